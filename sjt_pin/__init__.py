@@ -1,0 +1,46 @@
+"""sjt-pin: scaled Jacobian transpose (SJT) differential inverse kinematics on Pinocchio.
+
+The method is Lee, Yim and Choi's scaled Jacobian transpose: ``q_dot = D(q) J^T (x_dot_d + K e)``
+with ``D = diag(1 / (J_i^T J_i))``; the pseudoinverse, damped least-squares and plain Jacobian
+transpose baselines share the same interface.
+"""
+
+from .exceptions import FrameNotFound, GainWarning, URDFError
+from .robot import Robot
+from .solvers import (
+    DifferentialIKSolver,
+    DLSSolver,
+    JPSolver,
+    JTSolver,
+    SJTSolver,
+    StepInfo,
+    make_solver,
+)
+from .tasks import OrientationTask, PoseTask, PositionTask, Task
+from .tracking import TrackingLog, track
+from .trajectories import Circle, Line, PoseInterpolation, Trajectory
+
+__all__ = [
+    "Circle",
+    "DLSSolver",
+    "DifferentialIKSolver",
+    "FrameNotFound",
+    "GainWarning",
+    "JPSolver",
+    "JTSolver",
+    "Line",
+    "OrientationTask",
+    "PoseInterpolation",
+    "PoseTask",
+    "PositionTask",
+    "Robot",
+    "SJTSolver",
+    "StepInfo",
+    "Task",
+    "Trajectory",
+    "TrackingLog",
+    "URDFError",
+    "make_solver",
+    "track",
+]
+__version__ = "0.1.0"

@@ -1,0 +1,102 @@
+"""The matrices M(J) that map a task velocity to joint velocities: ``q_dot = M(J) v``.
+
+Pure numpy, nothing about robots. ``J`` is an (m, n) task Jacobian (m task rows, n joints).
+
+=====  ===========================  ==============================================
+name   M(J)                         paper
+=====  ===========================  ==============================================
+jp     J^+ (Moore-Penrose)          eq. (4), (8)
+dls    J^T (J J^T + lambda^2 I)^-1  damped least squares (introduction, [4, 11, 12])
+jt     J^T                          eq. (10)
+sjt    D J^T, D = diag(alpha_i)     eq. (20)-(21), alpha_i = 1 / (J_i^T J_i), eq. (18)
+=====  ===========================  ==============================================
+
+Every ``*_apply`` function computes ``M(J) v`` without forming M; the ``*_matrix`` functions
+form M for analysis (motion ellipsoids, stability bounds).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: Squared column norm below which a joint counts as not moving the task (alpha_i = 0).
+COLUMN_TOL = 1e-10
+
+#: Singular values below ``JP_RCOND * sigma_max`` are treated as zero by the pseudoinverse.
+JP_RCOND = 1e-12
+
+
+def scaling_factors(J: np.ndarray, column_tol: float = COLUMN_TOL) -> np.ndarray:
+    """SJT scaling factors ``alpha_i = 1 / (J_i^T J_i)`` (eq. 18), 0 for columns with no effect.
+
+    For a revolute joint and a 6-row task ``J_i^T J_i = |z_i x (p_e - p_i)|^2 + 1 >= 1`` (eq. 19),
+    so ``0 < alpha_i <= 1``. A column with ``J_i^T J_i < column_tol`` (a joint outside the chain, a
+    finger, a joint whose axis passes through a position-task point) gets ``alpha_i = 0``.
+    """
+    squared_norms = np.einsum("ij,ij->j", J, J)
+    active = squared_norms > column_tol
+    alpha = np.zeros_like(squared_norms)
+    np.divide(1.0, squared_norms, out=alpha, where=active)
+    return alpha
+
+
+def sjt_matrix(J: np.ndarray, column_tol: float = COLUMN_TOL) -> np.ndarray:
+    """``D J^T`` (eq. 20)."""
+    return scaling_factors(J, column_tol)[:, None] * J.T
+
+
+def jt_matrix(J: np.ndarray) -> np.ndarray:
+    """``J^T`` (eq. 10)."""
+    return J.T.copy()
+
+
+def jp_matrix(J: np.ndarray, rcond: float = JP_RCOND) -> np.ndarray:
+    """Moore-Penrose pseudoinverse ``J^+`` (eq. 4), from the SVD with relative cutoff ``rcond``."""
+    U, s, Vt = np.linalg.svd(J, full_matrices=False)
+    cutoff = rcond * (s[0] if s.size else 0.0)
+    s_inv = np.divide(1.0, s, out=np.zeros_like(s), where=s > cutoff)
+    return (Vt.T * s_inv) @ U.T
+
+
+def dls_matrix(J: np.ndarray, damping: float) -> np.ndarray:
+    """Damped least squares ``J^T (J J^T + damping^2 I)^-1``; ``damping`` in task units (m, rad)."""
+    m = J.shape[0]
+    return np.linalg.solve(J @ J.T + damping**2 * np.eye(m), J).T
+
+
+def sjt_apply(J: np.ndarray, v: np.ndarray, alpha: np.ndarray) -> np.ndarray:
+    """``D J^T v`` with precomputed ``alpha`` (see :func:`scaling_factors`)."""
+    return alpha * (v @ J)
+
+
+def jt_apply(J: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """``J^T v``."""
+    return v @ J
+
+
+def jp_apply(J: np.ndarray, v: np.ndarray, rcond: float = JP_RCOND) -> np.ndarray:
+    """``J^+ v``."""
+    return jp_matrix(J, rcond) @ v
+
+
+def dls_apply(J: np.ndarray, v: np.ndarray, damping: float) -> np.ndarray:
+    """``J^T (J J^T + damping^2 I)^-1 v`` (one m x m solve)."""
+    m = J.shape[0]
+    return np.linalg.solve(J @ J.T + damping**2 * np.eye(m), v) @ J
+
+
+def max_loop_eigenvalue(J: np.ndarray, M: np.ndarray) -> float:
+    """Largest eigenvalue of the loop matrix ``J M`` (m x m).
+
+    The discrete closed loop is ``e_{k+1} = (I - dt K J M) e_k``; with ``K = k I`` it is stable
+    iff ``k dt lambda_max(J M) < 2``. ``J M`` is symmetric positive semidefinite for all four
+    mappings (for SJT it is ``sum alpha_i J_i J_i^T``, eq. 25, with eigenvalues in [0, n_active]).
+    """
+    JM = J @ M
+    return float(np.linalg.eigvalsh(0.5 * (JM + JM.T))[-1]) if JM.size else 0.0
+
+
+def stable_gain_bound(J: np.ndarray, M: np.ndarray, dt: float) -> float:
+    """Largest scalar gain k (1/s) keeping the linearised loop stable: ``2 / (dt lambda_max)``."""
+    lam = max_loop_eigenvalue(J, M)
+    return np.inf if lam <= 0.0 else 2.0 / (dt * lam)

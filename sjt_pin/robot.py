@@ -1,0 +1,235 @@
+"""Robot: a Pinocchio model of a URDF robot with a chosen end-effector frame.
+
+Kinematic quantities follow Pinocchio's conventions: ``fk`` returns the world pose of a frame
+(``oMf``), ``jacobian`` its 6 x nv frame Jacobian [linear; angular] in the frame's own (LOCAL) axes.
+"""
+
+from __future__ import annotations
+
+import importlib.resources
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+from .exceptions import FrameNotFound, URDFError
+from .validation import as_vector
+
+#: End-effector frames used when ``Robot.from_example`` is called without ``ee_frame``.
+DEFAULT_EE_FRAMES: dict[str, str] = {
+    "panda": "panda_hand",
+    "panda_collision": "panda_hand",
+    "ur3": "tool0",
+    "ur3_limited": "tool0",
+    "ur5": "tool0",
+    "ur5_limited": "tool0",
+    "ur10": "tool0",
+    "ur10_limited": "tool0",
+    "talos": "gripper_left_joint",
+    "talos_full": "gripper_left_joint",
+    "talos_arm": "gripper_left_joint",
+    "kinova": "j2s6s200_end_effector",
+    "z1": "gripperMover",
+    "xarm7": "link_eef",
+}
+
+
+class Robot:
+    """A kinematic model (``pin.Model``) with one end-effector frame.
+
+    Build one with :meth:`from_example`, :meth:`from_urdf` or :meth:`planar3`. ``model``, ``data``,
+    ``visual_model`` and ``collision_model`` are Pinocchio's own objects; ``data`` is this robot's
+    scratch space, overwritten by every kinematic call.
+    """
+
+    def __init__(
+        self,
+        model: pin.Model,
+        ee_frame: str,
+        *,
+        q0: np.ndarray | None = None,
+        name: str | None = None,
+        visual_model: pin.GeometryModel | None = None,
+        collision_model: pin.GeometryModel | None = None,
+        urdf: str | None = None,
+        package_dirs: Sequence[str] = (),
+    ):
+        self.model = model
+        self.data = model.createData()
+        self.name = name or model.name
+        self.visual_model = visual_model
+        self.collision_model = collision_model
+        self.urdf = urdf  #: the URDF file path or XML text the model came from
+        self.package_dirs = list(package_dirs)
+        self.ee_frame_id = self.frame_id(ee_frame)
+        self.ee_frame = ee_frame
+        self.q0 = pin.neutral(model) if q0 is None else self.check_q(q0, "q0").copy()
+
+    # -- construction ------------------------------------------------------------------------
+    @classmethod
+    def from_example(cls, name: str, ee_frame: str | None = None) -> Robot:
+        """Load ``name`` from example-robot-data (``"panda"``, ``"ur5"``, ``"talos_full"``, ...).
+
+        ``ee_frame`` defaults to :data:`DEFAULT_EE_FRAMES` for the robots listed there.
+        ``q0`` is the robot's reference configuration from its SRDF.
+        """
+        import example_robot_data as erd
+        from example_robot_data.robots_loader import ROBOTS
+
+        if name not in ROBOTS:
+            raise ValueError(
+                f"name {name!r} is not an example-robot-data robot; known: {sorted(ROBOTS)}"
+            )
+        if ee_frame is None:
+            ee_frame = DEFAULT_EE_FRAMES.get(name)
+            if ee_frame is None:
+                raise ValueError(
+                    f"no default ee_frame for {name!r}; pass ee_frame= (defaults exist for "
+                    f"{sorted(DEFAULT_EE_FRAMES)})"
+                )
+        wrapper = erd.load(name)
+        return cls(
+            wrapper.model,
+            ee_frame,
+            q0=wrapper.q0,
+            name=name,
+            visual_model=wrapper.visual_model,
+            collision_model=wrapper.collision_model,
+            urdf=getattr(wrapper, "urdf", None),
+        )
+
+    @classmethod
+    def from_urdf(
+        cls,
+        path_or_xml: str | Path,
+        ee_frame: str | None = None,
+        package_dirs: Sequence[str | Path] | None = None,
+        *,
+        load_visuals: bool = True,
+    ) -> Robot:
+        """Load a URDF from a file path or from XML text (a string starting with ``<``).
+
+        ``ee_frame`` defaults to the URDF's only leaf link; with several leaves it must be given.
+        ``package_dirs`` resolve ``package://`` mesh paths (the URDF's folder is always searched).
+        Visual geometry is loaded when its meshes can be found; ``load_visuals=False`` skips it.
+        """
+        text = str(path_or_xml)
+        is_xml = isinstance(path_or_xml, str) and text.lstrip().startswith("<")
+        source = "<URDF string>" if is_xml else text
+        dirs = [str(p) for p in (package_dirs or [])]
+        if not is_xml:
+            path = Path(text)
+            if not path.is_file():
+                raise URDFError(f"URDF file not found: {text}")
+            dirs.append(str(path.resolve().parent))
+        try:
+            model = pin.buildModelFromXML(text) if is_xml else pin.buildModelFromUrdf(text)
+        except (ValueError, RuntimeError) as exc:
+            raise URDFError(f"cannot parse URDF {source}: {exc}") from exc
+        if ee_frame is None:
+            ee_frame = _only_leaf_body(model, source)
+        visual = None
+        if load_visuals:
+            try:
+                visual = (
+                    pin.buildGeomFromUrdfString(model, text, pin.VISUAL, package_dirs=dirs)
+                    if is_xml
+                    else pin.buildGeomFromUrdf(model, text, pin.VISUAL, package_dirs=dirs)
+                )
+            except (ValueError, RuntimeError) as exc:
+                raise URDFError(
+                    f"cannot load the visual meshes of {source} (package_dirs={dirs}): {exc}; "
+                    "pass package_dirs= or load_visuals=False"
+                ) from exc
+        return cls(model, ee_frame, visual_model=visual, urdf=text, package_dirs=dirs)
+
+    @classmethod
+    def planar3(cls, ee_frame: str = "ee") -> Robot:
+        """The paper's 3-link planar arm (Fig. 4): ``robots/planar3.urdf``, joints about +z."""
+        urdf = importlib.resources.files("sjt_pin.robots").joinpath("planar3.urdf")
+        with importlib.resources.as_file(urdf) as path:
+            robot = cls.from_urdf(path, ee_frame=ee_frame)
+        robot.name = "planar3"
+        return robot
+
+    # -- dimensions and limits -----------------------------------------------------------------
+    @property
+    def nq(self) -> int:
+        """Size of a configuration vector."""
+        return self.model.nq
+
+    @property
+    def nv(self) -> int:
+        """Size of a velocity vector (= columns of the Jacobian)."""
+        return self.model.nv
+
+    @property
+    def lower_limits(self) -> np.ndarray:
+        """Lower position limits (nq,) in rad or m; ``-inf`` where the URDF gives none."""
+        return np.where(self._limited, self.model.lowerPositionLimit, -np.inf)
+
+    @property
+    def upper_limits(self) -> np.ndarray:
+        """Upper position limits (nq,) in rad or m; ``+inf`` where the URDF gives none."""
+        return np.where(self._limited, self.model.upperPositionLimit, np.inf)
+
+    @property
+    def velocity_limits(self) -> np.ndarray:
+        """Joint speed limits (nv,) in rad/s or m/s; ``+inf`` where the URDF gives none."""
+        limit = np.asarray(self.model.velocityLimit, dtype=float)
+        return np.where((limit > 0) & (limit < 1e30), limit, np.inf)
+
+    @property
+    def _limited(self) -> np.ndarray:
+        limited = np.array(list(self.model.hasConfigurationLimit()), dtype=bool)
+        lower, upper = self.model.lowerPositionLimit, self.model.upperPositionLimit
+        # A URDF joint without <limit> parses to [0, 0] or to +-max double: neither is a limit.
+        return limited & (upper > lower) & (np.abs(lower) < 1e30) & (np.abs(upper) < 1e30)
+
+    # -- frames and kinematics ---------------------------------------------------------------
+    def frame_id(self, name: str) -> int:
+        """Index of frame ``name``; :class:`FrameNotFound` (listing close names) if absent."""
+        if not isinstance(name, str) or not self.model.existFrame(name):
+            raise FrameNotFound(str(name), [f.name for f in self.model.frames], self.name)
+        return self.model.getFrameId(name)
+
+    def check_q(self, q, name: str = "q") -> np.ndarray:
+        """``q`` as a finite float vector of shape (nq,), or ``ValueError`` naming ``name``."""
+        return as_vector(q, name, self.model.nq)
+
+    def fk(self, q, frame: str | None = None) -> pin.SE3:
+        """World pose of ``frame`` (default: the end effector) at configuration ``q``."""
+        q = self.check_q(q)
+        fid = self.ee_frame_id if frame is None else self.frame_id(frame)
+        pin.forwardKinematics(self.model, self.data, q)
+        return pin.updateFramePlacement(self.model, self.data, fid).copy()
+
+    def jacobian(self, q, frame: str | None = None,
+                 reference: pin.ReferenceFrame = pin.LOCAL) -> np.ndarray:
+        """Frame Jacobian (6, nv), rows [linear; angular], in ``reference`` axes (LOCAL default)."""
+        q = self.check_q(q)
+        fid = self.ee_frame_id if frame is None else self.frame_id(frame)
+        return pin.computeFrameJacobian(self.model, self.data, q, fid, reference)
+
+    def random_configuration(self, rng: np.random.Generator | None = None) -> np.ndarray:
+        """A configuration drawn uniformly within the position limits (``[-pi, pi]`` if none)."""
+        rng = np.random.default_rng() if rng is None else rng
+        lower = np.where(np.isfinite(self.lower_limits), self.lower_limits, -np.pi)
+        upper = np.where(np.isfinite(self.upper_limits), self.upper_limits, np.pi)
+        pin.seed(int(rng.integers(2**31 - 1)))
+        return pin.randomConfiguration(self.model, lower, upper)
+
+    def __repr__(self) -> str:
+        return f"Robot({self.name!r}, ee_frame={self.ee_frame!r}, nq={self.nq}, nv={self.nv})"
+
+
+def _only_leaf_body(model: pin.Model, source: str) -> str:
+    """Name of the single leaf link of ``model`` (the default end effector of a URDF)."""
+    bodies = [f for f in model.frames if f.type == pin.FrameType.BODY]
+    # a link's children are the joint frames whose parent frame it is: a leaf has none
+    children = {model.frames[f.parentFrame].name for f in model.frames if f.parentFrame}
+    leaves = [f.name for f in bodies if f.name not in children]
+    if len(leaves) == 1:
+        return leaves[0]
+    raise ValueError(f"{source} has several leaf links {leaves}; pass ee_frame=")

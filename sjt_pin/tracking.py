@@ -1,0 +1,132 @@
+"""Run a solver along a trajectory and log what happened.
+
+At each sample time t_k the solver is given the configuration reached so far, the desired pose
+x_d(t_k) and velocity x_dot_d(t_k), as in the paper's eq. (5): the logged error
+``e_k = x_d(t_k) - x(q_{k-1})`` is the one the CLIK law acts on.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .solvers import DifferentialIKSolver
+from .trajectories import Trajectory
+from .validation import positive
+
+
+@dataclass
+class TrackingLog:
+    """Arrays of one tracking run, one row per control period actually simulated.
+
+    Attributes:
+        t: sample times (N,) in s.
+        q: configuration at which each error was measured (N, nq).
+        dq: joint velocity commanded at each step (N, nv), rad/s or m/s.
+        position: end-effector (task frame) position (N, 3) in m, world axes.
+        target: desired position (N, 3) in m.
+        error: task error vectors (N, m) in task units (m, rad).
+        error_norm: their norms (N,).
+        diverged: the run was stopped because the state blew up (see ``track``).
+        reason: why it was stopped, empty when it ran to the end.
+        method: the solver's method name; ``dt`` its period (s).
+    """
+
+    t: np.ndarray
+    q: np.ndarray
+    dq: np.ndarray
+    position: np.ndarray
+    target: np.ndarray
+    error: np.ndarray
+    error_norm: np.ndarray
+    diverged: bool = False
+    reason: str = ""
+    method: str = ""
+    dt: float = 0.0
+    q_final: np.ndarray = field(default_factory=lambda: np.empty(0))
+
+    @property
+    def max_error(self) -> float:
+        """Largest task error norm over the run (inf if it diverged)."""
+        if self.diverged or self.error_norm.size == 0:
+            return float("inf")
+        return float(self.error_norm.max())
+
+    @property
+    def rms_error(self) -> float:
+        """Root mean square of the task error norm over the run (inf if it diverged)."""
+        if self.diverged or self.error_norm.size == 0:
+            return float("inf")
+        return float(np.sqrt(np.mean(self.error_norm**2)))
+
+    @property
+    def max_joint_speed(self) -> float:
+        """Largest absolute joint velocity commanded (rad/s or m/s)."""
+        return float(np.abs(self.dq).max()) if self.dq.size else 0.0
+
+    def __len__(self) -> int:
+        return self.t.size
+
+
+def track(
+    solver: DifferentialIKSolver,
+    trajectory: Trajectory,
+    q0,
+    *,
+    duration: float | None = None,
+    max_step: float = np.pi,
+    max_error: float = 1e3,
+    feedforward: bool = True,
+) -> TrackingLog:
+    """Track ``trajectory`` with ``solver`` from configuration ``q0``.
+
+    Args:
+        duration: simulated time in s (default: the trajectory's; longer keeps commanding
+            its final pose).
+        max_step: the run counts as diverged when one step moves a joint by more than this
+            (rad or m); the default, half a turn per control period, is no motion any robot makes.
+        max_error: the run counts as diverged when the task error norm exceeds this (m, rad).
+        feedforward: pass the trajectory's velocity x_dot_d to the solver; False runs the
+            feedback term K e alone (to show what the feed-forward buys).
+
+    A diverging run (non-finite state, ``max_step`` or ``max_error`` exceeded) stops there with
+    ``diverged=True`` and the reason, instead of raising.
+    """
+    if not isinstance(solver, DifferentialIKSolver):
+        raise TypeError(f"solver must be a DifferentialIKSolver, got {type(solver).__name__}")
+    if not isinstance(trajectory, Trajectory):
+        raise TypeError(f"trajectory must be a Trajectory, got {type(trajectory).__name__}")
+    max_step = positive(max_step, "max_step", "rad")
+    max_error = positive(max_error, "max_error", "task units")
+    q = solver.robot.check_q(q0, "q0")
+    times = trajectory.times(solver.dt, duration)
+    n, nq, nv, m = times.size, solver.robot.nq, solver.robot.nv, solver.task.dim
+    qs, dqs = np.empty((n, nq)), np.empty((n, nv))
+    positions, targets = np.empty((n, 3)), np.empty((n, 3))
+    errors, norms = np.empty((n, m)), np.empty(n)
+    limit = max_step / solver.dt
+    diverged, reason, k = False, "", 0
+    with np.errstate(all="ignore"):
+        for k, t in enumerate(times):
+            pose, velocity = trajectory.sample(t)
+            q_next = solver._step(q, pose, velocity if feedforward else None)
+            info = solver.last
+            qs[k], dqs[k], errors[k], norms[k] = q, info.dq, info.error, info.error_norm
+            positions[k], targets[k] = info.pose.translation, pose.translation
+            if not (np.isfinite(info.error_norm) and np.all(np.isfinite(q_next))):
+                diverged, reason = True, f"non-finite state at t = {t:.4g} s"
+            elif np.abs(info.dq).max() > limit:
+                diverged, reason = True, (f"a joint moved more than {max_step:g} in one step at "
+                                          f"t = {t:.4g} s")
+            elif info.error_norm > max_error:
+                diverged, reason = True, f"error above {max_error:g} at t = {t:.4g} s"
+            if diverged:
+                break
+            q = q_next
+    end = k + 1
+    return TrackingLog(
+        t=times[:end], q=qs[:end], dq=dqs[:end], position=positions[:end],
+        target=targets[:end], error=errors[:end], error_norm=norms[:end],
+        diverged=diverged, reason=reason, method=solver.method, dt=solver.dt, q_final=q,
+    )

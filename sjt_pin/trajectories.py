@@ -1,0 +1,138 @@
+"""Desired end-effector trajectories with analytic velocities.
+
+``sample(t)`` returns ``(pose, velocity)``: the desired world pose ``oMd`` (``pin.SE3``) and a
+``pin.Motion`` with ``linear = p_dot_d`` (m/s) and ``angular = omega_d`` (rad/s), both in world
+axes at the desired origin (DESIGN.md section 4). Before 0 and after ``duration`` a trajectory
+holds its end pose with zero velocity, so ``track`` can keep commanding the final target.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+
+import numpy as np
+import pinocchio as pin
+
+from .validation import as_pose, as_vector, positive
+
+TIMINGS = ("linear", "min_jerk")
+
+
+def _timing(name: str) -> str:
+    if name not in TIMINGS:
+        raise ValueError(f"timing must be one of {TIMINGS}, got {name!r}")
+    return name
+
+
+def _progress(t: float, duration: float, timing: str) -> tuple[float, float]:
+    """Path parameter s(t) in [0, 1] and its rate ds/dt (1/s)."""
+    if t <= 0.0:
+        return 0.0, 0.0
+    if t >= duration:
+        return 1.0, 0.0
+    tau = t / duration
+    if timing == "linear":
+        return tau, 1.0 / duration
+    # minimum jerk: s = 10 tau^3 - 15 tau^4 + 6 tau^5
+    return (tau**3 * (10.0 - 15.0 * tau + 6.0 * tau**2),
+            30.0 * tau**2 * (1.0 - tau) ** 2 / duration)
+
+
+class Trajectory(ABC):
+    """A desired pose x_d(t) for t in [0, duration] (s), with its velocity x_dot_d(t)."""
+
+    duration: float
+
+    @abstractmethod
+    def sample(self, t: float) -> tuple[pin.SE3, pin.Motion]:
+        """Desired pose and velocity at time ``t`` (s)."""
+
+    def times(self, dt: float, duration: float | None = None) -> np.ndarray:
+        """Sample times 0, dt, 2 dt, ... up to ``duration`` (default: the trajectory's) included."""
+        dt = positive(dt, "dt", "s")
+        end = self.duration if duration is None else positive(duration, "duration", "s")
+        return np.arange(int(np.floor(end / dt + 1e-9)) + 1) * dt
+
+    def positions(self, dt: float) -> np.ndarray:
+        """Desired positions (N, 3) at ``times(dt)``, in m (for drawing the path)."""
+        return np.array([self.sample(t)[0].translation for t in self.times(dt)])
+
+
+class Line(Trajectory):
+    """Straight line from ``start`` to ``end`` (3-vectors, m) in ``duration`` s.
+
+    The orientation is held at ``rotation`` (3x3, default identity). ``timing`` is ``"linear"``
+    (constant speed, as in the paper's tasks) or ``"min_jerk"`` (rest to rest).
+    """
+
+    def __init__(self, start, end, duration: float, rotation=None, timing: str = "linear"):
+        self.start = as_vector(start, "start", 3)
+        self.end = as_vector(end, "end", 3)
+        self.duration = positive(duration, "duration", "s")
+        self.rotation = np.eye(3) if rotation is None else as_pose(
+            pin.SE3(np.asarray(rotation, dtype=float), np.zeros(3)), "rotation").rotation
+        self.timing = _timing(timing)
+
+    def sample(self, t):
+        s, ds = _progress(t, self.duration, self.timing)
+        delta = self.end - self.start
+        return (pin.SE3(self.rotation, self.start + s * delta),
+                pin.Motion(ds * delta, np.zeros(3)))
+
+
+class Circle(Trajectory):
+    """Circle of ``radius`` (m) about ``center`` in the plane normal to ``normal``.
+
+    Starts at angle ``start_angle`` (rad, measured from the plane's first axis: world x for the
+    default normal +z) and runs ``turns`` times counter-clockwise about ``normal`` at constant
+    speed over ``duration`` s, with the orientation held at ``rotation`` (default identity).
+    """
+
+    def __init__(self, center, radius: float, duration: float, normal=(0.0, 0.0, 1.0),
+                 start_angle: float = 0.0, turns: float = 1.0, rotation=None):
+        self.center = as_vector(center, "center", 3)
+        self.radius = positive(radius, "radius", "m")
+        self.duration = positive(duration, "duration", "s")
+        n = as_vector(normal, "normal", 3)
+        if np.linalg.norm(n) < 1e-12:
+            raise ValueError("normal must be a non-zero 3-vector")
+        n = n / np.linalg.norm(n)
+        helper = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+        self._u = helper - (helper @ n) * n
+        self._u /= np.linalg.norm(self._u)
+        self._w = np.cross(n, self._u)
+        self.normal = n
+        self.start_angle = float(as_vector([start_angle], "start_angle", 1)[0])
+        self.turns = float(as_vector([turns], "turns", 1)[0])
+        self.rotation = np.eye(3) if rotation is None else as_pose(
+            pin.SE3(np.asarray(rotation, dtype=float), np.zeros(3)), "rotation").rotation
+
+    def sample(self, t):
+        s, ds = _progress(t, self.duration, "linear")
+        sweep = 2.0 * np.pi * self.turns
+        angle = self.start_angle + sweep * s
+        radial = np.cos(angle) * self._u + np.sin(angle) * self._w
+        tangent = -np.sin(angle) * self._u + np.cos(angle) * self._w
+        return (pin.SE3(self.rotation, self.center + self.radius * radial),
+                pin.Motion(self.radius * sweep * ds * tangent, np.zeros(3)))
+
+
+class PoseInterpolation(Trajectory):
+    """SE(3) geodesic from ``start`` to ``end`` (``pin.SE3`` or 4x4): ``start exp6(s xi)``.
+
+    ``xi = log6(start^-1 end)`` is a constant body twist, so the path is a screw motion; ``s(t)``
+    follows ``timing`` (``"min_jerk"`` by default, or ``"linear"``).
+    """
+
+    def __init__(self, start, end, duration: float, timing: str = "min_jerk"):
+        self.start = as_pose(start, "start")
+        self.end = as_pose(end, "end")
+        self.duration = positive(duration, "duration", "s")
+        self.timing = _timing(timing)
+        self._twist = pin.log6(self.start.actInv(self.end)).vector  # [v; w], body axes
+
+    def sample(self, t):
+        s, ds = _progress(t, self.duration, self.timing)
+        pose = self.start * pin.exp6(s * self._twist)
+        R = pose.rotation  # the body twist ds * xi, rotated to world axes
+        return pose, pin.Motion(ds * (R @ self._twist[:3]), ds * (R @ self._twist[3:]))

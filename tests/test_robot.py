@@ -1,0 +1,95 @@
+import numpy as np
+import pinocchio as pin
+import pytest
+
+import sjt_pin as sjt
+
+CONTINUOUS_PRISMATIC = """<robot name="mixed">
+  <link name="base"/><link name="a"/><link name="b"/><link name="tip"/><link name="side"/>
+  <joint name="spin" type="continuous"><parent link="base"/><child link="a"/>
+    <axis xyz="0 0 1"/></joint>
+  <joint name="slide" type="prismatic"><parent link="a"/><child link="b"/>
+    <origin xyz="0.5 0 0"/><axis xyz="1 0 0"/>
+    <limit lower="-0.1" upper="0.2" effort="1" velocity="0.5"/></joint>
+  <joint name="tip_fixed" type="fixed"><parent link="b"/><child link="tip"/>
+    <origin xyz="0.1 0 0.2"/></joint>
+  <joint name="side_joint" type="revolute"><parent link="a"/><child link="side"/>
+    <origin xyz="0 0.3 0"/><axis xyz="0 1 0"/>
+    <limit lower="-1" upper="1" effort="1" velocity="1"/></joint>
+</robot>"""
+
+
+def manifold_fd_jacobian(robot, q, h=1e-6):
+    """LOCAL Jacobian by central differences on the manifold: log6(oMf(q)^-1 oMf(q + h e_i))."""
+    pose = robot.fk(q)
+    J = np.empty((6, robot.nv))
+    for i in range(robot.nv):
+        dv = np.zeros(robot.nv)
+        dv[i] = h
+        plus = robot.fk(pin.integrate(robot.model, q, dv))
+        minus = robot.fk(pin.integrate(robot.model, q, -dv))
+        J[:, i] = (pin.log6(pose.actInv(plus)) - pin.log6(pose.actInv(minus))).vector / (2 * h)
+    return J
+
+
+@pytest.mark.parametrize("name", ["ur5", "panda"])
+def test_jacobian_matches_finite_differences(name, rng):
+    robot = sjt.Robot.from_example(name)
+    for _ in range(5):
+        q = robot.random_configuration(rng)
+        np.testing.assert_allclose(robot.jacobian(q), manifold_fd_jacobian(robot, q), atol=1e-6)
+
+
+def test_example_defaults(ur5, panda):
+    assert ur5.ee_frame == "tool0" and (ur5.nq, ur5.nv) == (6, 6)
+    assert panda.ee_frame == "panda_hand" and (panda.nq, panda.nv) == (9, 9)
+    assert panda.jacobian(panda.q0).shape == (6, 9)
+    assert isinstance(panda.fk(panda.q0), pin.SE3)
+    # Panda's URDF limits: joint 4 in [-3.0718, -0.0698], fingers prismatic in [0, 0.04]
+    assert panda.upper_limits[3] == pytest.approx(-0.0698)
+    assert panda.upper_limits[7] == pytest.approx(0.04)
+    assert panda.velocity_limits[0] == pytest.approx(2.175)
+    assert np.all((panda.q0 >= panda.lower_limits) & (panda.q0 <= panda.upper_limits))
+
+
+def test_explicit_ee_frame_and_other_frames(panda):
+    robot = sjt.Robot.from_example("panda", ee_frame="panda_link7")
+    assert robot.ee_frame == "panda_link7"
+    np.testing.assert_allclose(
+        robot.fk(panda.q0).homogeneous, panda.fk(panda.q0, frame="panda_link7").homogeneous
+    )
+
+
+def test_urdf_with_continuous_prismatic_fixed_and_branch(tmp_path):
+    path = tmp_path / "mixed.urdf"
+    path.write_text(CONTINUOUS_PRISMATIC)
+    for source in (path, str(path), CONTINUOUS_PRISMATIC):
+        robot = sjt.Robot.from_urdf(source, ee_frame="tip")
+        assert (robot.nq, robot.nv) == (4, 3)  # continuous joint: cos/sin
+        q = pin.neutral(robot.model)
+        assert robot.fk(q).translation == pytest.approx([0.6, 0.0, 0.2])
+        J = robot.jacobian(q)
+        assert J.shape == (6, 3)
+        np.testing.assert_allclose(J, manifold_fd_jacobian(robot, q), atol=1e-6)
+        model = robot.model
+        names = ("spin", "slide", "side_joint")
+        iv = {name: model.idx_vs[model.getJointId(name)] for name in names}
+        iq = {name: model.idx_qs[model.getJointId(name)] for name in names}
+        assert np.all(J[:, iv["side_joint"]] == 0)  # the side branch does not move the tip
+        assert np.isinf(robot.upper_limits[iq["spin"]])
+        assert robot.upper_limits[iq["slide"]] == pytest.approx(0.2)
+        assert robot.velocity_limits[iv["slide"]] == pytest.approx(0.5)
+        assert np.isinf(robot.velocity_limits[iv["spin"]])
+
+
+def test_default_ee_frame_is_the_only_leaf():
+    with pytest.raises(ValueError, match=r"several leaf links \['side', 'tip'\]"):
+        sjt.Robot.from_urdf(CONTINUOUS_PRISMATIC)
+    single = CONTINUOUS_PRISMATIC.split('<joint name="side_joint"')[0] + "</robot>"
+    assert sjt.Robot.from_urdf(single.replace('<link name="side"/>', "")).ee_frame == "tip"
+
+
+def test_random_configuration_respects_limits(panda, rng):
+    for _ in range(100):
+        q = panda.random_configuration(rng)
+        assert np.all((q >= panda.lower_limits) & (q <= panda.upper_limits))

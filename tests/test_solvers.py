@@ -1,0 +1,206 @@
+"""CLIK solvers: convergence, singular starts, feed-forward, unreachable targets, gain checks."""
+
+import warnings
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+import sjt_pin as sjt
+
+METHODS = ["sjt", "jt", "jp", "dls"]
+
+
+def regulate(solver, q, target, steps):
+    for _ in range(steps):
+        q = solver.step(q, target)
+        if solver.last.error_norm < 1e-7:
+            break
+    return q
+
+
+@pytest.mark.parametrize("method", METHODS)
+@pytest.mark.parametrize("name", ["ur5", "panda"])
+def test_set_point_regulation_converges_from_nearby_pose(method, name, rng):
+    """From 0.1 rad per joint away, at goals where sigma_min(J) > 0.1 (transpose-type updates
+    converge at the rate of the smallest loop eigenvalue, so near-singular goals take longer)."""
+    robot = sjt.Robot.from_example(name)
+    goals = 0
+    while goals < 3:
+        q_goal = robot.random_configuration(rng)
+        if np.linalg.svd(robot.jacobian(q_goal), compute_uv=False)[5] < 0.1:
+            continue
+        goals += 1
+        target = robot.fk(q_goal)
+        q = q_goal + rng.uniform(-0.1, 0.1, robot.nq)
+        solver = sjt.make_solver(method, robot, gain="auto", dt=0.01)
+        q = regulate(solver, q, target, 20_000)
+        final = sjt.PoseTask().error(robot.fk(q), target)
+        assert np.linalg.norm(final) < 1e-6
+
+
+def ur5_roll_about_lost_axis(ur5, angle=0.2):
+    """A target that UR5 at q = 0 (wrist and elbow singular) can only reach through a saddle."""
+    q = np.zeros(6)
+    U = np.linalg.svd(ur5.jacobian(q))[0]
+    assert np.linalg.svd(ur5.jacobian(q), compute_uv=False)[-1] < 1e-12  # exactly singular
+    return q, ur5.fk(q) * pin.exp6(pin.Motion(angle * U[:, -1]))
+
+
+@pytest.mark.parametrize("method, gain", [("sjt", "auto"), ("jt", 20.0)])
+def test_transpose_methods_escape_the_singular_saddle_of_ur5(ur5, method, gain):
+    q0, target = ur5_roll_about_lost_axis(ur5)
+    stuck = sjt.make_solver(method, ur5, gain=gain, dt=0.01)
+    stuck.escapes_saddles = False
+    q = regulate(stuck, q0, target, 2000)
+    assert stuck.last.error_norm == pytest.approx(0.2)  # J^T e = 0: it never moves
+
+    solver = sjt.make_solver(method, ur5, gain=gain, dt=0.01)
+    escapes = 0
+    q = q0
+    for _ in range(20_000):
+        q = solver.step(q, target)
+        escapes += solver.last.escaped
+        assert np.all(np.isfinite(q))
+        if solver.last.error_norm < 1e-6:
+            break
+    assert solver.last.error_norm < 1e-6
+    assert 1 <= escapes <= 5
+
+
+@pytest.mark.parametrize("method, gain", [("sjt", "auto"), ("jt", 20.0)])
+def test_transpose_methods_converge_from_stretched_panda(panda, method, gain):
+    q_stretched = np.zeros(9)  # joint 4 at 0: upper arm and forearm aligned
+    assert np.linalg.svd(panda.jacobian(q_stretched), compute_uv=False)[5] < 1e-12
+    target = panda.fk(panda.q0)
+    solver = sjt.make_solver(method, panda, gain=gain, dt=0.01)
+    q = regulate(solver, q_stretched, target, 20_000)
+    assert np.all(np.isfinite(q))
+    assert solver.last.error_norm < 1e-6
+
+
+def away_from_singularities(ur5):
+    q0 = np.array([0.3, -1.2, 1.5, -1.8, -1.5, 0.2])
+    assert np.linalg.svd(ur5.jacobian(q0), compute_uv=False)[-1] > 0.05
+    return q0, ur5.fk(q0)
+
+
+def test_feedforward_makes_jp_track_ten_times_better(ur5):
+    q0, T0 = away_from_singularities(ur5)
+    radius = 0.1
+    circle = sjt.Circle(T0.translation - [radius, 0, 0], radius, duration=2.0,
+                        rotation=T0.rotation)
+    with_ff = sjt.track(sjt.JPSolver(ur5, gain=10.0, dt=1e-3), circle, q0)
+    without = sjt.track(sjt.JPSolver(ur5, gain=10.0, dt=1e-3), circle, q0, feedforward=False)
+    assert not with_ff.diverged and not without.diverged
+    assert with_ff.max_error * 10 < without.max_error
+    speed = 2 * np.pi * radius / circle.duration
+    assert without.max_error == pytest.approx(speed / 10.0, rel=0.1)  # lag = speed / gain
+
+
+def test_unreachable_target_sjt_bounded_jp_reports_divergence(ur5):
+    q0, T0 = away_from_singularities(ur5)
+    p0 = T0.translation
+    far = p0 + 1.5 * p0 / np.linalg.norm(p0)  # 1.5 m beyond: outside UR5's reach
+    line = sjt.Line(p0, far, duration=1.0, rotation=T0.rotation)
+    sjt_log = sjt.track(sjt.SJTSolver(ur5, gain="auto", dt=1e-3), line, q0, duration=3.0)
+    assert not sjt_log.diverged
+    assert np.all(np.isfinite(sjt_log.q))
+    assert sjt_log.error_norm[-1] <= np.linalg.norm(far - p0) + 0.1  # pulled toward the goal
+    jp_log = sjt.track(sjt.JPSolver(ur5, gain=10.0, dt=1e-3), line, q0, duration=3.0)
+    assert jp_log.diverged and "one step" in jp_log.reason
+    assert len(jp_log) < 3001
+
+
+def test_step_does_not_mutate_and_accepts_matrix_targets(ur5):
+    q, T = away_from_singularities(ur5)
+    q_copy = q.copy()
+    target = T * pin.SE3(np.eye(3), np.array([0.01, 0.0, 0.0]))
+    solver = sjt.SJTSolver(ur5, gain=50.0, dt=0.01)
+    a = solver.step(q, target)
+    b = solver.step(q, target.homogeneous)
+    np.testing.assert_array_equal(q, q_copy)
+    np.testing.assert_allclose(a, b)
+    assert solver.last.dq.shape == (6,) and solver.last.alpha.shape == (6,)
+
+
+def test_sjt_alpha_uses_the_weighted_task_rows(planar3, rng):
+    weight = np.array([4.0, 0.25])
+    solver = sjt.SJTSolver(planar3, gain=10.0, dt=1e-3,
+                           task=sjt.PositionTask("xy", weight=weight))
+    q = rng.uniform(-1, 1, 3)
+    solver.step(q, [0.5, 0.5, 0.0])
+    J = pin.computeFrameJacobian(planar3.model, planar3.data, q, planar3.ee_frame_id,
+                                 pin.LOCAL_WORLD_ALIGNED)[:2]
+    expected = 1 / np.einsum("ij,i,ij->j", J, weight, J)
+    np.testing.assert_allclose(solver.last.alpha, expected)
+
+
+@pytest.mark.parametrize("task", [sjt.PoseTask(), sjt.PositionTask("xz"), sjt.OrientationTask()])
+def test_task_jacobian_is_minus_the_error_derivative(ur5, task, rng):
+    q, _ = away_from_singularities(ur5)
+    pose = ur5.fk(q)
+    target = pose * pin.exp6(pin.Motion(rng.normal(scale=1e-9, size=6)))  # e ~ 0
+    J = task.jacobian(pose, ur5.jacobian(q))
+    h = 1e-6
+    for i in range(6):
+        dv = np.zeros(6)
+        dv[i] = h
+        plus = task.error(ur5.fk(pin.integrate(ur5.model, q, dv)), target)
+        minus = task.error(ur5.fk(pin.integrate(ur5.model, q, -dv)), target)
+        np.testing.assert_allclose((plus - minus) / (2 * h), -J[:, i], atol=1e-6)
+
+
+def test_gain_above_the_stability_bound_warns_once(planar3):
+    q = np.deg2rad([60.0, 45.0, 30.0])
+    dt = 1e-3
+    solver = sjt.SJTSolver(planar3, gain=1.0, dt=dt, task=sjt.PositionTask("xy"))
+    solver.step(q, [0.0, 1.0, 0.0])
+    J = solver.task.jacobian(solver.last.pose, planar3.jacobian(q))
+    bound = sjt.mappings.stable_gain_bound(J, solver.matrix(J), dt)
+    assert 2 / (3 * dt) < bound  # the SJT bound 2 / (n dt) holds everywhere, with margin here
+    solver.gain = 0.99 * bound
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        solver.step(q, [0.0, 1.0, 0.0])
+    solver.gain = 1.01 * bound
+    with pytest.warns(sjt.GainWarning, match=f"{bound:.4g}"):
+        solver.step(q, [0.0, 1.0, 0.0])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        solver.step(q, [0.0, 1.0, 0.0])  # once per solver
+
+
+def test_auto_gain_for_sjt_is_half_the_configuration_free_bound(panda):
+    solver = sjt.SJTSolver(panda, dt=2e-3)
+    solver.step(panda.q0, panda.fk(panda.q0))
+    assert np.count_nonzero(solver.last.alpha) == 7  # the fingers do not move panda_hand
+    assert solver.last.gain == pytest.approx(1 / (7 * 2e-3))
+
+
+def test_per_row_gains_set_per_row_rates(planar3):
+    """With JP the loop is e_dot = -K e: each row decays at its own gain."""
+    gains = np.array([5.0, 50.0])
+    solver = sjt.JPSolver(planar3, gain=gains, dt=1e-3, task=sjt.PositionTask("xy"))
+    q = np.deg2rad([60.0, 45.0, 30.0])
+    target = [-0.25, 0.95, 0.0]
+    solver.step(q, target)
+    e0 = solver.last.error
+    for _ in range(100):
+        q = solver.step(q, target)
+    np.testing.assert_allclose(solver.last.error / e0, (1 - gains * 1e-3) ** 100, rtol=0.05)
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_per_row_gains_converge(method, planar3):
+    solver = sjt.make_solver(method, planar3, gain=[5.0, 50.0], dt=1e-2,
+                             task=sjt.PositionTask("xy"))
+    regulate(solver, np.deg2rad([60.0, 45.0, 30.0]), [-0.2, 0.9, 0.0], 5000)
+    assert solver.last.error_norm < 1e-6
+
+
+def test_make_solver_names_and_options(ur5):
+    assert isinstance(sjt.make_solver("SJT", ur5), sjt.SJTSolver)
+    assert sjt.make_solver("dls", ur5, damping=0.2).damping == 0.2
+    with pytest.raises(ValueError, match="one of"):
+        sjt.make_solver("newton", ur5)

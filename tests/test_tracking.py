@@ -1,0 +1,30 @@
+import numpy as np
+import pytest
+
+import sjt_pin as sjt
+
+
+def test_log_arrays_and_metrics(planar3):
+    solver = sjt.SJTSolver(planar3, gain=300.0, dt=1e-3, task=sjt.PositionTask("xy"))
+    line = sjt.Line([-0.293, 0.986, 0.0], [0.507, 0.986, 0.0], duration=1.0)
+    q0 = np.deg2rad([60.0, 45.0, 30.0])
+    log = sjt.track(solver, line, q0)
+    n = 1001
+    assert (log.t.shape, log.q.shape, log.dq.shape) == ((n,), (n, 3), (n, 3))
+    assert (log.position.shape, log.target.shape, log.error.shape) == ((n, 3), (n, 3), (n, 2))
+    assert not log.diverged and log.reason == "" and log.method == "sjt"
+    np.testing.assert_array_equal(log.q[0], q0)
+    np.testing.assert_allclose(log.position[:, :2] + log.error, log.target[:, :2], atol=1e-12)
+    assert log.max_error == pytest.approx(log.error_norm.max())
+    assert log.rms_error <= log.max_error
+    assert log.max_error < 1e-2  # high-gain SJT tracks the paper's task 1 within millimetres
+
+
+def test_divergence_is_reported_not_raised(planar3):
+    solver = sjt.JTSolver(planar3, gain=1e5, dt=1e-3, task=sjt.PositionTask("xy"),
+                          check_stability=False)
+    line = sjt.Line([-0.293, 0.986, 0.0], [0.507, 0.986, 0.0], duration=1.0)
+    log = sjt.track(solver, line, np.deg2rad([60.0, 45.0, 30.0]))
+    assert log.diverged and log.reason
+    assert log.max_error == np.inf and log.rms_error == np.inf
+    assert len(log) < 1001 and np.all(np.isfinite(log.q))
