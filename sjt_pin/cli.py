@@ -1,4 +1,4 @@
-"""The ``sjt-pin`` command: ``demo`` (tracking table)."""
+"""The ``sjt-pin`` command: ``demo`` (tracking table), ``reproduce`` (the paper's simulations)."""
 
 from __future__ import annotations
 
@@ -43,6 +43,15 @@ def demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def reproduce(args: argparse.Namespace) -> int:
+    """Run the paper's experiments and write figures and results.md into ``--out``."""
+    from .reproduce import reproduce as run
+
+    path = run(args.out, processes=args.processes, progress=not args.quiet, grid=args.grid)
+    print(f"wrote {path} and its figures")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="sjt-pin", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -51,6 +60,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--method", nargs="+", choices=sorted(SOLVERS),
                    default=["sjt", "jt", "dls", "jp"])
     p.set_defaults(func=demo)
+    p = sub.add_parser("reproduce", help="the paper's simulations: figures and results.md")
+    p.add_argument("--out", default="results", help="output folder (default: results)")
+    p.add_argument("--processes", type=int, default=None,
+                   help="worker processes for the sweeps (default: one per core)")
+    p.add_argument("--grid", type=int, default=30, help="gains per sweep (default: 30)")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.set_defaults(func=reproduce)
     return parser
 
 

@@ -55,7 +55,7 @@ def scenario(name: str, robot: Robot | None = None) -> Scenario:
         radius = 0.194
         # start on the circle's lowest point, (0, 0.792), from the elbow-up posture
         circle = Circle(center, radius, duration=4.0, start_angle=-np.pi / 2)
-        q0 = _closest_start(robot, PositionTask("xy"), PLANAR3_START, circle.sample(0.0)[0])
+        q0 = settle(robot, PositionTask("xy"), PLANAR3_START, circle.sample(0.0)[0])
         return Scenario(name, robot, PositionTask("xy"), q0, circle)
     q0 = UR5_START if name == "ur5" else robot.q0
     pose = robot.fk(q0)
@@ -65,8 +65,8 @@ def scenario(name: str, robot: Robot | None = None) -> Scenario:
     return Scenario(name, robot, PoseTask(), q0, circle)
 
 
-def _closest_start(robot: Robot, task: Task, q: np.ndarray, target: pin.SE3) -> np.ndarray:
-    """Move ``q`` onto ``target`` by damped least-squares iterations (the start of a run)."""
+def settle(robot: Robot, task: Task, q: np.ndarray, target: pin.SE3) -> np.ndarray:
+    """``q`` moved onto ``target`` by damped least-squares iterations (to start a run on a path)."""
     from .solvers import DLSSolver
 
     solver = DLSSolver(robot, gain="auto", dt=1e-2, task=task, damping=1e-3)

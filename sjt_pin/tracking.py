@@ -30,7 +30,8 @@ class TrackingLog:
         error_norm: their norms (N,).
         diverged: the run was stopped because the state blew up (see ``track``).
         reason: why it was stopped, empty when it ran to the end.
-        method: the solver's method name; ``dt`` its period (s).
+        method: the solver's method name; ``dt`` its period (s); ``gain`` its gain setting.
+        q_final: the configuration after the last step.
     """
 
     t: np.ndarray
@@ -44,6 +45,7 @@ class TrackingLog:
     reason: str = ""
     method: str = ""
     dt: float = 0.0
+    gain: float | np.ndarray | str = "auto"
     q_final: np.ndarray = field(default_factory=lambda: np.empty(0))
 
     @property
@@ -128,5 +130,6 @@ def track(
     return TrackingLog(
         t=times[:end], q=qs[:end], dq=dqs[:end], position=positions[:end],
         target=targets[:end], error=errors[:end], error_norm=norms[:end],
-        diverged=diverged, reason=reason, method=solver.method, dt=solver.dt, q_final=q,
+        diverged=diverged, reason=reason, method=solver.method, dt=solver.dt, gain=solver.gain,
+        q_final=q,
     )
