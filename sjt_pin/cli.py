@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+import webbrowser
 from collections.abc import Sequence
 
 from . import scenarios
@@ -28,18 +29,47 @@ def _table(rows: list[tuple[str, str, TrackingLog, float]]) -> str:
 
 
 def demo(args: argparse.Namespace) -> int:
-    """Track each robot's demo trajectory with each method and print the table."""
-    rows = []
+    """Track each robot's demo trajectory with each method, print the table, write the HTML."""
+    rows, runs = [], {}
     for name in args.robot:
         sc = scenarios.scenario(name)
+        runs[name] = (sc.robot, {})
         for method in args.method:
             solver = make_solver(method, sc.robot, gain="auto", dt=DEMO_DT, task=sc.task)
             start = time.perf_counter()
             log = track(solver, sc.trajectory, sc.q0)
             rows.append((name, method, log, time.perf_counter() - start))
+            runs[name][1][method] = log
     print(f"Tracking the demo trajectories (dt = {DEMO_DT:g} s, gain = auto; errors in m/rad, "
           "joint speeds in rad/s)")
     print(_table(rows))
+    if args.no_viewer:
+        return 0
+    from .viewer import Viewer
+
+    spacing = 2.0  # m between the robots' bases, along y, centred on the origin
+    viewer = None
+    try:
+        for k, (name, (robot, logs)) in enumerate(runs.items()):
+            offset = (0.0, spacing * (k - (len(runs) - 1) / 2), 0.0)
+            if viewer is None:
+                viewer = Viewer(robot, name=name, offset=offset)
+            else:
+                viewer.add_robot(robot, name, offset=offset)
+            viewer.compare(logs, robot=name)
+        viewer.set_camera([1.2 + 0.6 * len(runs), 0.4, 0.6 + 0.3 * len(runs)])
+        path = viewer.save_html(args.out)
+        print(f"\nLive viewer (while this command runs): {viewer.url}")
+        print(f"Animation written to {path.resolve()} ({path.stat().st_size / 1e6:.1f} MB, "
+              "self-contained; open it in a browser, the timeline is under Open Controls)")
+        if args.open:
+            webbrowser.open(path.resolve().as_uri(), new=2)
+        if args.keep > 0:
+            print(f"Serving the live viewer for {args.keep:g} s")
+            time.sleep(args.keep)
+    finally:
+        if viewer is not None:
+            viewer.close()
     return 0
 
 
@@ -59,6 +89,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--robot", nargs="+", choices=scenarios.ROBOTS, default=list(scenarios.ROBOTS))
     p.add_argument("--method", nargs="+", choices=sorted(SOLVERS),
                    default=["sjt", "jt", "dls", "jp"])
+    p.add_argument("--out", default="demo.html", help="static HTML animation (demo.html)")
+    p.add_argument("--open", action="store_true", help="open the HTML file in a web browser")
+    p.add_argument("--no-viewer", action="store_true", help="print the table only")
+    p.add_argument("--keep", type=float, default=0.0,
+                   help="seconds to keep the live viewer up before exiting (default 0)")
     p.set_defaults(func=demo)
     p = sub.add_parser("reproduce", help="the paper's simulations: figures and results.md")
     p.add_argument("--out", default="results", help="output folder (default: results)")
