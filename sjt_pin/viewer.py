@@ -161,7 +161,7 @@ class Viewer:
 
     def draw_ellipsoid(self, center, transform, name: str = "ellipsoid", color="blue",
                        opacity: float = 0.4, scale: float = 1.0, robot: str | None = None) -> None:
-        """The motion ellipsoid ``{T u : |u| <= 1}`` of ``transform`` T (2 or 3 rows), at ``center``.
+        """The motion ellipsoid ``{T u : |u| <= 1}`` of ``transform`` (2 or 3 rows) at ``center``.
 
         For instance T = J^T or D J^T of a planar arm (paper Figs. 2-3), or the task-space loop
         ``J M`` of a method. ``scale`` multiplies the semi-axes (drawing units); 2-row transforms
