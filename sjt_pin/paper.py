@@ -108,8 +108,10 @@ def paper_task(number: int, settings: PaperSettings = PaperSettings()) -> PaperT
 
 def _solver(method: str, gain: float, settings: PaperSettings, robot: Robot):
     options = {"damping": settings.damping * settings.scale} if method == "dls" else {}
+    # the paper's methods have no joint limits: the URDF's +-pi and 10 rad/s stay unused
     return make_solver(method, robot, gain=gain, dt=settings.dt, task=PositionTask("xy"),
-                       check_stability=False, **options)
+                       check_stability=False, position_limits=False, velocity_limits=False,
+                       **options)
 
 
 def run(method: str, number: int, gain: float,

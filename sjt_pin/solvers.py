@@ -7,11 +7,15 @@ Every solver implements the paper's CLIK law with its own mapping M(J) (see :mod
 
 ``integrate`` is ``pinocchio.integrate``, so continuous joints and free flyers stay on their
 manifold. ``K`` is ``gain``: a scalar, a diagonal (one entry per task row) or ``"auto"``.
+Several frames can be driven at once (their task rows are stacked), an optional posture task
+keeps redundant arms from drifting, and joint position and velocity limits are enforced.
 """
 
 from __future__ import annotations
 
+import math
 import warnings
+from collections.abc import Mapping, Sequence
 from typing import ClassVar
 
 import numpy as np
@@ -19,28 +23,36 @@ import pinocchio as pin
 
 from . import mappings
 from .exceptions import GainWarning
+from .limits import JointLimits
 from .robot import Robot
-from .tasks import PoseTask, Task
+from .tasks import PoseTask, PostureTask, Task
 from .validation import as_motion, positive
+
+_LOCAL = pin.LOCAL
 
 
 class StepInfo:
     """What one ``step()`` computed, at the configuration it was given.
 
     Attributes:
-        error: task error vector e (task rows; m and rad), before weights and gain.
+        error: task error vector e (stacked task rows; m and rad), before weights and gain.
         error_norm: Euclidean norm of ``error``.
-        dq: joint velocity q_dot (nv,), in rad/s or m/s (before multiplying by dt).
-        alpha: SJT scaling factors (nv,), zero for joints that do not move the task;
+        dq: joint velocity q_dot (nv,), in rad/s or m/s (after limits; before multiplying by dt).
+        alpha: SJT scaling factors (nv,), zero for joints that do not move the tasks;
             ``None`` for the other methods.
         gain: the scalar or per-row gain K used in this step (1/s).
-        pose: world pose of the task frame at the given configuration (``pin.SE3``).
-        escaped: True when the step added a saddle escape (see ``DifferentialIKSolver``).
+        pose: world pose of the task frame (``pin.SE3``); with several frames a dict
+            ``{frame: pose}``.
+        escaped: True when the step added a saddle escape (see ``_TransposeSolver``).
+        clamped: tangent indices of the joints clamped out of the update at their limits.
+        velocity_scale: factor (<= 1) applied to the joint velocity for the speed limits.
     """
 
-    __slots__ = ("error", "error_norm", "dq", "alpha", "gain", "pose", "escaped")
+    __slots__ = ("error", "error_norm", "dq", "alpha", "gain", "pose", "escaped", "clamped",
+                 "velocity_scale")
 
-    def __init__(self, error, error_norm, dq, alpha, gain, pose, escaped=False):
+    def __init__(self, error, error_norm, dq, alpha, gain, pose, escaped=False,
+                 clamped=(), velocity_scale=1.0):
         self.error = error
         self.error_norm = error_norm
         self.dq = dq
@@ -48,9 +60,31 @@ class StepInfo:
         self.gain = gain
         self.pose = pose
         self.escaped = escaped
+        self.clamped = np.asarray(clamped, dtype=int)
+        self.velocity_scale = velocity_scale
 
     def __repr__(self) -> str:
         return f"StepInfo(error_norm={self.error_norm:.3g}, |dq|={np.linalg.norm(self.dq):.3g})"
+
+
+def _normalise_tasks(task) -> list[Task]:
+    if task is None:
+        return [PoseTask()]
+    if isinstance(task, Task):
+        return [task]
+    if isinstance(task, Mapping):
+        tasks = []
+        for frame, t in task.items():
+            if not isinstance(t, Task):
+                raise TypeError(f"task[{frame!r}] must be a sjt_pin Task, got {type(t).__name__}")
+            if t.frame not in (None, frame):
+                raise ValueError(f"task[{frame!r}] is on frame {t.frame!r}")
+            t.frame = frame
+            tasks.append(t)
+        return tasks
+    if isinstance(task, Sequence) and task and all(isinstance(t, Task) for t in task):
+        return list(task)
+    raise TypeError("task must be a sjt_pin Task, a list of tasks or a {frame: task} mapping")
 
 
 class DifferentialIKSolver:
@@ -59,15 +93,23 @@ class DifferentialIKSolver:
     Args:
         robot: the :class:`~sjt_pin.robot.Robot` to move.
         gain: K in 1/s. A float (K = k I), a sequence (diagonal of K, one per task row) or
-            ``"auto"``: for SJT ``1 / (n_active dt)``, half the configuration-independent bound
-            ``2 / (n_active dt)``; for the others ``1 / (dt lambda_max(J M))`` at the current q.
+            ``"auto"``: for SJT ``1 / (n dt)`` with n the joints that move the tasks, half the
+            configuration-independent bound ``2 / (n dt)``; for the others
+            ``1 / (dt lambda_max(J M))`` at the current q.
         dt: control period in s (the integration step).
-        task: the task (default :class:`~sjt_pin.tasks.PoseTask` on the end effector).
+        task: a :class:`~sjt_pin.tasks.Task` (default: :class:`~sjt_pin.tasks.PoseTask` on the
+            end effector), a list of tasks on distinct frames, or a ``{frame: task}`` mapping.
+            With several tasks, ``step`` takes ``{frame: target}`` mappings.
+        posture: an optional :class:`~sjt_pin.tasks.PostureTask` stacked under the tasks.
+        position_limits: keep joints within their URDF position limits (default: when the URDF
+            has them); see :mod:`.limits`.
+        velocity_limits: ``True`` (URDF limits), ``False``, or an (nv,) array in rad/s or m/s;
+            default: the URDF's when it has any.
         check_stability: warn (:class:`~sjt_pin.exceptions.GainWarning`, once per solver) when a
             fixed gain exceeds the linear stability bound ``2 / (dt lambda_max(J M))`` at the
             current configuration.
 
-    ``step()`` never mutates its arguments. ``last`` holds the :class:`StepInfo` of the last step.
+    ``step()`` never mutates its arguments. ``last`` is the :class:`StepInfo` of the last step.
     """
 
     method: ClassVar[str] = ""
@@ -77,62 +119,101 @@ class DifferentialIKSolver:
     def __init__(
         self,
         robot: Robot,
-        gain: float | str | np.ndarray = "auto",
+        gain: float | str | Sequence[float] = "auto",
         dt: float = 1e-3,
-        task: Task | None = None,
+        task: Task | Sequence[Task] | Mapping[str, Task] | None = None,
         *,
+        posture: PostureTask | None = None,
+        position_limits: bool | None = None,
+        velocity_limits=None,
         check_stability: bool = True,
     ):
         if not isinstance(robot, Robot):
             raise TypeError(f"robot must be a sjt_pin.Robot, got {type(robot).__name__}")
         self.robot = robot
-        self.dt = positive(dt, "dt", "s")
-        self.task = PoseTask() if task is None else task
-        if not isinstance(self.task, Task):
-            raise TypeError(f"task must be a sjt_pin Task, got {type(self.task).__name__}")
-        self.frame_id = robot.ee_frame_id if self.task.frame is None else robot.frame_id(
-            self.task.frame)
-        self.gain = gain
-        self.check_stability = check_stability
-        self.last: StepInfo | None = None
         self._model = robot.model
         self._data = robot.model.createData()  # the solver's own scratch space
+        self.dt = positive(dt, "dt", "s")
+        self.tasks = _normalise_tasks(task)
+        self.frame_ids = [robot.ee_frame_id if t.frame is None else robot.frame_id(t.frame)
+                          for t in self.tasks]
+        self.frames = [robot.model.frames[f].name for f in self.frame_ids]
+        if len(set(self.frames)) != len(self.frames):
+            raise ValueError(f"each frame takes one task, got frames {self.frames}")
+        self.task, self.frame_id = self.tasks[0], self.frame_ids[0]
+        self._single = len(self.tasks) == 1
+        self._rows, start = [], 0
+        for t in self.tasks:
+            self._rows.append(slice(start, start + t.dim))
+            start += t.dim
+        self.task_dim = start
+        if posture is not None and not isinstance(posture, PostureTask):
+            raise TypeError(f"posture must be a PostureTask, got {type(posture).__name__}")
+        self.posture = posture
+        if posture is not None:
+            q_ref = robot.q0 if posture.q_ref is None else robot.check_q(posture.q_ref, "q_ref")
+            self._q_ref = q_ref.copy()
+            self._posture_rows = np.sqrt(np.broadcast_to(posture.weight, (robot.nv,)))
+        # joints that can move at least one task frame (the others never enter the update)
+        chain = np.zeros(robot.nv)
+        for fid in self.frame_ids:
+            for j in robot.model.supports[robot.model.frames[fid].parentJoint][1:]:
+                joint = robot.model.joints[j]
+                chain[joint.idx_v:joint.idx_v + joint.nv] = 1.0
+        self._chain = chain if posture is None else np.ones(robot.nv)
+        self.n_chain = int(self._chain.sum())
+        self.limits = JointLimits(robot, position_limits, velocity_limits)
         self._gain_warned = False
+        self._check_stability = bool(check_stability)
+        self.gain = gain
+        self._countdown = 0
+        self._last: StepInfo | None = None
+        self._state: tuple | None = None
+        self._q_shape = (robot.nq,)
 
     # -- gain ---------------------------------------------------------------------------------
     @property
     def gain(self) -> float | np.ndarray | str:
-        """K (1/s): a float, the diagonal of K, or ``"auto"``."""
+        """K (1/s): a float, the diagonal of K (one per task row), or ``"auto"``."""
         return "auto" if self._auto else self._gain
 
     @gain.setter
     def gain(self, gain) -> None:
-        self._auto = isinstance(gain, str)
-        if self._auto:
+        if isinstance(gain, str):
             if gain != "auto":
                 raise ValueError(f"gain must be a number, a sequence or 'auto', got {gain!r}")
-            self._gain = None
-            return
-        arr = np.asarray(gain, dtype=float) if not isinstance(gain, (int, float)) else None
-        if arr is None or arr.ndim == 0:
+            self._auto, self._gain, self._gain_max = True, None, None
+        elif np.ndim(gain) == 0:
             value = float(gain)
             if not np.isfinite(value) or value < 0:
                 raise ValueError(f"gain must be a finite number >= 0 (1/s), got {gain!r}")
-            self._gain, self._gain_max = value, value
-            return
-        if arr.shape != (self.task.dim,) or not np.all(np.isfinite(arr)) or np.any(arr < 0):
-            raise ValueError(
-                f"gain as a sequence must have shape ({self.task.dim},) (one per task row) with "
-                f"finite entries >= 0, got {gain!r}"
-            )
-        self._gain, self._gain_max = arr.copy(), float(arr.max())
+            self._auto, self._gain, self._gain_max = False, value, value
+        else:
+            arr = np.asarray(gain, dtype=float)
+            if arr.shape != (self.task_dim,) or not np.all(np.isfinite(arr)) or np.any(arr < 0):
+                raise ValueError(
+                    f"gain as a sequence must have shape ({self.task_dim},) (one per task row) "
+                    f"with finite entries >= 0, got {gain!r}"
+                )
+            self._auto, self._gain, self._gain_max = False, arr.copy(), float(arr.max())
+        self._gain_changed()
+
+    @property
+    def check_stability(self) -> bool:
+        """Warn once when a fixed gain exceeds the stability bound (see the class docstring)."""
+        return self._check_stability
+
+    @check_stability.setter
+    def check_stability(self, value: bool) -> None:
+        self._check_stability = bool(value)
+        self._gain_changed()
+
+    def _gain_changed(self) -> None:
+        """Recompute what depends on the gain; subclasses extend it."""
+        self._gain_check = self._check_stability and not self._auto and not self._gain_warned
 
     # -- the mapping (subclasses) --------------------------------------------------------------
-    def _scaling(self, J: np.ndarray) -> np.ndarray | None:
-        """SJT's scaling factors alpha (nv,); ``None`` for the other methods."""
-        return None
-
-    def _apply(self, J: np.ndarray, v: np.ndarray, alpha) -> np.ndarray:
+    def _apply(self, J: np.ndarray, v: np.ndarray) -> np.ndarray:
         """``M(J) v``."""
         raise NotImplementedError
 
@@ -140,11 +221,15 @@ class DifferentialIKSolver:
         """The mapping M(J) as an (n, m) matrix (for analysis, not used by ``step``)."""
         raise NotImplementedError
 
-    def _loop_eigenvalue_bound(self, J: np.ndarray, alpha) -> float:
+    def scaling_factors(self, J: np.ndarray) -> np.ndarray | None:
+        """SJT's alpha_i for the (weighted, stacked) rows ``J``; ``None`` for other methods."""
+        return None
+
+    def _loop_eigenvalue_bound(self, J: np.ndarray) -> float:
         """A cheap upper bound of lambda_max(J M(J)); exact where that is cheap."""
         return 1.0  # J J^+ is a projector, J J^T (J J^T + l^2 I)^-1 has eigenvalues below 1
 
-    def _auto_gain(self, J: np.ndarray, alpha) -> float:
+    def _auto_gain(self, J: np.ndarray) -> float:
         return 1.0 / (self.dt * max(mappings.max_loop_eigenvalue(J, self.matrix(J)), 1e-12))
 
     # -- one control period ----------------------------------------------------------------------
@@ -154,64 +239,157 @@ class DifferentialIKSolver:
         Args:
             q: current configuration (nq,).
             target: desired pose x_d(t): ``pin.SE3`` or 4x4 matrix (position tasks also take a
-                3-vector in m).
+                3-vector in m); with several tasks a ``{frame: target}`` mapping.
             target_velocity: desired velocity x_dot_d(t) as ``pin.Motion`` or 6-vector
-                [linear (m/s), angular (rad/s)], world axes at the desired origin; ``None`` = 0.
+                [linear (m/s), angular (rad/s)], world axes at the desired origin (``None``: 0);
+                with several tasks a ``{frame: velocity}`` mapping (missing frames: 0).
         """
-        q = self.robot.check_q(q)
-        oMd = self.task.target_pose(target)
-        velocity = None if target_velocity is None else as_motion(target_velocity)
+        if not (isinstance(q, np.ndarray) and q.shape == self._q_shape and q.dtype == float):
+            q = self.robot.check_q(q)
+        if self._single:
+            oMd = self.task.target_pose(target)
+            velocity = None if target_velocity is None else as_motion(target_velocity)
+        else:
+            oMd, velocity = self._targets(target, target_velocity)
         return self._step(q, oMd, velocity)
 
-    def _step(self, q: np.ndarray, oMd: pin.SE3, velocity: pin.Motion | None) -> np.ndarray:
-        model, data, task, fid = self._model, self._data, self.task, self.frame_id
+    def _targets(self, target, target_velocity) -> tuple[list, list | None]:
+        if not isinstance(target, Mapping):
+            raise ValueError(f"target must be a {{frame: target}} mapping for frames {self.frames}")
+        unknown = set(target) - set(self.frames)
+        missing = set(self.frames) - set(target)
+        if unknown or missing:
+            raise ValueError(f"target must have exactly the frames {self.frames}; "
+                             f"missing {sorted(missing)}, unknown {sorted(unknown)}")
+        poses = [t.target_pose(target[f]) for t, f in zip(self.tasks, self.frames, strict=True)]
+        if target_velocity is None:
+            return poses, None
+        if not isinstance(target_velocity, Mapping) or set(target_velocity) - set(self.frames):
+            raise ValueError(f"target_velocity must be a {{frame: velocity}} mapping over "
+                             f"{self.frames}")
+        velocities = [None if f not in target_velocity else
+                      as_motion(target_velocity[f], f"target_velocity[{f!r}]") for f in self.frames]
+        return poses, velocities
+
+    def _kinematics(self, q, oMd, velocity):
+        """Stacked task rows J (weighted), error e (unweighted), weighted e, feed-forward, poses."""
+        model, data = self._model, self._data
         pin.computeJointJacobians(model, data, q)
-        oMf = pin.updateFramePlacement(model, data, fid)
-        J = task.jacobian(oMf, pin.getFrameJacobian(model, data, fid, pin.LOCAL))
-        e = task.error(oMf, oMd)
-        if task.sqrt_weight is not None:
-            J = task.sqrt_weight[:, None] * J
-            e_w = task.sqrt_weight * e
+        if self._single:
+            task, fid = self.task, self.frame_id
+            oMf = pin.updateFramePlacement(model, data, fid)
+            J = task.jacobian(oMf, pin.getFrameJacobian(model, data, fid, _LOCAL))
+            e = task.error(oMf, oMd)
+            ff = None if velocity is None else task.feedforward(oMf, oMd, velocity)
+            sw = task.sqrt_weight
+            if sw is not None:
+                J, e_w = sw[:, None] * J, sw * e
+                ff = None if ff is None else sw * ff
+            else:
+                e_w = e
+            pose = oMf
         else:
-            e_w = e
-        alpha = self._scaling(J)
-        gain = self._auto_gain(J, alpha) if self._auto else self._gain
+            blocks, errors, weighted, ffs, pose = [], [], [], [], {}
+            for k, (task, fid) in enumerate(zip(self.tasks, self.frame_ids, strict=True)):
+                oMf = pin.updateFramePlacement(model, data, fid)
+                rows = task.jacobian(oMf, pin.getFrameJacobian(model, data, fid, _LOCAL))
+                err = task.error(oMf, oMd[k])
+                vel = None if velocity is None else velocity[k]
+                f = np.zeros(task.dim) if vel is None else task.feedforward(oMf, oMd[k], vel)
+                sw = 1.0 if task.sqrt_weight is None else task.sqrt_weight
+                blocks.append(rows * (sw if np.ndim(sw) == 0 else sw[:, None]))
+                errors.append(err)
+                weighted.append(sw * err)
+                ffs.append(sw * f)
+                pose[self.frames[k]] = oMf
+            J, e, e_w = np.vstack(blocks), np.concatenate(errors), np.concatenate(weighted)
+            ff = None if velocity is None else np.concatenate(ffs)
+        return J, e, e_w, ff, pose
+
+    def _step(self, q: np.ndarray, oMd, velocity) -> np.ndarray:
+        """One step on validated arguments (``track`` and ``step`` call this)."""
+        J, e, e_w, ff, pose = self._kinematics(q, oMd, velocity)
+        ee = e.dot(e)
+        if not math.isfinite(ee):
+            self._raise_non_finite(q)
+        gain = self._auto_gain(J) if self._auto else self._gain
         v = gain * e_w
-        if velocity is not None:
-            ff = task.feedforward(oMf, oMd, velocity)
-            v += ff if task.sqrt_weight is None else task.sqrt_weight * ff
-        dq = self._apply(J, v, alpha)
-        if self.check_stability and not self._auto and not self._gain_warned:
-            self._check_gain(J, alpha)
+        if ff is not None:
+            v += ff
+        if self.posture is not None:
+            k_p = gain if np.ndim(gain) == 0 else float(np.mean(gain))
+            J = np.vstack([J, np.diag(self._posture_rows)])
+            v = np.concatenate([v, k_p * self._posture_rows
+                                * pin.difference(self._model, q, self._q_ref)])
+        return self._finish(q, oMd, J, e, ee, v, self._apply(J, v) * self.dt, gain, pose)
+
+    def _finish(self, q, oMd, J, e, ee, v, step, gain, pose) -> np.ndarray:
+        """Stability check, saddle escape, limits, integration and the record of the step.
+
+        ``step`` is q_dot dt (the vector integrated); ``v`` the task velocity it maps, or
+        ``None`` for ``gain * e`` (computed only if a safeguard needs it).
+        """
+        if self._gain_check:
+            self._check_gain(J)
         escaped = False
         if self.escapes_saddles:
-            escaped = self._escape_saddle(q, oMd, J, e, v, dq)
-        self.last = StepInfo(e, float(np.sqrt(e @ e)), dq, alpha, gain, oMf, escaped)
-        return pin.integrate(model, q, dq * self.dt)
+            if self._countdown > 0:
+                self._countdown -= 1
+            else:
+                escaped = self._escape_saddle(q, oMd, J, e, v, step, gain)
+        limits, clamped, scale, dt = self.limits, (), 1.0, self.dt
+        q_next = pin.integrate(self._model, q, step)
+        if limits.active and limits.violated(q_next, step, dt):
+            if limits.position and limits.outside(q_next):
+                v = gain * e if v is None else v
+                dq, clamped = limits.clamp(q, step / dt, dt, J, v, self._apply)
+                step = dq * dt
+            if limits.velocity:
+                scale = limits.scale_step(step, dt)
+            q_next = pin.integrate(self._model, q, step)
+            if limits.position:
+                limits.clip(q_next)
+        self._state = (J, e, ee, step, gain, pose, escaped, clamped, scale)
+        self._last = None
+        return q_next
+
+    @property
+    def last(self) -> StepInfo | None:
+        """The :class:`StepInfo` of the last step (``None`` before the first)."""
+        if self._last is None and self._state is not None:
+            J, e, ee, step, gain, pose, escaped, clamped, scale = self._state
+            self._last = StepInfo(e, math.sqrt(ee), step / self.dt, self.scaling_factors(J), gain,
+                                  pose, escaped, clamped, scale)
+        return self._last
+
+    def _raise_non_finite(self, q: np.ndarray) -> None:
+        self.robot.check_q(q)  # names q if q holds NaN or inf
+        raise ValueError("target contains NaN or inf (the task error is not finite)")
 
     # -- safeguards ------------------------------------------------------------------------------
-    def _check_gain(self, J: np.ndarray, alpha) -> None:
+    def _check_gain(self, J: np.ndarray) -> None:
         """Warn once if ``k_max dt lambda_max(J M) >= 2`` at this configuration."""
         k_dt = self._gain_max * self.dt
-        if k_dt * self._loop_eigenvalue_bound(J, alpha) < 2.0:
+        if k_dt * self._loop_eigenvalue_bound(J) < 2.0:
             return
         bound = mappings.stable_gain_bound(J, self.matrix(J), self.dt)
         if self._gain_max >= bound:
-            self._gain_warned = True
+            self._gain_warned, self._gain_check = True, False
             warnings.warn(
                 f"{self.method.upper()} gain {self._gain_max:g} 1/s exceeds the stability bound "
                 f"2 / (dt lambda_max(J M)) = {bound:.4g} 1/s at the current configuration "
                 f"(dt = {self.dt:g} s); the closed loop will oscillate or diverge",
                 GainWarning,
-                stacklevel=3,
+                stacklevel=4,
             )
 
-    def _escape_saddle(self, q, oMd, J, e, v, dq) -> bool:
+    def _escape_saddle(self, q, oMd, J, e, v, step, gain) -> bool:
         return False
 
     def __repr__(self) -> str:
+        tasks = self.task if self._single else self.tasks
         return (f"{type(self).__name__}({self.robot.name!r}, gain={self.gain!r}, dt={self.dt:g}, "
-                f"task={self.task!r})")
+                f"task={tasks!r})")
 
 
 class JPSolver(DifferentialIKSolver):
@@ -222,12 +400,12 @@ class JPSolver(DifferentialIKSolver):
 
     method = "jp"
 
-    def __init__(self, robot: Robot, gain="auto", dt: float = 1e-3, task: Task | None = None, *,
-                 rcond: float = mappings.JP_RCOND, check_stability: bool = True):
+    def __init__(self, robot: Robot, gain="auto", dt: float = 1e-3, task=None, *,
+                 rcond: float = mappings.JP_RCOND, **options):
         self.rcond = positive(rcond, "rcond")
-        super().__init__(robot, gain, dt, task, check_stability=check_stability)
+        super().__init__(robot, gain, dt, task, **options)
 
-    def _apply(self, J, v, alpha):
+    def _apply(self, J, v):
         return mappings.jp_apply(J, v, self.rcond)
 
     def matrix(self, J):
@@ -243,12 +421,12 @@ class DLSSolver(DifferentialIKSolver):
 
     method = "dls"
 
-    def __init__(self, robot: Robot, gain="auto", dt: float = 1e-3, task: Task | None = None, *,
-                 damping: float = 0.05, check_stability: bool = True):
+    def __init__(self, robot: Robot, gain="auto", dt: float = 1e-3, task=None, *,
+                 damping: float = 0.05, **options):
         self.damping = positive(damping, "damping", "task units (m, rad)")
-        super().__init__(robot, gain, dt, task, check_stability=check_stability)
+        super().__init__(robot, gain, dt, task, **options)
 
-    def _apply(self, J, v, alpha):
+    def _apply(self, J, v):
         return mappings.dls_apply(J, v, self.damping)
 
     def matrix(self, J):
@@ -261,9 +439,9 @@ class _TransposeSolver(DifferentialIKSolver):
     At an exactly singular configuration an error along the lost task direction gives
     ``J^T e = 0`` although ``e != 0``: a saddle of ``1/2 e^T K e`` that round-off alone takes
     thousands of steps to leave (UR5 at q = 0 asked to roll its tool about the lost axis never
-    moves). The step detects it, when the loop gain along the command falls below
-    ``saddle_ratio`` (``v^T J M v < saddle_ratio v^T v``) while the error is above
-    ``saddle_error``, and escapes as perturbed gradient descent does: it tries joint moves of
+    moves). Every ``saddle_check_every`` steps the step looks for it — the loop gain along the
+    command below ``saddle_ratio`` (``v^T J M v < saddle_ratio v^T v``) while the error is above
+    ``saddle_error`` — and escapes as perturbed gradient descent does: it tries joint moves of
     ``escape_step`` rad along +-the null direction of J and along ``escape_candidates`` random
     directions (seeded, so runs repeat), takes the one that leaves the smallest error, and then
     lets the regular update work for ``escape_cooldown`` steps before it may escape again.
@@ -272,6 +450,7 @@ class _TransposeSolver(DifferentialIKSolver):
     escapes_saddles = True
     saddle_ratio = 1e-6
     saddle_error = 1e-6
+    saddle_check_every = 10
     escape_step = 0.05  # rad
     escape_candidates = 8
     escape_cooldown = 20
@@ -279,29 +458,29 @@ class _TransposeSolver(DifferentialIKSolver):
     def __init__(self, *args, seed: int = 0, **kwargs):
         super().__init__(*args, **kwargs)
         self._rng = np.random.default_rng(seed)
-        self._cooldown = 0
 
-    def _escape_saddle(self, q, oMd, J, e, v, dq) -> bool:
-        if self._cooldown > 0:
-            self._cooldown -= 1
+    def _escape_saddle(self, q, oMd, J, e, v, step, gain) -> bool:
+        """Called every ``saddle_check_every`` steps (``_countdown`` counts down in ``_finish``)."""
+        self._countdown = self.saddle_check_every - 1
+        if e @ e < self.saddle_error**2:
             return False
+        v = gain * e if v is None else v
         vv = v @ v
-        if vv == 0.0 or e @ e < self.saddle_error**2 or (v @ J) @ dq >= self.saddle_ratio * vv:
+        if vv == 0.0 or (v @ J) @ step >= self.saddle_ratio * vv * self.dt:
             return False
         _, s, Vt = np.linalg.svd(J, full_matrices=False)
-        random = self._rng.standard_normal((self.escape_candidates, J.shape[1]))
+        random = self._rng.standard_normal((self.escape_candidates, J.shape[1])) * self._chain
         directions = np.vstack([Vt[s.size - 1], -Vt[s.size - 1], random])
-        directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+        directions /= np.maximum(np.linalg.norm(directions, axis=1, keepdims=True), 1e-12)
         norms = [self._error_norm_at(pin.integrate(self._model, q, self.escape_step * d), oMd)
                  for d in directions]
-        self._cooldown = self.escape_cooldown
-        dq += (self.escape_step / self.dt) * directions[int(np.argmin(norms))]
+        self._countdown = self.escape_cooldown
+        step += self.escape_step * directions[int(np.argmin(norms))]
         return True
 
-    def _error_norm_at(self, q: np.ndarray, oMd: pin.SE3) -> float:
-        pin.forwardKinematics(self._model, self._data, q)
-        oMf = pin.updateFramePlacement(self._model, self._data, self.frame_id)
-        return float(np.linalg.norm(self.task.error(oMf, oMd)))
+    def _error_norm_at(self, q: np.ndarray, oMd) -> float:
+        _, e, _, _, _ = self._kinematics(q, oMd, None)
+        return float(np.sqrt(e @ e))
 
 
 class JTSolver(_TransposeSolver):
@@ -309,46 +488,96 @@ class JTSolver(_TransposeSolver):
 
     method = "jt"
 
-    def _apply(self, J, v, alpha):
-        return mappings.jt_apply(J, v)
+    def _apply(self, J, v):
+        return v @ J
 
     def matrix(self, J):
         return mappings.jt_matrix(J)
 
-    def _loop_eigenvalue_bound(self, J, alpha):
+    def _loop_eigenvalue_bound(self, J):
         return float(np.einsum("ij,ij->", J, J))  # trace(J J^T) >= lambda_max
 
 
 class SJTSolver(_TransposeSolver):
     """Scaled Jacobian transpose CLIK, eq. (21)-(22): ``M = D J^T``, ``D = diag(alpha_i)``.
 
-    ``alpha_i = 1 / (J_i^T W J_i)`` from the task's own (weighted) rows, 0 for joints that do not
-    move the task (squared column norm below ``column_tol``). The loop matrix ``J D J^T`` has
-    eigenvalues in ``[0, n_active]`` whatever the robot's size or length unit (eq. 25), so
-    ``gain < 2 / (n_active dt)`` is stable at every configuration; ``gain="auto"`` uses half that.
+    ``alpha_i = 1 / (J_i^T W J_i)`` from the tasks' own (weighted, stacked) rows, 0 for joints
+    that do not move them: joints outside the frames' kinematic chains, and columns whose squared
+    norm is below ``column_tol`` (see :func:`~sjt_pin.mappings.scaling_factors`). The loop matrix
+    ``J D J^T`` has eigenvalues in ``[0, n]`` whatever the robot's size or length unit (eq. 25),
+    so ``gain < 2 / (n dt)`` is stable at every configuration; ``gain="auto"`` uses half that.
     """
 
     method = "sjt"
 
-    def __init__(self, robot: Robot, gain="auto", dt: float = 1e-3, task: Task | None = None, *,
-                 column_tol: float = mappings.COLUMN_TOL, check_stability: bool = True):
+    def __init__(self, robot: Robot, gain="auto", dt: float = 1e-3, task=None, *,
+                 column_tol: float = mappings.COLUMN_TOL, **options):
         self.column_tol = positive(column_tol, "column_tol", "task units squared")
-        super().__init__(robot, gain, dt, task, check_stability=check_stability)
+        super().__init__(robot, gain, dt, task, **options)
+        self._norms = np.empty(robot.nv)
+        self._not_chain = 1.0 - self._chain
+        # A 6-row pose task gives every chain column J_i^T W J_i >= min(W) (eq. 19): no column
+        # of the chain can fall below column_tol, so the fast path needs no threshold test.
+        t = self.task
+        w_min = 1.0 if t.sqrt_weight is None else float(np.min(t.sqrt_weight)) ** 2
+        self._fast = (self._single and self.posture is None and isinstance(t, PoseTask)
+                      and w_min > self.column_tol)
+        self._ones = np.ones(self.task_dim)
+        self._partial_chain = bool(self._not_chain.any())
+        self._gain_changed()
 
-    def _scaling(self, J):
-        return mappings.scaling_factors(J, self.column_tol)
+    def _gain_changed(self) -> None:
+        super()._gain_changed()
+        # chain_i k dt: dividing it by |J_i|^2 gives k dt alpha_i in one operation
+        chain = getattr(self, "_chain", None)
+        if chain is None:  # called by the base constructor before the chain is known
+            return
+        k = self._auto_gain(None) if self._auto else self._gain
+        self._chain_kdt = chain * (k * self.dt) if np.ndim(k) == 0 else None
+    def _apply(self, J, v):
+        # alpha_i = 1 / |J_i|^2 on the chain, 0 elsewhere and below column_tol (eq. 18)
+        norms = np.dot(np.ones(J.shape[0]), J * J)
+        alpha = np.divide(self._chain, norms, out=np.zeros_like(norms),
+                          where=norms > self.column_tol)
+        return alpha * (v @ J)
 
-    def _apply(self, J, v, alpha):
-        return mappings.sjt_apply(J, v, alpha)
+    def _step(self, q, oMd, velocity):
+        """The SJT step of eq. (21)-(22), without allocations beyond Pinocchio's own results
+        where the task is one pose task and the gain a scalar; otherwise the general path."""
+        if not self._fast or self._chain_kdt is None or velocity is not None:
+            return super()._step(q, oMd, velocity)
+        model, data, fid = self._model, self._data, self.frame_id
+        pin.computeJointJacobians(model, data, q)
+        oMf = pin.updateFramePlacement(model, data, fid)
+        J = pin.getFrameJacobian(model, data, fid, _LOCAL)
+        e = pin.log6(oMf.actInv(oMd)).vector
+        ee = e.dot(e)
+        if not math.isfinite(ee):
+            self._raise_non_finite(q)
+        gain = self._gain_max if not self._auto else self._auto_gain(None)
+        sw, v = self.task.sqrt_weight, None
+        if sw is not None:
+            J = sw[:, None] * J
+            e = sw * e
+            v = gain * e
+        norms = np.dot(self._ones, np.multiply(J, J), out=self._norms)
+        if self._partial_chain:
+            np.add(norms, self._not_chain, out=norms)  # joints off the chain: alpha = 0 / 1
+        step = np.divide(self._chain_kdt, norms)  # k dt alpha (eq. 18)
+        step *= e.dot(J)  # k dt D J^T e (eq. 21-22)
+        return self._finish(q, oMd, J, e if sw is None else e / sw, ee, v, step, gain, oMf)
+
+    def scaling_factors(self, J):
+        return mappings.scaling_factors(J, self.column_tol) * self._chain
 
     def matrix(self, J):
-        return mappings.sjt_matrix(J, self.column_tol)
+        return self.scaling_factors(J)[:, None] * J.T
 
-    def _loop_eigenvalue_bound(self, J, alpha):
-        return float(np.count_nonzero(alpha))  # trace(J D J^T) = n_active
+    def _loop_eigenvalue_bound(self, J):
+        return float(self.n_chain)  # trace(J D J^T) = n_active <= n
 
-    def _auto_gain(self, J, alpha):
-        return 1.0 / (self.dt * max(np.count_nonzero(alpha), 1))
+    def _auto_gain(self, J):
+        return 1.0 / (self.dt * max(self.n_chain, 1))
 
 
 SOLVERS: dict[str, type[DifferentialIKSolver]] = {

@@ -132,3 +132,26 @@ class OrientationTask(Task):
 
     def feedforward(self, oMf, oMd, velocity):
         return oMf.rotation.T @ velocity.angular
+
+
+class PostureTask:
+    """A joint-space pull toward a reference configuration, for redundant robots.
+
+    Stacked under the other tasks with a low ``weight`` (dimensionless per joint), it keeps the
+    self-motion of a 7-DoF arm from drifting over long runs at the price of a small bias of the
+    main task of order ``weight``. Its error is ``difference(q, q_ref)`` (rad or m per joint)
+    and its rows are ``sqrt(weight) I``; SJT's scaling factors then become
+    ``alpha_i = 1 / (J_i^T W J_i + weight_i)``, and the loop's eigenvalues stay in [0, n].
+    ``q_ref`` defaults to the robot's ``q0``.
+    """
+
+    def __init__(self, q_ref=None, weight=1e-2):
+        self.q_ref = None if q_ref is None else np.asarray(q_ref, dtype=float)
+        w = np.asarray(weight, dtype=float)
+        if w.ndim > 1 or not np.all(np.isfinite(w)) or np.any(w <= 0):
+            raise ValueError(f"weight must be positive (a number or one per joint), "
+                             f"got {weight!r}")
+        self.weight = w
+
+    def __repr__(self) -> str:
+        return f"PostureTask(weight={self.weight})"

@@ -97,6 +97,8 @@ def track(
     """
     if not isinstance(solver, DifferentialIKSolver):
         raise TypeError(f"solver must be a DifferentialIKSolver, got {type(solver).__name__}")
+    if len(solver.tasks) != 1:
+        raise TypeError("track drives one task frame; step() takes several (see the README)")
     if not isinstance(trajectory, Trajectory):
         raise TypeError(f"trajectory must be a Trajectory, got {type(trajectory).__name__}")
     max_step = positive(max_step, "max_step", "rad")

@@ -73,7 +73,8 @@ def test_transpose_methods_converge_from_stretched_panda(panda, method, gain):
     q_stretched = np.zeros(9)  # joint 4 at 0: upper arm and forearm aligned
     assert np.linalg.svd(panda.jacobian(q_stretched), compute_uv=False)[5] < 1e-12
     target = panda.fk(panda.q0)
-    solver = sjt.make_solver(method, panda, gain=gain, dt=0.01)
+    # q4 = 0 lies beyond joint 4's URDF limit (-0.07 rad): the bare method, without limits
+    solver = sjt.make_solver(method, panda, gain=gain, dt=0.01, position_limits=False)
     q = regulate(solver, q_stretched, target, 20_000)
     assert np.all(np.isfinite(q))
     assert solver.last.error_norm < 1e-6
@@ -107,7 +108,9 @@ def test_unreachable_target_sjt_bounded_jp_reports_divergence(ur5):
     assert not sjt_log.diverged
     assert np.all(np.isfinite(sjt_log.q))
     assert sjt_log.error_norm[-1] <= np.linalg.norm(far - p0) + 0.1  # pulled toward the goal
-    jp_log = sjt.track(sjt.JPSolver(ur5, gain=10.0, dt=1e-3), line, q0, duration=3.0)
+    # the bare method: UR5's URDF speed limits would otherwise cap JP's blow-up
+    jp = sjt.JPSolver(ur5, gain=10.0, dt=1e-3, velocity_limits=False)
+    jp_log = sjt.track(jp, line, q0, duration=3.0)
     assert jp_log.diverged and "one step" in jp_log.reason
     assert len(jp_log) < 3001
 

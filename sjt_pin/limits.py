@@ -1,0 +1,136 @@
+"""Joint position and velocity limits applied inside a CLIK step.
+
+Position limits (1-DoF revolute and prismatic joints with URDF limits) are never crossed: a joint
+whose update would leave its range is clamped out of the update — it moves exactly to its limit
+(or stays there) and its column is removed from the mapping, which is recomputed for the task
+velocity that joint no longer provides, so the other joints take over. Velocity limits scale the
+whole joint velocity down uniformly, keeping its direction.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .robot import Robot
+
+
+class JointLimits:
+    """The limits one solver enforces, in configuration (q) and tangent (v) indices.
+
+    Args:
+        robot: where the URDF limits come from.
+        position: enforce position limits (``None``: when the URDF has any).
+        velocity: ``True``/``None`` for the URDF's speed limits (if any), ``False`` for none, or
+            an (nv,) array of limits in rad/s or m/s (``inf`` for none).
+    """
+
+    def __init__(self, robot: Robot, position: bool | None = None, velocity=None):
+        model = robot.model
+        lower, upper = robot.lower_limits, robot.upper_limits
+        qi, vi = [], []
+        for j in range(1, model.njoints):
+            joint = model.joints[j]
+            if joint.nq == 1 and joint.nv == 1 and np.isfinite(lower[joint.idx_q]) \
+                    and np.isfinite(upper[joint.idx_q]):
+                qi.append(joint.idx_q)
+                vi.append(joint.idx_v)
+        self.q_index = np.array(qi, dtype=int)
+        self.v_index = np.array(vi, dtype=int)
+        self.lower = lower[self.q_index]
+        self.upper = upper[self.q_index]
+        self.position = bool(qi) if position is None else bool(position) and bool(qi)
+        if velocity is None or velocity is True:
+            vmax = robot.velocity_limits
+        elif velocity is False:
+            vmax = np.full(model.nv, np.inf)
+        else:
+            vmax = np.asarray(velocity, dtype=float)
+            if vmax.shape != (model.nv,) or np.any(np.isnan(vmax)) or np.any(vmax <= 0):
+                raise ValueError(f"velocity_limits must have shape ({model.nv},) with entries "
+                                 f"> 0 (rad/s or m/s; inf for none), got {velocity!r}")
+        self.velocity_limits = vmax
+        self._inv_vmax = 1.0 / vmax
+        self.velocity = bool(np.any(np.isfinite(vmax))) and velocity is not False
+        self.active = self.position or self.velocity
+        # every joint 1-DoF, limited and in order: one fused test of both limits per step
+        self._dense = (len(qi) == model.nq == model.nv
+                       and np.array_equal(self.q_index, np.arange(model.nq)))
+        if self._dense:
+            self._mid = 0.5 * (self.upper + self.lower)
+            half = 0.5 * (self.upper - self.lower)
+            self._inv_half = np.where(half > 0, 1.0 / np.maximum(half, 1e-300), np.inf)
+            if not self.position:
+                self._inv_half = np.zeros(model.nq)
+            both = np.empty(model.nq + model.nv)
+            self._both, self._pos, self._vel = both, both[:model.nq], both[model.nq:]
+        self._inv_vmax_dt = None
+
+    def violated(self, q_next: np.ndarray, step: np.ndarray, dt: float) -> bool:
+        """Whether ``q_next`` leaves a position limit or ``step / dt`` exceeds a speed limit.
+
+        The per-step test of the common case: a handful of vector operations, no allocation.
+        """
+        if not self._dense:
+            return (self.position and self.outside(q_next)) or (
+                self.velocity and bool((np.abs(step) * self._inv_vmax).max() > dt))
+        if self._inv_vmax_dt is None or self._dt != dt:
+            self._dt, self._inv_vmax_dt = dt, self._inv_vmax / dt
+            if not self.velocity:
+                self._inv_vmax_dt = np.zeros_like(self._inv_vmax)
+        np.subtract(q_next, self._mid, out=self._pos)
+        self._pos *= self._inv_half  # |.| > 1 outside [lower, upper]
+        np.multiply(step, self._inv_vmax_dt, out=self._vel)  # |.| > 1 faster than the limit
+        both = np.abs(self._both, out=self._both)
+        return bool(both.max() > 1.0)
+
+    def outside(self, q_next: np.ndarray) -> bool:
+        """Whether ``q_next`` leaves the position limits (cheap check for the common case)."""
+        q = q_next if self._dense else q_next[self.q_index]
+        return bool((q > self.upper).any() or (q < self.lower).any())
+
+    def clip(self, q_next: np.ndarray) -> None:
+        """Clip ``q_next`` into the limits in place (round-off of a step that lands on one)."""
+        q_next[self.q_index] = np.clip(q_next[self.q_index], self.lower, self.upper)
+
+    def scale_step(self, step: np.ndarray, dt: float) -> float:
+        """Scale ``step`` (= q_dot dt) in place so no joint exceeds its speed limit.
+
+        Returns the factor applied (1 when no joint is too fast).
+        """
+        worst = float(np.max(np.abs(step) * self._inv_vmax)) / dt if step.size else 0.0
+        if worst <= 1.0:
+            return 1.0
+        step /= worst
+        return 1.0 / worst
+
+    def clamp(self, q: np.ndarray, dq: np.ndarray, dt: float, J: np.ndarray, v: np.ndarray,
+              remap) -> tuple[np.ndarray, np.ndarray]:
+        """``dq`` with the joints that would leave their limits clamped out of the update.
+
+        ``remap(J, v)`` recomputes the joint velocity of the mapping for Jacobian ``J`` and task
+        velocity ``v``. Returns the new ``dq`` and the tangent indices of the clamped joints.
+        """
+        fixed = np.zeros(J.shape[1], dtype=bool)
+        fixed_dq = np.zeros(J.shape[1])
+        q_lim = q[self.q_index]
+        for _ in range(self.q_index.size):
+            q_new = q_lim + dq[self.v_index] * dt
+            over = (q_new > self.upper) | (q_new < self.lower)
+            over &= ~fixed[self.v_index]
+            if not over.any():
+                break
+            k = np.flatnonzero(over)
+            idx = self.v_index[k]
+            lo, hi, qk, dqk = self.lower[k], self.upper[k], q_lim[k], dq[idx]
+            fixed[idx] = True
+            # inside: move exactly onto the limit; already outside (a start out of range):
+            # keep a motion back toward the range, stop any other
+            landing = (np.clip(q_new[k], lo, hi) - qk) / dt
+            inward = ((qk > hi) & (dqk < 0)) | ((qk < lo) & (dqk > 0))
+            fixed_dq[idx] = np.where((qk <= hi) & (qk >= lo), landing,
+                                     np.where(inward, dqk, 0.0))
+            J_free = J.copy()
+            J_free[:, fixed] = 0.0
+            dq = remap(J_free, v - J[:, fixed] @ fixed_dq[fixed])
+            dq[fixed] = fixed_dq[fixed]
+        return dq, np.flatnonzero(fixed)
