@@ -7,6 +7,7 @@ transpose baselines share the same interface.
 
 from .exceptions import FrameNotFound, GainWarning, URDFError
 from .robot import Robot
+from .solve import IKResult
 from .solvers import (
     DifferentialIKSolver,
     DLSSolver,
@@ -16,7 +17,7 @@ from .solvers import (
     StepInfo,
     make_solver,
 )
-from .tasks import OrientationTask, PoseTask, PositionTask, Task
+from .tasks import OrientationTask, PoseTask, PositionTask, PostureTask, Task
 from .tracking import TrackingLog, track
 from .trajectories import Circle, Line, PoseInterpolation, Trajectory
 
@@ -26,6 +27,7 @@ __all__ = [
     "DifferentialIKSolver",
     "FrameNotFound",
     "GainWarning",
+    "IKResult",
     "JPSolver",
     "JTSolver",
     "Line",
@@ -33,6 +35,7 @@ __all__ = [
     "PoseInterpolation",
     "PoseTask",
     "PositionTask",
+    "PostureTask",
     "Robot",
     "SJTSolver",
     "StepInfo",

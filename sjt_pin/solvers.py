@@ -353,6 +353,18 @@ class DifferentialIKSolver:
         self._last = None
         return q_next
 
+    def solve(self, target, q0, tol: float = 1e-6, max_iters: int = 500, restarts: int = 0,
+              rng: np.random.Generator | None = None, inner: int | None = None):
+        """Solve to ``target`` from ``q0`` with an adaptive step along this solver's direction.
+
+        Returns an :class:`~sjt_pin.solve.IKResult` (q, success, iterations, error); see
+        :func:`sjt_pin.solve.solve`. Solutions respect the position limits the solver enforces.
+        """
+        from .solve import solve
+
+        return solve(self, target, q0, tol=tol, max_iters=max_iters, restarts=restarts, rng=rng,
+                     inner=inner)
+
     @property
     def last(self) -> StepInfo | None:
         """The :class:`StepInfo` of the last step (``None`` before the first)."""

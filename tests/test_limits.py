@@ -1,0 +1,72 @@
+"""Joint limits inside step(): positions never crossed, speeds scaled, tracking still converges."""
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+import sjt_pin as sjt
+
+
+@pytest.mark.parametrize("method", ["sjt", "dls", "jp"])
+def test_random_targets_never_violate_panda_limits(panda, method, rng):
+    solver = sjt.make_solver(method, panda, gain="auto" if method == "sjt" else 50.0, dt=5e-3)
+    assert solver.limits.position and solver.limits.velocity
+    lower, upper, vmax = panda.lower_limits, panda.upper_limits, panda.velocity_limits
+    q = panda.q0.copy()
+    clamped = 0
+    steps = 3000 if method == "sjt" else 1000
+    for k in range(steps):
+        if k % 100 == 0:  # a new random target, half of them beyond the reach
+            target = pin.SE3(pin.exp3(rng.normal(size=3)), rng.uniform(-1.2, 1.2, 3))
+        q = solver.step(q, target)
+        info = solver.last
+        clamped += len(info.clamped)
+        assert np.all(q >= lower - 1e-12) and np.all(q <= upper + 1e-12)
+        assert np.all(np.abs(info.dq) <= vmax * (1 + 1e-9))
+    assert clamped > 0  # the limits were really in play
+
+
+def test_reachable_targets_still_converge_within_limits(panda, rng):
+    solver = sjt.SJTSolver(panda, dt=0.01)
+    for _ in range(3):
+        goal = np.clip(panda.q0 + rng.uniform(-0.3, 0.3, 9), panda.lower_limits, panda.upper_limits)
+        target = panda.fk(goal)
+        q = panda.q0.copy()
+        for _ in range(20_000):
+            q = solver.step(q, target)
+            if solver.last.error_norm < 1e-6:
+                break
+        assert solver.last.error_norm < 1e-6
+
+
+def test_a_joint_at_its_limit_is_clamped_out_and_the_others_take_over(ur5):
+    elbow_max = ur5.upper_limits[2]  # the URDF's 3.14159265359
+    q = np.array([0.3, -1.2, elbow_max, -1.8, -1.5, 0.2])  # elbow at its upper limit
+    # a position target: five joints without the elbow can still reach it
+    target = (ur5.fk(q) * pin.SE3(np.eye(3), np.array([0.0, 0.0, 0.05]))).translation
+    solver = sjt.JPSolver(ur5, gain=20.0, dt=0.01, task=sjt.PositionTask())
+    free = sjt.JPSolver(ur5, gain=20.0, dt=0.01, task=sjt.PositionTask(), position_limits=False)
+    free.step(q, target)
+    assert free.last.dq[2] > 0  # the unconstrained update pushes the elbow outward
+    q_next = solver.step(q, target)
+    assert list(solver.last.clamped) == [2]
+    assert q_next[2] == elbow_max  # stays on the limit
+    for _ in range(500):
+        q = solver.step(q, target)
+        assert q[2] <= elbow_max
+    assert solver.last.error_norm < 1e-6  # the other joints reached the target
+
+
+def test_velocity_limits_scale_the_whole_velocity(ur5):
+    q = np.array([0.3, -1.2, 1.5, -1.8, -1.5, 0.2])
+    target = ur5.fk(q) * pin.SE3(np.eye(3), np.array([0.3, 0.0, 0.0]))
+    limited = sjt.SJTSolver(ur5, gain=150.0, dt=1e-3, velocity_limits=np.full(6, 0.5))
+    free = sjt.SJTSolver(ur5, gain=150.0, dt=1e-3, velocity_limits=False)
+    limited.step(q, target)
+    free.step(q, target)
+    scale = limited.last.velocity_scale
+    assert scale < 1
+    assert np.abs(limited.last.dq).max() == pytest.approx(0.5)
+    np.testing.assert_allclose(limited.last.dq, scale * free.last.dq)  # same direction
+    with pytest.raises(ValueError, match=r"velocity_limits must have shape \(6,\)"):
+        sjt.SJTSolver(ur5, velocity_limits=[1.0, 2.0])
