@@ -6,17 +6,10 @@ transpose baselines share the same interface.
 """
 
 from .exceptions import FrameNotFound, GainWarning, URDFError
+from .methods import DLSSolver, JPSolver, JTSolver, SJTSolver, make_solver
 from .robot import Robot
 from .solve import IKResult
-from .solvers import (
-    DifferentialIKSolver,
-    DLSSolver,
-    JPSolver,
-    JTSolver,
-    SJTSolver,
-    StepInfo,
-    make_solver,
-)
+from .solvers import DifferentialIKSolver, StepInfo
 from .tasks import OrientationTask, PoseTask, PositionTask, PostureTask, Task
 from .tracking import TrackingLog, track
 from .trajectories import Circle, Line, PoseInterpolation, Trajectory

@@ -9,7 +9,7 @@ import webbrowser
 from collections.abc import Sequence
 
 from . import scenarios
-from .solvers import SOLVERS, make_solver
+from .methods import SOLVERS, make_solver
 from .tracking import TrackingLog, track
 
 DEMO_DT = 1e-3

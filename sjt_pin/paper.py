@@ -29,10 +29,10 @@ import numpy as np
 
 from .analysis import linear_gain_bound, motion_ellipsoid
 from .mappings import jt_matrix, sjt_matrix
+from .methods import make_solver
 from .robot import Robot
 from .robots import planar3 as generator
 from .scenarios import PLANAR3_START, settle
-from .solvers import make_solver
 from .tasks import PositionTask
 from .tracking import TrackingLog, track
 from .trajectories import Circle, Line, Trajectory

@@ -67,7 +67,7 @@ def scenario(name: str, robot: Robot | None = None) -> Scenario:
 
 def settle(robot: Robot, task: Task, q: np.ndarray, target: pin.SE3) -> np.ndarray:
     """``q`` moved onto ``target`` by damped least-squares iterations (to start a run on a path)."""
-    from .solvers import DLSSolver
+    from .methods import DLSSolver
 
     solver = DLSSolver(robot, gain="auto", dt=1e-2, task=task, damping=1e-3)
     for _ in range(200):
