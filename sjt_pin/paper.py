@@ -33,6 +33,8 @@ from .methods import make_solver
 from .robot import Robot
 from .robots import planar3 as generator
 from .scenarios import PLANAR3_START, settle
+from .stability import largest_stable
+from .stability import stability as run_stability
 from .tasks import PositionTask
 from .tracking import TrackingLog, track
 from .trajectories import Circle, Line, Trajectory
@@ -131,34 +133,8 @@ def reachable_max_error(log: TrackingLog, task: PaperTask) -> float:
 
 
 def stability(log: TrackingLog, settings: PaperSettings = PaperSettings()) -> tuple[bool, str]:
-    """Whether a run is stable, and if not why.
-
-    Unstable means any of:
-
-    - the run diverged (non-finite state or half a turn in one step, see
-      :func:`~sjt_pin.tracking.track`);
-    - a joint flails: some ``|q_dot_i|`` exceeds ``speed_bound`` (100 rad/s, ten times the
-      arm's URDF limit, 0.1 rad in one 1-ms step);
-    - a period-2 oscillation does not die out: the alternating part of the error,
-      ``|e[k+1] - 2 e[k] + e[k-1]| / 4``, averaged over the last 10 % of the run, is above
-      ``oscillation_tol`` (0.1 mm) and at least half its average over the 10 % before.
-
-    There is no bound on the error itself: a revolute arm's error is bounded by its geometry,
-    so an unstable loop shows as flailing or oscillation, while a stable loop with a low gain
-    (JT in centimetres) may lag far behind the path and still be stable.
-    """
-    if log.diverged:
-        return False, log.reason
-    speed = log.max_joint_speed
-    if speed > settings.speed_bound:
-        return False, f"a joint reached {speed:.3g} rad/s"
-    e = log.error
-    alternating = np.linalg.norm(e[2:] - 2.0 * e[1:-1] + e[:-2], axis=1) / 4.0
-    window = max(alternating.size // 10, 2)
-    last, before = alternating[-window:].mean(), alternating[-2 * window:-window].mean()
-    if last > settings.oscillation_tol * settings.scale and last >= 0.5 * before:
-        return False, f"period-2 oscillation of amplitude {last:.3g} that does not die out"
-    return True, ""
+    """:func:`sjt_pin.stability.stability` with the settings' tolerances (scaled lengths)."""
+    return run_stability(log, settings.oscillation_tol * settings.scale, settings.speed_bound)
 
 
 def _evaluate(args: tuple[str, int, float, PaperSettings]) -> tuple[float, bool]:
@@ -220,15 +196,8 @@ def largest_stable_gain(method: str, number: int, low: float, high: float,
     Returns 0 when ``low`` itself is unstable (JT in centimetres: its feed-forward
     ``J^T x_dot_d`` alone flails, whatever the gain).
     """
-    if not _evaluate((method, number, low, settings))[1]:
-        return 0.0
-    while high - low > rtol * high:
-        mid = np.sqrt(low * high)
-        if _evaluate((method, number, mid, settings))[1]:
-            low = mid
-        else:
-            high = mid
-    return low
+    return largest_stable(lambda gain: _evaluate((method, number, gain, settings))[1],
+                          low, high, rtol)
 
 
 def _refine(args) -> float:
