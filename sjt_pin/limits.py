@@ -64,6 +64,15 @@ class JointLimits:
             both = np.empty(model.nq + model.nv)
             self._both, self._pos, self._vel = both, both[:model.nq], both[model.nq:]
         self._inv_vmax_dt = None
+        self._moving = np.ones(model.nv)
+
+    def only_moving(self, moving: np.ndarray) -> None:
+        """Skip joints that never move (``moving[i] == 0``, e.g. off every task's chain) in the
+        per-step test, so a finger resting on its limit costs nothing."""
+        self._moving = np.asarray(moving, dtype=float)
+        if self._dense:
+            self._inv_half = self._inv_half * self._moving
+        self._inv_vmax_dt = None
 
     def violated(self, q_next: np.ndarray, step: np.ndarray, dt: float) -> bool:
         """Whether ``q_next`` leaves a position limit or ``step / dt`` exceeds a speed limit.
@@ -74,7 +83,7 @@ class JointLimits:
             return (self.position and self.outside(q_next)) or (
                 self.velocity and bool((np.abs(step) * self._inv_vmax).max() > dt))
         if self._inv_vmax_dt is None or self._dt != dt:
-            self._dt, self._inv_vmax_dt = dt, self._inv_vmax / dt
+            self._dt, self._inv_vmax_dt = dt, self._inv_vmax * self._moving / dt
             if not self.velocity:
                 self._inv_vmax_dt = np.zeros_like(self._inv_vmax)
         np.subtract(q_next, self._mid, out=self._pos)

@@ -94,9 +94,12 @@ class _TransposeSolver(DifferentialIKSolver):
         vv = v @ v
         if vv == 0.0 or (v @ J) @ step >= self.saddle_ratio * vv * self.dt:
             return False
-        _, s, Vt = np.linalg.svd(J, full_matrices=False)
+        chain = np.flatnonzero(self._chain)  # joints off every chain have no null direction
+        _, s, Vt = np.linalg.svd(J[:, chain], full_matrices=False)
+        null = np.zeros(J.shape[1])
+        null[chain] = Vt[s.size - 1]
         random = self._rng.standard_normal((self.escape_candidates, J.shape[1])) * self._chain
-        directions = np.vstack([Vt[s.size - 1], -Vt[s.size - 1], random])
+        directions = np.vstack([null, -null, random])
         directions /= np.maximum(np.linalg.norm(directions, axis=1, keepdims=True), 1e-12)
         norms = [self._error_norm_at(pin.integrate(self._model, q, self.escape_step * d), oMd)
                  for d in directions]

@@ -164,6 +164,7 @@ class DifferentialIKSolver:
         self._chain = chain if posture is None else np.ones(robot.nv)
         self.n_chain = int(self._chain.sum())
         self.limits = JointLimits(robot, position_limits, velocity_limits)
+        self.limits.only_moving(self._chain)
         self._gain_warned = False
         self._check_stability = bool(check_stability)
         self.gain = gain
