@@ -1,4 +1,4 @@
-"""The ``sjt-pin`` command: ``demo`` (tracking table), ``reproduce`` (the paper's simulations)."""
+"""The ``sjt-pin`` command: ``demo``, ``reproduce`` (the paper's simulations), ``bench``."""
 
 from __future__ import annotations
 
@@ -82,6 +82,64 @@ def reproduce(args: argparse.Namespace) -> int:
     return 0
 
 
+def _write_json(path: str | None, payload) -> None:
+    if path:
+        import json
+
+        with open(path, "w") as f:
+            json.dump(payload, f, indent=1, default=float)
+        print(f"wrote {path}")
+
+
+def bench(args: argparse.Namespace) -> int:
+    """``sjt-pin bench speed|scale|accuracy|ik``."""
+    from dataclasses import asdict
+
+    from . import bench as speed_bench
+
+    def show(row):
+        print(f"  {row.robot:16s} {row.method:18s} {row.step.median:8.2f} us "
+              f"(floor {row.primitives.median:.2f}, ratio {row.ratio:.2f})", flush=True)
+
+    machine = speed_bench.machine()
+    print(f"{machine.get('cpu', machine['machine'])}; Python {machine['python']}, "
+          f"Pinocchio {machine['pinocchio']}, NumPy {machine['numpy']}")
+    if args.kind == "speed":
+        report = speed_bench.speed(steps=args.steps, peers=args.peers, progress=show)
+        print(speed_bench.speed_table(report))
+        for robot, ratio in sorted(speed_bench.peer_ratios(report).items()):
+            print(f"pink / sjt step time on {robot}: {ratio:.1f}x")
+        print("\nWhere an SJT step's time goes (us):")
+        for name in ("ur5", "panda"):
+            for label, us in speed_bench.breakdown(name):
+                print(f"  {name:6s} {us:6.2f}  {label}")
+        _write_json(args.json, report.to_dict())
+    elif args.kind == "scale":
+        report = speed_bench.scale(steps=args.steps, progress=show)
+        print(speed_bench.speed_table(report))
+        if args.plot:
+            from .figures import save, scale_figure
+
+            save(scale_figure(report), args.plot)
+            print(f"wrote {args.plot}")
+        _write_json(args.json, report.to_dict())
+    elif args.kind == "accuracy":
+        from .accuracy import accuracy, accuracy_table
+
+        rows = accuracy(progress=lambda r: print(f"  {r.path}: {r.method} done", flush=True))
+        print(accuracy_table(rows))
+        _write_json(args.json, {"machine": machine, "rows": [asdict(r) for r in rows]})
+    else:
+        from .ik_bench import ik_benchmark, ik_table
+
+        rows = ik_benchmark(poses=args.poses, peers=not args.no_peers,
+                            progress=lambda r: print(f"  {r.robot} {r.method}: "
+                                                     f"{100 * r.success:.1f} %", flush=True))
+        print(ik_table(rows))
+        _write_json(args.json, {"machine": machine, "rows": [asdict(r) for r in rows]})
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="sjt-pin", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -102,6 +160,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--grid", type=int, default=30, help="gains per sweep (default: 30)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=reproduce)
+    p = sub.add_parser("bench", help="benchmarks: speed, scale, accuracy, ik")
+    p.add_argument("kind", choices=["speed", "scale", "accuracy", "ik"])
+    p.add_argument("--peers", action="store_true", help="speed: add pink (the bench extra)")
+    p.add_argument("--steps", type=int, default=5000, help="speed/scale: timed steps")
+    p.add_argument("--poses", type=int, default=1000, help="ik: random poses per robot")
+    p.add_argument("--no-peers", action="store_true", help="ik: skip pink and TRAC-IK")
+    p.add_argument("--plot", default=None, help="scale: write the step-time plot (PNG)")
+    p.add_argument("--json", default=None, help="write the results as JSON")
+    p.set_defaults(func=bench)
     return parser
 
 

@@ -85,6 +85,26 @@ def error_series_figure(logs: dict[str, TrackingLog], number: int = 3) -> plt.Fi
     return fig
 
 
+def scale_figure(report) -> plt.Figure:
+    """SJT step time (and the Pinocchio floor) against the number of joints."""
+    rows = sorted(report.rows, key=lambda r: r.nv)
+    nv = [r.nv for r in rows]
+    fig, ax = plt.subplots(figsize=(6, 4))
+    ax.plot(nv, [r.step.median for r in rows], "o-", color=COLORS["sjt"], label="SJT step")
+    ax.plot(nv, [r.primitives.median for r in rows], "s--", color="0.4",
+            label="Pinocchio calls of the step")
+    for r in rows:
+        ax.annotate(r.robot, (r.nv, r.step.median), textcoords="offset points", xytext=(4, 4),
+                    fontsize=7)
+    ax.set_xlabel("joints (nv)")
+    ax.set_ylabel("median time per step [us]")
+    ax.set_title("SJT step time against the number of joints")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
 def save(fig: plt.Figure, path: str | Path, dpi: int = 90) -> Path:
     """Write ``fig`` as PNG and close it."""
     path = Path(path)

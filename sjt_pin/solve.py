@@ -14,6 +14,7 @@ its range is clamped out of the direction); a joint whose range spans a full tur
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -162,7 +163,8 @@ def _descend(solver, q, oMd, tol, max_iters, inner, armijo=1e-4):
 
 
 def solve(solver, target, q0, tol: float = 1e-6, max_iters: int = 500, restarts: int = 0,
-          rng: np.random.Generator | None = None, inner: int | None = None) -> IKResult:
+          rng: np.random.Generator | None = None, inner: int | None = None,
+          timeout: float | None = None) -> IKResult:
     """Drive ``solver``'s tasks to ``target`` from ``q0``; see the module docstring.
 
     Args:
@@ -174,6 +176,7 @@ def solve(solver, target, q0, tol: float = 1e-6, max_iters: int = 500, restarts:
         rng: generator for the restarts (default: seeded 0, so results repeat).
         inner: JT and SJT only: CGLS iterations per step (default: the number of joints);
             1 is the plain adaptive step along the method's own direction.
+        timeout: no new restart once this many seconds have passed (``None``: no limit).
     """
     tol = positive(tol, "tol", "task units")
     if int(max_iters) < 1 or int(restarts) < 0:
@@ -187,7 +190,10 @@ def solve(solver, target, q0, tol: float = 1e-6, max_iters: int = 500, restarts:
         raise ValueError(f"inner must be >= 1, got {inner}")
     total = 0
     best = None
+    deadline = None if timeout is None else time.perf_counter() + positive(timeout, "timeout", "s")
     for attempt in range(int(restarts) + 1):
+        if attempt and deadline is not None and time.perf_counter() > deadline:
+            return IKResult(best[0], False, total, best[1], attempt - 1)
         start = q if attempt == 0 else solver.robot.random_configuration(rng)
         q_end, success, iterations, error = _descend(solver, start, oMd, tol, int(max_iters),
                                                      inner)

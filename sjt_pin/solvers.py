@@ -356,7 +356,8 @@ class DifferentialIKSolver:
         return q_next
 
     def solve(self, target, q0, tol: float = 1e-6, max_iters: int = 500, restarts: int = 0,
-              rng: np.random.Generator | None = None, inner: int | None = None):
+              rng: np.random.Generator | None = None, inner: int | None = None,
+              timeout: float | None = None):
         """Solve to ``target`` from ``q0`` with an adaptive step along this solver's direction.
 
         Returns an :class:`~sjt_pin.solve.IKResult` (q, success, iterations, error); see
@@ -365,7 +366,7 @@ class DifferentialIKSolver:
         from .solve import solve
 
         return solve(self, target, q0, tol=tol, max_iters=max_iters, restarts=restarts, rng=rng,
-                     inner=inner)
+                     inner=inner, timeout=timeout)
 
     @property
     def last(self) -> StepInfo | None:
