@@ -5,13 +5,7 @@ import pytest
 
 import sjt_pin as sjt
 
-
-def regulate(solver, q, targets, steps):
-    for _ in range(steps):
-        q = solver.step(q, targets)
-        if solver.last.error_norm < 1e-7:
-            break
-    return q
+from .helpers import regulate
 
 
 def test_talos_tracks_both_hands():

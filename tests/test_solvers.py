@@ -8,15 +8,9 @@ import pytest
 
 import sjt_pin as sjt
 
+from .helpers import regulate
+
 METHODS = ["sjt", "jt", "jp", "dls"]
-
-
-def regulate(solver, q, target, steps):
-    for _ in range(steps):
-        q = solver.step(q, target)
-        if solver.last.error_norm < 1e-7:
-            break
-    return q
 
 
 @pytest.mark.parametrize("method", METHODS)
