@@ -74,14 +74,28 @@ class JointLimits:
             self._inv_half = self._inv_half * self._moving
         self._inv_vmax_dt = None
 
-    def violated(self, q_next: np.ndarray, step: np.ndarray, dt: float) -> bool:
+    @property
+    def slowest(self) -> float:
+        """The lowest speed limit of the joints that move (rad/s or m/s; inf for none)."""
+        moving = self.velocity_limits[self._moving > 0]
+        return float(moving.min()) if self.velocity and moving.size else np.inf
+
+    def violated(self, q_next: np.ndarray, step: np.ndarray, dt: float,
+                 speed: bool = True) -> bool:
         """Whether ``q_next`` leaves a position limit or ``step / dt`` exceeds a speed limit.
 
         The per-step test of the common case: a handful of vector operations, no allocation.
+        ``speed=False`` skips the speed part (the caller has bounded every joint's speed).
         """
         if not self._dense:
             return (self.position and self.outside(q_next)) or (
-                self.velocity and bool((np.abs(step) * self._inv_vmax).max() > dt))
+                speed and self.velocity and bool((np.abs(step) * self._inv_vmax).max() > dt))
+        if not speed:
+            if not self.position:
+                return False
+            pos = np.subtract(q_next, self._mid, out=self._pos)
+            pos *= self._inv_half
+            return bool(np.abs(pos, out=pos).max() > 1.0 - 1e-12)
         if self._inv_vmax_dt is None or self._dt != dt:
             self._dt, self._inv_vmax_dt = dt, self._inv_vmax * self._moving / dt
             if not self.velocity:

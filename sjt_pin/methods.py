@@ -153,6 +153,7 @@ class SJTSolver(_TransposeSolver):
                       and w_min > self.column_tol)
         self._ones = np.ones(self.task_dim)
         self._partial_chain = bool(self._not_chain.any())
+        self._slowest2 = self.limits.slowest ** 2
         self._gain_changed()
 
     def _gain_changed(self) -> None:
@@ -194,7 +195,11 @@ class SJTSolver(_TransposeSolver):
             np.add(norms, self._not_chain, out=norms)  # joints off the chain: alpha = 0 / 1
         step = np.divide(self._chain_kdt, norms)  # k dt alpha (eq. 18)
         step *= e.dot(J)  # k dt D J^T e (eq. 21-22)
-        return self._finish(q, oMd, J, e if sw is None else e / sw, ee, v, step, gain, oMf)
+        # |q_dot_i| = k alpha_i |J_i^T e| <= k sqrt(alpha_i) |e| <= k |e| since alpha_i <= 1
+        # (eq. 19): below the slowest joint's limit, the speed test can be skipped
+        speed_safe = sw is None and gain * gain * ee <= self._slowest2
+        return self._finish(q, oMd, J, e if sw is None else e / sw, ee, v, step, gain, oMf,
+                            speed_safe)
 
     def scaling_factors(self, J):
         return mappings.scaling_factors(J, self.column_tol) * self._chain

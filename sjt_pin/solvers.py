@@ -325,11 +325,12 @@ class DifferentialIKSolver:
                                 * pin.difference(self._model, q, self._q_ref)])
         return self._finish(q, oMd, J, e, ee, v, self._apply(J, v) * self.dt, gain, pose)
 
-    def _finish(self, q, oMd, J, e, ee, v, step, gain, pose) -> np.ndarray:
+    def _finish(self, q, oMd, J, e, ee, v, step, gain, pose, speed_safe=False) -> np.ndarray:
         """Stability check, saddle escape, limits, integration and the record of the step.
 
         ``step`` is q_dot dt (the vector integrated); ``v`` the task velocity it maps, or
-        ``None`` for ``gain * e`` (computed only if a safeguard needs it).
+        ``None`` for ``gain * e`` (computed only if a safeguard needs it); ``speed_safe`` says
+        the caller has proved every joint below its speed limit.
         """
         if self._gain_check:
             self._check_gain(J)
@@ -339,9 +340,10 @@ class DifferentialIKSolver:
                 self._countdown -= 1
             else:
                 escaped = self._escape_saddle(q, oMd, J, e, v, step, gain)
+                speed_safe = speed_safe and not escaped
         limits, clamped, scale, dt = self.limits, (), 1.0, self.dt
         q_next = pin.integrate(self._model, q, step)
-        if limits.active and limits.violated(q_next, step, dt):
+        if limits.active and limits.violated(q_next, step, dt, not speed_safe):
             if limits.position and limits.outside(q_next):
                 v = gain * e if v is None else v
                 dq, clamped = limits.clamp(q, step / dt, dt, J, v, self._apply)

@@ -1,0 +1,30 @@
+"""The wheel carries the generated URDF, so Robot.planar3() works from an installed package."""
+
+import subprocess
+import sys
+import zipfile
+
+
+def test_wheel_ships_planar3_urdf_and_generator(tmp_path):
+    build = subprocess.run(
+        [sys.executable, "-m", "pip", "wheel", ".", "--no-deps", "-q", "-w", str(tmp_path)],
+        capture_output=True, text=True, timeout=600,
+    )
+    assert build.returncode == 0, build.stderr
+    (wheel,) = tmp_path.glob("sjt_pin-*.whl")
+    names = zipfile.ZipFile(wheel).namelist()
+    assert "sjt_pin/robots/planar3.urdf" in names
+    assert "sjt_pin/robots/planar3.py" in names
+    assert not any("__pycache__" in n or n.startswith("tests/") for n in names)
+    # installed apart from the source tree, the URDF is found as package data
+    target = tmp_path / "site"
+    subprocess.run([sys.executable, "-m", "pip", "install", "--no-deps", "-q", "--target",
+                    str(target), str(wheel)], check=True, timeout=600)
+    code = ("import sys; sys.path.insert(0, sys.argv[1]); import sjt_pin; "
+            "assert sjt_pin.__file__.startswith(sys.argv[1]), sjt_pin.__file__; "
+            "r = sjt_pin.Robot.planar3(); print(r.nq, r.urdf)")
+    run = subprocess.run([sys.executable, "-c", code, str(target)], capture_output=True,
+                         text=True, timeout=120, cwd=tmp_path)
+    assert run.returncode == 0, run.stderr
+    nq, urdf = run.stdout.split()
+    assert nq == "3" and urdf.startswith(str(target))
