@@ -101,7 +101,8 @@ class DifferentialIKSolver:
         task: a :class:`~sjt_pin.tasks.Task` (default: :class:`~sjt_pin.tasks.PoseTask` on the
             end effector), a list of tasks on distinct frames, or a ``{frame: task}`` mapping.
             With several tasks, ``step`` takes ``{frame: target}`` mappings.
-        posture: an optional :class:`~sjt_pin.tasks.PostureTask` stacked under the tasks.
+        posture: an optional :class:`~sjt_pin.tasks.PostureTask` stacked under the tasks; its
+            rows take the scalar gain (the mean gain when the gain is given per row).
         position_limits: keep joints within their URDF position limits (default: when the URDF
             has them); see :mod:`.limits`.
         velocity_limits: ``True`` (URDF limits), ``False``, or an (nv,) array in rad/s or m/s;
@@ -143,11 +144,7 @@ class DifferentialIKSolver:
             raise ValueError(f"each frame takes one task, got frames {self.frames}")
         self.task, self.frame_id = self.tasks[0], self.frame_ids[0]
         self._single = len(self.tasks) == 1
-        self._rows, start = [], 0
-        for t in self.tasks:
-            self._rows.append(slice(start, start + t.dim))
-            start += t.dim
-        self.task_dim = start
+        self.task_dim = sum(t.dim for t in self.tasks)
         if posture is not None and not isinstance(posture, PostureTask):
             raise TypeError(f"posture must be a PostureTask, got {type(posture).__name__}")
         self.posture = posture
