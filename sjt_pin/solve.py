@@ -36,7 +36,7 @@ class IKResult:
 
 
 MAX_STEP = 0.5  # rad (or m): the largest joint move of one iteration (a trust region)
-STALL_WINDOW, STALL_PROGRESS = 25, 0.9  # give up when 25 iterations cut |e|^2 by under 10 %
+STALL_WINDOW, STALL_PROGRESS = 10, 0.7  # give up when 10 iterations cut |e|^2 by under 30 %
 CGLS_TOL = 1e-2  # inner iterations stop once |S J^T r| has fallen tenfold (squared: 1e-2)
 
 
