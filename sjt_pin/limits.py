@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .kernels import outside_box
 from .robot import Robot
 
 
@@ -61,8 +62,7 @@ class JointLimits:
             self._inv_half = np.where(half > 0, 1.0 / np.maximum(half, 1e-300), np.inf)
             if not self.position:
                 self._inv_half = np.zeros(model.nq)
-            both = np.empty(model.nq + model.nv)
-            self._both, self._pos, self._vel = both, both[:model.nq], both[model.nq:]
+            self._no_speed = np.zeros(model.nv)
         self._inv_vmax_dt = None
         self._moving = np.ones(model.nv)
 
@@ -84,28 +84,18 @@ class JointLimits:
                  speed: bool = True) -> bool:
         """Whether ``q_next`` leaves a position limit or ``step / dt`` exceeds a speed limit.
 
-        The per-step test of the common case: a handful of vector operations, no allocation.
+        The per-step test of the common case: one compiled loop, no allocation.
         ``speed=False`` skips the speed part (the caller has bounded every joint's speed).
         """
         if not self._dense:
             return (self.position and self.outside(q_next)) or (
                 speed and self.velocity and bool((np.abs(step) * self._inv_vmax).max() > dt))
-        if not speed:
-            if not self.position:
-                return False
-            pos = np.subtract(q_next, self._mid, out=self._pos)
-            pos *= self._inv_half
-            return bool(np.abs(pos, out=pos).max() > 1.0 - 1e-12)
         if self._inv_vmax_dt is None or self._dt != dt:
             self._dt, self._inv_vmax_dt = dt, self._inv_vmax * self._moving / dt
             if not self.velocity:
                 self._inv_vmax_dt = np.zeros_like(self._inv_vmax)
-        np.subtract(q_next, self._mid, out=self._pos)
-        self._pos *= self._inv_half  # |.| > 1 outside [lower, upper]
-        np.multiply(step, self._inv_vmax_dt, out=self._vel)  # |.| > 1 faster than the limit
-        both = np.abs(self._both, out=self._both)
-        # a hair under 1: a joint resting on its limit takes the exact path (and its clip)
-        return bool(both.max() > 1.0 - 1e-12)
+        return outside_box(q_next, step, self._mid, self._inv_half,
+                           self._inv_vmax_dt if speed else self._no_speed)
 
     def outside(self, q_next: np.ndarray) -> bool:
         """Whether ``q_next`` leaves the position limits (cheap check for the common case)."""

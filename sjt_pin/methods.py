@@ -12,6 +12,7 @@ import numpy as np
 import pinocchio as pin
 
 from . import mappings
+from .kernels import sjt_step
 from .robot import Robot
 from .solvers import _LOCAL, DifferentialIKSolver
 from .tasks import PoseTask
@@ -143,16 +144,9 @@ class SJTSolver(_TransposeSolver):
                  column_tol: float = mappings.COLUMN_TOL, **options):
         self.column_tol = positive(column_tol, "column_tol", "task units squared")
         super().__init__(robot, gain, dt, task, **options)
-        self._norms = np.empty(robot.nv)
         self._not_chain = 1.0 - self._chain
-        # A 6-row pose task gives every chain column J_i^T W J_i >= min(W) (eq. 19): no column
-        # of the chain can fall below column_tol, so the fast path needs no threshold test.
-        t = self.task
-        w_min = 1.0 if t.sqrt_weight is None else float(np.min(t.sqrt_weight)) ** 2
-        self._fast = (self._single and self.posture is None and isinstance(t, PoseTask)
-                      and w_min > self.column_tol)
-        self._ones = np.ones(self.task_dim)
-        self._partial_chain = bool(self._not_chain.any())
+        # one pose task: the error is log6 itself and the step one compiled loop (_step)
+        self._fast = self._single and self.posture is None and isinstance(self.task, PoseTask)
         self._slowest2 = self.limits.slowest ** 2
         self._gain_changed()
 
@@ -166,14 +160,13 @@ class SJTSolver(_TransposeSolver):
         self._chain_kdt = chain * (k * self.dt) if np.ndim(k) == 0 else None
     def _apply(self, J, v):
         # alpha_i = 1 / |J_i|^2 on the chain, 0 elsewhere and below column_tol (eq. 18)
-        norms = np.dot(np.ones(J.shape[0]), J * J)
-        alpha = np.divide(self._chain, norms, out=np.zeros_like(norms),
-                          where=norms > self.column_tol)
-        return alpha * (v @ J)
+        out = np.empty(J.shape[1])
+        sjt_step(J, v, self._chain, self._not_chain, out, self.column_tol)
+        return out
 
     def _step(self, q, oMd, velocity):
-        """The SJT step of eq. (21)-(22), without allocations beyond Pinocchio's own results
-        where the task is one pose task and the gain a scalar; otherwise the general path."""
+        """The SJT step of eq. (21)-(22) for one pose task and a scalar gain: Pinocchio's calls,
+        then :func:`~sjt_pin.kernels.sjt_step`; the general path otherwise."""
         if not self._fast or self._chain_kdt is None or velocity is not None:
             return super()._step(q, oMd, velocity)
         model, data, fid = self._model, self._data, self.frame_id
@@ -181,20 +174,19 @@ class SJTSolver(_TransposeSolver):
         oMf = pin.updateFramePlacement(model, data, fid)
         J = pin.getFrameJacobian(model, data, fid, _LOCAL)
         e = pin.log6(oMf.actInv(oMd)).vector
-        ee = e.dot(e)
-        if not math.isfinite(ee):
-            self._raise_non_finite(q)
         gain = self._gain_max if not self._auto else self._auto_gain(None)
         sw, v = self.task.sqrt_weight, None
         if sw is not None:
             J = sw[:, None] * J
             e = sw * e
             v = gain * e
-        norms = np.dot(self._ones, np.multiply(J, J), out=self._norms)
-        if self._partial_chain:
-            np.add(norms, self._not_chain, out=norms)  # joints off the chain: alpha = 0 / 1
-        step = np.divide(self._chain_kdt, norms)  # k dt alpha (eq. 18)
-        step *= e.dot(J)  # k dt D J^T e (eq. 21-22)
+        step = np.empty(self.robot.nv)
+        # k dt D J^T e, and |e|^2
+        ee = sjt_step(J, e, self._chain_kdt, self._not_chain, step, self.column_tol)
+        if not math.isfinite(ee):
+            self._raise_non_finite(q)
+        if sw is not None:
+            ee = float((e / sw) @ (e / sw))
         # |q_dot_i| = k alpha_i |J_i^T e| <= k sqrt(alpha_i) |e| <= k |e| since alpha_i <= 1
         # (eq. 19): below the slowest joint's limit, the speed test can be skipped
         speed_safe = sw is None and gain * gain * ee <= self._slowest2

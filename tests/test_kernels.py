@@ -1,0 +1,42 @@
+"""The compiled inner loops agree with the numpy formulas they replace."""
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from sjt_pin import mappings
+from sjt_pin.kernels import outside_box, sjt_step
+
+
+@settings(max_examples=60, deadline=None)
+@given(m=st.integers(1, 6), n=st.integers(1, 12), seed=st.integers(0, 2**32 - 1))
+def test_sjt_step_is_k_dt_D_Jt_e(m, n, seed):
+    rng = np.random.default_rng(seed)
+    J = rng.normal(size=(m, n))
+    chain = (rng.random(n) > 0.3).astype(float)
+    J[:, chain == 0] = 0.0  # joints off the chain have zero columns
+    e = rng.normal(size=m)
+    k_dt = 0.37
+    out = np.empty(n)
+    J[:, 0] *= 1e-7  # a chain column below the threshold gets alpha = 0, as in mappings
+    ee = sjt_step(J, e, k_dt * chain, 1.0 - chain, out, mappings.COLUMN_TOL)
+    expected = k_dt * mappings.sjt_apply(J, e, mappings.scaling_factors(J))
+    np.testing.assert_allclose(out, expected, rtol=1e-12, atol=1e-15)
+    assert abs(ee - e @ e) <= 1e-12 * (e @ e)
+
+
+def test_sjt_step_reports_non_finite_errors():
+    out = np.empty(2)
+    ee = sjt_step(np.eye(2), np.array([np.nan, 0.0]), np.ones(2), np.zeros(2), out)
+    assert not np.isfinite(ee)
+
+
+def test_outside_box():
+    mid, inv_half = np.zeros(3), np.ones(3)  # limits [-1, 1]
+    speed = np.full(3, 10.0)  # |step| * 10 > 1 is too fast
+    inside, small = np.array([0.5, -0.9, 0.0]), np.full(3, 0.01)
+    assert not outside_box(inside, small, mid, inv_half, speed)
+    assert outside_box(np.array([0.5, -1.1, 0.0]), small, mid, inv_half, speed)
+    assert outside_box(np.array([1.0, 0.0, 0.0]), small, mid, inv_half, speed)  # on the limit
+    assert outside_box(inside, np.array([0.0, 0.2, 0.0]), mid, inv_half, speed)
+    assert not outside_box(inside, np.array([0.0, 0.2, 0.0]), mid, inv_half, np.zeros(3))
