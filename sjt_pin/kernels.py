@@ -49,3 +49,74 @@ def outside_box(q_next: np.ndarray, step: np.ndarray, mid: np.ndarray, inv_half:
         if abs(step[i]) * inv_speed[i] > 1.0:
             return True
     return False
+
+
+@njit(cache=True, nogil=True)
+def cgls(J: np.ndarray, e: np.ndarray, scale: np.ndarray, iterations: int,
+         tol: float) -> np.ndarray:
+    """Preconditioned CGLS for ``min |J d - e|`` with ``d = S y``, S = diag(``scale``).
+
+    Stops after ``iterations`` or once ``|S J^T r|^2`` has fallen below ``tol`` times its start.
+    Only products with J and J^T: nothing to factorise, nothing that breaks at a singularity.
+    """
+    m, n = J.shape
+    y = np.zeros(n)
+    r = e.copy()
+    s = np.empty(n)
+    p = np.empty(n)
+    Jp = np.empty(m)
+    gamma = 0.0
+    for j in range(n):
+        acc = 0.0
+        for i in range(m):
+            acc += J[i, j] * r[i]
+        s[j] = scale[j] * acc
+        p[j] = s[j]
+        gamma += s[j] * s[j]
+    gamma0 = gamma
+    for _ in range(iterations):
+        if gamma == 0.0 or gamma <= tol * gamma0:
+            break
+        curvature = 0.0
+        for i in range(m):
+            acc = 0.0
+            for j in range(n):
+                acc += J[i, j] * scale[j] * p[j]
+            Jp[i] = acc
+            curvature += acc * acc
+        if curvature <= 0.0:
+            break
+        step = gamma / curvature
+        for j in range(n):
+            y[j] += step * p[j]
+        for i in range(m):
+            r[i] -= step * Jp[i]
+        gamma_new = 0.0
+        for j in range(n):
+            acc = 0.0
+            for i in range(m):
+                acc += J[i, j] * r[i]
+            s[j] = scale[j] * acc
+            gamma_new += s[j] * s[j]
+        beta = gamma_new / gamma
+        for j in range(n):
+            p[j] = s[j] + beta * p[j]
+        gamma = gamma_new
+    for j in range(n):
+        y[j] *= scale[j]
+    return y
+
+
+@njit(cache=True, nogil=True)
+def sqrt_scaling(J: np.ndarray, chain: np.ndarray, tol: float) -> np.ndarray:
+    """``sqrt(alpha_i) = chain_i / |J_i|`` (0 where ``|J_i|^2`` is not above ``tol``): the
+    preconditioner of :func:`cgls` for SJT."""
+    m, n = J.shape
+    out = np.zeros(n)
+    for j in range(n):
+        norm = 0.0
+        for i in range(m):
+            norm += J[i, j] * J[i, j]
+        if norm > tol:
+            out[j] = chain[j] / np.sqrt(norm)
+    return out

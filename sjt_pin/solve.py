@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
+from .kernels import cgls, sqrt_scaling
 from .validation import positive
 
 
@@ -71,36 +72,6 @@ def _wrap(q: np.ndarray, move: np.ndarray, limits, wrap: np.ndarray) -> np.ndarr
     return q
 
 
-def _cgls(J: np.ndarray, e: np.ndarray, scale: np.ndarray, iterations: int) -> np.ndarray:
-    """Preconditioned CGLS for ``min |J d - e|`` with ``d = S y``, S = diag(``scale``).
-
-    Only products with J and J^T: no factorisation, so nothing breaks at singularities, and the
-    Krylov space stays on the joints that move the task. With S^2 = D its first iterate is the
-    SJT direction ``D J^T e`` times the step minimising the linearised error; each further
-    iterate moves toward the Gauss-Newton step.
-    """
-    y = np.zeros(J.shape[1])
-    r = e.copy()
-    s = scale * (r @ J)
-    p = s
-    gamma = gamma0 = float(s @ s)
-    for _ in range(iterations):
-        if gamma <= CGLS_TOL * gamma0 or gamma == 0.0:
-            break
-        Jp = J @ (scale * p)
-        curvature = float(Jp @ Jp)
-        if curvature <= 0.0:
-            break
-        step = gamma / curvature
-        y += step * p
-        r -= step * Jp
-        s = scale * (r @ J)
-        gamma_new = float(s @ s)
-        p = s + (gamma_new / gamma) * p
-        gamma = gamma_new
-    return scale * y
-
-
 def _direction(solver, J: np.ndarray, e: np.ndarray, inner: int) -> np.ndarray:
     """The solver's step toward the target for the linearised error ``e``.
 
@@ -110,9 +81,12 @@ def _direction(solver, J: np.ndarray, e: np.ndarray, inner: int) -> np.ndarray:
     """
     if not solver.escapes_saddles:
         return solver._apply(J, e)
-    alpha = solver.scaling_factors(J)
-    scale = np.sqrt(alpha) if alpha is not None else solver._chain
-    return _cgls(J, e, scale, inner)
+    J = np.ascontiguousarray(J)
+    if solver.method == "sjt":
+        scale = sqrt_scaling(J, solver._chain, solver.column_tol)
+    else:
+        scale = solver._chain
+    return cgls(J, e, scale, inner, CGLS_TOL)
 
 
 def _descend(solver, q, oMd, tol, max_iters, inner, armijo=1e-4):

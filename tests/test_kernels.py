@@ -40,3 +40,27 @@ def test_outside_box():
     assert outside_box(np.array([1.0, 0.0, 0.0]), small, mid, inv_half, speed)  # on the limit
     assert outside_box(inside, np.array([0.0, 0.2, 0.0]), mid, inv_half, speed)
     assert not outside_box(inside, np.array([0.0, 0.2, 0.0]), mid, inv_half, np.zeros(3))
+
+
+def test_cgls_first_iterate_is_the_sjt_direction_and_later_ones_least_squares(rng):
+    from sjt_pin.kernels import cgls
+
+    J, e = rng.normal(size=(6, 7)), rng.normal(size=6)
+    scale = np.sqrt(mappings.scaling_factors(J))
+    d1 = cgls(J, e, scale, 1, 0.0)
+    direction = mappings.sjt_apply(J, e, mappings.scaling_factors(J))  # D J^T e
+    t = (e @ J @ direction) / np.sum((J @ direction) ** 2)  # the best step along it
+    np.testing.assert_allclose(d1, t * direction, rtol=1e-10)
+    d = cgls(J, e, scale, 50, 0.0)  # enough iterations: a least-squares solution
+    np.testing.assert_allclose(J @ d, e, atol=1e-8)
+
+
+def test_sqrt_scaling(rng):
+    from sjt_pin.kernels import sqrt_scaling
+
+    J = rng.normal(size=(6, 5))
+    J[:, 1] = 0.0
+    J[:, 3] *= 1e-8  # below the column threshold
+    chain = np.array([1.0, 1.0, 1.0, 1.0, 0.0])
+    expected = np.sqrt(mappings.scaling_factors(J)) * chain
+    np.testing.assert_allclose(sqrt_scaling(J, chain, mappings.COLUMN_TOL), expected)
