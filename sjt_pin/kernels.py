@@ -120,3 +120,33 @@ def sqrt_scaling(J: np.ndarray, chain: np.ndarray, tol: float) -> np.ndarray:
         if norm > tol:
             out[j] = chain[j] / np.sqrt(norm)
     return out
+
+
+@njit(cache=True, nogil=True)
+def clamp_pass(q: np.ndarray, dq: np.ndarray, q_index: np.ndarray, v_index: np.ndarray,
+               lower: np.ndarray, upper: np.ndarray, dt: float, fixed: np.ndarray,
+               fixed_dq: np.ndarray) -> int:
+    """Fix the joints that ``q + dq dt`` takes out of ``[lower, upper]``; returns how many.
+
+    A fixed joint inside its range moves exactly onto the limit; one already outside (a start
+    out of range) keeps a motion back toward the range and stops any other. ``fixed`` and
+    ``fixed_dq`` (tangent-indexed) are updated in place.
+    """
+    count = 0
+    for k in range(q_index.shape[0]):
+        v = v_index[k]
+        if fixed[v]:
+            continue
+        qk, dqk, lo, hi = q[q_index[k]], dq[v], lower[k], upper[k]
+        new = qk + dqk * dt
+        if lo <= new <= hi:
+            continue
+        fixed[v] = True
+        count += 1
+        if lo <= qk <= hi:
+            fixed_dq[v] = (min(max(new, lo), hi) - qk) / dt
+        elif (qk > hi and dqk < 0.0) or (qk < lo and dqk > 0.0):
+            fixed_dq[v] = dqk
+        else:
+            fixed_dq[v] = 0.0
+    return count

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .kernels import outside_box
+from .kernels import clamp_pass, outside_box
 from .robot import Robot
 
 
@@ -104,7 +104,11 @@ class JointLimits:
 
     def clip(self, q_next: np.ndarray) -> None:
         """Clip ``q_next`` into the limits in place (round-off of a step that lands on one)."""
-        q_next[self.q_index] = np.clip(q_next[self.q_index], self.lower, self.upper)
+        if self._dense:
+            np.minimum(np.maximum(q_next, self.lower, out=q_next), self.upper, out=q_next)
+        else:
+            q_next[self.q_index] = np.minimum(np.maximum(q_next[self.q_index], self.lower),
+                                              self.upper)
 
     def scale_step(self, step: np.ndarray, dt: float) -> float:
         """Scale ``step`` (= q_dot dt) in place so no joint exceeds its speed limit.
@@ -126,25 +130,11 @@ class JointLimits:
         """
         fixed = np.zeros(J.shape[1], dtype=bool)
         fixed_dq = np.zeros(J.shape[1])
-        q_lim = q[self.q_index]
         for _ in range(self.q_index.size):
-            q_new = q_lim + dq[self.v_index] * dt
-            over = (q_new > self.upper) | (q_new < self.lower)
-            over &= ~fixed[self.v_index]
-            if not over.any():
+            if not clamp_pass(q, dq, self.q_index, self.v_index, self.lower, self.upper, dt,
+                              fixed, fixed_dq):
                 break
-            k = np.flatnonzero(over)
-            idx = self.v_index[k]
-            lo, hi, qk, dqk = self.lower[k], self.upper[k], q_lim[k], dq[idx]
-            fixed[idx] = True
-            # inside: move exactly onto the limit; already outside (a start out of range):
-            # keep a motion back toward the range, stop any other
-            landing = (np.clip(q_new[k], lo, hi) - qk) / dt
-            inward = ((qk > hi) & (dqk < 0)) | ((qk < lo) & (dqk > 0))
-            fixed_dq[idx] = np.where((qk <= hi) & (qk >= lo), landing,
-                                     np.where(inward, dqk, 0.0))
-            J_free = J.copy()
-            J_free[:, fixed] = 0.0
-            dq = remap(J_free, v - J[:, fixed] @ fixed_dq[fixed])
+            # the others take over the task velocity the fixed joints no longer provide
+            dq = remap(J * ~fixed, v - J @ fixed_dq)
             dq[fixed] = fixed_dq[fixed]
         return dq, np.flatnonzero(fixed)

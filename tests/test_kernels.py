@@ -64,3 +64,17 @@ def test_sqrt_scaling(rng):
     chain = np.array([1.0, 1.0, 1.0, 1.0, 0.0])
     expected = np.sqrt(mappings.scaling_factors(J)) * chain
     np.testing.assert_allclose(sqrt_scaling(J, chain, mappings.COLUMN_TOL), expected)
+
+
+def test_clamp_pass():
+    from sjt_pin.kernels import clamp_pass
+
+    q = np.array([0.0, 0.9, 1.5, -1.5])  # joints 3 and 4 start outside [-1, 1]
+    dq = np.array([0.5, 0.5, -0.2, -0.2])  # joint 2 would cross; 3 moves back in; 4 goes out
+    index = np.arange(4)
+    lower, upper = -np.ones(4), np.ones(4)
+    fixed, fixed_dq = np.zeros(4, dtype=bool), np.zeros(4)
+    assert clamp_pass(q, dq, index, index, lower, upper, 1.0, fixed, fixed_dq) == 3
+    np.testing.assert_array_equal(fixed, [False, True, True, True])
+    np.testing.assert_allclose(fixed_dq, [0.0, 0.1, -0.2, 0.0])  # land on 1, inward, stop
+    assert clamp_pass(q, dq, index, index, lower, upper, 1.0, fixed, fixed_dq) == 0
