@@ -52,6 +52,20 @@ def outside_box(q_next: np.ndarray, step: np.ndarray, mid: np.ndarray, inv_half:
 
 
 @njit(cache=True, nogil=True)
+def _scaled_gradient(J: np.ndarray, r: np.ndarray, scale: np.ndarray, out: np.ndarray) -> float:
+    """``out = S J^T r``; returns ``|out|^2``."""
+    m, n = J.shape
+    total = 0.0
+    for j in range(n):
+        acc = 0.0
+        for i in range(m):
+            acc += J[i, j] * r[i]
+        out[j] = scale[j] * acc
+        total += out[j] * out[j]
+    return total
+
+
+@njit(cache=True, nogil=True)
 def cgls(J: np.ndarray, e: np.ndarray, scale: np.ndarray, iterations: int,
          tol: float) -> np.ndarray:
     """Preconditioned CGLS for ``min |J d - e|`` with ``d = S y``, S = diag(``scale``).
@@ -65,15 +79,8 @@ def cgls(J: np.ndarray, e: np.ndarray, scale: np.ndarray, iterations: int,
     s = np.empty(n)
     p = np.empty(n)
     Jp = np.empty(m)
-    gamma = 0.0
-    for j in range(n):
-        acc = 0.0
-        for i in range(m):
-            acc += J[i, j] * r[i]
-        s[j] = scale[j] * acc
-        p[j] = s[j]
-        gamma += s[j] * s[j]
-    gamma0 = gamma
+    gamma = gamma0 = _scaled_gradient(J, r, scale, s)
+    p[:] = s
     for _ in range(iterations):
         if gamma == 0.0 or gamma <= tol * gamma0:
             break
@@ -91,13 +98,7 @@ def cgls(J: np.ndarray, e: np.ndarray, scale: np.ndarray, iterations: int,
             y[j] += step * p[j]
         for i in range(m):
             r[i] -= step * Jp[i]
-        gamma_new = 0.0
-        for j in range(n):
-            acc = 0.0
-            for i in range(m):
-                acc += J[i, j] * r[i]
-            s[j] = scale[j] * acc
-            gamma_new += s[j] * s[j]
+        gamma_new = _scaled_gradient(J, r, scale, s)
         beta = gamma_new / gamma
         for j in range(n):
             p[j] = s[j] + beta * p[j]
