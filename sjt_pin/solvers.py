@@ -14,6 +14,7 @@ keeps redundant arms from drifting, and joint position and velocity limits are e
 
 from __future__ import annotations
 
+import functools
 import math
 import warnings
 from collections.abc import Mapping, Sequence
@@ -40,7 +41,7 @@ class StepInfo:
         error_norm: Euclidean norm of ``error``.
         dq: joint velocity q_dot (nv,), in rad/s or m/s (after limits; before multiplying by dt).
         alpha: SJT scaling factors (nv,), zero for joints that do not move the tasks;
-            ``None`` for the other methods.
+            ``None`` for the other methods (computed on first access).
         gain: the scalar or per-row gain K used in this step (1/s).
         pose: world pose of the task frame (``pin.SE3``); with several frames a dict
             ``{frame: pose}``.
@@ -49,7 +50,7 @@ class StepInfo:
         velocity_scale: factor (<= 1) applied to the joint velocity for the speed limits.
     """
 
-    __slots__ = ("error", "error_norm", "dq", "alpha", "gain", "pose", "escaped", "clamped",
+    __slots__ = ("error", "error_norm", "dq", "_alpha", "gain", "pose", "escaped", "clamped",
                  "velocity_scale")
 
     def __init__(self, error, error_norm, dq, alpha, gain, pose, escaped=False,
@@ -57,12 +58,18 @@ class StepInfo:
         self.error = error
         self.error_norm = error_norm
         self.dq = dq
-        self.alpha = alpha
+        self._alpha = alpha  # an array, None, or a function computing it
         self.gain = gain
         self.pose = pose
         self.escaped = escaped
         self.clamped = np.asarray(clamped, dtype=int)
         self.velocity_scale = velocity_scale
+
+    @property
+    def alpha(self) -> np.ndarray | None:
+        if callable(self._alpha):
+            self._alpha = self._alpha()
+        return self._alpha
 
     def __repr__(self) -> str:
         return f"StepInfo(error_norm={self.error_norm:.3g}, |dq|={np.linalg.norm(self.dq):.3g})"
@@ -372,7 +379,8 @@ class DifferentialIKSolver:
         """The :class:`StepInfo` of the last step (``None`` before the first)."""
         if self._last is None and self._state is not None:
             J, e, ee, step, gain, pose, escaped, clamped, scale = self._state
-            self._last = StepInfo(e, math.sqrt(ee), step / self.dt, self.scaling_factors(J), gain,
+            alpha = functools.partial(self.scaling_factors, J)  # tracking logs never read it
+            self._last = StepInfo(e, math.sqrt(ee), step / self.dt, alpha, gain,
                                   pose, escaped, clamped, scale)
         return self._last
 
