@@ -19,7 +19,7 @@ import pinocchio as pin
 
 from .methods import make_solver
 from .robot import Robot
-from .scenarios import load_robot
+from .scenarios import PLANAR3_START, UR5_START, load_robot
 from .tasks import PoseTask
 
 METHODS = ("sjt", "jt", "jp", "dls")
@@ -104,9 +104,9 @@ def _time(function, args_list, warmup: int) -> np.ndarray:
 def _start(robot: Robot) -> np.ndarray:
     """A configuration inside the limits and away from singularities for the benchmark."""
     if robot.name == "ur5":
-        return np.array([0.3, -1.2, 1.5, -1.8, -1.5, 0.2])
+        return UR5_START.copy()
     if robot.name == "planar3":
-        return np.deg2rad([60.0, 45.0, 30.0])
+        return PLANAR3_START.copy()
     return robot.q0.copy()
 
 

@@ -148,16 +148,13 @@ class SJTSolver(_TransposeSolver):
         # one pose task: the error is log6 itself and the step one compiled loop (_step)
         self._fast = self._single and self.posture is None and isinstance(self.task, PoseTask)
         self._slowest2 = self.limits.slowest ** 2
-        self._gain_changed()
 
     def _gain_changed(self) -> None:
         super()._gain_changed()
-        # chain_i k dt: dividing it by |J_i|^2 gives k dt alpha_i in one operation
-        chain = getattr(self, "_chain", None)
-        if chain is None:  # called by the base constructor before the chain is known
-            return
+        # chain_i k dt: dividing it by |J_i|^2 gives k dt alpha_i in one operation (the base
+        # constructor sets the chain before the gain, so it is known here)
         k = self._auto_gain(None) if self._auto else self._gain
-        self._chain_kdt = chain * (k * self.dt) if np.ndim(k) == 0 else None
+        self._chain_kdt = self._chain * (k * self.dt) if np.ndim(k) == 0 else None
     def _apply(self, J, v):
         # alpha_i = 1 / |J_i|^2 on the chain, 0 elsewhere and below column_tol (eq. 18)
         out = np.empty(J.shape[1])
@@ -175,23 +172,22 @@ class SJTSolver(_TransposeSolver):
         J = pin.getFrameJacobian(model, data, fid, _LOCAL)
         e = pin.log6(oMf.actInv(oMd)).vector
         gain = self._gain_max if not self._auto else self._auto_gain(None)
-        sw, v = self.task.sqrt_weight, None
+        sw, v, e_w = self.task.sqrt_weight, None, e
         if sw is not None:
             J = sw[:, None] * J
-            e = sw * e
-            v = gain * e
+            e_w = sw * e
+            v = gain * e_w
         step = np.empty(self.robot.nv)
-        # k dt D J^T e, and |e|^2
-        ee = sjt_step(J, e, self._chain_kdt, self._not_chain, step, self.column_tol)
+        # k dt D J^T e, and |e|^2 (weighted when the task has weights)
+        ee = sjt_step(J, e_w, self._chain_kdt, self._not_chain, step, self.column_tol)
         if not math.isfinite(ee):
             self._raise_non_finite(q)
         if sw is not None:
-            ee = float((e / sw) @ (e / sw))
+            ee = float(e @ e)
         # |q_dot_i| = k alpha_i |J_i^T e| <= k sqrt(alpha_i) |e| <= k |e| since alpha_i <= 1
         # (eq. 19): below the slowest joint's limit, the speed test can be skipped
         speed_safe = sw is None and gain * gain * ee <= self._slowest2
-        return self._finish(q, oMd, J, e if sw is None else e / sw, ee, v, step, gain, oMf,
-                            speed_safe)
+        return self._finish(q, oMd, J, e, ee, v, step, gain, oMf, speed_safe)
 
     def scaling_factors(self, J):
         return mappings.scaling_factors(J, self.column_tol) * self._chain
