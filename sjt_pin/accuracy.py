@@ -113,16 +113,3 @@ def accuracy_table(rows: list[AccuracyRow]) -> str:
         lines.append(f"| {r.path} | {r.method} | {gain} | {r.max_error:.3g} | {r.rms_error:.3g} | "
                      f"{r.max_joint_speed:.3g} | {r.reason or 'no'} |")
     return "\n".join(lines)
-
-
-def _check_paths_are_singular() -> dict[str, float]:
-    """Smallest sigma_min(J) along each path's pose sequence, solved by DLS (for the docs)."""
-    out = {}
-    for path in singular_paths():
-        solver = make_solver("dls", path.robot, dt=DT, damping=1e-3, position_limits=False,
-                             velocity_limits=False)
-        log = track(solver, path.trajectory, path.q0)
-        out[path.name] = min(float(np.linalg.svd(path.robot.jacobian(q), compute_uv=False)[-1])
-                             for q in log.q[:: 10])
-    return out
-
