@@ -6,23 +6,32 @@ transpose baselines share the same interface.
 """
 
 from .exceptions import FrameNotFound, GainWarning, URDFError
-from .methods import DLSSolver, JPSolver, JTSolver, SJTSolver, make_solver
+from .gains import AutoGain, FixedGain, Gain
+from .kinematics import Kinematics
 from .robot import Robot
-from .solve import IKResult
-from .solvers import DifferentialIKSolver, StepInfo
+from .solve import IKResult, solve_many
+from .solver import Solver, StepInfo
+from .solvers import DLSSolver, JPSolver, JTSolver, SJTSolver, make_solver
 from .tasks import OrientationTask, PoseTask, PositionTask, PostureTask, Task
 from .tracking import TrackingLog, track
 from .trajectories import Circle, Line, PoseInterpolation, Trajectory
 
+#: the base class of the solvers, under its former name
+DifferentialIKSolver = Solver
+
 __all__ = [
+    "AutoGain",
     "Circle",
     "DLSSolver",
     "DifferentialIKSolver",
+    "FixedGain",
     "FrameNotFound",
+    "Gain",
     "GainWarning",
     "IKResult",
     "JPSolver",
     "JTSolver",
+    "Kinematics",
     "Line",
     "OrientationTask",
     "PoseInterpolation",
@@ -31,12 +40,14 @@ __all__ = [
     "PostureTask",
     "Robot",
     "SJTSolver",
+    "Solver",
     "StepInfo",
     "Task",
     "Trajectory",
     "TrackingLog",
     "URDFError",
     "make_solver",
+    "solve_many",
     "track",
 ]
-__version__ = "0.1.0"
+__version__ = "0.2.0"

@@ -8,8 +8,8 @@ import time
 import webbrowser
 from collections.abc import Sequence
 
-from . import scenarios
-from .methods import SOLVERS, make_solver
+from .paper import scenarios
+from .solvers import SOLVERS, make_solver
 from .tracking import TrackingLog, track
 
 DEMO_DT = 1e-3
@@ -75,7 +75,7 @@ def demo(args: argparse.Namespace) -> int:
 
 def reproduce(args: argparse.Namespace) -> int:
     """Run the paper's experiments and write figures and results.md into ``--out``."""
-    from .reproduce import reproduce as run
+    from .paper.reproduce import reproduce as run
 
     path = run(args.out, processes=args.processes, progress=not args.quiet, grid=args.grid)
     print(f"wrote {path} and its figures")
@@ -95,7 +95,7 @@ def bench(args: argparse.Namespace) -> int:
     """``sjt-pin bench speed|scale|accuracy|ik``."""
     from dataclasses import asdict
 
-    from . import bench as speed_bench
+    from .bench import speed as speed_bench
 
     def show(row):
         print(f"  {row.robot:16s} {row.method:18s} {row.step.median:8.2f} us "
@@ -118,19 +118,19 @@ def bench(args: argparse.Namespace) -> int:
         report = speed_bench.scale(steps=args.steps, progress=show)
         print(speed_bench.speed_table(report))
         if args.plot:
-            from .figures import save, scale_figure
+            from .paper.figures import save, scale_figure
 
             save(scale_figure(report), args.plot)
             print(f"wrote {args.plot}")
         _write_json(args.json, report.to_dict())
     elif args.kind == "accuracy":
-        from .accuracy import accuracy, accuracy_table
+        from .bench.accuracy import accuracy, accuracy_table
 
         rows = accuracy(progress=lambda r: print(f"  {r.path}: {r.method} done", flush=True))
         print(accuracy_table(rows))
         _write_json(args.json, {"machine": machine, "rows": [asdict(r) for r in rows]})
     else:
-        from .ik_bench import ik_benchmark, ik_table
+        from .bench.ik import ik_benchmark, ik_table
 
         rows = ik_benchmark(poses=args.poses, peers=not args.no_peers,
                             progress=lambda r: print(f"  {r.robot} {r.method}: "

@@ -26,23 +26,25 @@ COLUMN_TOL = 1e-10
 JP_RCOND = 1e-12
 
 
-def scaling_factors(J: np.ndarray, column_tol: float = COLUMN_TOL) -> np.ndarray:
+def scaling_factors(J: np.ndarray, column_tol: float = COLUMN_TOL,
+                    length: float = 0.0) -> np.ndarray:
     """SJT scaling factors ``alpha_i = 1 / (J_i^T J_i)`` (eq. 18), 0 for columns with no effect.
 
     For a revolute joint and a 6-row task ``J_i^T J_i = |z_i x (p_e - p_i)|^2 + 1 >= 1`` (eq. 19),
-    so ``0 < alpha_i <= 1``. A column with ``J_i^T J_i < column_tol`` (a joint outside the chain, a
-    finger, a joint whose axis passes through a position-task point) gets ``alpha_i = 0``.
+    so ``0 < alpha_i <= 1``. A column with ``J_i^T J_i <= column_tol`` (a joint outside the chain,
+    a finger, a joint whose axis passes through a position-task point) gets ``alpha_i = 0``.
+    ``length`` (task units) floors the column norm: ``alpha_i = 1 / max(J_i^T J_i, length^2)``.
     """
     squared_norms = np.einsum("ij,ij->j", J, J)
     active = squared_norms > column_tol
     alpha = np.zeros_like(squared_norms)
-    np.divide(1.0, squared_norms, out=alpha, where=active)
+    np.divide(1.0, np.maximum(squared_norms, length**2), out=alpha, where=active)
     return alpha
 
 
-def sjt_matrix(J: np.ndarray, column_tol: float = COLUMN_TOL) -> np.ndarray:
+def sjt_matrix(J: np.ndarray, column_tol: float = COLUMN_TOL, length: float = 0.0) -> np.ndarray:
     """``D J^T`` (eq. 20)."""
-    return scaling_factors(J, column_tol)[:, None] * J.T
+    return scaling_factors(J, column_tol, length)[:, None] * J.T
 
 
 def jt_matrix(J: np.ndarray) -> np.ndarray:

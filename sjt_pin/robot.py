@@ -7,6 +7,8 @@ Kinematic quantities follow Pinocchio's conventions: ``fk`` returns the world po
 from __future__ import annotations
 
 import importlib.resources
+import threading
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -56,7 +58,7 @@ class Robot:
         package_dirs: Sequence[str] = (),
     ):
         self.model = model
-        self.data = model.createData()
+        self._local = threading.local()  # one pin.Data per thread: queries never race
         self.name = name or model.name
         self.visual_model = visual_model
         self.collision_model = collision_model
@@ -64,7 +66,13 @@ class Robot:
         self.package_dirs = list(package_dirs)
         self.ee_frame_id = self.frame_id(ee_frame)
         self.ee_frame = ee_frame
-        self.q0 = pin.neutral(model) if q0 is None else self.check_q(q0, "q0").copy()
+        self._lower, self._upper = _position_limits(model)
+        limit = np.asarray(model.velocityLimit, dtype=float)
+        self._velocity = np.where((limit > 0) & (limit < 1e30), limit, np.inf)
+        #: name of the joint of each velocity (tangent) index: columns of J, entries of dq
+        self.velocity_names: list[str] = [
+            model.names[j] for j in range(1, model.njoints) for _ in range(model.joints[j].nv)]
+        self.q0 = pin.neutral(model) if q0 is None else self._inside(self.check_q(q0, "q0"))
 
     # -- construction ------------------------------------------------------------------------
     @classmethod
@@ -166,26 +174,31 @@ class Robot:
 
     @property
     def lower_limits(self) -> np.ndarray:
-        """Lower position limits (nq,) in rad or m; ``-inf`` where the URDF gives none."""
-        return np.where(self._limited, self.model.lowerPositionLimit, -np.inf)
+        """Lower position limits (nq,) in rad or m, those the solvers enforce: the URDF's for
+        1-DoF revolute and prismatic joints, ``-inf`` elsewhere (no limit in the URDF,
+        continuous joints, a floating base)."""
+        return self._lower.copy()
 
     @property
     def upper_limits(self) -> np.ndarray:
-        """Upper position limits (nq,) in rad or m; ``+inf`` where the URDF gives none."""
-        return np.where(self._limited, self.model.upperPositionLimit, np.inf)
+        """Upper position limits (nq,) in rad or m; ``+inf`` where none (see ``lower_limits``)."""
+        return self._upper.copy()
 
     @property
     def velocity_limits(self) -> np.ndarray:
         """Joint speed limits (nv,) in rad/s or m/s; ``+inf`` where the URDF gives none."""
-        limit = np.asarray(self.model.velocityLimit, dtype=float)
-        return np.where((limit > 0) & (limit < 1e30), limit, np.inf)
+        return self._velocity.copy()
 
-    @property
-    def _limited(self) -> np.ndarray:
-        limited = np.array(list(self.model.hasConfigurationLimit()), dtype=bool)
-        lower, upper = self.model.lowerPositionLimit, self.model.upperPositionLimit
-        # A URDF joint without <limit> parses to [0, 0] or to +-max double: neither is a limit.
-        return limited & (upper > lower) & (np.abs(lower) < 1e30) & (np.abs(upper) < 1e30)
+    def _inside(self, q0: np.ndarray) -> np.ndarray:
+        """``q0`` clipped into the position limits, with a warning naming the joints moved."""
+        outside = (q0 < self._lower) | (q0 > self._upper)
+        if not outside.any():
+            return q0.copy()
+        names = [self.model.names[j] for j in range(1, self.model.njoints)
+                 if self.model.joints[j].nq == 1 and outside[self.model.joints[j].idx_q]]
+        warnings.warn(f"{self.name}: the reference configuration q0 puts {names} outside their "
+                      f"URDF limits; q0 is clipped into range", UserWarning, stacklevel=3)
+        return np.clip(q0, self._lower, self._upper)
 
     # -- frames and kinematics ---------------------------------------------------------------
     def frame_id(self, name: str) -> int:
@@ -195,22 +208,36 @@ class Robot:
         return self.model.getFrameId(name)
 
     def check_q(self, q, name: str = "q") -> np.ndarray:
-        """``q`` as a finite float vector of shape (nq,), or ``ValueError`` naming ``name``."""
+        """``q`` as a finite real vector of shape (nq,), or ``ValueError`` naming ``name``."""
         return as_vector(q, name, self.model.nq)
 
+    @property
+    def data(self) -> pin.Data:
+        """Pinocchio's scratch space of the calling thread (``fk``/``jacobian`` use it)."""
+        data = getattr(self._local, "data", None)
+        if data is None:
+            data = self._local.data = self.model.createData()
+        return data
+
     def fk(self, q, frame: str | None = None) -> pin.SE3:
-        """World pose of ``frame`` (default: the end effector) at configuration ``q``."""
+        """World pose of ``frame`` (default: the end effector) at configuration ``q``.
+
+        Safe to call from several threads (each has its own ``pin.Data``).
+        """
         q = self.check_q(q)
         fid = self.ee_frame_id if frame is None else self.frame_id(frame)
-        pin.forwardKinematics(self.model, self.data, q)
-        return pin.updateFramePlacement(self.model, self.data, fid).copy()
+        data = self.data
+        pin.forwardKinematics(self.model, data, q)
+        return pin.updateFramePlacement(self.model, data, fid)
 
     def jacobian(self, q, frame: str | None = None,
                  reference: pin.ReferenceFrame = pin.LOCAL) -> np.ndarray:
-        """Frame Jacobian (6, nv), rows [linear; angular], in ``reference`` axes (LOCAL default)."""
+        """Frame Jacobian (6, nv), rows [linear; angular], in ``reference`` axes (LOCAL default);
+        always 2-D, also for a robot with one joint."""
         q = self.check_q(q)
         fid = self.ee_frame_id if frame is None else self.frame_id(frame)
-        return pin.computeFrameJacobian(self.model, self.data, q, fid, reference)
+        J = pin.computeFrameJacobian(self.model, self.data, q, fid, reference)
+        return np.asarray(J, dtype=float).reshape(6, self.model.nv)
 
     def random_configuration(self, rng: np.random.Generator | None = None) -> np.ndarray:
         """A configuration drawn uniformly within the position limits (``[-pi, pi]`` if none)."""
@@ -222,6 +249,22 @@ class Robot:
 
     def __repr__(self) -> str:
         return f"Robot({self.name!r}, ee_frame={self.ee_frame!r}, nq={self.nq}, nv={self.nv})"
+
+
+def _position_limits(model: pin.Model) -> tuple[np.ndarray, np.ndarray]:
+    """The position limits the solvers enforce (nq,): a 1-DoF revolute or prismatic joint's
+    URDF limits; -inf / +inf for every other coordinate."""
+    lower, upper = np.full(model.nq, -np.inf), np.full(model.nq, np.inf)
+    for j in range(1, model.njoints):
+        joint = model.joints[j]
+        if joint.nq != 1 or joint.nv != 1:
+            continue  # continuous (cos, sin), floating base, spherical, planar: unlimited
+        i = joint.idx_q
+        lo, hi = model.lowerPositionLimit[i], model.upperPositionLimit[i]
+        # a URDF joint without <limit> parses to [0, 0] or to +-max double: neither is a limit
+        if hi > lo and abs(lo) < 1e30 and abs(hi) < 1e30:
+            lower[i], upper[i] = lo, hi
+    return lower, upper
 
 
 def _only_leaf_body(model: pin.Model, source: str) -> str:

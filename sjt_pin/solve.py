@@ -20,7 +20,8 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from .kernels import cgls, sqrt_scaling
+from . import mappings
+from .kernels import cgls
 from .validation import positive
 
 
@@ -49,7 +50,7 @@ def _step_length(d: np.ndarray) -> float:
 
 def _wrappable(limits) -> np.ndarray | None:
     """Limited joints whose range spans a full turn: q and q -+ 2 pi are the same posture."""
-    if not limits.position:
+    if limits is None:
         return None
     full = limits.upper - limits.lower >= 2.0 * np.pi
     return np.flatnonzero(full) if full.any() else None
@@ -79,20 +80,29 @@ def _direction(solver, J: np.ndarray, e: np.ndarray, inner: int) -> np.ndarray:
     ``inner`` CGLS iterations preconditioned by ``sqrt(alpha)`` (SJT) or nothing (JT), whose
     first is the method's direction ``D J^T e`` (``J^T e``) with the best step along it.
     """
-    if not solver.escapes_saddles:
-        return solver._apply(J, e)
+    method = solver.method
+    if not method.stalls:
+        return method.matrix(J) @ e
     J = np.ascontiguousarray(J)
-    if solver.method == "sjt":
-        scale = sqrt_scaling(J, solver._chain, solver.column_tol)
-    else:
-        scale = solver._chain
-    return cgls(J, e, scale, inner, CGLS_TOL)
+    alpha = method.scaling_factors(J)
+    scale = np.sqrt(alpha) if alpha is not None else (np.abs(J).sum(axis=0) > 0).astype(float)
+    out = np.empty(J.shape[1])
+    cgls(J, e, scale, inner, CGLS_TOL, out)
+    return out
 
 
 def _descend(solver, q, oMd, tol, max_iters, inner, armijo=1e-4):
-    limits, model = solver.limits, solver._model
+    limits, model = solver.position_limit, solver.robot.model
     wrap = _wrappable(limits)
-    J, e, e_w, _, _ = solver._kinematics(q, oMd, None)
+    stack = solver.stack.copy()
+    sw = stack.sqrt_weight
+    mask = stack.chain
+
+    def kinematics(q):
+        J, e, _ = stack.evaluate(q, oMd, None)
+        return sw[:, None] * J * mask, e.copy(), sw * e
+
+    J, e, e_w = kinematics(q)
     f = f_checkpoint = 0.5 * float(e_w @ e_w)
     failures = 0
     it = 0
@@ -106,21 +116,23 @@ def _descend(solver, q, oMd, tol, max_iters, inner, armijo=1e-4):
             f_checkpoint = f
         d = _direction(solver, J, e_w, inner)
         t = _step_length(d)
-        if limits.position and t > 0.0:
-            moved = pin.integrate(model, q, t * d)
-            if limits.outside(moved):
+        if limits is not None and t > 0.0:
+            if limits.violated(q, t * d, 1.0):
                 if wrap is not None:
                     q = _wrap(q, t * d, limits, wrap)
-                d, _ = limits.clamp(q, d, t, J, e_w,
-                                    lambda Jf, v: _direction(solver, Jf, v, inner))
+
+                def remap(free, fixed_velocity, J=J, e_w=e_w, t=t):
+                    return t * _direction(solver, J * free, e_w - J @ fixed_velocity, inner)
+
+                d = limits.enforce(q, t * d, 1.0, remap) / t
         slope = float(e_w @ (J @ d))  # -(d f / d t) at t = 0: > 0 along a descent direction
         accepted = False
         if slope > 0.0 and t > 0.0:
             for _ in range(30):
                 q_try = pin.integrate(model, q, t * d)
-                if limits.position:
-                    limits.clip(q_try)
-                J_try, e_try, e_w_try, _, _ = solver._kinematics(q_try, oMd, None)
+                if limits is not None:
+                    limits.clip(q, q_try)
+                J_try, e_try, e_w_try = kinematics(q_try)
                 f_try = 0.5 * float(e_w_try @ e_w_try)
                 if f_try <= f - armijo * t * slope:
                     accepted = True
@@ -156,8 +168,7 @@ def solve(solver, target, q0, tol: float = 1e-6, max_iters: int = 500, restarts:
     if int(max_iters) < 1 or int(restarts) < 0:
         raise ValueError(f"max_iters must be >= 1 and restarts >= 0, got {max_iters}, {restarts}")
     q = solver.robot.check_q(q0, "q0")
-    oMd = (solver.task.target_pose(target) if solver._single
-           else solver._targets(target, None)[0])
+    oMd, _ = solver.stack.targets(target, None)
     rng = np.random.default_rng(0) if rng is None else rng
     inner = solver.robot.nv if inner is None else int(inner)
     if inner < 1:
@@ -177,3 +188,7 @@ def solve(solver, target, q0, tol: float = 1e-6, max_iters: int = 500, restarts:
         if success:
             return IKResult(q_end, True, total, error, attempt)
     return IKResult(best[0], False, total, best[1], int(restarts))
+
+
+def solve_many(*args, **kwargs):
+    raise NotImplementedError

@@ -2,16 +2,17 @@
 
 At each sample time t_k the solver is given the configuration reached so far, the desired pose
 x_d(t_k) and velocity x_dot_d(t_k), as in the paper's eq. (5): the logged error
-``e_k = x_d(t_k) - x(q_{k-1})`` is the one the CLIK law acts on.
+``e_k = x_d(t_k) - x(q_k)`` is the one the CLIK law acts on.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
+import pinocchio as pin
 
-from .solvers import DifferentialIKSolver
+from .solver import Solver
 from .trajectories import Trajectory
 from .validation import positive
 
@@ -31,7 +32,6 @@ class TrackingLog:
         diverged: the run was stopped because the state blew up (see ``track``).
         reason: why it was stopped, empty when it ran to the end.
         method: the solver's method name; ``dt`` its period (s); ``gain`` its gain setting.
-        q_final: the configuration after the last step.
     """
 
     t: np.ndarray
@@ -46,7 +46,6 @@ class TrackingLog:
     method: str = ""
     dt: float = 0.0
     gain: float | np.ndarray | str = "auto"
-    q_final: np.ndarray = field(default_factory=lambda: np.empty(0))
 
     @property
     def max_error(self) -> float:
@@ -72,7 +71,7 @@ class TrackingLog:
 
 
 def track(
-    solver: DifferentialIKSolver,
+    solver: Solver,
     trajectory: Trajectory,
     q0,
     *,
@@ -95,43 +94,53 @@ def track(
     A diverging run (non-finite state, ``max_step`` or ``max_error`` exceeded) stops there with
     ``diverged=True`` and the reason, instead of raising.
     """
-    if not isinstance(solver, DifferentialIKSolver):
-        raise TypeError(f"solver must be a DifferentialIKSolver, got {type(solver).__name__}")
-    if len(solver.tasks) != 1:
+    if not isinstance(solver, Solver):
+        raise TypeError(f"solver must be a sjt_pin Solver, got {type(solver).__name__}")
+    if len(solver.stack.targeted) != 1:
         raise TypeError("track drives one task frame; step() takes several (see the README)")
     if not isinstance(trajectory, Trajectory):
         raise TypeError(f"trajectory must be a Trajectory, got {type(trajectory).__name__}")
     max_step = positive(max_step, "max_step", "rad")
     max_error = positive(max_error, "max_error", "task units")
-    q = solver.robot.check_q(q0, "q0")
-    times = trajectory.times(solver.dt, duration)
-    n, nq, nv, m = times.size, solver.robot.nq, solver.robot.nv, solver.task.dim
-    qs, dqs = np.empty((n, nq)), np.empty((n, nv))
-    positions, targets = np.empty((n, 3)), np.empty((n, 3))
-    errors, norms = np.empty((n, m)), np.empty(n)
-    limit = max_step / solver.dt
-    diverged, reason, k = False, "", 0
+    q = solver.robot.check_q(q0, "q0").copy()
+    dt = solver.dt
+    times = trajectory.times(dt, duration)
+    positions_d, rotations_d, velocities_d = trajectory.samples(times)
+    n, nq, nv, m = times.size, solver.robot.nq, solver.robot.nv, solver.stack.target_dim
+    qs, steps = np.empty((n, nq)), np.empty((n, nv))
+    positions, errors, norms = np.empty((n, 3)), np.empty((n, m)), np.empty(n)
+    target = pin.SE3(np.array(rotations_d[0]), np.array(positions_d[0]))
+    task = solver.stack.task
+    step = solver.step
+    diverged, reason, k = False, "", -1
     with np.errstate(all="ignore"):
-        for k, t in enumerate(times):
-            pose, velocity = trajectory.sample(t)
-            q_next = solver._step(q, pose, velocity if feedforward else None)
-            info = solver.last
-            qs[k], dqs[k], errors[k], norms[k] = q, info.dq, info.error, info.error_norm
-            positions[k], targets[k] = info.pose.translation, pose.translation
-            if not (np.isfinite(info.error_norm) and np.all(np.isfinite(q_next))):
-                diverged, reason = True, f"non-finite state at t = {t:.4g} s"
-            elif np.abs(info.dq).max() > limit:
-                diverged, reason = True, (f"a joint moved more than {max_step:g} in one step at "
-                                          f"t = {t:.4g} s")
-            elif info.error_norm > max_error:
-                diverged, reason = True, f"error above {max_error:g} at t = {t:.4g} s"
-            if diverged:
+        for k in range(n):
+            target.translation = positions_d[k]
+            target.rotation = rotations_d[k]
+            try:
+                q_next = step(q, target, velocities_d[k] if feedforward else None)
+            except ValueError as exc:  # a non-finite state or error: the run blew up
+                if np.all(np.isfinite(q)):
+                    raise
+                diverged, reason = True, f"non-finite state at t = {times[k]:.4g} s ({exc})"
+                break
+            qs[k], steps[k], errors[k] = q, solver.displacement, solver.error
+            norms[k] = norm = solver.error_norm
+            positions[k] = task.placement.translation
+            if not norm < max_error:
+                diverged, reason = True, (f"error above {max_error:g} at t = {times[k]:.4g} s"
+                                          if np.isfinite(norm) else
+                                          f"non-finite state at t = {times[k]:.4g} s")
                 break
             q = q_next
     end = k + 1
+    # a step above max_step ends the run there (tested once, after the loop)
+    jumps = np.flatnonzero(np.abs(steps[:end]).max(axis=1, initial=0.0) > max_step)
+    if jumps.size:
+        end = int(jumps[0]) + 1
+        diverged, reason = True, (f"a joint moved more than {max_step:g} in one step at "
+                                  f"t = {times[end - 1]:.4g} s")
     return TrackingLog(
-        t=times[:end], q=qs[:end], dq=dqs[:end], position=positions[:end],
-        target=targets[:end], error=errors[:end], error_norm=norms[:end],
-        diverged=diverged, reason=reason, method=solver.method, dt=solver.dt, gain=solver.gain,
-        q_final=q,
-    )
+        t=times[:end], q=qs[:end], dq=steps[:end] / dt, position=positions[:end],
+        target=np.array(positions_d[:end]), error=errors[:end], error_norm=norms[:end],
+        diverged=diverged, reason=reason, method=solver.method.name, dt=dt, gain=solver.gain)

@@ -2,8 +2,9 @@
 
 ``sample(t)`` returns ``(pose, velocity)``: the desired world pose ``oMd`` (``pin.SE3``) and a
 ``pin.Motion`` with ``linear = p_dot_d`` (m/s) and ``angular = omega_d`` (rad/s), both in world
-axes at the desired origin (DESIGN.md section 4). Before 0 and after ``duration`` a trajectory
-holds its end pose with zero velocity, so ``track`` can keep commanding the final target.
+axes at the desired origin. ``samples(times)`` returns the same for many times at once, as
+arrays. Before 0 and after ``duration`` a trajectory holds its end pose with zero velocity, so
+``track`` can keep commanding the final target.
 """
 
 from __future__ import annotations
@@ -24,18 +25,18 @@ def _timing(name: str) -> str:
     return name
 
 
-def _progress(t: float, duration: float, timing: str) -> tuple[float, float]:
-    """Path parameter s(t) in [0, 1] and its rate ds/dt (1/s)."""
-    if t <= 0.0:
-        return 0.0, 0.0
-    if t >= duration:
-        return 1.0, 0.0
-    tau = t / duration
+def _progress(t, duration: float, timing: str):
+    """Path parameter s(t) in [0, 1] and its rate ds/dt (1/s); ``t`` a number or an array."""
+    tau = np.clip(np.asarray(t, dtype=float) / duration, 0.0, 1.0)
+    inside = (np.asarray(t) >= 0.0) & (np.asarray(t) < duration)  # right-continuous rate
     if timing == "linear":
-        return tau, 1.0 / duration
-    # minimum jerk: s = 10 tau^3 - 15 tau^4 + 6 tau^5
-    return (tau**3 * (10.0 - 15.0 * tau + 6.0 * tau**2),
-            30.0 * tau**2 * (1.0 - tau) ** 2 / duration)
+        s, rate = tau, np.where(inside, 1.0 / duration, 0.0)
+    else:  # minimum jerk: s = 10 tau^3 - 15 tau^4 + 6 tau^5
+        s = tau**3 * (10.0 - 15.0 * tau + 6.0 * tau**2)
+        rate = np.where(inside, 30.0 * tau**2 * (1.0 - tau) ** 2 / duration, 0.0)
+    if np.ndim(t) == 0:
+        return float(s), float(rate)
+    return s, rate
 
 
 class Trajectory(ABC):
@@ -46,6 +47,18 @@ class Trajectory(ABC):
     @abstractmethod
     def sample(self, t: float) -> tuple[pin.SE3, pin.Motion]:
         """Desired pose and velocity at time ``t`` (s)."""
+
+    def samples(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Desired positions (N, 3) in m, rotations (N, 3, 3) and velocities (N, 6)
+        [p_dot_d (m/s), omega_d (rad/s)] at ``times`` (N,) in s, as :meth:`sample` gives them."""
+        times = np.asarray(times, dtype=float)
+        positions, rotations = np.empty((times.size, 3)), np.empty((times.size, 3, 3))
+        velocities = np.empty((times.size, 6))
+        for k, t in enumerate(times):
+            pose, velocity = self.sample(float(t))
+            positions[k], rotations[k], velocities[k] = (pose.translation, pose.rotation,
+                                                         velocity.vector)
+        return positions, rotations, velocities
 
     def times(self, dt: float, duration: float | None = None) -> np.ndarray:
         """Sample times 0, dt, 2 dt, ... up to ``duration`` (default: the trajectory's) included."""
@@ -79,6 +92,14 @@ class Line(Trajectory):
         return (pin.SE3(self.rotation, self.start + s * delta),
                 pin.Motion(ds * delta, np.zeros(3)))
 
+    def samples(self, times):
+        s, ds = _progress(np.asarray(times, dtype=float), self.duration, self.timing)
+        delta = self.end - self.start
+        velocities = np.zeros((s.size, 6))
+        velocities[:, :3] = ds[:, None] * delta
+        return (self.start + s[:, None] * delta, np.broadcast_to(self.rotation, (s.size, 3, 3)),
+                velocities)
+
 
 class Circle(Trajectory):
     """Circle of ``radius`` (m) about ``center`` in the plane normal to ``normal``.
@@ -108,13 +129,19 @@ class Circle(Trajectory):
             pin.SE3(np.asarray(rotation, dtype=float), np.zeros(3)), "rotation").rotation
 
     def sample(self, t):
-        s, ds = _progress(t, self.duration, "linear")
+        positions, _, velocities = self.samples(np.array([t], dtype=float))
+        return pin.SE3(self.rotation, positions[0]), pin.Motion(velocities[0])
+
+    def samples(self, times):
+        s, ds = _progress(np.asarray(times, dtype=float), self.duration, "linear")
         sweep = 2.0 * np.pi * self.turns
-        angle = self.start_angle + sweep * s
+        angle = (self.start_angle + sweep * s)[:, None]
         radial = np.cos(angle) * self._u + np.sin(angle) * self._w
         tangent = -np.sin(angle) * self._u + np.cos(angle) * self._w
-        return (pin.SE3(self.rotation, self.center + self.radius * radial),
-                pin.Motion(self.radius * sweep * ds * tangent, np.zeros(3)))
+        velocities = np.zeros((s.size, 6))
+        velocities[:, :3] = (self.radius * sweep * ds)[:, None] * tangent
+        return (self.center + self.radius * radial,
+                np.broadcast_to(self.rotation, (s.size, 3, 3)), velocities)
 
 
 class PoseInterpolation(Trajectory):

@@ -1,16 +1,29 @@
-"""Argument checks shared by the public entry points (DESIGN.md section 5).
+"""Argument checks of the public entry points: each returns the converted value or raises a
+``ValueError``/``TypeError`` that names the argument, what was expected and what came.
 
-Each function returns the converted value or raises ``ValueError`` naming the argument.
+Nothing is repaired silently: a complex number is not cast to its real part, a 4x4 matrix whose
+last row is not [0 0 0 1] is not a pose, a scaled rotation is not a rotation.
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pinocchio as pin
+
+from .kernels import rotation_defect
+
+#: Largest |R^T R - I| accepted as a rotation (targets are often built in float32).
+RIGID_TOL = 1e-6
 
 
 def as_vector(value, name: str, size: int | None = None) -> np.ndarray:
     """``value`` as a finite float vector of length ``size`` (any length if None)."""
+    if isinstance(value, (str, bytes)) or value is None:
+        raise ValueError(f"{name} must be a vector of numbers, got {value!r}")
+    if np.iscomplexobj(value):
+        raise ValueError(f"{name} must be real, got complex values {value!r}")
     try:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError) as exc:
@@ -23,43 +36,77 @@ def as_vector(value, name: str, size: int | None = None) -> np.ndarray:
     return arr
 
 
-def as_pose(value, name: str = "target") -> pin.SE3:
-    """``value`` (a ``pin.SE3`` or a 4x4 homogeneous matrix) as a finite ``pin.SE3``.
+def check_rigid(pose: pin.SE3, name: str = "target") -> pin.SE3:
+    """``pose`` unchanged if its rotation is a rotation and every entry is finite."""
+    homogeneous = pose.np
+    defect = rotation_defect(homogeneous)
+    if not defect <= RIGID_TOL:
+        _raise_not_rigid(homogeneous, defect, name)
+    if not math.isfinite(float(np.abs(pose.translation).sum())):
+        raise ValueError(f"{name} contains NaN or inf: translation {pose.translation}")
+    return pose
 
-    A ``pin.SE3`` is returned as it is (its rotation is Pinocchio's to keep; the solvers detect a
-    NaN target from the non-finite error it produces, so the hot path pays nothing for it); a
-    matrix is checked for NaN/inf and must hold a rotation.
-    """
+
+def _raise_not_rigid(homogeneous: np.ndarray, defect: float, name: str) -> None:
+    if not np.all(np.isfinite(homogeneous)):
+        raise ValueError(f"{name} contains NaN or inf:\n{homogeneous}")
+    if not np.array_equal(homogeneous[3], [0.0, 0.0, 0.0, 1.0]):
+        raise ValueError(f"{name} is not a rigid transform: its last row is {homogeneous[3]}, "
+                         "not [0 0 0 1]")
+    R = homogeneous[:3, :3]
+    if np.linalg.det(R) <= 0.0:
+        raise ValueError(f"{name} rotation is not a rotation matrix (det = "
+                         f"{np.linalg.det(R):.3g}, a reflection or degenerate)")
+    raise ValueError(f"{name} rotation is not a rotation matrix: |R^T R - I| = {defect:.3g} "
+                     f"(above {RIGID_TOL:g}; a scaled or sheared matrix)")
+
+
+def as_pose(value, name: str = "target") -> pin.SE3:
+    """``value`` (a ``pin.SE3`` or a 4x4 homogeneous matrix) as a rigid, finite ``pin.SE3``."""
     if isinstance(value, pin.SE3):
-        return value
+        return check_rigid(value, name)
+    if value is None or isinstance(value, (str, bytes)) or np.iscomplexobj(value):
+        raise ValueError(f"{name} must be a pin.SE3 or a 4x4 matrix, got {value!r}")
     try:
         homogeneous = np.asarray(value, dtype=float)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{name} must be a pin.SE3 or a 4x4 matrix, got {value!r}") from exc
     if homogeneous.shape != (4, 4):
         raise ValueError(f"{name} must be a pin.SE3 or a 4x4 matrix, got shape {homogeneous.shape}")
+    homogeneous = np.ascontiguousarray(homogeneous)
+    defect = rotation_defect(homogeneous)
+    if not defect <= RIGID_TOL:
+        _raise_not_rigid(homogeneous, defect, name)
     if not np.all(np.isfinite(homogeneous)):
-        raise ValueError(f"{name} contains NaN or inf")
-    rotation = homogeneous[:3, :3]
-    if not np.allclose(rotation.T @ rotation, np.eye(3), atol=1e-6) or np.linalg.det(rotation) < 0:
-        raise ValueError(f"{name} rotation is not a rotation matrix")
-    return pin.SE3(rotation.copy(), homogeneous[:3, 3].copy())
+        raise ValueError(f"{name} contains NaN or inf:\n{homogeneous}")
+    return pin.SE3(homogeneous[:3, :3].copy(), homogeneous[:3, 3].copy())
 
 
-def as_motion(value, name: str = "target_velocity") -> pin.Motion:
-    """``value`` (a ``pin.Motion`` or a 6-vector [linear, angular]) as a finite ``pin.Motion``."""
-    vector = value.vector if isinstance(value, pin.Motion) else value
-    vector = as_vector(vector, name, 6)
-    return value if isinstance(value, pin.Motion) else pin.Motion(vector)
+def as_motion(value, name: str = "target_velocity") -> np.ndarray:
+    """``value`` (a ``pin.Motion`` or a 6-vector [linear (m/s), angular (rad/s)]) as a float
+    6-vector; finiteness is checked by the step (a NaN shows in the feed-forward)."""
+    if isinstance(value, pin.Motion):
+        return value.vector
+    if type(value) is np.ndarray and value.shape == (6,) and value.dtype == np.float64:
+        return value
+    return as_vector(value, name, 6)
 
 
 def positive(value, name: str, unit: str = "") -> float:
-    """``value`` as a finite float > 0."""
-    try:
-        number = float(value)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name} must be a positive number, got {value!r}") from exc
-    if not np.isfinite(number) or number <= 0.0:
+    """``value`` as a finite float > 0 (``TypeError`` if it is not a number)."""
+    number = real_number(value, name, unit)
+    if not math.isfinite(number) or number <= 0.0:
         raise ValueError(f"{name} must be a positive number{' in ' + unit if unit else ''}, "
                          f"got {value!r}")
     return number
+
+
+def real_number(value, name: str, unit: str = "") -> float:
+    """``value`` as a float, or ``TypeError`` naming ``name`` (no bool, str, None or complex)."""
+    if isinstance(value, (bool, np.bool_, str, bytes)) or value is None or np.iscomplexobj(value):
+        raise TypeError(f"{name} must be a number{' in ' + unit if unit else ''}, got {value!r}")
+    try:
+        return float(value)
+    except (TypeError, ValueError) as exc:
+        raise TypeError(f"{name} must be a number{' in ' + unit if unit else ''}, "
+                        f"got {value!r}") from exc

@@ -39,7 +39,7 @@ def test_bad_position_target_and_velocity(ur5):
     with pytest.raises(ValueError, match=r"target must have shape \(3,\)"):
         solver.step(ur5.q0, [0.1, 0.2])
     with pytest.raises(ValueError, match=r"target_velocity must have shape \(6,\)"):
-        solver.step(ur5.q0, [0.1, 0.2, 0.3], target_velocity=np.zeros(3))
+        solver.step(ur5.q0, [0.1, 0.2, 0.3], target_velocity=np.zeros(2))
     with pytest.raises(ValueError, match="target_velocity contains NaN"):
         solver.step(ur5.q0, [0.1, 0.2, 0.3], target_velocity=np.full(6, np.nan))
 

@@ -1,80 +1,191 @@
-"""The compiled inner loops agree with the numpy formulas they replace."""
+"""The compiled kernels agree with the numpy reference formulas of ``mappings`` and Pinocchio."""
 
 import numpy as np
+import pinocchio as pin
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from sjt_pin import kernels as K
 from sjt_pin import mappings
-from sjt_pin.kernels import outside_box, sjt_step
+
+DT = 1e-3
+
+
+def problem(seed, m, n):
+    """Random rows with some masked joints, weights and per-row gains."""
+    rng = np.random.default_rng(seed)
+    J = rng.normal(size=(m, n))
+    mask = (rng.random(n) > 0.25).astype(float)
+    e, ff = rng.normal(size=m), rng.normal(size=m)
+    rows = np.vstack([rng.uniform(0.5, 2.0, m), rng.uniform(1.0, 3.0, m)])  # sqrt(w), K
+    return J, e, ff, rows, mask
+
+
+def run(kernel, J, e, ff, rows, mask, **params):
+    m, n = J.shape
+    work = np.zeros(K.work_size(m, n))
+    work[K.P_DT] = DT
+    work[K.P_ERROR_ROWS] = m
+    for name, value in params.items():
+        work[getattr(K, "P_" + name.upper())] = value
+    step = np.full(n, np.nan)
+    kernel(J, e, ff, rows, mask, work, step)
+    return step, work[K.INFO:K.INFO + K.INFO_SIZE]
+
+
+shapes = dict(m=st.integers(1, 8), n=st.integers(1, 10), seed=st.integers(0, 2**32 - 1))
+
+
+@settings(max_examples=80, deadline=None)
+@given(**shapes, scaled=st.booleans(), ff_mode=st.sampled_from([0, 1, 2]),
+       length=st.sampled_from([0.0, 0.5]))
+def test_transpose_step_is_the_reference_mapping(m, n, seed, scaled, ff_mode, length):
+    J, e, ff, rows, mask = problem(seed, m, n)
+    J[:, 0] *= 1e-7  # a column below column_tol: alpha = 0
+    step, info = run(K.transpose_step, J, e, ff, rows, mask, scaled=float(scaled),
+                     ff_mode=ff_mode, mu=0.01, col_tol=mappings.COLUMN_TOL,
+                     length2=length**2)
+    sw, k = rows
+    Jw = sw[:, None] * J * mask
+    alpha = mappings.scaling_factors(Jw, mappings.COLUMN_TOL, length)
+    S = alpha if scaled else mask * (np.einsum("ij,ij->j", Jw, Jw) > 0)
+    expected = DT * S * (Jw.T @ (k * sw * e))  # fixed gain: S J_w^T K e_w
+    if ff_mode == K.FF_TRANSPOSE:
+        expected += DT * S * (Jw.T @ (sw * ff))
+    elif ff_mode == K.FF_DAMPED:
+        A = Jw @ np.diag(alpha) @ Jw.T
+        expected += DT * alpha * (Jw.T @ np.linalg.solve(A + 1e-4 * np.eye(m), sw * ff))
+    np.testing.assert_allclose(step, expected, rtol=1e-9, atol=1e-12)
+    assert info[K.I_E_SQ] == pytest.approx(e @ e)
+    assert info[K.I_TRACE] == pytest.approx(np.sum(S * np.einsum("ij,ij->j", Jw, Jw)))
 
 
 @settings(max_examples=60, deadline=None)
-@given(m=st.integers(1, 6), n=st.integers(1, 12), seed=st.integers(0, 2**32 - 1))
-def test_sjt_step_is_k_dt_D_Jt_e(m, n, seed):
+@given(**shapes)
+def test_damped_feedback_is_the_damped_solve_of_the_whole_velocity(m, n, seed):
+    J, e, ff, rows, mask = problem(seed, m, n)
+    c = 0.8
+    step, info = run(K.transpose_step, J, e, ff, rows, mask, scaled=1.0, ff_mode=K.FF_DAMPED,
+                     mu=0.01, col_tol=mappings.COLUMN_TOL, fb_mode=K.FB_DAMPED, lm=1.0,
+                     gain_mode=K.GAIN_AUTO, gain_arg=c)
+    sw, k = rows
+    Jw = sw[:, None] * J * mask
+    alpha = mappings.scaling_factors(Jw)
+    A = Jw @ np.diag(alpha) @ Jw.T
+    damping = 1e-4 + np.sum((sw * e) ** 2)  # mu^2 + |e_w|^2 (Levenberg-Marquardt)
+    v = sw * (ff + c / DT * k * e)
+    expected = DT * alpha * (Jw.T @ np.linalg.solve(A + damping * np.eye(m), v))
+    np.testing.assert_allclose(step, expected, rtol=1e-8, atol=1e-12)
+    assert info[K.I_GAIN] == pytest.approx(c / DT)
+
+
+@settings(max_examples=60, deadline=None)
+@given(**shapes, damping=st.sampled_from([0.0, 0.05, 1.0]))
+def test_least_squares_step_is_jp_or_dls(m, n, seed, damping):
+    J, e, ff, rows, mask = problem(seed, m, n)
+    step, _ = run(K.least_squares_step, J, e, ff, rows, mask, ff_mode=1, mu=damping,
+                  rcond=mappings.JP_RCOND)
+    sw, k = rows
+    Jw = sw[:, None] * J * mask
+    v = sw * ff + k * sw * e
+    expected = mappings.dls_apply(Jw, v, damping) if damping else mappings.jp_apply(Jw, v)
+    np.testing.assert_allclose(step, DT * expected, rtol=1e-7, atol=1e-10)
+
+
+def test_least_squares_drops_exactly_lost_directions():
+    J = np.array([[1.0, 1.0], [0.0, 0.0]])  # row 2 lost
+    rows = np.ones((2, 2))
+    step, _ = run(K.least_squares_step, J, np.array([1.0, 1.0]), np.zeros(2), rows,
+                  np.ones(2), rcond=mappings.JP_RCOND)
+    np.testing.assert_allclose(step, DT * np.array([0.5, 0.5]))
+
+
+@settings(max_examples=80, deadline=None)
+@given(p=st.integers(1, 9), rank=st.integers(0, 9), seed=st.integers(0, 2**32 - 1),
+       products=st.integers(0, 3))
+def test_loop_bound_is_a_guaranteed_upper_bound(p, rank, seed, products):
     rng = np.random.default_rng(seed)
-    J = rng.normal(size=(m, n))
-    chain = (rng.random(n) > 0.3).astype(float)
-    J[:, chain == 0] = 0.0  # joints off the chain have zero columns
-    e = rng.normal(size=m)
-    k_dt = 0.37
-    out = np.empty(n)
-    J[:, 0] *= 1e-7  # a chain column below the threshold gets alpha = 0, as in mappings
-    ee = sjt_step(J, e, k_dt * chain, 1.0 - chain, out, mappings.COLUMN_TOL)
-    expected = k_dt * mappings.sjt_apply(J, e, mappings.scaling_factors(J))
-    np.testing.assert_allclose(out, expected, rtol=1e-12, atol=1e-15)
-    assert abs(ee - e @ e) <= 1e-12 * (e @ e)
+    rank = min(rank, p)
+    B = rng.normal(size=(p, rank)) * rng.uniform(0.01, 3.0, rank)
+    A = B @ B.T
+    lam = np.linalg.eigvalsh(A)[-1] if rank else 0.0
+    bound = K.loop_bound(A.copy(), products, np.empty((p, p)), np.empty((p, p)))
+    assert bound >= lam * (1 - 1e-10)
+    assert bound <= max(rank, 1) ** (1 / 2 ** (products + 1)) * lam * (1 + 1e-10) + 1e-300
 
 
-def test_sjt_step_reports_non_finite_errors():
-    out = np.empty(2)
-    ee = sjt_step(np.eye(2), np.array([np.nan, 0.0]), np.ones(2), np.zeros(2), out)
-    assert not np.isfinite(ee)
+@settings(max_examples=40, deadline=None)
+@given(p=st.integers(1, 8), seed=st.integers(0, 2**32 - 1))
+def test_small_dense_algebra(p, seed):
+    rng = np.random.default_rng(seed)
+    B = rng.normal(size=(p, p))
+    A = B @ B.T
+    rhs = rng.normal(size=p)
+    out = np.empty(p)
+    assert K.cholesky_solve(A.copy(), 0.1, rhs, out)
+    np.testing.assert_allclose(out, np.linalg.solve(A + 0.1 * np.eye(p), rhs), rtol=1e-8)
+    D, V = A.copy(), np.empty((p, p))
+    K.symmetric_eigen(D, V)
+    np.testing.assert_allclose(np.sort(np.diag(D)), np.linalg.eigvalsh(A), rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(V @ np.diag(np.diag(D)) @ V.T, A, atol=1e-9)
 
 
-def test_outside_box():
-    mid, inv_half = np.zeros(3), np.ones(3)  # limits [-1, 1]
-    speed = np.full(3, 10.0)  # |step| * 10 > 1 is too fast
-    inside, small = np.array([0.5, -0.9, 0.0]), np.full(3, 0.01)
-    assert not outside_box(inside, small, mid, inv_half, speed)
-    assert outside_box(np.array([0.5, -1.1, 0.0]), small, mid, inv_half, speed)
-    assert outside_box(np.array([1.0, 0.0, 0.0]), small, mid, inv_half, speed)  # on the limit
-    assert outside_box(inside, np.array([0.0, 0.2, 0.0]), mid, inv_half, speed)
-    assert not outside_box(inside, np.array([0.0, 0.2, 0.0]), mid, inv_half, np.zeros(3))
+def test_frame_velocity_is_the_twist_seen_from_the_frame(rng):
+    oMf, oMd = pin.SE3.Random(), pin.SE3.Random()
+    velocity = rng.normal(size=6)  # [p_dot_d, omega_d], world axes at the desired origin
+    out = np.empty(6)
+    K.frame_velocity(oMf.np, oMd.np, velocity, out)
+    # the same twist with Pinocchio: world axes at the desired origin -> LOCAL axes of f
+    at_desired = pin.SE3(np.eye(3), oMd.translation)
+    expected = oMf.actInv(at_desired.act(pin.Motion(velocity)))
+    np.testing.assert_allclose(out, expected.vector, atol=1e-12)
 
 
-def test_cgls_first_iterate_is_the_sjt_direction_and_later_ones_least_squares(rng):
-    from sjt_pin.kernels import cgls
+def test_rotation_defect():
+    assert K.rotation_defect(pin.SE3.Random().np) < 1e-14
+    scaled = pin.SE3.Random().np
+    scaled[:3, :3] *= 1.1
+    assert K.rotation_defect(scaled) == pytest.approx(0.21)
+    reflected = np.diag([1.0, 1.0, -1.0, 1.0])
+    assert K.rotation_defect(reflected) == np.inf
+    bad_row = np.eye(4)
+    bad_row[3, 0] = 0.5
+    assert K.rotation_defect(bad_row) == np.inf
+    assert np.isnan(K.rotation_defect(np.full((4, 4), np.nan)))
 
-    J, e = rng.normal(size=(6, 7)), rng.normal(size=6)
-    scale = np.sqrt(mappings.scaling_factors(J))
-    d1 = cgls(J, e, scale, 1, 0.0)
-    direction = mappings.sjt_apply(J, e, mappings.scaling_factors(J))  # D J^T e
-    t = (e @ J @ direction) / np.sum((J @ direction) ** 2)  # the best step along it
-    np.testing.assert_allclose(d1, t * direction, rtol=1e-10)
-    d = cgls(J, e, scale, 50, 0.0)  # enough iterations: a least-squares solution
-    np.testing.assert_allclose(J @ d, e, atol=1e-8)
+
+def test_position_rows(rng):
+    J6, oMf = rng.normal(size=(6, 4)), pin.SE3.Random()
+    p_d, velocity = rng.normal(size=3), rng.normal(size=6)
+    axes = np.array([2, 0])
+    J_out, e_out, ff_out = np.empty((2, 4)), np.empty(2), np.empty(2)
+    K.position_rows(J6, oMf.np, p_d, velocity, axes, J_out, e_out, ff_out)
+    np.testing.assert_array_equal(J_out, J6[[2, 0]])
+    np.testing.assert_allclose(e_out, (p_d - oMf.translation)[[2, 0]])
+    np.testing.assert_array_equal(ff_out, velocity[[2, 0]])
 
 
-def test_sqrt_scaling(rng):
-    from sjt_pin.kernels import sqrt_scaling
-
-    J = rng.normal(size=(6, 5))
-    J[:, 1] = 0.0
-    J[:, 3] *= 1e-8  # below the column threshold
-    chain = np.array([1.0, 1.0, 1.0, 1.0, 0.0])
-    expected = np.sqrt(mappings.scaling_factors(J)) * chain
-    np.testing.assert_allclose(sqrt_scaling(J, chain, mappings.COLUMN_TOL), expected)
+def test_limits_violated():
+    q_index = v_index = np.arange(3)
+    lower, upper = -np.ones(3), np.ones(3)
+    slow = np.full(3, 10.0)  # |step| * 10 > 1 is too fast
+    q, small = np.array([0.5, -0.9, 0.0]), np.full(3, 0.01)
+    assert K.limits_violated(q, small, q_index, v_index, lower, upper, slow) == 0
+    assert K.limits_violated(q, -0.2 * np.ones(3), q_index, v_index, lower, upper, slow) == 3
+    assert K.limits_violated(np.array([1.0, 0, 0]), np.zeros(3), q_index, v_index, lower,
+                             upper, slow) == 0  # resting on a limit is inside
+    assert K.limits_violated(np.array([1.5, 0, 0]), np.zeros(3), q_index, v_index, lower,
+                             upper, slow) == 1  # starting outside is a violation
 
 
 def test_clamp_pass():
-    from sjt_pin.kernels import clamp_pass
-
     q = np.array([0.0, 0.9, 1.5, -1.5])  # joints 3 and 4 start outside [-1, 1]
-    dq = np.array([0.5, 0.5, -0.2, -0.2])  # joint 2 would cross; 3 moves back in; 4 goes out
     index = np.arange(4)
     lower, upper = -np.ones(4), np.ones(4)
-    fixed, fixed_dq = np.zeros(4, dtype=bool), np.zeros(4)
-    assert clamp_pass(q, dq, index, index, lower, upper, 1.0, fixed, fixed_dq) == 3
-    np.testing.assert_array_equal(fixed, [False, True, True, True])
-    np.testing.assert_allclose(fixed_dq, [0.0, 0.1, -0.2, 0.0])  # land on 1, inward, stop
-    assert clamp_pass(q, dq, index, index, lower, upper, 1.0, fixed, fixed_dq) == 0
+    step = np.array([0.1, 0.3, 0.2, -0.1])
+    fixed, fixed_step = np.zeros(4, dtype=bool), np.zeros(4)
+    recovery = np.full(4, 0.05)
+    count = K.clamp_pass(q, step, index, index, lower, upper, recovery, fixed, fixed_step)
+    assert count == 3 and list(fixed) == [False, True, True, True]
+    np.testing.assert_allclose(fixed_step[1:], [0.1, -0.05, 0.05])  # onto the limit; back

@@ -10,7 +10,7 @@ import sjt_pin as sjt
 @pytest.mark.parametrize("method", ["sjt", "dls", "jp"])
 def test_random_targets_never_violate_panda_limits(panda, method, rng):
     solver = sjt.make_solver(method, panda, gain="auto" if method == "sjt" else 50.0, dt=5e-3)
-    assert solver.limits.position and solver.limits.velocity
+    assert solver.position_limit is not None and solver.velocity_limit is not None
     lower, upper, vmax = panda.lower_limits, panda.upper_limits, panda.velocity_limits
     q = panda.q0.copy()
     clamped = 0

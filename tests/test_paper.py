@@ -5,7 +5,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from sjt_pin import paper
+from sjt_pin.paper import experiments as paper
 from sjt_pin.cli import main
 
 SETTINGS = paper.PaperSettings()

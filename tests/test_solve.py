@@ -20,7 +20,7 @@ def test_random_reachable_poses(name, method):
                               rng=rng)
         results.append(result)
         if result.success:
-            error = sjt.PoseTask().error(robot.fk(result.q), target)
+            error = pin.log6(robot.fk(result.q).actInv(target)).vector
             assert np.linalg.norm(error) < 1e-5
         assert np.all(result.q >= robot.lower_limits - 1e-12)
         assert np.all(result.q <= robot.upper_limits + 1e-12)

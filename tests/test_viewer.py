@@ -12,7 +12,7 @@ import pinocchio as pin
 import pytest
 
 import sjt_pin as sjt
-from sjt_pin.meshcat_server import LoopbackServer
+from sjt_pin.viewer.server import LoopbackServer
 from sjt_pin.viewer import Viewer
 
 
@@ -71,7 +71,7 @@ def test_server_listens_on_loopback_only_and_stops_on_close():
 
 
 def test_server_dies_with_a_sigkilled_parent():
-    code = ("from sjt_pin.meshcat_server import LoopbackServer; import time; "
+    code = ("from sjt_pin.viewer.server import LoopbackServer; import time; "
             "s = LoopbackServer(); print(s.pid, flush=True); time.sleep(60)")
     parent = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
     server_pid = int(parent.stdout.readline())

@@ -17,10 +17,10 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 import pinocchio as pin
 
-from .methods import make_solver
-from .robot import Robot
-from .scenarios import PLANAR3_START, UR5_START, load_robot
-from .tasks import PoseTask
+from ..solvers import make_solver
+from ..robot import Robot
+from ..paper.scenarios import PLANAR3_START, UR5_START, load_robot
+from ..tasks import PoseTask
 
 METHODS = ("sjt", "jt", "jp", "dls")
 SPEED_ROBOTS = ("planar3", "ur5", "panda")
@@ -192,7 +192,7 @@ def speed(robots=SPEED_ROBOTS, methods=METHODS, steps: int = 5000, warmup: int =
 
 def chain_robot(joints: int) -> Robot:
     """A serial chain of ``joints`` revolute joints, 1 m long in all, axes turning z, y, x."""
-    from .robots import planar3 as generator
+    from ..robots import planar3 as generator
 
     axes = [[0, 0, 1], [0, 1, 0], [1, 0, 0]]
     urdf = generator.serial_chain([1.0 / joints] * joints, name=f"chain{joints}",
@@ -260,7 +260,7 @@ def peer_ratios(report: SpeedReport) -> dict[str, float]:
 def breakdown(name: str = "ur5", samples: int = 20000) -> list[tuple[str, float]]:
     """Where an SJT pose step spends its time: the median cost (us) of each stage, measured
     by timing the stages cumulatively (Pinocchio's calls, then the compiled SJT loop)."""
-    from .kernels import sjt_step
+    from ..kernels import transpose_step
 
     robot = load_robot(name)
     model, data, fid = robot.model, robot.model.createData(), robot.ee_frame_id

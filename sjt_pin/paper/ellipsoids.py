@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .mappings import max_loop_eigenvalue
+from ..mappings import max_loop_eigenvalue
 
 
 @dataclass

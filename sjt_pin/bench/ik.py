@@ -18,8 +18,8 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from .methods import make_solver
-from .robot import Robot
+from ..solvers import make_solver
+from ..robot import Robot
 
 POSITION_TOL, ROTATION_TOL = 1e-5, 1e-4  # m, rad
 TIMEOUT = 20e-3  # s per pose for this package's solvers (Python); TRAC-IK keeps its 5 ms

@@ -26,19 +26,25 @@ from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass, replace
 
 import numpy as np
+import pinocchio as pin
 
-from .analysis import linear_gain_bound, motion_ellipsoid
-from .mappings import jt_matrix, sjt_matrix
-from .methods import make_solver
-from .robot import Robot
-from .robots import planar3 as generator
+from .ellipsoids import linear_gain_bound, motion_ellipsoid
+from ..mappings import jt_matrix, sjt_matrix
+from ..solvers import make_solver
+from ..robot import Robot
+from ..robots import planar3 as generator
 from .scenarios import PLANAR3_START, settle
 from .stability import largest_stable
 from .stability import stability as run_stability
-from .tasks import PositionTask
-from .tracking import TrackingLog, track
-from .trajectories import Circle, Line, Trajectory
+from ..tasks import PositionTask
+from ..tracking import TrackingLog, track
+from ..trajectories import Circle, Line, Trajectory
 
+#: The paper's own updates: eq. (10) and eq. (21) exactly (alpha_i = 1 / J_i^T J_i, eq. 18).
+PAPER_FORM = {
+    "sjt": {"feedback": "transpose", "feedforward": "transpose", "length": 0.0, "escape": False},
+    "jt": {"feedforward": "transpose", "escape": False},
+}
 #: The paper's largest stable gains (1/s) for tasks 1, 2 and 3 (Section 4).
 PAPER_GAINS = {"jt": (36.0, 25.0, 33.0), "sjt": (680.0, 500.0, 660.0)}
 TASKS = (1, 2, 3)
@@ -110,6 +116,8 @@ def paper_task(number: int, settings: PaperSettings = PaperSettings()) -> PaperT
 
 def _solver(method: str, gain: float, settings: PaperSettings, robot: Robot):
     options = {"damping": settings.damping * settings.scale} if method == "dls" else {}
+    if method in PAPER_FORM:
+        options.update(PAPER_FORM[method])
     # the paper's methods have no joint limits: the URDF's +-pi and 10 rad/s stay unused
     return make_solver(method, robot, gain=gain, dt=settings.dt, task=PositionTask("xy"),
                        check_stability=False, position_limits=False, velocity_limits=False,
@@ -182,11 +190,11 @@ def linear_bound(method: str, number: int, settings: PaperSettings = PaperSettin
     reference = run("dls", number, 0.5 / settings.dt, settings)
     task = paper_task(number, settings)
     solver = _solver(method, 1.0, settings, task.robot)
-    jacobians = []
-    for q in reference.q:
-        pose = task.robot.fk(q)
-        jacobians.append(solver.task.jacobian(pose, task.robot.jacobian(q)))
-    return linear_gain_bound(jacobians, [solver.matrix(J) for J in jacobians], settings.dt)
+    # the x-y task's rows: the world-aligned linear rows x and y
+    jacobians = [task.robot.jacobian(q, reference=pin.LOCAL_WORLD_ALIGNED)[:2]
+                 for q in reference.q]
+    matrices = [solver.method.matrix(J) for J in jacobians]
+    return linear_gain_bound(jacobians, matrices, settings.dt)
 
 
 def largest_stable_gain(method: str, number: int, low: float, high: float,
@@ -282,14 +290,13 @@ def ellipsoids(postures: int = 5) -> list[dict]:
 
     Posture 0 is q = (pi/2, -pi/2), the last q = (pi, 0) (stretched, singular), evenly between.
     Each entry: ``q``, ``elbow`` and ``hand`` positions (m), and the ``jt`` and ``sjt``
-    :class:`~sjt_pin.analysis.MotionEllipsoid` (2-row position Jacobian, as in Section 3.3).
+    :class:`~sjt_pin.paper.ellipsoids.MotionEllipsoid` (2-row position Jacobian, as in Section 3.3).
     """
     arm = Robot.from_urdf(generator.to_xml(generator.planar2()), load_visuals=False)
-    task = PositionTask("xy")
     out = []
     for q in np.linspace([np.pi / 2, -np.pi / 2], [np.pi, 0.0], postures):
         pose = arm.fk(q)
-        J = task.jacobian(pose, arm.jacobian(q))
+        J = arm.jacobian(q, reference=pin.LOCAL_WORLD_ALIGNED)[:2]  # the x-y position rows
         out.append({
             "q": q,
             "elbow": arm.fk(q, frame="link2").translation[:2],

@@ -9,7 +9,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from .tracking import TrackingLog
+from ..tracking import TrackingLog
 
 
 def stability(log: TrackingLog, oscillation_tol: float = 1e-4,

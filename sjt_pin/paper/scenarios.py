@@ -11,9 +11,9 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from .robot import Robot
-from .tasks import PoseTask, PositionTask, Task
-from .trajectories import Circle, Trajectory
+from ..robot import Robot
+from ..tasks import PoseTask, PositionTask, Task
+from ..trajectories import Circle, Trajectory
 
 ROBOTS = ("planar3", "ur5", "panda")
 
@@ -67,7 +67,7 @@ def scenario(name: str, robot: Robot | None = None) -> Scenario:
 
 def settle(robot: Robot, task: Task, q: np.ndarray, target: pin.SE3) -> np.ndarray:
     """``q`` moved onto ``target`` by damped least-squares iterations (to start a run on a path)."""
-    from .methods import DLSSolver
+    from ..solvers import DLSSolver
 
     solver = DLSSolver(robot, gain="auto", dt=1e-2, task=task, damping=1e-3)
     for _ in range(200):

@@ -2,7 +2,7 @@
 
 The viewer knows robots and :class:`~sjt_pin.tracking.TrackingLog` objects, nothing of solvers.
 Its meshcat server listens on 127.0.0.1 only and stops when the viewer is closed, when the
-program exits, or when the program is killed (see :mod:`.meshcat_server`).
+program exits, or when the program is killed (see :mod:`.server`).
 
 Several robots can share one scene (``add_robot`` with an ``offset``); every drawing method takes
 ``robot=`` to pick one (default: the first). Animations of all robots share one timeline.
@@ -23,9 +23,9 @@ import pinocchio as pin
 from meshcat.animation import Animation
 from pinocchio.visualize import MeshcatVisualizer
 
-from .meshcat_server import LoopbackServer
-from .robot import Robot
-from .tracking import TrackingLog
+from .server import LoopbackServer
+from ..robot import Robot
+from ..tracking import TrackingLog
 
 #: Colours of the methods (as in the figures) and of the desired path.
 METHOD_COLORS = {"sjt": 0x1F77B4, "jt": 0xD62728, "jp": 0x2CA02C, "dls": 0x9467BD}

@@ -7,7 +7,7 @@ already on 127.0.0.1), and the child leaves when its parent does: Linux delivers
 parent's death (``PR_SET_PDEATHSIG``), and a watchdog thread exits when the parent id changes
 (other platforms, or a parent that died before the child set that up).
 
-Run as ``python -m sjt_pin.meshcat_server --parent PID``; it prints ``zmq_url=`` and ``web_url=``
+Run as ``python -m sjt_pin.viewer.server --parent PID``; it prints ``zmq_url=`` and ``web_url=``
 lines like meshcat's server.
 """
 

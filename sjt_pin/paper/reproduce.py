@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from . import figures, paper
+from . import experiments as paper
+from . import figures
 
 
 def _gain(value: float) -> str:

@@ -14,12 +14,12 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from .methods import make_solver
-from .robot import Robot
-from .stability import largest_stable, stability
-from .tasks import PoseTask
-from .tracking import TrackingLog, track
-from .trajectories import PoseInterpolation, Trajectory
+from ..solvers import make_solver
+from ..robot import Robot
+from ..paper.stability import largest_stable, stability
+from ..tasks import PoseTask
+from ..tracking import TrackingLog, track
+from ..trajectories import PoseInterpolation, Trajectory
 
 METHODS = ("sjt", "jt", "jp", "dls")
 DT = 2e-3  # s, the same for every method and path

@@ -10,8 +10,8 @@ matplotlib.use("Agg")  # files only; notebooks pick their own backend before imp
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from .paper import PAPER_GAINS, Sweep  # noqa: E402
-from .tracking import TrackingLog  # noqa: E402
+from .experiments import PAPER_GAINS, Sweep  # noqa: E402
+from ..tracking import TrackingLog  # noqa: E402
 
 COLORS = {"sjt": "tab:blue", "jt": "tab:red", "jp": "tab:green", "dls": "tab:purple"}
 TASK_TITLES = {1: "task 1: line inside the workspace", 2: "task 2: line leaving the workspace",

@@ -1,0 +1,1 @@
+"""Benchmarks of ``sjt-pin bench``: step speed, accuracy near singularities, solve to a pose."""

@@ -1,0 +1,48 @@
+"""Kinematics of one configuration: what every task of a step reads, computed once.
+
+In the spirit of pink's ``Configuration``: :meth:`Kinematics.update` runs Pinocchio's
+``computeJointJacobians`` (forward kinematics and every joint's Jacobian, world axes) once per
+configuration; tasks then ask for frame placements and frame Jacobians, which Pinocchio derives
+from that state without recomputing the kinematics.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+
+_LOCAL = pin.LOCAL
+_WORLD_ALIGNED = pin.LOCAL_WORLD_ALIGNED
+
+
+class Kinematics:
+    """Pinocchio's model and a ``data`` of its own, at the configuration ``q`` of the last
+    :meth:`update` (each solver has one, so solvers never share scratch space)."""
+
+    __slots__ = ("model", "data", "q")
+
+    def __init__(self, model: pin.Model):
+        self.model = model
+        self.data = model.createData()
+        self.q: np.ndarray | None = None
+
+    def update(self, q: np.ndarray) -> None:
+        """Forward kinematics and joint Jacobians at ``q`` (nq,), validated by the caller."""
+        pin.computeJointJacobians(self.model, self.data, q)
+        self.q = q
+
+    def placement(self, frame_id: int) -> pin.SE3:
+        """World pose ``oMf`` of frame ``frame_id`` (a copy)."""
+        return pin.updateFramePlacement(self.model, self.data, frame_id)
+
+    def jacobian(self, frame_id: int) -> np.ndarray:
+        """Frame Jacobian (6, nv), rows [linear; angular], in the frame's LOCAL axes."""
+        return pin.getFrameJacobian(self.model, self.data, frame_id, _LOCAL)
+
+    def world_aligned_jacobian(self, frame_id: int) -> np.ndarray:
+        """Frame Jacobian (6, nv) at the frame's origin in world axes (LOCAL_WORLD_ALIGNED)."""
+        return pin.getFrameJacobian(self.model, self.data, frame_id, _WORLD_ALIGNED)
+
+    def difference(self, q_ref: np.ndarray) -> np.ndarray:
+        """``q_ref ⊖ q`` (nv,): the tangent vector that integrates ``q`` into ``q_ref``."""
+        return pin.difference(self.model, self.q, q_ref)

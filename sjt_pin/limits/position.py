@@ -1,0 +1,81 @@
+"""Joint position limits: clamp the joints that would leave their range, remap the others."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..kernels import clamp_pass, limits_violated
+from .base import Limit
+
+
+class PositionLimit(Limit):
+    """The URDF position limits of 1-DoF joints (revolute, prismatic) are never crossed.
+
+    A joint whose update would leave its range is clamped out of the update: it moves exactly
+    onto its limit (or stays there) and its column is removed from the mapping, which is
+    recomputed for the task velocity that joint no longer provides, so the other joints take
+    over. A joint that starts outside its range (a start configuration out of range) is driven
+    back toward it at its speed limit (``recovery_speeds``, rad/s or m/s), never jumped.
+
+    Args:
+        robot: where the limits come from (``robot.lower_limits``, ``upper_limits``).
+        moving: (nv,) 1 for the joints the solver moves; the others are not tested.
+        recovery_speeds: (nv,) speed at which a joint outside its range returns (rad/s, m/s).
+    """
+
+    def __init__(self, robot, moving: np.ndarray, recovery_speeds: np.ndarray):
+        model = robot.model
+        lower, upper = robot.lower_limits, robot.upper_limits
+        qi, vi = [], []
+        for j in range(1, model.njoints):
+            joint = model.joints[j]
+            if (joint.nq == 1 and joint.nv == 1 and moving[joint.idx_v]
+                    and np.isfinite(lower[joint.idx_q]) and np.isfinite(upper[joint.idx_q])):
+                qi.append(joint.idx_q)
+                vi.append(joint.idx_v)
+        self.q_index = np.array(qi, dtype=np.int64)
+        self.v_index = np.array(vi, dtype=np.int64)
+        self.lower = lower[self.q_index].copy()
+        self.upper = upper[self.q_index].copy()
+        self.recovery_speeds = np.asarray(recovery_speeds, dtype=float)[self.v_index]
+        self.names = [model.names[j] for j in range(1, model.njoints)
+                      if model.joints[j].idx_v in set(vi) and model.joints[j].nv == 1]
+        self._no_speed = np.zeros(model.nv)
+        self._fixed = np.zeros(model.nv, dtype=bool)
+        self._fixed_step = np.zeros(model.nv)
+        #: tangent (v) indices of the joints clamped by the last step
+        self.clamped = np.zeros(0, dtype=np.int64)
+
+    @property
+    def active(self) -> bool:
+        """Whether any moving joint has position limits."""
+        return self.q_index.size > 0
+
+    def violated(self, q, step, dt):
+        return limits_violated(q, step, self.q_index, self.v_index, self.lower, self.upper,
+                               self._no_speed) != 0
+
+    def reset(self):
+        if self.clamped.size:
+            self.clamped = np.zeros(0, dtype=np.int64)
+
+    def enforce(self, q, step, dt, remap):
+        fixed, fixed_step = self._fixed, self._fixed_step
+        fixed[:] = False
+        fixed_step[:] = 0.0
+        recovery = self.recovery_speeds * dt
+        for _ in range(self.q_index.size):
+            if not clamp_pass(q, step, self.q_index, self.v_index, self.lower, self.upper,
+                              recovery, fixed, fixed_step):
+                break
+            # the free joints take over the task velocity the fixed ones no longer provide
+            step = remap(~fixed, fixed_step / dt)
+            step[fixed] = fixed_step[fixed]
+        self.clamped = np.flatnonzero(fixed)
+        return step
+
+    def clip(self, q: np.ndarray, q_next: np.ndarray) -> None:
+        """Clip round-off: a joint inside its range at ``q`` stays inside at ``q_next``."""
+        qi = self.q_index
+        inside = (q[qi] >= self.lower) & (q[qi] <= self.upper)
+        q_next[qi[inside]] = np.clip(q_next[qi[inside]], self.lower[inside], self.upper[inside])

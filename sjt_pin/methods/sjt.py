@@ -1,0 +1,37 @@
+"""The scaled Jacobian transpose, eq. (20)-(22)."""
+
+from __future__ import annotations
+
+from .. import mappings
+from .transpose import TransposeMethod
+
+#: SJT's characteristic length l (m): alpha_i = 1 / max(J_i^T W J_i, l^2).
+SJT_LENGTH = 0.1
+
+
+class SJT(TransposeMethod):
+    """``M = D J^T``, ``D = diag(alpha_i)``, ``alpha_i = 1 / (J_i^T J_i)`` (eq. 18, 20-21).
+
+    The alpha_i come from the tasks' own (weighted, stacked) rows and are 0 for joints that do
+    not move them: joints outside the frames' kinematic chains, and columns whose squared norm
+    is below ``column_tol``. The characteristic length ``length`` floors the column norm,
+    ``alpha_i = 1 / max(J_i^T W J_i, l^2)``: rows with an orientation part never reach it
+    (``J_i^T J_i >= 1``, eq. 19), position-only rows get ``|q_dot_i| <= k |e| / l`` instead of
+    an alpha without bound near a joint axis. Either way ``alpha_i J_i^T W J_i <= 1``, so the
+    loop matrix ``J D J^T`` has eigenvalues in ``[0, n]`` whatever the robot's size or length
+    unit (eq. 25) and ``gain < 2 / (n dt)`` is stable at every configuration.
+    """
+
+    name = "sjt"
+    scaled = True
+
+    def bound(self, n_chain):
+        if self.feedback == "damped":
+            return 1.0
+        return float(max(n_chain, 1))  # tr(J D J^T) = n_active <= n_chain
+
+    def scaling_factors(self, J):
+        return mappings.scaling_factors(J, self.column_tol, self.length)
+
+    def matrix(self, J):
+        return mappings.sjt_matrix(J, self.column_tol, self.length)

@@ -1,0 +1,80 @@
+"""What JT and SJT share: gradient-type updates and the choice of feed-forward."""
+
+from __future__ import annotations
+
+from .. import kernels as K
+from ..mappings import COLUMN_TOL
+from ..validation import positive, real_number
+from .base import Method
+
+#: Feed-forward and feedback modes of the transpose methods.
+FEEDFORWARDS = {"damped": K.FF_DAMPED, "transpose": K.FF_TRANSPOSE}
+FEEDBACKS = {"damped": K.FB_DAMPED, "transpose": K.FB_TRANSPOSE}
+#: Levenberg-Marquardt weight of the damped feedback: mu^2 + LM_WEIGHT |e_w|^2, with the pose
+#: error's own convention that 1 m weighs as 1 rad.
+LM_WEIGHT = 1.0
+#: mu of the damped feed-forward (dimensionless: the columns it solves on have unit norm).
+FF_DAMPING = 0.01
+
+
+class TransposeMethod(Method):
+    """A Jacobian-transpose-type mapping ``S J^T`` (S = I for JT, D for SJT).
+
+    Args:
+        feedforward: ``"damped"``: the desired velocity through
+            ``D J^T (J D J^T + mu^2 I)^-1`` — a least-squares solve on the columns
+            ``J sqrt(D)`` of unit norm, unit-free, damped by ``ff_damping`` near
+            singularities — while the feedback keeps ``S J^T K e``; ``"transpose"``: through
+            ``S J^T`` like the feedback, exactly the paper's eq. (10) / (21).
+        feedback: ``"transpose"``: ``S J^T K e`` (eq. 10, 21); ``"damped"``: the feedback goes
+            through the damped solve too, ``D J^T (J D J^T + (mu^2 + |e|^2) I)^-1
+            (x_dot_d + K e)`` — the damped least squares of the unit-norm columns, with a
+            Levenberg-Marquardt term that grows with the error (needs
+            ``feedforward="damped"``).
+        ff_damping: mu of the damped solve (dimensionless, > 0).
+        column_tol: squared column norm (task units^2) below which a joint counts as not moving
+            the tasks (alpha_i = 0 instead of a division by almost zero).
+        length: characteristic length l (m): ``alpha_i = 1 / max(J_i^T W J_i, l^2)``.
+    """
+
+    stalls = True
+    kernel = staticmethod(K.transpose_step)
+    scaled = False
+
+    def __init__(self, feedforward: str = "damped", ff_damping: float = FF_DAMPING,
+                 column_tol: float = COLUMN_TOL, length: float = 0.0,
+                 feedback: str = "transpose"):
+        if feedforward not in FEEDFORWARDS:
+            raise ValueError(f"feedforward must be one of {sorted(FEEDFORWARDS)}, "
+                             f"got {feedforward!r}")
+        if feedback not in FEEDBACKS:
+            raise ValueError(f"feedback must be one of {sorted(FEEDBACKS)}, got {feedback!r}")
+        if feedback == "damped" and feedforward != "damped":
+            raise ValueError("feedback='damped' sends the feed-forward through the damped solve "
+                             "too: it needs feedforward='damped'")
+        self.feedforward = feedforward
+        self.feedback = feedback
+        self.ff_damping = positive(ff_damping, "ff_damping")
+        self.column_tol = positive(column_tol, "column_tol", "task units squared")
+        self.length = real_number(length, "length", "m")
+        if not 0.0 <= self.length < float("inf"):
+            raise ValueError(f"length must be a finite number >= 0 (m), got {length!r}")
+
+    def configure(self, work, gain, dt, n_chain):
+        super().configure(work, gain, dt, n_chain)
+        work[K.P_MU] = self.ff_damping
+        work[K.P_COL_TOL] = self.column_tol
+        work[K.P_SCALED] = 1.0 if self.scaled else 0.0
+        work[K.P_LENGTH2] = self.length**2
+        work[K.P_FB_MODE] = FEEDBACKS[self.feedback]
+        work[K.P_LM] = LM_WEIGHT
+
+    def bound(self, n_chain):
+        return 1.0 if self.feedback == "damped" else None
+
+    def feedforward_mode(self):
+        return FEEDFORWARDS[self.feedforward]
+
+    def __repr__(self):
+        return (f"{type(self).__name__}(feedforward={self.feedforward!r}, "
+                f"feedback={self.feedback!r})")

@@ -1,0 +1,1 @@
+"""The paper's simulations: experiments, figures, scenarios, the stability test, reproduce."""

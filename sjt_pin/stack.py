@@ -1,0 +1,162 @@
+"""A solver's tasks, bound to its robot, evaluated into stacked rows at a configuration."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from .kinematics import Kinematics
+from .tasks import PoseTask, PostureTask, Task
+
+
+def normalise_tasks(task, posture) -> list[Task]:
+    """The task argument of a solver (a task, a list, a ``{frame: task}`` mapping or ``None``
+    for a pose task on the end effector), with ``posture`` appended."""
+    if task is None:
+        tasks = [PoseTask()]
+    elif isinstance(task, Task):
+        tasks = [task]
+    elif isinstance(task, Mapping):
+        tasks = []
+        for frame, t in task.items():
+            if not isinstance(t, Task):
+                raise TypeError(f"task[{frame!r}] must be a sjt_pin Task, got {type(t).__name__}")
+            if not t.takes_target:
+                raise TypeError(f"task[{frame!r}] is a {type(t).__name__}, which has no frame; "
+                                "pass it as posture=")
+            if t.frame not in (None, frame):
+                raise ValueError(f"task[{frame!r}] is on frame {t.frame!r}")
+            t = _on_frame(t, frame)
+            tasks.append(t)
+    elif (isinstance(task, Sequence) and not isinstance(task, str) and task
+          and all(isinstance(t, Task) for t in task)):
+        tasks = list(task)
+    else:
+        raise TypeError("task must be a sjt_pin Task, a list of tasks or a {frame: task} mapping, "
+                        f"got {task!r}")
+    if posture is not None:
+        if not isinstance(posture, PostureTask):
+            raise TypeError(f"posture must be a PostureTask, got {type(posture).__name__}")
+        tasks.append(posture)
+    # the tasks that take targets first: their rows are the error a step reports
+    return [t for t in tasks if t.takes_target] + [t for t in tasks if not t.takes_target]
+
+
+def _on_frame(task: Task, frame: str) -> Task:
+    import copy
+
+    task = copy.copy(task)
+    task.frame = frame
+    return task
+
+
+class TaskStack:
+    """Bound tasks and the stacked buffers of their rows.
+
+    ``J`` (m, nv), ``e`` (m,) and ``ff`` (m,) hold every task's rows in order; ``sqrt_weight``
+    (m,) the weights' square roots; ``chain`` (nv,) is 1 for the joints that move at least one
+    task (a posture task moves all). With a single task, :meth:`evaluate` returns that task's
+    own arrays without copying.
+    """
+
+    def __init__(self, robot, tasks: list[Task]):
+        self.robot = robot
+        self.tasks = [t.bind(robot) for t in tasks]
+        self.targeted = [t for t in self.tasks if t.takes_target]
+        if not self.targeted:
+            raise ValueError("a solver needs at least one task that takes a target (PoseTask, "
+                             "PositionTask, OrientationTask, ...)")
+        self.frames = [t.frame for t in self.targeted]
+        if len(set(self.frames)) != len(self.frames):
+            raise ValueError(f"each frame takes one task, got frames {self.frames}")
+        self.single = len(self.tasks) == 1
+        self.task = self.targeted[0]
+        nv = robot.nv
+        self.dims = [t.dim for t in self.tasks]
+        self.dim = sum(self.dims)
+        #: rows of the tasks that take targets (a per-row gain has one entry for each)
+        self.target_dim = sum(t.dim for t in self.targeted)
+        self.posture_dim = self.dim - self.target_dim
+        bounds = np.cumsum([0, *self.dims])
+        self.slices = [slice(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
+        self.J = np.zeros((self.dim, nv))
+        self.e = np.zeros(self.dim)
+        #: the rows of ``e`` that are the tasks' error (without the posture rows)
+        self.error = self.e[:self.target_dim]
+        self.ff = np.zeros(self.dim)
+        self.sqrt_weight = np.concatenate([np.ones(t.dim) if t.sqrt_weight is None
+                                           else t.sqrt_weight for t in self.tasks])
+        chain = np.zeros(nv)
+        model = robot.model
+        for t in self.tasks:
+            if not t.takes_target:
+                chain[:] = 1.0  # a posture task moves every joint
+                continue
+            for j in model.supports[model.frames[t.frame_id].parentJoint][1:]:
+                joint = model.joints[j]
+                chain[joint.idx_v:joint.idx_v + joint.nv] = 1.0
+        self.chain = chain
+        self.n_chain = int(chain.sum())
+        self.kinematics = Kinematics(model)
+        self._zero_ff = np.zeros(0)
+
+    def copy(self) -> TaskStack:
+        """An independent stack on the same tasks (its own kinematics and buffers)."""
+        return TaskStack(self.robot, self.tasks)
+
+    # -- targets -----------------------------------------------------------------------------
+    def targets(self, target, target_velocity=None) -> tuple[list, list | None]:
+        """``target`` and ``target_velocity`` validated per task: lists aligned with
+        :attr:`tasks` (``None`` for tasks that take no target, and for missing velocities)."""
+        if len(self.targeted) == 1 and not isinstance(target, Mapping):
+            task = self.task
+            velocity = None if target_velocity is None else task.velocity(target_velocity)
+            return ([task.target(target) if t is task else None for t in self.tasks],
+                    None if velocity is None else [velocity if t is task else None
+                                                   for t in self.tasks])
+        if not isinstance(target, Mapping):
+            raise ValueError(f"target must be a {{frame: target}} mapping for frames {self.frames}")
+        unknown = set(target) - set(self.frames)
+        missing = set(self.frames) - set(target)
+        if unknown or missing:
+            raise ValueError(f"target must have exactly the frames {self.frames}; "
+                             f"missing {sorted(missing)}, unknown {sorted(map(str, unknown))}")
+        targets = [t.target(target[t.frame]) if t.takes_target else None for t in self.tasks]
+        if target_velocity is None:
+            return targets, None
+        if not isinstance(target_velocity, Mapping) or set(target_velocity) - set(self.frames):
+            raise ValueError(f"target_velocity must be a {{frame: velocity}} mapping over "
+                             f"{self.frames}")
+        velocities = [t.velocity(target_velocity[t.frame])
+                      if t.takes_target and t.frame in target_velocity else None
+                      for t in self.tasks]
+        return targets, velocities
+
+    # -- rows --------------------------------------------------------------------------------
+    def evaluate(self, q: np.ndarray, targets: list, velocities: list | None
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """``(J, e, ff)`` stacked at ``q`` (validated by the caller); ``ff`` is ``None`` when
+        there are no velocities. The arrays are reused by the next call."""
+        kinematics = self.kinematics
+        kinematics.update(q)
+        if self.single:
+            return self.task.compute(kinematics, targets[0],
+                                     None if velocities is None else velocities[0])
+        J, e, ff = self.J, self.e, self.ff
+        for k, task in enumerate(self.tasks):
+            rows = self.slices[k]
+            velocity = None if velocities is None else velocities[k]
+            Jt, et, fft = task.compute(kinematics, targets[k], velocity)
+            J[rows] = Jt
+            e[rows] = et
+            if velocities is not None:
+                ff[rows] = 0.0 if fft is None else fft
+        return J, e, None if velocities is None else ff
+
+    def poses(self):
+        """The task frames' world poses at the last evaluation: one ``pin.SE3``, or a
+        ``{frame: pin.SE3}`` dict with several target-taking tasks."""
+        if len(self.targeted) == 1:
+            return self.task.placement
+        return {t.frame: t.placement for t in self.targeted}

@@ -1,0 +1,9 @@
+"""Tasks: blocks of rows of the CLIK law, one class per file (see :mod:`.base`)."""
+
+from .base import Task
+from .orientation import OrientationTask
+from .pose import PoseTask
+from .position import PositionTask
+from .posture import PostureTask
+
+__all__ = ["OrientationTask", "PoseTask", "PositionTask", "PostureTask", "Task"]

@@ -1,0 +1,89 @@
+"""The task protocol: what one block of rows of the CLIK law contributes.
+
+A task turns the :class:`~sjt_pin.kinematics.Kinematics` of the current configuration and a
+desired target into the three pieces of the CLIK law ``q_dot = M(J) (x_dot_d + K e)`` (paper
+eq. 5, 10, 21): its error ``e = x_d - x`` (dim,), its Jacobian rows ``J = dx/dq`` (dim, nv), so
+that ``e_dot = x_dot_d - J q_dot``, and the desired velocity ``x_dot_d`` in its own rows. The
+solver stacks the rows of all its tasks. A new task is one subclass with ``compute`` (and
+``target``/``velocity`` when its targets are not poses); see the README's "Extend it".
+"""
+
+from __future__ import annotations
+
+import copy
+from abc import ABC, abstractmethod
+from typing import Any, ClassVar
+
+import numpy as np
+import pinocchio as pin
+
+from ..kinematics import Kinematics
+from ..validation import as_motion, as_pose, as_vector
+
+
+class Task(ABC):
+    """Base class: ``dim`` rows on one frame (default: the robot's end effector).
+
+    Args:
+        frame: name of the task frame; ``None`` for the robot's end effector.
+        weight: a positive number or one per row (dimensionless): rows are weighted in the
+            least-squares sense, the mappings see ``sqrt(W) J`` and ``sqrt(W) e``, so SJT's
+            scaling factors become ``alpha_i = 1 / (J_i^T W J_i)`` (eq. 18 with a weighted
+            norm).
+
+    A task given to a solver is bound to its robot (:meth:`bind` returns a copy), so one task
+    object can serve several solvers.
+    """
+
+    dim: int
+    #: whether ``step`` takes a target for this task (a posture task has its own reference)
+    takes_target: ClassVar[bool] = True
+
+    def __init__(self, frame: str | None = None, weight=None):
+        if frame is not None and not isinstance(frame, str):
+            raise TypeError(f"frame must be a frame name (str) or None, got {frame!r}")
+        self.frame = frame
+        self._weight = weight
+        self.sqrt_weight: np.ndarray | None = None
+        if weight is not None and getattr(self, "dim", None) is not None:
+            self.sqrt_weight = self._sqrt_weight(weight, self.dim)
+        self.frame_id = -1
+        #: world pose of the task frame at the last ``compute`` (``None`` for frameless tasks)
+        self.placement: pin.SE3 | None = None
+
+    @staticmethod
+    def _sqrt_weight(weight, dim: int) -> np.ndarray:
+        w = np.full(dim, float(weight)) if np.ndim(weight) == 0 else weight
+        w = as_vector(w, "weight", dim)
+        if np.any(w <= 0):
+            raise ValueError(f"weight must be positive, got {w}")
+        return np.sqrt(w)
+
+    def bind(self, robot) -> Task:
+        """A copy of this task for ``robot``: its frame resolved (``FrameNotFound`` if absent)."""
+        bound = copy.copy(self)
+        bound.frame_id = robot.ee_frame_id if self.frame is None else robot.frame_id(self.frame)
+        bound.frame = robot.model.frames[bound.frame_id].name
+        return bound
+
+    def target(self, value) -> Any:
+        """``value`` validated and converted for :meth:`compute` (default: a rigid pose)."""
+        return as_pose(value, "target")
+
+    def velocity(self, value) -> np.ndarray:
+        """A desired velocity ``pin.Motion`` or 6-vector [linear (m/s), angular (rad/s)], world
+        axes at the desired frame's origin, as a 6-vector."""
+        return as_motion(value)
+
+    @abstractmethod
+    def compute(self, kinematics: Kinematics, target, velocity
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """``(J, e, x_dot_d)`` at the configuration of ``kinematics``: Jacobian rows (dim, nv),
+        error (dim,) and desired task velocity (dim,), or ``None`` when ``velocity`` is."""
+
+    def __repr__(self) -> str:
+        frame = f"frame={self.frame!r}" if self.frame else "end effector"
+        return f"{type(self).__name__}({frame})"
+
+
+_NO_VELOCITY = np.zeros(0)

@@ -1,0 +1,73 @@
+"""The position of a frame's origin along some world axes."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+
+from ..kernels import position_rows
+from ..validation import as_pose, as_vector
+from .base import _NO_VELOCITY, Task
+
+_AXES = {"x": 0, "y": 1, "z": 2}
+
+
+class PositionTask(Task):
+    """Position of the frame origin along a subset of the world axes (m).
+
+    ``axes`` is any non-empty subset of ``"xyz"`` in any order, e.g. ``"xy"`` for a planar arm.
+    ``e = p_d - p`` in world axes, with the linear rows of the LOCAL_WORLD_ALIGNED Jacobian.
+    Targets are 3-vectors (m) or poses (``pin.SE3``, 4x4: only the translation is used);
+    velocities are ``pin.Motion``, 6-vectors (the linear part is used) or 3-vectors (m/s).
+
+    With position rows only, nothing bounds SJT's scaling factors from above: a joint whose
+    axis passes 1 mm from the point has ``|J_i| = 1e-3`` and ``alpha_i = 1e6``. The solvers'
+    ``column_tol`` (default (1 cm)^2 for position rows, see :class:`~sjt_pin.SJTSolver`) is the
+    principled floor: a column shorter than a characteristic length moves the point less than
+    its own rotation, and its alpha is capped at ``1 / column_tol``.
+    """
+
+    def __init__(self, axes: str = "xyz", frame: str | None = None, weight=None):
+        if (not isinstance(axes, str) or not axes or set(axes) - set(_AXES)
+                or len(set(axes)) != len(axes)):
+            raise ValueError(f"axes must be a non-empty subset of 'xyz', got {axes!r}")
+        self.axes = axes
+        self.dim = len(axes)
+        self._rows = np.array([_AXES[a] for a in axes], dtype=np.int64)
+        super().__init__(frame, weight)
+
+    def bind(self, robot):
+        bound = super().bind(robot)
+        bound._J = np.zeros((self.dim, robot.nv))
+        bound._e = np.zeros(self.dim)
+        bound._ff = np.zeros(self.dim)
+        return bound
+
+    def target(self, value):
+        if type(value) is np.ndarray and value.shape == (3,) and value.dtype == np.float64:
+            return value  # finiteness shows in the error
+        if isinstance(value, pin.SE3):
+            return value.translation
+        if np.shape(value) == (4, 4):
+            return as_pose(value, "target").translation
+        return as_vector(value, "target", 3)
+
+    def velocity(self, value):
+        if isinstance(value, pin.Motion):
+            return value.vector
+        if type(value) is np.ndarray and value.shape in ((3,), (6,)) and value.dtype == np.float64:
+            return value
+        size = 3 if np.shape(value) == (3,) else 6
+        return as_vector(value, "target_velocity", size)
+
+    def compute(self, kinematics, target, velocity):
+        oMf = kinematics.placement(self.frame_id)
+        self.placement = oMf
+        J6 = kinematics.world_aligned_jacobian(self.frame_id)
+        position_rows(J6, oMf.np, target, _NO_VELOCITY if velocity is None else velocity,
+                      self._rows, self._J, self._e, self._ff)
+        return self._J, self._e, None if velocity is None else self._ff
+
+    def __repr__(self) -> str:
+        frame = f", frame={self.frame!r}" if self.frame else ""
+        return f"PositionTask(axes={self.axes!r}{frame})"
