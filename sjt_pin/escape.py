@@ -41,6 +41,7 @@ class SaddleEscape:
     STALL_RATIO = 1e-4  #: loop gain along the command below this (of tr) counts as stalled
     ERROR_FLOOR = 1e-6  #: |e| below this (task units) is converged, not stalled
     WINDOW = 50  #: stalled steps before the curvature test
+    MAX_WAIT = 64  #: the longest run (in windows) between tests at a persistent minimum
     PROGRESS = 0.01  #: ... during which |e| fell by less than this fraction
     FD_STEP = 1e-4  #: rad or m: finite-difference step of the Hessian
     CURVATURE = 1e-6  #: a curvature below -CURVATURE |e_w|^2 (per rad^2) is a saddle
@@ -61,6 +62,8 @@ class SaddleEscape:
     def reset(self) -> None:
         """Forget the stall, any escape in progress and the last curvature test."""
         self._count = 0
+        self._last_step = -2
+        self._wait = self.WINDOW
         self._error_start = 0.0
         self._tested: tuple[np.ndarray, float] | None = None
         self.direction: np.ndarray | None = None
@@ -76,18 +79,24 @@ class SaddleEscape:
         """Whether an escape velocity is being added."""
         return self.direction is not None
 
-    def observe(self, stall: float, e_sq: float) -> bool:
-        """Count a stalled step; True when the curvature should be tested (O(1), every step)."""
-        if stall >= self.STALL_RATIO or e_sq <= self.ERROR_FLOOR ** 2:
-            self._count = 0
-            return False
+    def observe(self, step: int, e_sq: float) -> bool:
+        """Count the stalled step number ``step`` (the step kernel flags a stall: a stall ratio
+        below ``STALL_RATIO`` with ``|e|`` above ``ERROR_FLOOR``); True when the curvature should
+        be tested: a run of stalled steps long enough without progress. After a test that
+        found no saddle the run needed doubles (up to ``MAX_WAIT`` windows), so a persistent
+        minimum costs a test ever more rarely; a new run starts from ``WINDOW`` again."""
+        if step != self._last_step + 1:  # a new run of stalled steps
+            self._count, self._wait, self._error_start = 0, self.WINDOW, e_sq
+        self._last_step = step
         self._count += 1
-        if self._count == 1:
-            self._error_start = e_sq
-        if self._count < self.WINDOW:
+        if self._count < self._wait:
             return False
         self._count = 0
-        return e_sq > (1.0 - self.PROGRESS) ** 2 * self._error_start
+        test = e_sq > (1.0 - self.PROGRESS) ** 2 * self._error_start
+        self._error_start = e_sq
+        if test:
+            self._wait = min(2 * self._wait, self.MAX_WAIT * self.WINDOW)
+        return test
 
     def test(self, q: np.ndarray, rows: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
              ) -> bool:
@@ -150,7 +159,7 @@ class SaddleEscape:
             self.speed = max(self.speed - accel * dt, 0.0)
             if self.speed == 0.0:
                 self.direction = None
-                self._count = 0
+                self._count, self._wait = 0, self.WINDOW
                 return None
         else:
             self.speed = min(self.speed + accel * dt, self._top)

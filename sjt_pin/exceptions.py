@@ -26,7 +26,8 @@ class FrameNotFound(SJTError, KeyError):
 
 
 class URDFError(SJTError, ValueError):
-    """A URDF that is missing or cannot be parsed; the message names the file."""
+    """A URDF that is missing, empty, not XML or not a valid robot tree; the message names the
+    file (or ``<URDF string>``) and the joint or link at fault."""
 
 
 class GainWarning(UserWarning):

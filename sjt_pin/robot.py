@@ -6,6 +6,7 @@ Kinematic quantities follow Pinocchio's conventions: ``fk`` returns the world po
 
 from __future__ import annotations
 
+import difflib
 import importlib.resources
 import threading
 import warnings
@@ -16,6 +17,7 @@ import numpy as np
 import pinocchio as pin
 
 from .exceptions import FrameNotFound, URDFError
+from .urdf_check import URDFSource, build_model, check_urdf, read_urdf
 from .validation import as_vector
 
 #: End-effector frames used when ``Robot.from_example`` is called without ``ee_frame``.
@@ -74,6 +76,18 @@ class Robot:
             model.names[j] for j in range(1, model.njoints) for _ in range(model.joints[j].nv)]
         self.q0 = pin.neutral(model) if q0 is None else self._inside(self.check_q(q0, "q0"))
 
+    def __getstate__(self) -> dict:
+        """A pickled robot (``solve_many``'s workers) carries its kinematic model, not its
+        meshes: ``visual_model`` and ``collision_model`` are ``None`` after unpickling."""
+        state = self.__dict__.copy()
+        del state["_local"]  # per-thread scratch space: each process makes its own
+        state["visual_model"] = state["collision_model"] = None
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._local = threading.local()
+
     # -- construction ------------------------------------------------------------------------
     @classmethod
     def from_example(cls, name: str, ee_frame: str | None = None) -> Robot:
@@ -85,10 +99,15 @@ class Robot:
         import example_robot_data as erd
         from example_robot_data.robots_loader import ROBOTS
 
+        if not isinstance(name, str):
+            raise TypeError(f"name must be a str naming an example-robot-data robot, got "
+                            f"{type(name).__name__}")
         if name not in ROBOTS:
-            raise ValueError(
-                f"name {name!r} is not an example-robot-data robot; known: {sorted(ROBOTS)}"
-            )
+            by_lower = {known.lower(): known for known in ROBOTS}
+            close = [by_lower[m] for m in difflib.get_close_matches(name.lower(), by_lower, n=3)]
+            hint = f"did you mean {' or '.join(map(repr, close))}? " if close else ""
+            raise ValueError(f"name {name!r} is not an example-robot-data robot; {hint}"
+                             f"known: {sorted(ROBOTS)}")
         if ee_frame is None:
             ee_frame = DEFAULT_EE_FRAMES.get(name)
             if ee_frame is None:
@@ -110,47 +129,36 @@ class Robot:
     @classmethod
     def from_urdf(
         cls,
-        path_or_xml: str | Path,
+        path_or_xml: str | Path | bytes,
         ee_frame: str | None = None,
         package_dirs: Sequence[str | Path] | None = None,
         *,
         load_visuals: bool = True,
     ) -> Robot:
-        """Load a URDF from a file path or from XML text (a string starting with ``<``).
+        """Load a URDF from a file path (``str`` or ``pathlib.Path``) or from XML text (a string,
+        or UTF-8 bytes, starting with ``<``).
 
         ``ee_frame`` defaults to the URDF's only leaf link; with several leaves it must be given.
-        ``package_dirs`` resolve ``package://`` mesh paths (the URDF's folder is always searched).
-        Visual geometry is loaded when its meshes can be found; ``load_visuals=False`` skips it.
+        ``package_dirs`` (folders, or one folder) resolve ``package://`` mesh paths (the URDF's
+        folder is always searched). Visual geometry is loaded when its meshes can be found;
+        ``load_visuals=False`` skips it.
+
+        The URDF is checked before Pinocchio parses it (:mod:`sjt_pin.urdf_check`): a broken
+        one raises :class:`URDFError` naming the file and the joint or link at fault.
         """
-        text = str(path_or_xml)
-        is_xml = isinstance(path_or_xml, str) and text.lstrip().startswith("<")
-        source = "<URDF string>" if is_xml else text
+        source = read_urdf(path_or_xml)
+        check_urdf(source)
+        model = build_model(source)
+        if isinstance(package_dirs, (str, Path)):
+            package_dirs = [package_dirs]  # one folder, not a sequence of characters
         dirs = [str(p) for p in (package_dirs or [])]
-        if not is_xml:
-            path = Path(text)
-            if not path.is_file():
-                raise URDFError(f"URDF file not found: {text}")
-            dirs.append(str(path.resolve().parent))
-        try:
-            model = pin.buildModelFromXML(text) if is_xml else pin.buildModelFromUrdf(text)
-        except (ValueError, RuntimeError) as exc:
-            raise URDFError(f"cannot parse URDF {source}: {exc}") from exc
+        if source.path is not None:
+            dirs.append(str(source.path.resolve().parent))
         if ee_frame is None:
-            ee_frame = _only_leaf_body(model, source)
-        visual = None
-        if load_visuals:
-            try:
-                visual = (
-                    pin.buildGeomFromUrdfString(model, text, pin.VISUAL, package_dirs=dirs)
-                    if is_xml
-                    else pin.buildGeomFromUrdf(model, text, pin.VISUAL, package_dirs=dirs)
-                )
-            except (ValueError, RuntimeError) as exc:
-                raise URDFError(
-                    f"cannot load the visual meshes of {source} (package_dirs={dirs}): {exc}; "
-                    "pass package_dirs= or load_visuals=False"
-                ) from exc
-        return cls(model, ee_frame, visual_model=visual, urdf=text, package_dirs=dirs)
+            ee_frame = _only_leaf_body(model, source.label)
+        visual = _visual_model(model, source, dirs) if load_visuals else None
+        urdf = source.text if source.path is None else str(source.path)
+        return cls(model, ee_frame, visual_model=visual, urdf=urdf, package_dirs=dirs)
 
     @classmethod
     def planar3(cls, ee_frame: str = "ee") -> Robot:
@@ -265,6 +273,19 @@ def _position_limits(model: pin.Model) -> tuple[np.ndarray, np.ndarray]:
         if hi > lo and abs(lo) < 1e30 and abs(hi) < 1e30:
             lower[i], upper[i] = lo, hi
     return lower, upper
+
+
+def _visual_model(model: pin.Model, source: URDFSource, dirs: list[str]) -> pin.GeometryModel:
+    """The visual geometry of ``source``; :class:`URDFError` if its meshes cannot be found."""
+    try:
+        if source.path is None:
+            return pin.buildGeomFromUrdfString(model, source.text, pin.VISUAL, package_dirs=dirs)
+        return pin.buildGeomFromUrdf(model, str(source.path), pin.VISUAL, package_dirs=dirs)
+    except (ValueError, RuntimeError) as exc:
+        raise URDFError(
+            f"cannot load the visual meshes of {source.label} (package_dirs={dirs}): {exc}; "
+            "pass package_dirs= or load_visuals=False"
+        ) from exc
 
 
 def _only_leaf_body(model: pin.Model, source: str) -> str:

@@ -1,34 +1,64 @@
-"""Solve to a pose: set-point regulation with an adaptive step along the solver's direction.
+"""Solve to a pose (set-point IK): Levenberg-Marquardt on SJT's normalised columns, restarted
+from random configurations within the limits until it succeeds or its budget runs out.
 
-JP and DLS step along their own ``M(J) e`` (Newton and Levenberg-Marquardt steps). JT and SJT
-step along CGLS iterates preconditioned by ``sqrt(D)``: the first is the method's own direction
-``D J^T e`` scaled by the step that minimises the linearised error ``|e - t J d|``; the paper's
-Lyapunov argument makes it a descent direction of ``1/2 |e|^2`` at every configuration
-(``e^T J D J^T e >= 0``, eq. 24-25), so no gain needs tuning. Further CGLS iterates (``inner``)
-move toward the Gauss-Newton step with products by J and J^T only — no factorisation, nothing
-that breaks at a singularity. Every step is capped at ``MAX_STEP`` per joint and halved until the
-error decreases (Armijo). Joint position limits are kept as in ``step`` (a joint that would leave
-its range is clamped out of the direction); a joint whose range spans a full turn is turned by
-2 pi instead when a limit would trap it, since both angles give the same posture.
+Each iteration evaluates the task rows once, at the trial configuration, and makes one compiled
+call (:func:`~sjt_pin.kernels.search.search_iteration`) that accepts or rejects the trial and
+computes the next step ``S J^T (J S J^T + lambda I)^-1 e`` — S = D for SJT (the paper's scaling
+factors as the preconditioner: as lambda grows the step turns into SJT's direction ``D J^T e``,
+a descent direction everywhere, eq. 24-25; as it shrinks, into the Gauss-Newton step, which
+converges quadratically) and S = I for the other methods (plain Levenberg-Marquardt; DLS adds
+its damping). ``lambda = mu^2 + nu |e_w|^2`` grows with the error (Sugihara's damping), with
+``nu`` adapted as in Levenberg-Marquardt. Joint limits hold at every iteration: a joint that
+would leave its range is fixed onto its limit and the others solved again; a joint whose range
+spans a full turn wraps by 2 pi instead. A start ends when the error is below ``tol``
+(success), or when it stops falling (a local minimum): then a new start.
 """
 
 from __future__ import annotations
 
+import math
+import os
+import pickle
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
 
-from . import mappings
-from .kernels import cgls
+from . import kernels as K
+from .kernels.search import (
+    CONVERGED,
+    S_BEST,
+    S_ERROR_ROWS,
+    S_ITER,
+    S_MAX_STEP,
+    S_NU,
+    S_STALE,
+    S_TOL_SQ,
+    STATE_SIZE,
+    search_iteration,
+)
+from .mappings import COLUMN_TOL
 from .validation import positive
+
+#: |e| (m and rad, the target rows) below which a pose counts as solved
+TOL = 1e-6
+#: iterations of one start before it gives up
+MAX_ITERS = 100
+#: the search's budget: iterations over all starts, and seconds of wall-clock time
+BUDGET = 2000
+TIMEOUT = 5e-3
+#: the largest joint motion of one iteration (rad or m): a trust region
+MAX_STEP = 0.5
+#: the initial nu of the damping lambda = mu^2 + nu |e_w|^2, and its floor mu^2
+NU_START, MU = 1.0, 1e-6
 
 
 @dataclass
 class IKResult:
     """Outcome of :func:`solve`: the configuration, whether ``|e| < tol``, the iterations used
-    (over all restarts) and the final error norm (task units)."""
+    (over all starts), the final error norm (task units) and the restarts made."""
 
     q: np.ndarray
     success: bool
@@ -37,158 +67,243 @@ class IKResult:
     restarts: int = 0
 
 
-MAX_STEP = 0.5  # rad (or m): the largest joint move of one iteration (a trust region)
-STALL_WINDOW, STALL_PROGRESS = 10, 0.7  # give up when 10 iterations cut |e|^2 by under 30 %
-CGLS_TOL = 1e-2  # inner iterations stop once |S J^T r| has fallen tenfold (squared: 1e-2)
+class Search:
+    """The set-point IK of one solver: a task stack of its own (a search never touches the
+    buffers of the solver's steps), its work vectors and its restart sampler."""
 
+    def __init__(self, solver):
+        self.robot = robot = solver.robot
+        self.stack = stack = solver.stack.copy()
+        method = solver.method
+        m, n = stack.dim, robot.nv
+        self.layout = layout = K.Layout(m, n, 0)
+        self.work = work = layout.allocate()
+        layout.sqrt_weight(work)[:] = stack.sqrt_weight
+        layout.joint_mask(work)[:] = stack.chain
+        work[K.P_MU] = max(MU, getattr(method, "damping", 0.0))
+        work[K.P_COL_TOL] = getattr(method, "column_tol", COLUMN_TOL)
+        work[K.P_LENGTH2] = getattr(method, "length", 0.0) ** 2
+        work[K.P_SCALED] = 1.0 if getattr(method, "scaled", False) else 0.0
+        limit = solver.position_limit
+        self.limits = (np.zeros((4, 0)) if limit is None else
+                       np.vstack([limit.q_index, limit.v_index, limit.lower, limit.upper])
+                       .astype(float))
+        self.state = np.zeros(STATE_SIZE)
+        self.J = np.zeros((m, n))
+        self.e = np.zeros(m)
+        self.q = np.zeros(robot.nq)
+        self.step = np.zeros(n)
+        self._sampler = _Sampler(robot)
 
-def _step_length(d: np.ndarray) -> float:
-    """1 (the direction already holds its step), capped at ``MAX_STEP`` per joint."""
-    biggest = float(np.abs(d).max()) if d.size else 0.0
-    return 0.0 if biggest == 0.0 else min(1.0, MAX_STEP / biggest)
+    def start(self, q: np.ndarray, target_rows: int, tol: float) -> None:
+        state = self.state
+        state[:] = 0.0
+        state[S_NU], state[S_BEST] = NU_START, math.inf
+        state[S_TOL_SQ], state[S_MAX_STEP] = tol * tol, MAX_STEP
+        state[S_ERROR_ROWS] = target_rows
 
-
-def _wrappable(limits) -> np.ndarray | None:
-    """Limited joints whose range spans a full turn: q and q -+ 2 pi are the same posture."""
-    if limits is None:
-        return None
-    full = limits.upper - limits.lower >= 2.0 * np.pi
-    return np.flatnonzero(full) if full.any() else None
-
-
-def _wrap(q: np.ndarray, move: np.ndarray, limits, wrap: np.ndarray) -> np.ndarray:
-    """``q`` with the full-turn joints that ``move`` would push out of range turned by -+2 pi
-    when that keeps them in range (an IK solution may sit on either turn; a limit must not
-    trap the descent there)."""
-    qi, vi = limits.q_index[wrap], limits.v_index[wrap]
-    lo, hi = limits.lower[wrap], limits.upper[wrap]
-    new = q[qi] + move[vi]
-    shift = np.where(new > hi, -2.0 * np.pi, np.where(new < lo, 2.0 * np.pi, 0.0))
-    ok = (shift != 0.0) & (q[qi] + shift >= lo) & (q[qi] + shift <= hi) \
-        & (new + shift >= lo) & (new + shift <= hi)
-    if not ok.any():
-        return q
-    q = q.copy()
-    q[qi[ok]] += shift[ok]
-    return q
-
-
-def _direction(solver, J: np.ndarray, e: np.ndarray, inner: int) -> np.ndarray:
-    """The solver's step toward the target for the linearised error ``e``.
-
-    JP and DLS: their own ``M(J) e`` (Newton and Levenberg-Marquardt steps). JT and SJT:
-    ``inner`` CGLS iterations preconditioned by ``sqrt(alpha)`` (SJT) or nothing (JT), whose
-    first is the method's direction ``D J^T e`` (``J^T e``) with the best step along it.
-    """
-    method = solver.method
-    if not method.stalls:
-        return method.matrix(J) @ e
-    J = np.ascontiguousarray(J)
-    alpha = method.scaling_factors(J)
-    scale = np.sqrt(alpha) if alpha is not None else (np.abs(J).sum(axis=0) > 0).astype(float)
-    out = np.empty(J.shape[1])
-    cgls(J, e, scale, inner, CGLS_TOL, out)
-    return out
-
-
-def _descend(solver, q, oMd, tol, max_iters, inner, armijo=1e-4):
-    limits, model = solver.position_limit, solver.robot.model
-    wrap = _wrappable(limits)
-    stack = solver.stack.copy()
-    sw = stack.sqrt_weight
-    mask = stack.chain
-
-    def kinematics(q):
-        J, e, _ = stack.evaluate(q, oMd, None)
-        return sw[:, None] * J * mask, e.copy(), sw * e
-
-    J, e, e_w = kinematics(q)
-    f = f_checkpoint = 0.5 * float(e_w @ e_w)
-    failures = 0
-    it = 0
-    for it in range(max_iters):  # noqa: B007 (it is returned)
-        norm = float(np.sqrt(e @ e))
-        if norm < tol:
-            return q, True, it, norm
-        if it % STALL_WINDOW == STALL_WINDOW - 1:
-            if f > STALL_PROGRESS * f_checkpoint:
-                break  # a local minimum (or a crawl): better spent on a restart
-            f_checkpoint = f
-        d = _direction(solver, J, e_w, inner)
-        t = _step_length(d)
-        if limits is not None and t > 0.0:
-            if limits.violated(q, t * d, 1.0):
-                if wrap is not None:
-                    q = _wrap(q, t * d, limits, wrap)
-
-                def remap(free, fixed_velocity, J=J, e_w=e_w, t=t):
-                    return t * _direction(solver, J * free, e_w - J @ fixed_velocity, inner)
-
-                d = limits.enforce(q, t * d, 1.0, remap) / t
-        slope = float(e_w @ (J @ d))  # -(d f / d t) at t = 0: > 0 along a descent direction
-        accepted = False
-        if slope > 0.0 and t > 0.0:
-            for _ in range(30):
-                q_try = pin.integrate(model, q, t * d)
-                if limits is not None:
-                    limits.clip(q, q_try)
-                J_try, e_try, e_w_try = kinematics(q_try)
-                f_try = 0.5 * float(e_w_try @ e_w_try)
-                if f_try <= f - armijo * t * slope:
-                    accepted = True
-                    break
-                t *= 0.5
-        if accepted:
-            q, J, e, e_w, f, failures = q_try, J_try, e_try, e_w_try, f_try, 0
-        else:
-            failures += 1
-            if failures > 1:
+    def run(self, q0: np.ndarray, targets: list, tol: float, max_iters: int, budget: int,
+            deadline: float) -> tuple[bool, int]:
+        """One start from ``q0``: (converged, iterations used)."""
+        stack, model = self.stack, self.robot.model
+        self.start(q0, stack.target_dim, tol)
+        q, iterations = q0, 0
+        limit = min(max_iters, budget)
+        clock = time.perf_counter
+        while iterations < limit:
+            J, e, _ = stack.evaluate(q, targets, None)
+            status = search_iteration(J, e, q, self.J, self.e, self.q, self.limits, self.work,
+                                      self.state, self.step)
+            iterations += 1
+            if status:
+                return status == CONVERGED, iterations
+            if iterations % 16 == 0 and clock() > deadline:
                 break
-    norm = float(np.sqrt(e @ e))
-    return q, norm < tol, it + 1, norm
+            q = pin.integrate(model, self.q, self.step)
+        return False, iterations
+
+    def error(self) -> float:
+        """|e| of the target rows at the current configuration."""
+        rows = self.stack.target_dim
+        return float(np.sqrt(self.e[:rows] @ self.e[:rows]))
+
+    def random(self, seed: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        return self._sampler(seed, rng)
 
 
-def solve(solver, target, q0, tol: float = 1e-6, max_iters: int = 500, restarts: int = 0,
-          rng: np.random.Generator | None = None, inner: int | None = None,
-          timeout: float | None = None) -> IKResult:
+class _Sampler:
+    """Random starts: limited joints uniform within their limits, unlimited revolute and
+    continuous joints a random angle (about the seed's), the rest (a floating base, prismatic
+    joints without limits) as in the seed."""
+
+    def __init__(self, robot):
+        model = robot.model
+        lower, upper = robot.lower_limits, robot.upper_limits
+        self.limited, self.turning, self.circle = [], [], []
+        for j in range(1, model.njoints):
+            joint = model.joints[j]
+            kind = joint.shortname()
+            if joint.nq == 1 and joint.nv == 1:
+                i = joint.idx_q
+                if np.isfinite(lower[i]) and np.isfinite(upper[i]):
+                    self.limited.append(i)
+                elif "Revolute" in kind:
+                    self.turning.append(i)
+            elif joint.nq == 2 and joint.nv == 1:  # continuous: (cos, sin)
+                self.circle.append(joint.idx_q)
+        self.limited = np.array(self.limited, dtype=np.int64)
+        self.lower, self.upper = lower[self.limited], upper[self.limited]
+        self.turning = np.array(self.turning, dtype=np.int64)
+        self.circle = np.array(self.circle, dtype=np.int64)
+
+    def __call__(self, seed: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        q = seed.copy()
+        q[self.limited] = rng.uniform(self.lower, self.upper)
+        q[self.turning] += rng.uniform(-np.pi, np.pi, self.turning.size)
+        angles = rng.uniform(-np.pi, np.pi, self.circle.size)
+        q[self.circle], q[self.circle + 1] = np.cos(angles), np.sin(angles)
+        return q
+
+
+def solve(solver, target, q0, *, tol: float = TOL, max_iters: int = MAX_ITERS,
+          restarts: int | None = None, timeout: float | None = TIMEOUT, budget: int = BUDGET,
+          rng: np.random.Generator | int | None = None) -> IKResult:
     """Drive ``solver``'s tasks to ``target`` from ``q0``; see the module docstring.
 
     Args:
         target: as for ``step`` (a pose, or ``{frame: target}`` with several tasks).
-        q0: start configuration (nq,).
-        tol: success when the task error norm is below ``tol`` (m and rad).
-        max_iters: iterations per start.
-        restarts: extra starts from random configurations within the limits when a start fails.
-        rng: generator for the restarts (default: seeded 0, so results repeat).
-        inner: JT and SJT only: CGLS iterations per step (default: the number of joints);
-            1 is the plain adaptive step along the method's own direction.
-        timeout: no new restart once this many seconds have passed (``None``: no limit).
+        q0: the first start (nq,); later starts are random within the limits (a floating base
+            and prismatic joints without limits keep ``q0``'s values).
+        tol: success when the tasks' error norm is below ``tol`` (m and rad; > 0).
+        max_iters: iterations of one start.
+        restarts: most restarts after the first start (``None``: as many as the budget allows).
+        timeout: no new iteration once this many seconds have passed (``None``: no limit; the
+            result then depends only on the inputs and ``rng``).
+        budget: iterations over all starts.
+        rng: a ``numpy.random.Generator`` or a seed for the random starts (``None``: seed 0,
+            so a call repeats).
+
+    Returns the first start that succeeds, or the best one (lowest error) when none did.
     """
+    search = solver.search()
     tol = positive(tol, "tol", "task units")
-    if int(max_iters) < 1 or int(restarts) < 0:
-        raise ValueError(f"max_iters must be >= 1 and restarts >= 0, got {max_iters}, {restarts}")
-    q = solver.robot.check_q(q0, "q0")
-    oMd, _ = solver.stack.targets(target, None)
-    rng = np.random.default_rng(0) if rng is None else rng
-    inner = solver.robot.nv if inner is None else int(inner)
-    if inner < 1:
-        raise ValueError(f"inner must be >= 1, got {inner}")
-    total = 0
-    best = None
-    deadline = None if timeout is None else time.perf_counter() + positive(timeout, "timeout", "s")
-    for attempt in range(int(restarts) + 1):
-        if attempt and deadline is not None and time.perf_counter() > deadline:
-            return IKResult(best[0], False, total, best[1], attempt - 1)
-        start = q if attempt == 0 else solver.robot.random_configuration(rng)
-        q_end, success, iterations, error = _descend(solver, start, oMd, tol, int(max_iters),
-                                                     inner)
-        total += iterations
+    max_iters, budget = _count(max_iters, "max_iters"), _count(budget, "budget")
+    if restarts is not None and (isinstance(restarts, bool) or int(restarts) < 0):
+        raise ValueError(f"restarts must be None or an integer >= 0, got {restarts!r}")
+    q = solver.robot.check_q(q0, "q0").copy()
+    targets, _ = search.stack.targets(target, None)
+    if not isinstance(rng, np.random.Generator):
+        rng = np.random.default_rng(0 if rng is None else rng)
+    deadline = math.inf if timeout is None else time.perf_counter() + positive(timeout, "timeout",
+                                                                                 "s")
+    total, best, attempt = 0, None, 0
+    while True:
+        start = q if attempt == 0 else search.random(q, rng)
+        success, used = search.run(start, targets, tol, max_iters, budget - total, deadline)
+        total += used
+        error = search.error()
         if best is None or error < best[1]:
-            best = (q_end, error)
+            best = (search.q.copy(), error)
         if success:
-            return IKResult(q_end, True, total, error, attempt)
-    return IKResult(best[0], False, total, best[1], int(restarts))
+            return IKResult(search.q.copy(), True, total, error, attempt)
+        out_of_starts = restarts is not None and attempt >= restarts
+        if out_of_starts or total >= budget or time.perf_counter() > deadline:
+            return IKResult(best[0], False, total, best[1], attempt)
+        attempt += 1
 
 
-def solve_many(*args, **kwargs):
-    raise NotImplementedError
+def _count(value, name: str) -> int:
+    if isinstance(value, bool) or int(value) != value or int(value) < 1:
+        raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
+    return int(value)
+
+
+# -- many targets ----------------------------------------------------------------------------------
+_WORKER: dict = {}
+
+
+def _init_worker(solver) -> None:
+    _WORKER["solver"] = solver
+
+
+def _solve_chunk(chunk):
+    solver = _WORKER["solver"]
+    options = chunk[0]
+    return [solver.solve(target, seed, rng=np.random.default_rng([options["seed"], index]),
+                         **options["kwargs"])
+            for index, target, seed in chunk[1]]
+
+
+def solve_many(solver, targets: Sequence, q0, *, processes: int | None = None,
+               executor=None, progress: bool = True, chunk: int = 64, seed: int = 0,
+               **options) -> list[IKResult]:
+    """:meth:`~sjt_pin.Solver.solve` for every target, in parallel; results in order.
+
+    Target ``k`` is solved with ``rng = numpy.random.default_rng([seed, k])``, so the results do
+    not depend on how the targets are spread over processes: ``solve_many(..., processes=1)``
+    gives the same. With the default ``timeout`` a slower machine may restart less often; pass
+    ``timeout=None`` for results that depend on the inputs only.
+
+    Args:
+        targets: the targets, as ``step`` takes them.
+        q0: one start for every target (nq,), or one per target (N, nq).
+        processes: worker processes (default: one per core); 1 solves in this process.
+        executor: a ``concurrent.futures.Executor`` to run on instead (e.g. Dask's
+            ``client.get_executor()``); it receives chunks of ``chunk`` targets.
+        progress: a progress bar (tqdm) on standard error.
+        options: passed to ``solve`` (``tol``, ``max_iters``, ``timeout``, ...).
+    """
+    targets = list(targets)
+    seeds = np.asarray(q0, dtype=float)
+    if seeds.ndim == 1:
+        seeds = np.broadcast_to(solver.robot.check_q(seeds, "q0"), (len(targets), seeds.size))
+    elif seeds.shape != (len(targets), solver.robot.nq):
+        raise ValueError(f"q0 must have shape ({solver.robot.nq},) or ({len(targets)}, "
+                         f"{solver.robot.nq}), got {seeds.shape}")
+    items = [(k, t, seeds[k]) for k, t in enumerate(targets)]
+    chunks = [({"seed": seed, "kwargs": options}, items[i:i + chunk])
+              for i in range(0, len(items), chunk)]
+    bar = _progress(len(items), progress)
+    results: list[IKResult] = []
+    try:
+        if executor is None and (processes == 1 or len(chunks) <= 1):
+            _init_worker(solver)
+            for c in chunks:
+                results += _solve_chunk(c)
+                bar.update(len(c[1]))
+            return results
+        if executor is None:
+            from concurrent.futures import ProcessPoolExecutor
+
+            workers = processes or os.cpu_count() or 1
+            with ProcessPoolExecutor(workers, initializer=_init_worker,
+                                     initargs=(solver,)) as pool:
+                for part in pool.map(_solve_chunk, chunks):
+                    results += part
+                    bar.update(len(part))
+            return results
+        payload = pickle.dumps(solver)  # each chunk unpickles a solver of its own
+        futures = [executor.submit(_solve_with, payload, c) for c in chunks]
+        for future in futures:
+            part = future.result()
+            results += part
+            bar.update(len(part))
+        return results
+    finally:
+        bar.close()
+
+
+def _solve_with(payload: bytes, chunk):
+    """A chunk with a solver of its own (executors have no initializer, and threads must not
+    share one solver's buffers)."""
+    solver = pickle.loads(payload)
+    options = chunk[0]
+    return [solver.solve(target, seed, rng=np.random.default_rng([options["seed"], index]),
+                         **options["kwargs"])
+            for index, target, seed in chunk[1]]
+
+
+def _progress(total: int, show: bool):
+    from tqdm.auto import tqdm
+
+    return tqdm(total=total, desc="solve_many", unit="pose", disable=not show or None)

@@ -43,6 +43,9 @@ from .tasks import PostureTask, Task
 from .validation import positive
 
 _F64 = np.dtype(np.float64)
+_NONE_CLAMPED = np.zeros(0, dtype=np.int64)
+#: status bits that need Python: an error to raise, a stall for the escape to look at
+_PYTHON = K.NON_FINITE | K.STALLED
 
 
 @dataclass(frozen=True)
@@ -141,44 +144,61 @@ class Solver:
         n = robot.nv
         self._model = robot.model
         self._q_shape = (robot.nq,)
-        self._work = np.zeros(K.work_size(stack.dim, n))
-        self._info = self._work[K.INFO:K.INFO + K.INFO_SIZE]
-        self._step = np.zeros(n)
-        self._rows = np.zeros((2, stack.dim))
-        self._rows[0] = stack.sqrt_weight
-        self._mask = stack.chain.copy()
-        self._no_ff = np.zeros(stack.dim)
-        self._ff_on = False
-        self._kernel = method.kernel
         self._dt = positive(dt, "dt", "s")
-        # limits, the escape and the names of the velocity indices
+        self._kernel = method.kernel
+        # limits: the built-in ones run inside the method's kernel (their data in ``work``);
+        # further Limit objects after it, in Python
         urdf_speeds = robot.velocity_limits
-        speeds = _speed_limits(velocity_limits, urdf_speeds, n)
         moving = stack.chain > 0
         position = PositionLimit(robot, moving, np.where(np.isfinite(urdf_speeds), urdf_speeds,
                                                          SaddleEscape.DEFAULT_SPEED))
         use_position = position.active if position_limits is None else (
             bool(position_limits) and position.active)
         self.position_limit = position if use_position else None
-        velocity = VelocityLimit(np.where(moving, speeds, np.inf))
+        speeds = np.where(moving, _speed_limits(velocity_limits, urdf_speeds, n), np.inf)
+        velocity = VelocityLimit(speeds)
         self.velocity_limit = velocity if velocity.active else None
-        self.limits: list[Limit] = [x for x in (self.position_limit, self.velocity_limit)
-                                    if x is not None]
-        for extra in limits:
+        self._extra_limits = list(limits)
+        for extra in self._extra_limits:
             if not isinstance(extra, Limit):
                 raise TypeError(f"limits must hold sjt_pin Limit objects, got {extra!r}")
-            self.limits.append(extra)
+        self.limits: list[Limit] = [x for x in (self.position_limit, self.velocity_limit)
+                                    if x is not None] + self._extra_limits
         self.escape = (SaddleEscape(robot.model, stack.chain, urdf_speeds, self.position_limit)
                        if escape and method.stalls else None)
+        # the kernel's work vector: parameters, weights, gains, mask, box, speeds, scratch
+        box = self.position_limit
+        self._layout = layout = K.Layout(stack.dim, n, 0 if box is None else box.q_index.size)
+        self._work = work = layout.allocate()
+        self._info = layout.info(work)
+        layout.sqrt_weight(work)[:] = stack.sqrt_weight
+        self._mask = layout.joint_mask(work)
+        self._mask[:] = stack.chain
+        if box is not None:
+            for part, values in enumerate((box.q_index, box.v_index, box.lower, box.upper,
+                                           box.recovery_speeds)):
+                layout.box_part(work, part)[:] = values
+        self._escape_velocity = layout.extra_velocity(work)
+        self._clamped = layout.clamped_joints(work)
+        layout.inverse_speeds(work)[:] = np.where(np.isfinite(speeds), 1.0 / speeds, 0.0)
+        work[K.P_ERROR_ROWS] = stack.target_dim
+        work[K.P_STALL_RATIO] = -1.0 if self.escape is None else SaddleEscape.STALL_RATIO
+        work[K.P_STALL_ERROR] = SaddleEscape.ERROR_FLOOR ** 2
+        self._step = np.zeros(n)
+        self._no_ff = np.zeros(stack.dim)
+        self._ff_on = False
+        self._escaped = (-1, False)  # (step count, whether that step added the escape)
         self._v_names = robot.velocity_names
         self._check_stability = bool(check_stability)
         self._warned = False
         self._probe: TaskStack | None = None
+        self._search = None
         self._gain = as_gain(gain, stack.target_dim)
         self._configure()
+        self._count = 0
         self._last: StepInfo | None = None
-        self._stepped = False
-        self._e = self._dq_step = np.full(0, np.nan)
+        #: the last step's rows, error, displacement and status (None before the first)
+        self._record: tuple | None = None
 
     # -- settings ----------------------------------------------------------------------------
     @property
@@ -217,18 +237,23 @@ class Solver:
 
     def _configure(self) -> None:
         """Write everything that depends on the gain and dt into the kernel's parameters."""
-        stack, gain = self.stack, self._gain
-        self.method.configure(self._work, gain, self._dt, stack.n_chain)
-        self._work[K.P_ERROR_ROWS] = stack.target_dim
-        self._ff_mode = self.method.feedforward_mode()
-        self._work[K.P_FF_MODE] = self._ff_mode if self._ff_on else K.FF_NONE
-        self._rows[1] = gain.rows(stack.target_dim, stack.posture_dim)
+        stack, gain, work = self.stack, self._gain, self._work
+        self.method.configure(work, gain, self._dt, stack.n_chain)
+        work[K.P_FF_MODE] = self.method.feedforward_mode()
+        self._layout.gains(work)[:] = gain.rows(stack.target_dim, stack.posture_dim)
         self._k_dt = gain.largest * self._dt
         bound = self.method.bound(stack.n_chain)
         # the check can only fire when k dt times a bound of lambda_max reaches 2
         self._gain_check = (self._check_stability and not self._warned
                             and gain.mode == K.GAIN_FIXED
                             and (bound is None or self._k_dt * bound >= 2.0))
+        self._update_slow()
+
+    def _update_slow(self) -> None:
+        """Whether every step must take the slow path (an escape in progress, a pending
+        stability check, limits outside the kernel's box)."""
+        self._always = (self._gain_check or bool(self._extra_limits)
+                        or (self.escape is not None and self.escape.active))
 
     # -- one control period --------------------------------------------------------------------
     def step(self, q, target, target_velocity=None) -> np.ndarray:
@@ -245,85 +270,86 @@ class Solver:
         """
         if not (type(q) is np.ndarray and q.shape == self._q_shape and q.dtype == _F64):
             q = self.robot.check_q(q)
+        # 1. the task rows at q
         stack = self.stack
         if stack.single:
             task = stack.task
             target = task.target(target)
             velocity = None if target_velocity is None else task.velocity(target_velocity)
-            stack.kinematics.update(q)
-            J, e, ff = task.compute(stack.kinematics, target, velocity)
+            kinematics = stack.kinematics
+            kinematics.update(q)
+            J, e, ff = task.compute(kinematics, target, velocity)
             targets = (target,)
         else:
             targets, velocities = stack.targets(target, target_velocity)
             J, e, ff = stack.evaluate(q, targets, velocities)
-        return self._advance(q, J, e, ff, targets)
-
-    def _advance(self, q, J, e, ff, targets) -> np.ndarray:
-        work, step, info = self._work, self._step, self._info
+        # 2. gain, mapping, escape velocity and limits, in one compiled call
         if ff is None:
             if self._ff_on:
-                work[K.P_FF_MODE], self._ff_on = K.FF_NONE, False
+                self._work[K.P_HAS_FF], self._ff_on = 0.0, False
             ff = self._no_ff
         elif not self._ff_on:
-            work[K.P_FF_MODE], self._ff_on = self._ff_mode, True
-        self._kernel(J, e, ff, self._rows, self._mask, work, step)
-        if not math.isfinite(info[K.I_E_SQ] + info[K.I_FF_SQ]):
+            self._work[K.P_HAS_FF], self._ff_on = 1.0, True
+        step = self._step
+        status = self._kernel(J, e, ff, q, self._work, step)
+        self._count += 1
+        # 3. only when needed: errors, the stability check, the escape's state, other limits
+        if status & _PYTHON or self._always:
+            step = self._slow(status, q, J, e, ff, targets)
+        # 4. integrate on the manifold; the record of the step (StepInfo) is built on demand
+        self._record, self._last = (J, e, step, status), None
+        return pin.integrate(self._model, q, step)
+
+    def _slow(self, status, q, J, e, ff, targets) -> np.ndarray:
+        """What the fast path skips: errors, the stability check, the escape's state (its
+        velocity for the next step), limits beyond the built-in ones."""
+        if status & K.NON_FINITE:
             self._raise_non_finite(q, targets)
         if self._gain_check:
             self._check_gain(J)
-        escaped = False
+        step, dt = self._step, self._dt
         escape = self.escape
-        if escape is not None and (escape.active or escape.observe(info[K.I_STALL],
-                                                                   info[K.I_E_SQ])):
-            escaped = self._escape(q, J, step, targets)
-        dt = self._dt
-        enforced = False
-        for limit in self.limits:
+        self._escaped = (self._count, escape is not None and escape.active)
+        if escape is not None:
+            if status & K.STALLED and escape.observe(self._count, self._info[K.I_E_SQ]):
+                escape.test(q, self._weighted_rows(targets))
+            velocity = escape.velocity(float(self._info[K.I_REGULAR]), dt)
+            if velocity is None:
+                self._work[K.P_ESCAPING] = 0.0
+                self._escape_velocity[:] = 0.0
+            else:  # the kernel adds it, within the limits, from the next step on
+                self._work[K.P_ESCAPING] = 1.0
+                self._escape_velocity[:] = velocity
+        for limit in self._extra_limits:
             if limit.violated(q, step, dt):
-                if not enforced:
-                    enforced = True
-                    for other in self.limits:
-                        other.reset()
-                step = limit.enforce(q, step, dt, self._remap(J, e, ff))
-        q_next = pin.integrate(self._model, q, step)
-        if enforced and self.position_limit is not None:
-            self.position_limit.clip(q, q_next)
-        self._J, self._dq_step = J, step
-        self._e = e if self.stack.single else self.stack.error
-        self._escaped, self._enforced = escaped, enforced
-        self._stepped, self._last = True, None
-        return q_next
+                step = limit.enforce(q, step, dt, self._remap(q, J, e, ff))
+        self._update_slow()
+        return step
 
-    def _remap(self, J, e, ff):
-        """The method's step with only ``free`` joints and their share of the task velocity."""
+    def _remap(self, q, J, e, ff):
+        """``remap(free, fixed_velocity)``: the method's step with only the ``free`` joints and
+        the task velocity the others (moving at ``fixed_velocity``) leave to them."""
 
         def remap(free: np.ndarray, fixed_velocity: np.ndarray) -> np.ndarray:
-            mask = self._mask * free
-            extra = ff - J @ fixed_velocity
-            work = self._work
-            work[K.P_FF_MODE] = self._ff_mode
+            work, mask = self._work, self._mask
+            saved = mask.copy()
+            mask *= free
+            work[K.P_HAS_FF] = 1.0
             out = np.empty_like(self._step)
-            self._kernel(J, e, extra, self._rows, mask, work, out)
-            work[K.P_FF_MODE] = self._ff_mode if self._ff_on else K.FF_NONE
+            try:
+                self._kernel(J, e, ff - J @ fixed_velocity, q, work, out)
+            finally:
+                mask[:] = saved
+                work[K.P_HAS_FF] = 1.0 if self._ff_on else 0.0
             return out
 
         return remap
-
-    def _escape(self, q, J, step, targets) -> bool:
-        escape = self.escape
-        if not escape.active and not escape.test(q, self._weighted_rows(targets)):
-            return False
-        velocity = escape.velocity(float(np.linalg.norm(step)) / self._dt, self._dt)
-        if velocity is None:
-            return False
-        step += velocity * self._dt
-        return True
 
     def _weighted_rows(self, targets):
         """``q -> (J_w, e_w)``: the weighted, masked task rows for ``targets``, evaluated on a
         stack of their own (the step's buffers stay as they are)."""
         probe = self._probe_stack()
-        sw, mask = self._rows[0], self._mask
+        sw, mask = self.stack.sqrt_weight, self.stack.chain
         targets = list(targets)
 
         def rows(q):
@@ -342,38 +368,39 @@ class Solver:
     def error_norm(self) -> float:
         """|e| of the last step (task units; NaN before the first), without building
         :attr:`last`: the cheap test of a control loop."""
-        return math.sqrt(self._info[K.I_E_SQ]) if self._stepped else math.nan
+        return math.sqrt(self._info[K.I_E_SQ]) if self._record is not None else math.nan
 
     @property
     def error(self) -> np.ndarray:
-        """The last step's task error e (m,), as a view that the next step overwrites (copy it
-        to keep it; :attr:`last` holds copies)."""
-        return self._e
+        """The last step's task error e (the target rows), as a view that the next step
+        overwrites (copy it to keep it; :attr:`last` holds copies)."""
+        if self._record is None:
+            return np.full(0, np.nan)
+        return self._record[1] if self.stack.single else self.stack.error
 
     @property
     def displacement(self) -> np.ndarray:
         """The last step's joint displacement ``q_dot dt`` (nv,), as a view that the next step
         overwrites."""
-        return self._dq_step
+        return self._step if self._record is None else self._record[2]
 
     @property
     def last(self) -> StepInfo | None:
         """The :class:`StepInfo` of the last step (``None`` before the first)."""
-        if self._last is None and self._stepped:
+        if self._last is None and self._record is not None:
             info, stack = self._info, self.stack
-            J = self._J
+            J, _, step, status = self._record
             gain = self._gain
             k = gain.value if gain.mode == K.GAIN_FIXED else float(info[K.I_GAIN])
-            Jw = self._rows[0][:, None] * J * self._mask
+            Jw = stack.sqrt_weight[:, None] * J * stack.chain
             alpha = self.method.scaling_factors(Jw)
-            clamped = (self.position_limit.clamped if self._enforced and self.position_limit
-                       else np.zeros(0, dtype=np.int64))
-            scale = (self.velocity_limit.scale if self._enforced and self.velocity_limit
-                     else 1.0)
+            escaped = self._escaped[1] and self._escaped[0] == self._count
+            clamped = (np.flatnonzero(self._clamped) if status & K.CLAMPED else _NONE_CLAMPED)
+            scale = float(info[K.I_SCALE]) if status & K.SCALED else 1.0
             self._last = StepInfo(
-                error=np.array(self._e, dtype=float), error_norm=math.sqrt(info[K.I_E_SQ]),
-                dq=self._dq_step / self._dt, gain=k, loop_bound=float(info[K.I_LOOP]),
-                pose=stack.poses(), alpha=alpha, escaped=self._escaped,
+                error=np.array(self.error, dtype=float), error_norm=math.sqrt(info[K.I_E_SQ]),
+                dq=step / self._dt, gain=k, loop_bound=float(info[K.I_LOOP]),
+                pose=stack.poses(), alpha=alpha, escaped=escaped,
                 clamped=np.array(clamped), velocity_scale=float(scale),
                 clamped_joints=tuple(self._v_names[i] for i in clamped))
         return self._last
@@ -386,7 +413,7 @@ class Solver:
             bound = float(self._info[K.I_TRACE])
         if self._k_dt * bound < 2.0:
             return
-        Jw = self._rows[0][:, None] * J * self._mask
+        Jw = self.stack.sqrt_weight[:, None] * J * self.stack.chain
         JM = Jw @ self.method.matrix(Jw)
         lam = float(np.linalg.eigvalsh(0.5 * (JM + JM.T))[-1]) if JM.size else 0.0
         if lam <= 0.0 or self._gain.largest * self._dt * lam < 2.0:
@@ -396,7 +423,7 @@ class Solver:
             f"{self.method.name.upper()} gain {self._gain.largest:g} 1/s exceeds the stability "
             f"bound 2 / (dt lambda_max(J M)) = {2.0 / (self._dt * lam):.4g} 1/s at the current "
             f"configuration (dt = {self._dt:g} s); the closed loop will oscillate or diverge",
-            GainWarning, stacklevel=4)
+            GainWarning, stacklevel=5)
 
     def _raise_non_finite(self, q: np.ndarray, targets) -> None:
         self.robot.check_q(q)  # names q if it holds NaN or inf
@@ -414,12 +441,22 @@ class Solver:
 
     # -- other entry points ----------------------------------------------------------------------
     def solve(self, target, q0, **options):
-        """Solve to ``target`` from ``q0``: set-point IK along this solver's direction, with
-        random restarts within the limits; see :func:`sjt_pin.solve.solve` for the options.
-        Returns an :class:`~sjt_pin.solve.IKResult`."""
+        """Solve to ``target`` from ``q0`` (set-point IK): Levenberg-Marquardt on this
+        method's columns (SJT's normalised ones for SJT) within the limits, restarted from
+        random configurations until it succeeds or its budget (iterations, 5 ms) runs out; see
+        :func:`sjt_pin.solve.solve` for the options. Returns an :class:`~sjt_pin.IKResult`."""
         from .solve import solve
 
         return solve(self, target, q0, **options)
+
+    def search(self):
+        """The set-point IK state of this solver (:class:`~sjt_pin.solve.Search`, created on
+        first use; its buffers are its own)."""
+        if self._search is None:
+            from .solve import Search
+
+            self._search = Search(self)
+        return self._search
 
     def __repr__(self) -> str:
         tasks = self.stack.tasks[0] if len(self.stack.tasks) == 1 else self.stack.tasks

@@ -99,39 +99,59 @@ class TaskStack:
         self.chain = chain
         self.n_chain = int(chain.sum())
         self.kinematics = Kinematics(model)
-        self._zero_ff = np.zeros(0)
+        self._tail = [None] * (len(self.tasks) - len(self.targeted))
+        self._frame_set = set(self.frames)
+        # per task: its index, the task, its rows, and whether its Jacobian rows are constant
+        # (written here once: a posture task's identity)
+        self._plan = []
+        for k, t in enumerate(self.tasks):
+            rows = self.slices[k]
+            if not self.single:  # a task may write its rows straight into the stacked buffers
+                t.write_into(self.J[rows], self.e[rows], self.ff[rows])
+            if t.constant_jacobian:
+                self.J[rows] = t.compute(self.kinematics, None, None)[0]
+            self._plan.append((k, t, rows, t.constant_jacobian))
 
     def copy(self) -> TaskStack:
         """An independent stack on the same tasks (its own kinematics and buffers)."""
         return TaskStack(self.robot, self.tasks)
 
-    # -- targets -----------------------------------------------------------------------------
+    # -- targets ---------------------------------------------------------------------------
     def targets(self, target, target_velocity=None) -> tuple[list, list | None]:
         """``target`` and ``target_velocity`` validated per task: lists aligned with
-        :attr:`tasks` (``None`` for tasks that take no target, and for missing velocities)."""
-        if len(self.targeted) == 1 and not isinstance(target, Mapping):
+        :attr:`tasks` (``None`` for tasks that take no target, and for missing velocities).
+        With one task that takes targets, ``target`` may be that target itself."""
+        targeted, tail = self.targeted, self._tail
+        mapping = type(target) is dict or isinstance(target, Mapping)
+        if len(targeted) == 1 and not mapping:
             task = self.task
             velocity = None if target_velocity is None else task.velocity(target_velocity)
-            return ([task.target(target) if t is task else None for t in self.tasks],
-                    None if velocity is None else [velocity if t is task else None
-                                                   for t in self.tasks])
-        if not isinstance(target, Mapping):
+            return ([task.target(target), *tail],
+                    None if velocity is None else [velocity, *tail])
+        if not mapping:
             raise ValueError(f"target must be a {{frame: target}} mapping for frames {self.frames}")
-        unknown = set(target) - set(self.frames)
-        missing = set(self.frames) - set(target)
-        if unknown or missing:
+        try:
+            targets = [task.target(target[task.frame]) for task in targeted]
+        except KeyError:
+            targets = None
+        if targets is None or len(target) != len(targeted):
+            unknown = sorted(map(str, set(target) - set(self.frames)))
+            missing = sorted(set(self.frames) - set(target))
             raise ValueError(f"target must have exactly the frames {self.frames}; "
-                             f"missing {sorted(missing)}, unknown {sorted(map(str, unknown))}")
-        targets = [t.target(target[t.frame]) if t.takes_target else None for t in self.tasks]
+                             f"missing {missing}, unknown {unknown}")
+        targets += tail
         if target_velocity is None:
             return targets, None
-        if not isinstance(target_velocity, Mapping) or set(target_velocity) - set(self.frames):
+        if not (type(target_velocity) is dict or isinstance(target_velocity, Mapping)):
             raise ValueError(f"target_velocity must be a {{frame: velocity}} mapping over "
                              f"{self.frames}")
-        velocities = [t.velocity(target_velocity[t.frame])
-                      if t.takes_target and t.frame in target_velocity else None
-                      for t in self.tasks]
-        return targets, velocities
+        if not target_velocity.keys() <= self._frame_set:
+            unknown = sorted(map(str, set(target_velocity) - self._frame_set))
+            raise ValueError(f"target_velocity has frames {unknown} that are not task frames "
+                             f"{self.frames}")
+        velocities = [task.velocity(target_velocity[task.frame])
+                      if task.frame in target_velocity else None for task in targeted]
+        return targets, velocities + tail
 
     # -- rows --------------------------------------------------------------------------------
     def evaluate(self, q: np.ndarray, targets: list, velocities: list | None
@@ -144,14 +164,18 @@ class TaskStack:
             return self.task.compute(kinematics, targets[0],
                                      None if velocities is None else velocities[0])
         J, e, ff = self.J, self.e, self.ff
-        for k, task in enumerate(self.tasks):
-            rows = self.slices[k]
+        for k, task, rows, constant in self._plan:
             velocity = None if velocities is None else velocities[k]
             Jt, et, fft = task.compute(kinematics, targets[k], velocity)
-            J[rows] = Jt
-            e[rows] = et
-            if velocities is not None:
-                ff[rows] = 0.0 if fft is None else fft
+            if et.base is not e:  # not written in place
+                e[rows] = et
+            if not constant and Jt.base is not J:
+                J[rows] = Jt
+            if velocity is not None:
+                if fft.base is not ff:
+                    ff[rows] = fft
+            elif velocities is not None and not constant:
+                ff[rows] = 0.0
         return J, e, None if velocities is None else ff
 
     def poses(self):

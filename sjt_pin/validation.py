@@ -85,10 +85,10 @@ def as_pose(value, name: str = "target") -> pin.SE3:
 def as_motion(value, name: str = "target_velocity") -> np.ndarray:
     """``value`` (a ``pin.Motion`` or a 6-vector [linear (m/s), angular (rad/s)]) as a float
     6-vector; finiteness is checked by the step (a NaN shows in the feed-forward)."""
-    if isinstance(value, pin.Motion):
-        return value.vector
     if type(value) is np.ndarray and value.shape == (6,) and value.dtype == np.float64:
         return value
+    if isinstance(value, pin.Motion):
+        return value.vector
     return as_vector(value, name, 6)
 
 

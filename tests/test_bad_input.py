@@ -59,11 +59,12 @@ def test_missing_and_malformed_urdf_name_the_file(tmp_path):
         sjt.Robot.from_urdf(missing)
     broken = tmp_path / "broken.urdf"
     broken.write_text("<robot name='x'><link name='a'>")
-    with pytest.raises(sjt.URDFError, match=f"cannot parse URDF {broken}"):
+    with pytest.raises(sjt.URDFError, match=f"invalid URDF {broken}: not well-formed XML: "
+                                            "Premature end of data in tag link line 1"):
         sjt.Robot.from_urdf(broken)
-    with pytest.raises(sjt.URDFError, match="cannot parse URDF <URDF string>"):
+    with pytest.raises(sjt.URDFError, match="invalid URDF <URDF string>: not well-formed XML"):
         sjt.Robot.from_urdf("<robot name='x'><link name='a'>")
-    with pytest.raises(ValueError, match="not an example-robot-data robot"):
+    with pytest.raises(ValueError, match="not an example-robot-data robot; did you mean 'ur5'"):
         sjt.Robot.from_example("ur55")
 
 

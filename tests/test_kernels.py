@@ -24,14 +24,21 @@ def problem(seed, m, n):
 
 def run(kernel, J, e, ff, rows, mask, **params):
     m, n = J.shape
-    work = np.zeros(K.work_size(m, n))
+    layout = K.Layout(m, n, 0)
+    work = layout.allocate()
+    layout.sqrt_weight(work)[:], layout.gains(work)[:] = rows
+    layout.joint_mask(work)[:] = mask
     work[K.P_DT] = DT
     work[K.P_ERROR_ROWS] = m
+    work[K.P_STALL_RATIO] = -1.0
+    if params.get("ff_mode"):  # 0: no desired velocity in this step
+        work[K.P_HAS_FF] = 1.0
     for name, value in params.items():
         work[getattr(K, "P_" + name.upper())] = value
     step = np.full(n, np.nan)
-    kernel(J, e, ff, rows, mask, work, step)
-    return step, work[K.INFO:K.INFO + K.INFO_SIZE]
+    status = kernel(J, e, ff, np.zeros(n), work, step)
+    assert status == 0  # no limits here: nothing clamped or scaled
+    return step, layout.info(work)
 
 
 shapes = dict(m=st.integers(1, 8), n=st.integers(1, 10), seed=st.integers(0, 2**32 - 1))
@@ -158,25 +165,28 @@ def test_rotation_defect():
 def test_position_rows(rng):
     J6, oMf = rng.normal(size=(6, 4)), pin.SE3.Random()
     p_d, velocity = rng.normal(size=3), rng.normal(size=6)
-    axes = np.array([2, 0])
-    J_out, e_out, ff_out = np.empty((2, 4)), np.empty(2), np.empty(2)
-    K.position_rows(J6, oMf.np, p_d, velocity, axes, J_out, e_out, ff_out)
+    out = np.zeros(2 * (4 + 3))
+    out[:2] = [2, 0]  # the axes z, x
+    K.position_rows(J6, oMf.np, p_d, velocity, out)
+    J_out, e_out, ff_out = out[2:10].reshape(2, 4), out[10:12], out[12:]
     np.testing.assert_array_equal(J_out, J6[[2, 0]])
     np.testing.assert_allclose(e_out, (p_d - oMf.translation)[[2, 0]])
     np.testing.assert_array_equal(ff_out, velocity[[2, 0]])
 
 
-def test_limits_violated():
-    q_index = v_index = np.arange(3)
-    lower, upper = -np.ones(3), np.ones(3)
-    slow = np.full(3, 10.0)  # |step| * 10 > 1 is too fast
-    q, small = np.array([0.5, -0.9, 0.0]), np.full(3, 0.01)
-    assert K.limits_violated(q, small, q_index, v_index, lower, upper, slow) == 0
-    assert K.limits_violated(q, -0.2 * np.ones(3), q_index, v_index, lower, upper, slow) == 3
-    assert K.limits_violated(np.array([1.0, 0, 0]), np.zeros(3), q_index, v_index, lower,
-                             upper, slow) == 0  # resting on a limit is inside
-    assert K.limits_violated(np.array([1.5, 0, 0]), np.zeros(3), q_index, v_index, lower,
-                             upper, slow) == 1  # starting outside is a violation
+def test_box_status():
+    layout = K.Layout(1, 3, 3)
+    work = layout.allocate()
+    for part, values in enumerate((np.arange(3), np.arange(3), -np.ones(3), np.ones(3))):
+        layout.box_part(work, part)[:] = values  # q, v indices; limits [-1, 1]
+    layout.inverse_speeds(work)[:] = 1.0 / np.array([10.0, 10.0, np.inf])  # rad/s
+    work[K.P_DT] = 1e-3
+    q, small = np.array([0.5, -0.9, 0.0]), np.full(3, 0.001)  # 1 rad/s
+    assert K.box_status(q, small, work) == 0
+    assert K.box_status(q, np.array([0.0, -0.2, 0.0]), work) == K.OUTSIDE | K.TOO_FAST
+    assert K.box_status(q, np.array([0.0, 0.0, 0.5]), work) == 0  # no speed limit on joint 3
+    assert K.box_status(np.array([1.0, 0, 0]), np.zeros(3), work) == 0  # on a limit is inside
+    assert K.box_status(np.array([1.5, 0, 0]), np.zeros(3), work) == K.OUTSIDE  # starts out
 
 
 def test_clamp_pass():
@@ -184,8 +194,8 @@ def test_clamp_pass():
     index = np.arange(4)
     lower, upper = -np.ones(4), np.ones(4)
     step = np.array([0.1, 0.3, 0.2, -0.1])
-    fixed, fixed_step = np.zeros(4, dtype=bool), np.zeros(4)
-    recovery = np.full(4, 0.05)
-    count = K.clamp_pass(q, step, index, index, lower, upper, recovery, fixed, fixed_step)
-    assert count == 3 and list(fixed) == [False, True, True, True]
+    fixed, fixed_step = np.zeros(4), np.zeros(4)
+    speeds = np.full(4, 50.0)  # rad/s: 0.05 rad in a step of 1 ms
+    count = K.clamp_pass(q, step, index, index, lower, upper, speeds, 1e-3, fixed, fixed_step)
+    assert count == 3 and list(fixed) == [0.0, 1.0, 1.0, 1.0]
     np.testing.assert_allclose(fixed_step[1:], [0.1, -0.05, 0.05])  # onto the limit; back

@@ -28,3 +28,16 @@ def test_wheel_ships_planar3_urdf_and_generator(tmp_path):
     assert run.returncode == 0, run.stderr
     nq, urdf = run.stdout.split()
     assert nq == "3" and urdf.startswith(str(target))
+
+
+def test_every_package_of_the_source_tree_is_in_the_wheel():
+    """pyproject.toml lists the packages (robots/ ships as sjt_pin.robots): none forgotten."""
+    import tomllib
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    listed = set(tomllib.loads((root / "pyproject.toml").read_text())["tool"]["setuptools"]
+                 ["packages"])
+    found = {".".join(p.parent.relative_to(root).parts)
+             for p in (root / "sjt_pin").rglob("__init__.py")}
+    assert found | {"sjt_pin.robots"} == listed

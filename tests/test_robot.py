@@ -1,8 +1,13 @@
+from pathlib import Path
+
 import numpy as np
 import pinocchio as pin
 import pytest
 
 import sjt_pin as sjt
+from sjt_pin.robot import DEFAULT_EE_FRAMES
+
+FIXTURES = Path(__file__).parent / "fixtures" / "urdf"
 
 CONTINUOUS_PRISMATIC = """<robot name="mixed">
   <link name="base"/><link name="a"/><link name="b"/><link name="tip"/><link name="side"/>
@@ -93,3 +98,44 @@ def test_random_configuration_respects_limits(panda, rng):
     for _ in range(100):
         q = panda.random_configuration(rng)
         assert np.all((q >= panda.lower_limits) & (q <= panda.upper_limits))
+
+
+def test_robot_without_moving_joints_loads():
+    robot = sjt.Robot.from_urdf(FIXTURES / "fixed_only.urdf")
+    assert robot.ee_frame == "tool"  # the fixed joint's child, the only leaf
+    assert (robot.nq, robot.nv) == (0, 0)
+    q = np.zeros(0)
+    assert robot.jacobian(q).shape == (6, 0)
+    assert robot.fk(q).translation == pytest.approx([0.0, 0.0, 0.5])
+    assert robot.velocity_names == [] and robot.lower_limits.shape == (0,)
+
+
+def test_robot_with_one_joint_loads():
+    robot = sjt.Robot.from_urdf(FIXTURES / "one_joint.urdf")
+    assert robot.ee_frame == "tip" and (robot.nq, robot.nv) == (1, 1)
+    q = np.array([np.pi / 2])
+    assert robot.fk(q).translation == pytest.approx([0.0, 0.5, 0.0])
+    J = robot.jacobian(q)
+    assert J.shape == (6, 1)
+    np.testing.assert_allclose(J, manifold_fd_jacobian(robot, q), atol=1e-6)
+    assert robot.velocity_names == ["shoulder"]
+    assert (robot.lower_limits[0], robot.upper_limits[0]) == (-2.0, 2.0)
+
+
+@pytest.mark.parametrize("name", sorted(DEFAULT_EE_FRAMES))
+@pytest.mark.filterwarnings("ignore:.*q0 is clipped into range:UserWarning")  # kinova, panda
+def test_every_default_ee_frame_exists(name):
+    robot = sjt.Robot.from_example(name)
+    assert robot.ee_frame == DEFAULT_EE_FRAMES[name]
+    assert robot.jacobian(robot.q0).shape == (6, robot.nv)
+
+
+@pytest.mark.parametrize("name, hint", [("UR5", "did you mean 'ur5'"),
+                                        ("pandas", "did you mean 'panda'"),
+                                        ("talos-full", "did you mean 'talos_full'")])
+def test_unknown_example_name_suggests_close_names(name, hint):
+    with pytest.raises(ValueError, match=f"name {name!r} is not an example-robot-data robot; "
+                                         f"{hint}.*known: \\['a1'"):
+        sjt.Robot.from_example(name)
+    with pytest.raises(TypeError, match="name must be a str"):
+        sjt.Robot.from_example(["ur5"])

@@ -1,51 +1,151 @@
-"""solve(): set-point IK to random reachable poses, within limits, with restarts."""
+"""solve(): set-point IK to random reachable poses with its defaults, within limits, with
+restarts; solve_many."""
 
 import numpy as np
 import pinocchio as pin
 import pytest
 
 import sjt_pin as sjt
+from sjt_pin.bench.ik import problems, solved
 
 
+def check(robot, result, target, tol=1e-6):
+    """The solution within the limits and on the target (independently of the solver)."""
+    assert np.all(result.q >= robot.lower_limits) and np.all(result.q <= robot.upper_limits)
+    if result.success:
+        error = pin.log6(robot.fk(result.q).actInv(target)).vector
+        assert np.linalg.norm(error) < tol
+        assert result.error < tol
+
+
+@pytest.mark.filterwarnings("ignore:kinova. the reference configuration")
+@pytest.mark.parametrize("name", ["ur5", "panda", "kinova", "xarm7"])
 @pytest.mark.parametrize("method", ["sjt", "dls"])
-@pytest.mark.parametrize("name", ["ur5", "panda"])
-def test_random_reachable_poses(name, method):
+def test_defaults_solve_random_reachable_poses(name, method):
+    """TRAC-IK's protocol: targets and seeds random within the limits; the defaults, with the
+    wall-clock budget off so that the test does not depend on the machine."""
     robot = sjt.Robot.from_example(name)
-    rng = np.random.default_rng(7)
     solver = sjt.make_solver(method, robot)
-    results = []
-    for _ in range(30):
-        target = robot.fk(robot.random_configuration(rng))
-        result = solver.solve(target, robot.random_configuration(rng), tol=1e-5, restarts=20,
-                              rng=rng)
-        results.append(result)
-        if result.success:
-            error = pin.log6(robot.fk(result.q).actInv(target)).vector
-            assert np.linalg.norm(error) < 1e-5
-        assert np.all(result.q >= robot.lower_limits - 1e-12)
-        assert np.all(result.q <= robot.upper_limits + 1e-12)
-    assert np.mean([r.success for r in results]) >= 29 / 30
+    pairs = problems(robot, 40, seed=3)
+    results = [solver.solve(target, seed, timeout=None) for target, seed in pairs]
+    for (target, _), result in zip(pairs, results, strict=True):
+        check(robot, result, target)
+        assert solved(robot, result.q, target) == result.success
+    assert sum(r.success for r in results) >= 39
 
 
-def test_sjt_direction_alone_converges_from_nearby(ur5):
+def test_first_start_is_the_seed_and_converges_from_nearby(ur5):
     q_goal = np.array([0.3, -1.2, 1.5, -1.8, -1.5, 0.2])
     target = ur5.fk(q_goal)
-    result = sjt.SJTSolver(ur5).solve(target, q_goal + 0.1, tol=1e-6, inner=1, max_iters=5000)
-    assert result.success and result.error < 1e-6 and result.iterations > 1
+    result = sjt.SJTSolver(ur5).solve(target, q_goal + 0.1, restarts=0)
+    assert result.success and result.restarts == 0
+    assert 1 < result.iterations < 20  # Levenberg-Marquardt: a few iterations near a solution
+    check(ur5, result, target)
 
 
-def test_unreachable_pose_fails_cleanly(ur5):
+def test_unreachable_pose_fails_cleanly_within_its_budget(ur5):
     target = pin.SE3(np.eye(3), np.array([2.0, 0.0, 0.5]))
-    result = sjt.SJTSolver(ur5).solve(target, ur5.q0, tol=1e-6, restarts=2)
+    result = sjt.SJTSolver(ur5).solve(target, ur5.q0, timeout=None, budget=300)
     assert not result.success and np.isfinite(result.error) and result.error > 0.5
-    assert np.all(np.isfinite(result.q)) and result.restarts == 2
+    assert result.iterations <= 300 and result.restarts >= 1
+    check(ur5, result, target)
+    few = sjt.SJTSolver(ur5).solve(target, ur5.q0, restarts=2, timeout=None)
+    assert few.restarts == 2
+
+
+def test_results_repeat_for_a_seed(panda):
+    solver = sjt.SJTSolver(panda)
+    target, seed = problems(panda, 1, seed=11)[0]
+    a = solver.solve(target, seed, rng=5, timeout=None)
+    b = solver.solve(target, seed, rng=np.random.default_rng(5), timeout=None)
+    np.testing.assert_array_equal(a.q, b.q)
+    assert (a.iterations, a.restarts) == (b.iterations, b.restarts)
+
+
+def test_bad_targets_raise_as_step_does(ur5):
+    solver = sjt.SJTSolver(ur5)
+    nan = pin.SE3(np.eye(3), np.array([np.nan, 0.0, 0.0]))
+    for target in (nan, np.full((4, 4), np.nan)):
+        with pytest.raises(ValueError, match="NaN"):
+            solver.solve(target, ur5.q0)
+        with pytest.raises(ValueError, match="NaN"):
+            solver.step(ur5.q0, target)
+    scaled = ur5.fk(ur5.q0)
+    scaled.rotation = 1.1 * scaled.rotation
+    with pytest.raises(ValueError, match="not a rotation"):
+        solver.solve(scaled, ur5.q0)
 
 
 def test_solve_arguments(ur5):
     solver = sjt.SJTSolver(ur5)
+    target = ur5.fk(ur5.q0)
     with pytest.raises(ValueError, match="tol must be a positive number"):
-        solver.solve(ur5.fk(ur5.q0), ur5.q0, tol=0)
+        solver.solve(target, ur5.q0, tol=0)
     with pytest.raises(ValueError, match=r"q0 must have shape \(6,\)"):
-        solver.solve(ur5.fk(ur5.q0), np.zeros(2))
-    with pytest.raises(ValueError, match="inner must be >= 1"):
-        solver.solve(ur5.fk(ur5.q0), ur5.q0, inner=0)
+        solver.solve(target, np.zeros(2))
+    with pytest.raises(ValueError, match="max_iters must be an integer >= 1"):
+        solver.solve(target, ur5.q0, max_iters=0)
+    with pytest.raises(ValueError, match="restarts must be None or an integer >= 0"):
+        solver.solve(target, ur5.q0, restarts=-1)
+    with pytest.raises(ValueError, match="timeout must be a positive number"):
+        solver.solve(target, ur5.q0, timeout=-1.0)
+
+
+def test_full_turn_joints_wrap_instead_of_stopping_at_a_limit(ur5):
+    """UR5's base joint turns +-2 pi: from a seed near -2 pi, the target's angle is reached by
+    turning the other way round, not blocked at the limit."""
+    q_goal = np.array([3.0, -1.2, 1.5, -1.8, -1.5, 0.2])
+    target = ur5.fk(q_goal)
+    seed = q_goal.copy()
+    seed[0] = -6.2
+    result = sjt.SJTSolver(ur5).solve(target, seed, restarts=0, timeout=None)
+    assert result.success
+    check(ur5, result, target)
+
+
+def test_floating_base_is_free_and_reported_unbounded():
+    talos = sjt.Robot.from_example("talos_arm")
+    solver = sjt.SJTSolver(talos, task=sjt.PoseTask())
+    target = talos.fk(talos.random_configuration(np.random.default_rng(2)))
+    result = solver.solve(target, talos.q0, timeout=None)
+    assert result.success
+    check(talos, result, target)
+    humanoid = sjt.Robot.from_example("talos")
+    assert np.all(np.isinf(humanoid.lower_limits[:7])) and np.all(np.isinf(humanoid.upper_limits[:7]))
+    hand = sjt.SJTSolver(humanoid, task=sjt.PoseTask(frame="gripper_left_joint"))
+    goal = hand.robot.fk(humanoid.q0, "gripper_left_joint") * pin.SE3(np.eye(3), np.array([0.05, 0.0, 0.0]))
+    result = hand.solve(goal, humanoid.q0, timeout=None)
+    assert result.success
+    check(humanoid, result, goal)
+
+
+def test_solve_many_equals_the_sequential_solves(ur5):
+    solver = sjt.SJTSolver(ur5)
+    pairs = problems(ur5, 12, seed=4)
+    targets = [t for t, _ in pairs]
+    seeds = np.array([s for _, s in pairs])
+    parallel = sjt.solve_many(solver, targets, seeds, processes=2, chunk=4, progress=False,
+                              timeout=None)
+    sequential = sjt.solve_many(solver, targets, seeds, processes=1, progress=False,
+                                timeout=None)
+    by_hand = [solver.solve(t, s, rng=np.random.default_rng([0, k]), timeout=None)
+               for k, (t, s) in enumerate(pairs)]
+    for a, b, c in zip(parallel, sequential, by_hand, strict=True):
+        np.testing.assert_array_equal(a.q, b.q)
+        np.testing.assert_array_equal(a.q, c.q)
+        assert a.success == b.success == c.success
+    assert all(r.success for r in parallel)
+
+
+def test_solve_many_takes_any_executor(ur5):
+    from concurrent.futures import ThreadPoolExecutor
+
+    solver = sjt.SJTSolver(ur5)
+    pairs = problems(ur5, 6, seed=5)
+    with ThreadPoolExecutor(2) as executor:
+        results = sjt.solve_many(solver, [t for t, _ in pairs], ur5.q0, executor=executor,
+                                 chunk=2, progress=False, timeout=None)
+    reference = sjt.solve_many(solver, [t for t, _ in pairs], ur5.q0, processes=1,
+                               progress=False, timeout=None)
+    for a, b in zip(results, reference, strict=True):
+        np.testing.assert_array_equal(a.q, b.q)

@@ -1,11 +1,13 @@
-"""Step-speed benchmarks (DESIGN.md section 6): one ``step()`` against the Pinocchio floor.
+"""``sjt-pin bench speed``: one ``step()`` on every documented path, against its Pinocchio floor.
 
-Times are ratios inside one run, because the machines are shared and noisy: the median time of
-one ``step()`` against the median time of the Pinocchio calls a step cannot avoid, made the same
-way (joint Jacobians with forward kinematics, the frame placement, the frame Jacobian, the pose
-error's ``actInv`` and ``log6``, ``integrate``), on the same robot, with the target moving on a
-1 cm circle so that no step is trivial; and, with ``--peers``, against pink's ``solve_ik`` and
-integration on the same robot, frame and targets.
+Times are ratios inside one run, because the machines are shared and noisy: for each path the
+median (p90, p99) time of one ``step()`` against the same statistics of *the Pinocchio calls
+that path makes* (its floor), timed the same way on the same configurations and targets: joint
+Jacobians with forward kinematics, per task frame its placement, its frame Jacobian and (pose
+tasks) ``actInv`` + ``log6``, ``difference`` for a posture task, and ``integrate``. The target
+moves on a 1 cm circle (one turn per second) so that no step is trivial. ``track()`` is timed
+per step over a whole run, against the floor of the step it makes. With ``--peers``, pink's
+``solve_ik`` + integration on the same robot, frame and targets.
 """
 
 from __future__ import annotations
@@ -17,39 +19,46 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 import pinocchio as pin
 
-from ..solvers import make_solver
 from ..robot import Robot
-from ..paper.scenarios import PLANAR3_START, UR5_START, load_robot
-from ..tasks import PoseTask
+from ..solvers import make_solver
+from ..tasks import PoseTask, PositionTask, PostureTask
+from ..tracking import track
+from ..trajectories import Circle
 
-METHODS = ("sjt", "jt", "jp", "dls")
-SPEED_ROBOTS = ("planar3", "ur5", "panda")
+ROBOTS = ("ur5", "panda")
+#: Start configurations inside the limits and away from singularities.
+STARTS = {"ur5": np.array([0.3, -1.2, 1.5, -1.8, -1.5, 0.2])}
 
 
 @dataclass
 class Timing:
-    """Median and 90th percentile of one operation, in microseconds."""
+    """Median, 90th and 99th percentiles of one operation, in microseconds."""
 
     median: float
     p90: float
+    p99: float
 
     @classmethod
     def of(cls, samples_ns: np.ndarray) -> Timing:
-        return cls(float(np.median(samples_ns)) / 1e3, float(np.percentile(samples_ns, 90)) / 1e3)
+        p50, p90, p99 = np.percentile(samples_ns, [50, 90, 99]) / 1e3
+        return cls(float(p50), float(p90), float(p99))
+
+    @property
+    def jitter(self) -> float:
+        """p90 / median."""
+        return self.p90 / self.median
 
 
 @dataclass
 class SpeedRow:
     robot: str
-    nv: int
-    method: str
+    path: str
     step: Timing
-    primitives: Timing
-    peer: str = ""
+    floor: Timing
 
     @property
     def ratio(self) -> float:
-        return self.step.median / self.primitives.median
+        return self.step.median / self.floor.median
 
 
 @dataclass
@@ -59,238 +68,264 @@ class SpeedReport:
 
     def to_dict(self) -> dict:
         return {"machine": self.machine,
-                "rows": [asdict(r) | {"ratio": r.ratio} for r in self.rows]}
+                "rows": [asdict(r) | {"ratio": r.ratio, "jitter": r.step.jitter}
+                         for r in self.rows]}
 
 
 def machine() -> dict:
     """Versions and machine, for the record."""
-    import numpy
-
     info = {"python": platform.python_version(), "pinocchio": pin.__version__,
-            "numpy": numpy.__version__, "machine": platform.machine(),
-            "processor": platform.processor() or "", "system": platform.platform()}
+            "numpy": np.__version__, "machine": platform.machine(),
+            "system": platform.platform()}
     try:
         with open("/proc/cpuinfo") as f:
             names = [line.split(":", 1)[1].strip() for line in f if line.startswith("model name")]
         info["cpu"] = names[0] if names else ""
     except OSError:
-        pass
+        info["cpu"] = platform.processor()
     return info
-
-
-def _targets(robot: Robot, q: np.ndarray, frame_id: int, steps: int, dt: float,
-             radius: float = 0.01) -> list[pin.SE3]:
-    """Poses of the frame's start moving on a ``radius`` circle, one turn per second."""
-    pose = robot.fk(q, robot.model.frames[frame_id].name)
-    angles = 2.0 * np.pi * np.arange(steps) * dt
-    return [pin.SE3(pose.rotation, pose.translation + radius * np.array([np.cos(a) - 1.0,
-                                                                          np.sin(a), 0.0]))
-            for a in angles]
 
 
 def _time(function, args_list, warmup: int) -> np.ndarray:
     """Per-call times (ns) of ``function(*args)`` over ``args_list`` after ``warmup`` calls."""
+    return _time_pair(function, args_list, None, None, warmup)[0]
+
+
+def _time_pair(first, first_args, second, second_args, warmup: int):
+    """Per-call times (ns) of two functions called alternately on their argument lists, so
+    that both see the same state of a shared, noisy machine."""
     clock = time.perf_counter_ns
-    for args in args_list[:warmup]:
-        function(*args)
-    samples = np.empty(len(args_list) - warmup)
-    for k, args in enumerate(args_list[warmup:]):
+    for k in range(warmup):
+        first(*first_args[k])
+        if second is not None:
+            second(*second_args[k])
+    count = len(first_args) - warmup
+    a, b = np.empty(count), np.empty(count)
+    for k in range(count):
+        args = first_args[warmup + k]
         start = clock()
-        function(*args)
-        samples[k] = clock() - start
-    return samples
+        first(*args)
+        middle = clock()
+        if second is not None:
+            second(*second_args[warmup + k])
+            b[k] = clock() - middle
+        a[k] = middle - start
+    return a, b
 
 
-def _start(robot: Robot) -> np.ndarray:
-    """A configuration inside the limits and away from singularities for the benchmark."""
-    if robot.name == "ur5":
-        return UR5_START.copy()
-    if robot.name == "planar3":
-        return PLANAR3_START.copy()
-    return robot.q0.copy()
+@dataclass
+class Path:
+    """One way of calling ``step``: the solver's options, its frames and what it is given."""
+
+    name: str
+    method: str = "sjt"
+    options: dict = field(default_factory=dict)
+    frames: tuple[str, ...] = ()  # several pose tasks on these frames (default: the end effector)
+    position: bool = False  # a PositionTask on the end effector
+    posture: bool = False
+    feedforward: bool = False
 
 
-def primitives_timing(robot: Robot, frame_id: int, qs: list, targets: list,
-                      warmup: int) -> Timing:
-    """The Pinocchio calls of one pose-task step, made as ``step()`` makes them."""
+PATHS = [
+    Path("SJT pose"),
+    Path("SJT pose + target_velocity", feedforward=True),
+    Path("SJT position", position=True),
+    Path("SJT position + target_velocity", position=True, feedforward=True),
+    Path("SJT pose + posture", posture=True),
+    Path("SJT pose + posture + target_velocity", posture=True, feedforward=True),
+    Path("SJT transpose feedback + target_velocity", options={"feedback": "transpose"},
+         feedforward=True),
+    Path("SJT paper eq. 21 + target_velocity",
+         options={"feedback": "transpose", "feedforward": "transpose"}, feedforward=True),
+    Path("JT pose", "jt"),
+    Path("JT pose + target_velocity", "jt", feedforward=True),
+    Path("JP pose + target_velocity", "jp", feedforward=True),
+    Path("DLS pose + target_velocity", "dls", feedforward=True),
+]
+#: Two frames per robot (the end effector and a link up the arm), and Talos' two hands.
+TWO_FRAMES = {"ur5": ("tool0", "forearm_link"), "panda": ("panda_hand", "panda_link4"),
+              "talos": ("gripper_left_joint", "gripper_right_joint")}
+
+
+def _circle(robot: Robot, q: np.ndarray, frame: str, duration: float,
+            radius: float = 0.01) -> Circle:
+    """A ``radius`` circle through the frame's position at ``q``, one turn per second."""
+    pose = robot.fk(q, frame)
+    return Circle(pose.translation - [radius, 0.0, 0.0], radius, duration=duration,
+                  rotation=pose.rotation, turns=duration)
+
+
+def _targets(robot: Robot, q0: np.ndarray, frames: tuple[str, ...], count: int, dt: float):
+    """Per step: ``{frame: (pose, velocity 6-vector)}`` on 1 cm circles."""
+    times = np.arange(count) * dt
+    out = [dict() for _ in range(count)]
+    for frame in frames:
+        circle = _circle(robot, q0, frame, count * dt)
+        positions, rotations, velocities = circle.samples(times)
+        for k in range(count):
+            out[k][frame] = (pin.SE3(np.array(rotations[k]), positions[k]), velocities[k])
+    return out
+
+
+def _floor(robot: Robot, frames: tuple[str, ...], position: bool, posture: bool):
+    """The Pinocchio calls of a step on ``frames``, as the step makes them."""
     model, data = robot.model, robot.model.createData()
-    step = np.full(model.nv, 1e-6)
-    local = pin.LOCAL
+    ids = [robot.frame_id(f) for f in frames]
+    delta = np.full(model.nv, 1e-6)
+    local, aligned, q_ref = pin.LOCAL, pin.LOCAL_WORLD_ALIGNED, robot.q0
 
-    def floor(q, oMd):
+    def floor(q, targets):
         pin.computeJointJacobians(model, data, q)
-        oMf = pin.updateFramePlacement(model, data, frame_id)
-        pin.getFrameJacobian(model, data, frame_id, local)
-        return pin.log6(oMf.actInv(oMd)).vector, pin.integrate(model, q, step)
+        for fid, frame in zip(ids, frames, strict=True):
+            oMf = pin.updateFramePlacement(model, data, fid)
+            if position:
+                pin.getFrameJacobian(model, data, fid, aligned)
+            else:
+                pin.getFrameJacobian(model, data, fid, local)
+                pin.log6(oMf.actInv(targets[frame][0])).vector
+        if posture:
+            pin.difference(model, q, q_ref)
+        return pin.integrate(model, q, delta)
 
-    return Timing.of(_time(floor, list(zip(qs, targets, strict=True)), warmup))
-
-
-def step_timing(solver, q0: np.ndarray, targets: list, warmup: int) -> tuple[Timing, list]:
-    """Times of ``solver.step`` along the moving target; returns the configurations visited."""
-    qs, q = [], q0
-    for target in targets:  # the path the timed loop will follow, so both see the same q
-        qs.append(q)
-        q = solver.step(q, target)
-    samples = _time(solver.step, list(zip(qs, targets, strict=True)), warmup)
-    return Timing.of(samples), qs
+    return floor
 
 
-def pink_timing(robot: Robot, frame: str, qs: list, targets: list, dt: float,
-                warmup: int) -> Timing:
+def time_path(robot: Robot, q0: np.ndarray, path: Path, steps: int, warmup: int,
+              dt: float = 1e-3, frames: tuple[str, ...] | None = None) -> SpeedRow:
+    """Median/p90/p99 of ``step`` on ``path`` and of its floor."""
+    frames = frames or path.frames or (robot.ee_frame,)
+    if path.position:
+        task = PositionTask()
+    elif len(frames) == 1:
+        task = PoseTask(frame=frames[0])
+    else:
+        task = {f: PoseTask() for f in frames}
+    solver = make_solver(path.method, robot, dt=dt, task=task,
+                         posture=PostureTask() if path.posture else None, **path.options)
+    targets = _targets(robot, q0, frames, steps + warmup, dt)
+    single = len(frames) == 1
+    calls, q = [], q0
+    for tk in targets:  # the configurations the timed loop will see
+        if single:
+            pose, velocity = tk[frames[0]]
+            args = (q, pose.translation if path.position else pose,
+                    velocity if path.feedforward else None)
+        else:
+            args = (q, {f: tk[f][0] for f in frames},
+                    {f: tk[f][1] for f in frames} if path.feedforward else None)
+        calls.append(args)
+        q = solver.step(*args)
+    floor_calls = [(args[0], tk) for args, tk in zip(calls, targets, strict=True)]
+    steps, floors = _time_pair(solver.step, calls,
+                               _floor(robot, frames, path.position, path.posture), floor_calls,
+                               warmup)
+    return SpeedRow(robot.name, path.name, Timing.of(steps), Timing.of(floors))
+
+
+def time_track(robot: Robot, q0: np.ndarray, steps: int, dt: float = 1e-3,
+               repeats: int = 7) -> SpeedRow:
+    """``track()`` on a 1 cm circle, per step (total time / steps), against the pose floor."""
+    frames = (robot.ee_frame,)
+    circle = _circle(robot, q0, robot.ee_frame, steps * dt)
+    solver = make_solver("sjt", robot, dt=dt)
+    log = track(solver, circle, q0)
+    samples = []
+    for _ in range(repeats):
+        start = time.perf_counter_ns()
+        track(solver, circle, q0)
+        samples.append((time.perf_counter_ns() - start) / len(log))
+    targets = _targets(robot, q0, frames, len(log), dt)
+    floor = Timing.of(_time(_floor(robot, frames, False, False),
+                            list(zip(log.q, targets, strict=True)), len(log) // 10))
+    return SpeedRow(robot.name, "track() per step (SJT, circle)", Timing.of(np.array(samples)),
+                    floor)
+
+
+def time_pink(robot: Robot, q0: np.ndarray, steps: int, warmup: int,
+              dt: float = 1e-3) -> SpeedRow:
     """pink's ``solve_ik`` + ``integrate`` on the same frame and targets (one FrameTask, a
     small PostureTask, pink's default limits, its fastest available QP solver)."""
     import pink
     import qpsolvers
-    from pink.tasks import FrameTask, PostureTask
+    from pink.tasks import FrameTask
+    from pink.tasks import PostureTask as PinkPosture
 
-    solver = "daqp" if "daqp" in qpsolvers.available_solvers else qpsolvers.available_solvers[0]
-    model = robot.model
-    configuration = pink.Configuration(model, model.createData(), qs[0])
+    qp = "daqp" if "daqp" in qpsolvers.available_solvers else qpsolvers.available_solvers[0]
+    frame = robot.ee_frame
+    configuration = pink.Configuration(robot.model, robot.model.createData(), q0)
     task = FrameTask(frame, position_cost=1.0, orientation_cost=1.0)
-    posture = PostureTask(cost=1e-3)
+    posture = PinkPosture(cost=1e-3)
     posture.set_target(robot.q0)
-    tasks = [task, posture]
+    targets = _targets(robot, q0, (frame,), steps + warmup, dt)
 
     def pink_step(q, target):
         configuration.update(q)
         task.set_target(target)
-        velocity = pink.solve_ik(configuration, tasks, dt, solver=solver)
+        velocity = pink.solve_ik(configuration, [task, posture], dt, solver=qp)
         return configuration.integrate(velocity, dt)
 
-    return Timing.of(_time(pink_step, list(zip(qs, targets, strict=True)), warmup))
+    calls, q = [], q0
+    for tk in targets:
+        calls.append((q, tk[frame][0]))
+        q = pink_step(q, tk[frame][0])
+    steps, floors = _time_pair(pink_step, calls, _floor(robot, (frame,), False, False),
+                               [(c[0], tk) for c, tk in zip(calls, targets, strict=True)], warmup)
+    return SpeedRow(robot.name, "pink solve_ik + integrate", Timing.of(steps), Timing.of(floors))
 
 
-def speed(robots=SPEED_ROBOTS, methods=METHODS, steps: int = 5000, warmup: int = 500,
-          dt: float = 1e-3, peers: bool = False, progress=None) -> SpeedReport:
-    """Median/p90 of one step per method and robot, beside the Pinocchio floor (and pink)."""
+def start_configuration(robot: Robot) -> np.ndarray:
+    return STARTS.get(robot.name, robot.q0).copy()
+
+
+def speed(robots=ROBOTS, steps: int = 5000, warmup: int = 500, peers: bool = False,
+          talos: bool = True, progress=None) -> SpeedReport:
+    """Every path of :data:`PATHS`, two frames, ``track()`` (and pink) per robot; Talos' two
+    hands."""
     report = SpeedReport(machine=machine())
-    for name in robots:
-        robot = load_robot(name)
-        q0 = _start(robot)
-        targets = _targets(robot, q0, robot.ee_frame_id, steps + warmup, dt)
-        variants = [(m, {}) for m in methods]
-        if "sjt" in methods:  # the paper's method as it stands, without the limits' checks
-            variants.insert(1, ("sjt", {"position_limits": False, "velocity_limits": False}))
-        floor = None
-        for method, options in variants:
-            solver = make_solver(method, robot, dt=dt, task=PoseTask(), **options)
-            timing, qs = step_timing(solver, q0, targets, warmup)
-            if floor is None:
-                floor = primitives_timing(robot, robot.ee_frame_id, qs, targets, warmup)
-            label = method + (" (no limits)" if options else "")
-            report.rows.append(SpeedRow(name, robot.nv, label, timing, floor))
-            if progress:
-                progress(report.rows[-1])
-        if peers:
-            timing = pink_timing(robot, robot.ee_frame, qs, targets, dt, warmup)
-            report.rows.append(SpeedRow(name, robot.nv, "pink", timing, floor, peer="pink"))
-            if progress:
-                progress(report.rows[-1])
-    return report
 
-
-def chain_robot(joints: int) -> Robot:
-    """A serial chain of ``joints`` revolute joints, 1 m long in all, axes turning z, y, x."""
-    from ..robots import planar3 as generator
-
-    axes = [[0, 0, 1], [0, 1, 0], [1, 0, 0]]
-    urdf = generator.serial_chain([1.0 / joints] * joints, name=f"chain{joints}",
-                                  axes=[axes[k % 3] for k in range(joints)])
-    robot = Robot.from_urdf(generator.to_xml(urdf), ee_frame="ee", load_visuals=False)
-    robot.name = f"chain{joints}"
-    robot.q0 = np.full(joints, 0.1)
-    return robot
-
-
-def scale(chains=(20, 50, 100), steps: int = 2000, warmup: int = 200, dt: float = 1e-3,
-          progress=None) -> SpeedReport:
-    """SJT step time against the number of joints: the speed robots, Talos' two hands, chains."""
-    report = SpeedReport(machine=machine())
-    cases: list[tuple[str, Robot, object, list]] = []
-    for name in SPEED_ROBOTS:
-        robot = load_robot(name)
-        cases.append((name, robot, PoseTask(), None))
-    talos = Robot.from_example("talos")
-    hands = ["gripper_left_joint", "gripper_right_joint"]
-    cases.append(("talos (2 hands)", talos, {h: PoseTask() for h in hands}, hands))
-    for n in chains:
-        cases.append((f"chain{n}", chain_robot(n), PoseTask(), None))
-    for label, robot, task, frames in cases:
-        q0 = _start(robot) if label in SPEED_ROBOTS else robot.q0.copy()
-        solver = make_solver("sjt", robot, dt=dt, task=task, position_limits=False,
-                             velocity_limits=False)
-        if frames is None:
-            targets = _targets(robot, q0, robot.ee_frame_id, steps + warmup, dt)
-            floor_frame = robot.ee_frame_id
-        else:
-            per_frame = [_targets(robot, q0, robot.frame_id(f), steps + warmup, dt) for f in frames]
-            targets = [dict(zip(frames, t, strict=True)) for t in zip(*per_frame, strict=True)]
-            floor_frame = robot.frame_id(frames[0])
-        timing, qs = step_timing(solver, q0, targets, warmup)
-        floor_targets = targets if frames is None else [t[frames[0]] for t in targets]
-        floor = primitives_timing(robot, floor_frame, qs, floor_targets, warmup)
-        report.rows.append(SpeedRow(label, robot.nv, "sjt", timing, floor))
+    def add(row):
+        report.rows.append(row)
         if progress:
-            progress(report.rows[-1])
+            progress(row)
+
+    for name in robots:
+        robot = Robot.from_example(name)
+        q0 = start_configuration(robot)
+        for path in PATHS:
+            add(time_path(robot, q0, path, steps, warmup))
+        for label, options, ff in [("SJT two frames", {}, False),
+                                   ("SJT two frames + target_velocity", {}, True)]:
+            add(time_path(robot, q0, Path(label, options=options, feedforward=ff), steps,
+                          warmup, frames=TWO_FRAMES[name]))
+        add(time_track(robot, q0, steps))
+        if peers:
+            add(time_pink(robot, q0, steps, warmup))
+    if talos:
+        robot = Robot.from_example("talos")
+        for label, ff in [("SJT two hands", False), ("SJT two hands + target_velocity", True)]:
+            add(time_path(robot, robot.q0.copy(), Path(label, feedforward=ff), steps // 2,
+                          warmup // 2, frames=TWO_FRAMES["talos"]))
     return report
 
 
 def speed_table(report: SpeedReport) -> str:
-    """Markdown table of a speed or scale report."""
-    lines = ["| robot | nv | method | step median [us] | step p90 [us] | Pinocchio floor [us] | "
-             "step / floor | us per joint |", "|---|---|---|---|---|---|---|---|"]
+    """Markdown table of a speed report."""
+    lines = ["| robot | path | median [us] | p90 [us] | p99 [us] | floor [us] | step / floor | "
+             "p90 / median |", "|---|---|---|---|---|---|---|---|"]
     for r in report.rows:
-        lines.append(f"| {r.robot} | {r.nv} | {r.method} | {r.step.median:.2f} | "
-                     f"{r.step.p90:.2f} | {r.primitives.median:.2f} | {r.ratio:.2f} | "
-                     f"{r.step.median / r.nv:.2f} |")
+        lines.append(f"| {r.robot} | {r.path} | {r.step.median:.2f} | {r.step.p90:.2f} | "
+                     f"{r.step.p99:.2f} | {r.floor.median:.2f} | {r.ratio:.2f} | "
+                     f"{r.step.jitter:.2f} |")
     return "\n".join(lines)
 
 
 def peer_ratios(report: SpeedReport) -> dict[str, float]:
-    """pink's step time over SJT's (with limits) per robot."""
+    """pink's step time over SJT's with a target velocity, per robot."""
     out = {}
     for robot in {r.robot for r in report.rows}:
-        rows = {r.method: r for r in report.rows if r.robot == robot}
-        if "pink" in rows and "sjt" in rows:
-            out[robot] = rows["pink"].step.median / rows["sjt"].step.median
+        rows = {r.path: r for r in report.rows if r.robot == robot}
+        pink_row = rows.get("pink solve_ik + integrate")
+        sjt_row = rows.get("SJT pose + target_velocity")
+        if pink_row and sjt_row:
+            out[robot] = pink_row.step.median / sjt_row.step.median
     return out
-
-
-def breakdown(name: str = "ur5", samples: int = 20000) -> list[tuple[str, float]]:
-    """Where an SJT pose step spends its time: the median cost (us) of each stage, measured
-    by timing the stages cumulatively (Pinocchio's calls, then the compiled SJT loop)."""
-    from ..kernels import transpose_step
-
-    robot = load_robot(name)
-    model, data, fid = robot.model, robot.model.createData(), robot.ee_frame_id
-    q = _start(robot)
-    target = _targets(robot, q, fid, 2, 1e-3)[1]
-    solver = make_solver("sjt", robot, dt=1e-3, position_limits=False, velocity_limits=False)
-    numerator, off_chain = solver._chain_kdt, solver._not_chain
-    local = pin.LOCAL
-
-    def stage(level):
-        pin.computeJointJacobians(model, data, q)
-        oMf = pin.updateFramePlacement(model, data, fid)
-        J = pin.getFrameJacobian(model, data, fid, local)
-        e = pin.log6(oMf.actInv(target)).vector
-        step = np.empty(robot.nv)
-        if level:
-            sjt_step(J, e, numerator, off_chain, step)
-        else:
-            step[:] = 0.0
-        return pin.integrate(model, q, step)
-
-    cumulative = [float(np.median(_time(stage, [(level,)] * samples, samples // 10))) / 1e3
-                  for level in range(2)]
-    limited = make_solver("sjt", robot, dt=1e-3)
-    full = Timing.of(_time(solver.step, [(q, target)] * samples, samples // 10)).median
-    with_limits = Timing.of(_time(limited.step, [(q, target)] * samples, samples // 10)).median
-    return [
-        ("Pinocchio calls (the floor)", cumulative[0]),
-        ("+ compiled SJT loop: |e|^2, alpha_i = 1 / |J_i|^2, k dt D J^T e",
-         cumulative[1] - cumulative[0]),
-        ("+ Python around it (checks, state, StepInfo record)", full - cumulative[1]),
-        ("+ joint limits test (position and speed)", with_limits - full),
-    ]

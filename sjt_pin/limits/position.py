@@ -4,12 +4,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kernels import clamp_pass, limits_violated
+from ..kernels import clamp_pass
 from .base import Limit
 
 
 class PositionLimit(Limit):
     """The URDF position limits of 1-DoF joints (revolute, prismatic) are never crossed.
+
+    A solver runs this limit inside its step kernel (the box and the clamping pass of
+    :mod:`sjt_pin.kernels.methods`); these methods are the reference it is tested against and
+    what a further solver's ``limits=`` would use.
 
     A joint whose update would leave its range is clamped out of the update: it moves exactly
     onto its limit (or stays there) and its column is removed from the mapping, which is
@@ -38,10 +42,7 @@ class PositionLimit(Limit):
         self.lower = lower[self.q_index].copy()
         self.upper = upper[self.q_index].copy()
         self.recovery_speeds = np.asarray(recovery_speeds, dtype=float)[self.v_index]
-        self.names = [model.names[j] for j in range(1, model.njoints)
-                      if model.joints[j].idx_v in set(vi) and model.joints[j].nv == 1]
-        self._no_speed = np.zeros(model.nv)
-        self._fixed = np.zeros(model.nv, dtype=bool)
+        self._fixed = np.zeros(model.nv)
         self._fixed_step = np.zeros(model.nv)
         #: tangent (v) indices of the joints clamped by the last step
         self.clamped = np.zeros(0, dtype=np.int64)
@@ -52,8 +53,8 @@ class PositionLimit(Limit):
         return self.q_index.size > 0
 
     def violated(self, q, step, dt):
-        return limits_violated(q, step, self.q_index, self.v_index, self.lower, self.upper,
-                               self._no_speed) != 0
+        new = q[self.q_index] + step[self.v_index]
+        return bool(np.any(new > self.upper) or np.any(new < self.lower))
 
     def reset(self):
         if self.clamped.size:
@@ -61,16 +62,16 @@ class PositionLimit(Limit):
 
     def enforce(self, q, step, dt, remap):
         fixed, fixed_step = self._fixed, self._fixed_step
-        fixed[:] = False
+        fixed[:] = 0.0
         fixed_step[:] = 0.0
-        recovery = self.recovery_speeds * dt
         for _ in range(self.q_index.size):
             if not clamp_pass(q, step, self.q_index, self.v_index, self.lower, self.upper,
-                              recovery, fixed, fixed_step):
+                              self.recovery_speeds, dt, fixed, fixed_step):
                 break
             # the free joints take over the task velocity the fixed ones no longer provide
-            step = remap(~fixed, fixed_step / dt)
-            step[fixed] = fixed_step[fixed]
+            held = fixed != 0.0
+            step = remap(~held, fixed_step / dt)
+            step[held] = fixed_step[held]
         self.clamped = np.flatnonzero(fixed)
         return step
 

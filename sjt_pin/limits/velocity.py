@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kernels import limits_violated
 from .base import Limit
 
 
 class VelocityLimit(Limit):
     """No joint faster than its limit: the whole joint velocity is scaled down uniformly, so
-    the direction of the update (and of the task motion) is kept.
+    the direction of the update (and of the task motion) is kept. A solver runs it inside its
+    step kernel; these methods are the reference.
 
     Args:
         limits: (nv,) speed limits in rad/s or m/s (``inf`` for none).
@@ -19,9 +19,6 @@ class VelocityLimit(Limit):
     def __init__(self, limits: np.ndarray):
         self.limits = np.asarray(limits, dtype=float)
         self._inv = 1.0 / self.limits
-        self._empty = np.zeros(0, dtype=np.int64)
-        self._none = np.zeros(0)
-        self._dt = None
         #: the factor (<= 1) the last step was scaled by
         self.scale = 1.0
 
@@ -30,17 +27,14 @@ class VelocityLimit(Limit):
         return bool(np.any(np.isfinite(self.limits)))
 
     def violated(self, q, step, dt):
-        if dt != self._dt:
-            self._dt, self._inv_dt = dt, self._inv / dt
-        return limits_violated(q, step, self._empty, self._empty, self._none, self._none,
-                               self._inv_dt) != 0
+        return bool(np.max(np.abs(step) * self._inv) > dt)
 
     def reset(self):
         self.scale = 1.0
 
     def enforce(self, q, step, dt, remap):
         worst = float(np.max(np.abs(step) * self._inv)) / dt
+        self.scale = 1.0 / worst if worst > 1.0 else 1.0
         if worst > 1.0:
             step /= worst
-            self.scale = 1.0 / worst
         return step

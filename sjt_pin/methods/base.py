@@ -48,7 +48,7 @@ class Method(ABC):
         return None
 
     def feedforward_mode(self) -> int:
-        """The kernels' ``P_FF_MODE`` of a step with a desired velocity."""
+        """The kernels' ``P_FF_MODE``: how a desired velocity is mapped."""
         return K.FF_TRANSPOSE
 
     def __repr__(self) -> str:

@@ -38,6 +38,8 @@ class Task(ABC):
     dim: int
     #: whether ``step`` takes a target for this task (a posture task has its own reference)
     takes_target: ClassVar[bool] = True
+    #: whether the Jacobian rows never change (the stack then copies them once)
+    constant_jacobian: ClassVar[bool] = False
 
     def __init__(self, frame: str | None = None, weight=None):
         if frame is not None and not isinstance(frame, str):
@@ -66,6 +68,10 @@ class Task(ABC):
         bound.frame = robot.model.frames[bound.frame_id].name
         return bound
 
+    def write_into(self, J: np.ndarray, e: np.ndarray, ff: np.ndarray) -> None:
+        """Offer views of the stacked buffers for this task's rows: a task may compute its
+        rows straight into them (and return them) instead of into arrays of its own."""
+
     def target(self, value) -> Any:
         """``value`` validated and converted for :meth:`compute` (default: a rigid pose)."""
         return as_pose(value, "target")
@@ -86,4 +92,5 @@ class Task(ABC):
         return f"{type(self).__name__}({frame})"
 
 
+#: what the compiled task kernels take for "no desired velocity"
 _NO_VELOCITY = np.zeros(0)

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from ..kernels import pose_feedforward
-from ..validation import RIGID_TOL, check_rigid
-from .base import _NO_VELOCITY, Task
+from ..kernels import frame_velocity, rotation_defect
+from ..validation import RIGID_TOL
+from .base import Task
 
 
 class OrientationTask(Task):
@@ -25,7 +25,7 @@ class OrientationTask(Task):
         return bound
 
     def target(self, value):
-        if type(value) is pin.SE3:
+        if type(value) is pin.SE3 and rotation_defect(value.np) <= RIGID_TOL:
             return value
         return super().target(value)
 
@@ -34,7 +34,7 @@ class OrientationTask(Task):
         self.placement = oMf
         J = kinematics.jacobian(self.frame_id)[3:]
         e = pin.log3(oMf.actInv(target).rotation)
-        if not pose_feedforward(oMf.np, target.np, _NO_VELOCITY if velocity is None else velocity,
-                                self._ff) <= RIGID_TOL:
-            check_rigid(target)
-        return J, e, None if velocity is None else self._ff[3:]
+        if velocity is None:
+            return J, e, None
+        frame_velocity(oMf.np, target.np, velocity, self._ff)
+        return J, e, self._ff[3:]

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from ..kernels import pose_feedforward
+from ..kernels import frame_velocity, rotation_defect
 from ..validation import RIGID_TOL, check_rigid
-from .base import _NO_VELOCITY, Task
+from .base import Task
 
 
 class PoseTask(Task):
@@ -30,18 +30,21 @@ class PoseTask(Task):
         bound._ff = np.zeros(6)
         return bound
 
+    def write_into(self, J, e, ff):
+        self._ff = ff  # the feed-forward is computed here; J and e come from Pinocchio
+
     def target(self, value):
-        if type(value) is pin.SE3:
-            return value  # rigidity is checked in compute, with the feed-forward
+        if type(value) is pin.SE3 and rotation_defect(value.np) <= RIGID_TOL:
+            return value  # a rigid pose (NaN shows in the error)
         return super().target(value)
 
     def compute(self, kinematics, target, velocity):
-        oMf = kinematics.placement(self.frame_id)
+        model, data, fid = kinematics.model, kinematics.data, self.frame_id
+        oMf = pin.updateFramePlacement(model, data, fid)
         self.placement = oMf
-        J = kinematics.jacobian(self.frame_id)
+        J = pin.getFrameJacobian(model, data, fid, pin.LOCAL)
         e = pin.log6(oMf.actInv(target)).vector
-        ff = self._ff
-        if not pose_feedforward(oMf.np, target.np, _NO_VELOCITY if velocity is None else velocity,
-                                ff) <= RIGID_TOL:
-            check_rigid(target)
-        return J, e, None if velocity is None else ff
+        if velocity is None:
+            return J, e, None
+        frame_velocity(oMf.np, target.np, velocity, self._ff)
+        return J, e, self._ff

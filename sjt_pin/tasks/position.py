@@ -38,9 +38,13 @@ class PositionTask(Task):
 
     def bind(self, robot):
         bound = super().bind(robot)
-        bound._J = np.zeros((self.dim, robot.nv))
-        bound._e = np.zeros(self.dim)
-        bound._ff = np.zeros(self.dim)
+        d, n = self.dim, robot.nv
+        # [axes | J | e | ff]: one buffer, one argument for the kernel
+        bound._out = np.zeros(d * (n + 3))
+        bound._out[:d] = self._rows
+        bound._J = bound._out[d:d + d * n].reshape(d, n)
+        bound._e = bound._out[d + d * n:2 * d + d * n]
+        bound._ff = bound._out[2 * d + d * n:]
         return bound
 
     def target(self, value):
@@ -53,19 +57,20 @@ class PositionTask(Task):
         return as_vector(value, "target", 3)
 
     def velocity(self, value):
+        if type(value) is np.ndarray and value.shape in ((3,), (6,)) and value.dtype == np.float64:
+            return value  # finiteness shows in the feed-forward
         if isinstance(value, pin.Motion):
             return value.vector
-        if type(value) is np.ndarray and value.shape in ((3,), (6,)) and value.dtype == np.float64:
-            return value
         size = 3 if np.shape(value) == (3,) else 6
         return as_vector(value, "target_velocity", size)
 
     def compute(self, kinematics, target, velocity):
-        oMf = kinematics.placement(self.frame_id)
+        model, data, fid = kinematics.model, kinematics.data, self.frame_id
+        oMf = pin.updateFramePlacement(model, data, fid)
         self.placement = oMf
-        J6 = kinematics.world_aligned_jacobian(self.frame_id)
+        J6 = pin.getFrameJacobian(model, data, fid, pin.LOCAL_WORLD_ALIGNED)
         position_rows(J6, oMf.np, target, _NO_VELOCITY if velocity is None else velocity,
-                      self._rows, self._J, self._e, self._ff)
+                      self._out)
         return self._J, self._e, None if velocity is None else self._ff
 
     def __repr__(self) -> str:

@@ -21,6 +21,7 @@ class PostureTask(Task):
     """
 
     takes_target = False
+    constant_jacobian = True
 
     def __init__(self, q_ref=None, weight=1e-2):
         self.q_ref = None if q_ref is None else as_vector(q_ref, "q_ref")
@@ -45,6 +46,8 @@ class PostureTask(Task):
         return bound
 
     def compute(self, kinematics, target, velocity):
+        if kinematics.q is None:  # asked for its constant rows before any configuration
+            return self._J, np.zeros(self.dim), None
         return self._J, kinematics.difference(self.q_ref), None
 
     def __repr__(self) -> str:

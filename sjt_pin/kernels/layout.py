@@ -1,0 +1,102 @@
+"""The ``work`` vector of a solver: parameters, constants, results and scratch, in one array.
+
+A method kernel takes ``(J, e, ff, q, work, step)``: everything that stays fixed between steps
+(the parameters, the row weights and gains, the joint mask, the limit box) lives in ``work``,
+so a step pays for six arguments, not fifteen. :class:`Layout` says where each part starts;
+the kernels read those offsets from the ``P_*`` parameter slots.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+# -- parameter slots (work[P_*]) ----------------------------------------------------------------
+(P_DT, P_GAIN_MODE, P_GAIN_ARG, P_FF_MODE, P_MU, P_COL_TOL, P_SCALED, P_RCOND, P_LENGTH2,
+ P_FB_MODE, P_LM, P_ERROR_ROWS, P_STALL_RATIO, P_STALL_ERROR, P_ROWS, P_MASK, P_BOX,
+ P_BOX_COUNT, P_SPEED, P_SCRATCH, P_EXTRA, P_CLAMPED, P_ESCAPING, P_HAS_FF) = range(24)
+#: results (work[INFO + I_*])
+INFO = 24
+I_E_SQ, I_FF_SQ, I_GAIN, I_LOOP, I_STALL, I_TRACE, I_EW_SQ, I_SCALE, I_REGULAR = range(9)
+INFO_SIZE = 9
+HEADER = INFO + INFO_SIZE
+
+#: gain modes: K as given; "auto": c K / (dt lambda_hat), lambda_hat >= lambda_max(J M)
+GAIN_FIXED, GAIN_AUTO = 0, 1
+#: how a method maps the desired velocity (``P_FF_MODE``; ``P_HAS_FF`` says whether a step has
+#: one): through the feedback's own mapping (paper eq. 10, 21), or the damped sqrt(D) solve
+FF_TRANSPOSE, FF_DAMPED = 1, 2
+#: feedback of the transpose methods: S J^T K e (eq. 10, 21), or through the damped solve
+FB_TRANSPOSE, FB_DAMPED = 0, 1
+#: status bits a step kernel returns (0: nothing to do but integrate): errors and a stall need
+#: Python; joints clamped at a position limit and a step scaled for the speed limits do not
+NON_FINITE, STALLED, CLAMPED, SCALED = 1, 2, 4, 8
+#: bits of :func:`~.limits.box_status`
+OUTSIDE, TOO_FAST = 1, 2
+#: matrix products of the loop-eigenvalue bound (tr A^(2^(s+1)))^(1/2^(s+1))
+BOUND_PRODUCTS = 2
+#: smallest eigenvalue of J J^T, relative to the largest, that the pseudoinverse inverts: the
+#: eigenvalues of a Gram matrix are exact to about 1e3 eps of the largest
+EIGEN_FLOOR = 1e3 * 2.220446049250313e-16
+
+
+class Layout:
+    """Offsets of the parts of ``work`` for m task rows, n joints and c position-limited
+    joints, and views on them: the header (parameters, results), the rows' weights and gains,
+    the joint mask, the position box (q and v indices, lower and upper limits, return speeds),
+    the inverse speed limits, an extra joint velocity (the escape's), the clamped joints of the
+    last step, and the scratch space (the clamping's vectors, then the methods')."""
+
+    def __init__(self, m: int, n: int, c: int):
+        self.m, self.n, self.c = m, n, c
+        self.rows = HEADER
+        self.mask = self.rows + 2 * m
+        self.box = self.mask + n
+        self.speed = self.box + 5 * c
+        self.extra = self.speed + n
+        self.clamped = self.extra + n  # then the clamping's scratch: 3 n + m
+        self.scratch = self.clamped + n + 3 * n + m
+        p = min(m, n)
+        self.size = self.scratch + 4 * m + 6 * n + 3 * p * p
+
+    def allocate(self) -> np.ndarray:
+        """A zeroed ``work`` vector with the offsets written into their slots."""
+        work = np.zeros(self.size)
+        work[P_ROWS], work[P_MASK], work[P_BOX] = self.rows, self.mask, self.box
+        work[P_BOX_COUNT], work[P_SPEED], work[P_SCRATCH] = self.c, self.speed, self.scratch
+        work[P_EXTRA], work[P_CLAMPED] = self.extra, self.clamped
+        return work
+
+    def info(self, work: np.ndarray) -> np.ndarray:
+        return work[INFO:INFO + INFO_SIZE]
+
+    def sqrt_weight(self, work: np.ndarray) -> np.ndarray:
+        return work[self.rows:self.rows + self.m]
+
+    def gains(self, work: np.ndarray) -> np.ndarray:
+        return work[self.rows + self.m:self.rows + 2 * self.m]
+
+    def joint_mask(self, work: np.ndarray) -> np.ndarray:
+        return work[self.mask:self.mask + self.n]
+
+    def box_part(self, work: np.ndarray, k: int) -> np.ndarray:
+        """Part ``k`` of the limit box: 0 q indices, 1 v indices, 2 lower, 3 upper, 4 the
+        speed (rad/s, m/s) at which a joint outside its range returns."""
+        start = self.box + k * self.c
+        return work[start:start + self.c]
+
+    def inverse_speeds(self, work: np.ndarray) -> np.ndarray:
+        """1 / v_max per joint (0 where there is no limit)."""
+        return work[self.speed:self.speed + self.n]
+
+    def extra_velocity(self, work: np.ndarray) -> np.ndarray:
+        """A joint velocity added to the method's (the escape's; rad/s, m/s)."""
+        return work[self.extra:self.extra + self.n]
+
+    def clamped_joints(self, work: np.ndarray) -> np.ndarray:
+        """1 for the joints the last step held at a position limit."""
+        return work[self.clamped:self.clamped + self.n]
+
+
+def work_size(m: int, n: int, c: int = 0) -> int:
+    """Length of ``work`` for m task rows, n joints and c position-limited joints."""
+    return Layout(m, n, c).size

@@ -1,0 +1,57 @@
+"""Joint limits in a step: the box test of every limited joint, and the clamping pass."""
+
+from __future__ import annotations
+
+from .compile import compiled
+from .layout import OUTSIDE, P_BOX, P_BOX_COUNT, P_DT, P_SPEED, TOO_FAST
+
+
+@compiled
+def box_status(q, step, work):
+    """Whether ``q + step`` leaves the position box (``OUTSIDE``: a limited 1-DoF joint would
+    end outside its range, or starts there) or some joint is faster than its limit
+    (``TOO_FAST``: ``|step_j| > v_max,j dt``); the box and the inverse speed limits are read
+    from ``work``."""
+    status = 0
+    box, count = int(work[P_BOX]), int(work[P_BOX_COUNT])
+    for c in range(count):
+        new = q[int(work[box + c])] + step[int(work[box + count + c])]
+        if new > work[box + 3 * count + c] or new < work[box + 2 * count + c]:
+            status = OUTSIDE
+            break
+    speed = int(work[P_SPEED])
+    for j in range(step.shape[0]):
+        if abs(step[j]) * work[speed + j] > work[P_DT]:
+            status |= TOO_FAST
+            break
+    return status
+
+
+@compiled(inline=True)
+def clamp_pass(q, step, q_index, v_index, lower, upper, speeds, dt, fixed, fixed_step):
+    """Fix the joints that ``q + step`` takes out of ``[lower, upper]``; returns how many.
+
+    ``q_index``, ``v_index`` may be floats (as stored in a solver's ``work``). A fixed joint
+    inside its range moves exactly onto the limit. A joint that starts outside (a start
+    configuration out of range) is driven back toward the range at ``speeds`` (rad/s or m/s)
+    and no further than the limit. ``fixed`` (1.0 where fixed) and ``fixed_step``
+    (tangent-indexed) are updated in place.
+    """
+    count = 0
+    for c in range(q_index.shape[0]):
+        v = int(v_index[c])
+        if fixed[v] != 0.0:
+            continue
+        qc, lo, hi = q[int(q_index[c])], lower[c], upper[c]
+        new = qc + step[v]
+        if lo <= qc <= hi:
+            if lo <= new <= hi:
+                continue
+            fixed_step[v] = min(max(new, lo), hi) - qc
+        elif qc > hi:
+            fixed_step[v] = -min(speeds[c] * dt, qc - hi)
+        else:
+            fixed_step[v] = min(speeds[c] * dt, lo - qc)
+        fixed[v] = 1.0
+        count += 1
+    return count

@@ -1,0 +1,355 @@
+"""URDF input checked before Pinocchio parses it, so that a bad one gets an error saying why.
+
+Pinocchio's URDF parser (urdfdom) answers every broken file with "The XML stream does not
+contain a valid URDF model." and prints the reason to stderr; it also accepts some broken robots
+silently (a zero-length joint axis, lower > upper limits, a cycle cut off from the root). Here
+:func:`read_urdf` turns ``Robot.from_urdf``'s argument into a :class:`URDFSource`,
+:func:`check_urdf` rejects what is not a URDF tree with sane numbers, and :func:`build_model`
+runs Pinocchio and puts whatever it prints to stderr into the error. Every error is a
+:class:`URDFError` whose message starts with the file (or ``<URDF string>``) and names the
+offending joint or link.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import difflib
+import io
+import math
+import os
+import sys
+import tempfile
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import pinocchio as pin
+from lxml import etree
+
+from .exceptions import URDFError
+
+#: The joint types of the URDF specification.
+JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", "planar")
+#: Joint types whose ``<axis>`` matters (for ``planar`` it is the plane's normal).
+_AXIS_TYPES = {"revolute", "continuous", "prismatic", "planar"}
+#: Joint types whose ``<limit lower upper>`` bound the position.
+_LIMITED_TYPES = {"revolute", "prismatic"}
+STRING_LABEL = "<URDF string>"
+
+
+@dataclass(frozen=True)
+class URDFSource:
+    """A URDF document to parse: XML text given in the call, or a file."""
+
+    label: str  #: the file path, or ``<URDF string>``: every error message starts with it
+    data: bytes  #: the document's bytes
+    path: Path | None = None  #: the file; None for XML text
+
+    @property
+    def text(self) -> str:
+        """The document as text (XML text sources are UTF-8 encoded in ``data``)."""
+        return self.data.decode("utf-8", errors="replace")
+
+    def error(self, problem: str) -> URDFError:
+        """A :class:`URDFError` naming this source."""
+        return URDFError(f"invalid URDF {self.label}: {problem}")
+
+
+# -- the argument ------------------------------------------------------------------------------
+def read_urdf(path_or_xml: str | bytes | os.PathLike) -> URDFSource:
+    """``path_or_xml`` as a :class:`URDFSource`: a file path (``str`` or ``os.PathLike``), or
+    URDF XML text (a ``str``, or UTF-8 ``bytes``, starting with ``<``).
+
+    Raises ``TypeError`` for other types and for bytes that are not XML text, and
+    :class:`URDFError` for an empty string, text that is neither XML nor a file name, a missing
+    file, a directory, or an unreadable or empty file.
+    """
+    if isinstance(path_or_xml, (bytes, bytearray)):
+        return _xml_text(_decoded(bytes(path_or_xml)))
+    if isinstance(path_or_xml, str):
+        if not path_or_xml.strip():
+            raise URDFError(f"empty URDF: path_or_xml is {path_or_xml!r}; pass a URDF file path "
+                            "or URDF XML text")
+        if path_or_xml.lstrip().startswith("<"):
+            return _xml_text(path_or_xml)
+        if not path_or_xml.isprintable():
+            raise URDFError("path_or_xml is neither a URDF file path nor URDF XML text (XML "
+                            f"starts with '<'): got {_preview(path_or_xml)}")
+    elif not isinstance(path_or_xml, os.PathLike):
+        raise TypeError("path_or_xml must be a URDF file path (str or os.PathLike) or URDF XML "
+                        f"text (str or bytes starting with '<'), got {type(path_or_xml).__name__}")
+    return _file(Path(path_or_xml))
+
+
+def _decoded(data: bytes) -> str:
+    """UTF-8 ``bytes`` of XML text as ``str``; ``TypeError`` if they do not start with ``<``."""
+    if not _starts_xml(data):
+        raise TypeError("path_or_xml as bytes must be URDF XML text starting with '<', got "
+                        f"{_preview(data)}; pass a file path as str or pathlib.Path")
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise URDFError(f"path_or_xml: the URDF bytes are not UTF-8 text: {exc}") from exc
+
+
+def _starts_xml(data: bytes) -> bool:
+    """Whether ``data`` starts with ``<`` after white space and a UTF-8 byte order mark."""
+    return data.lstrip().removeprefix(b"\xef\xbb\xbf").lstrip().startswith(b"<")
+
+
+def _xml_text(text: str) -> URDFSource:
+    return URDFSource(STRING_LABEL, text.encode("utf-8"))
+
+
+def _file(path: Path) -> URDFSource:
+    """The URDF file at ``path``, read; :class:`URDFError` if it is missing, a directory,
+    unreadable or empty."""
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError:
+        raise URDFError(f"URDF file not found: {path}") from None
+    except IsADirectoryError:
+        urdfs = sorted(p.name for p in path.glob("*.urdf"))
+        hint = f" (URDF files in it: {urdfs})" if urdfs else ""
+        raise URDFError(f"URDF path {path} is a directory, not a file{hint}") from None
+    except OSError as exc:
+        raise URDFError(f"cannot read URDF file {_preview(str(path))}: {exc.strerror}; "
+                        "path_or_xml must be a URDF file path or URDF XML text") from exc
+    if not data.strip():
+        raise URDFError(f"empty URDF: the file {path} is empty")
+    return URDFSource(str(path), data, path)
+
+
+def _preview(value: str | bytes, size: int = 60) -> str:
+    """``repr`` of the start of ``value``, for messages."""
+    return repr(value[:size]) + ("..." if len(value) > size else "")
+
+
+# -- the document ------------------------------------------------------------------------------
+def check_urdf(source: URDFSource) -> None:
+    """Raise :class:`URDFError` unless ``source`` is well-formed XML describing one tree of
+    named links joined by URDF joints, with finite origins and axes, nonzero axes and
+    ``lower <= upper`` limits."""
+    root = _parse(source)
+    if _tag(root) != "robot":
+        raise source.error(f"the root element is <{_tag(root)}>, not <robot>")
+    links = _children(root, "link")
+    joints = _children(root, "joint")
+    link_names = _names(links, "link", source)
+    _names(joints, "joint", source)
+    if not links:
+        raise source.error("<robot> has no <link>")
+    for link in links:
+        _check_link(link, source)
+    parents = {}
+    for joint in joints:
+        _check_joint(joint, set(link_names), source)
+        child = _link_of(joint, "child")
+        if child in parents:
+            raise source.error(
+                f"link {child!r} has two parents: joint {parents[child].get('name')!r} (from "
+                f"link {_link_of(parents[child], 'parent')!r}) and joint "
+                f"{joint.get('name')!r} (from link {_link_of(joint, 'parent')!r})")
+        parents[child] = joint
+    _check_tree(link_names, parents, source)
+
+
+def _parse(source: URDFSource) -> etree._Element:
+    """The root element of ``source``; no entities resolved, no network."""
+    if not _starts_xml(source.data):
+        raise source.error(f"not XML text: it starts with {_preview(source.data, 20)}, not '<'")
+    parser = etree.XMLParser(resolve_entities=False, no_network=True,
+                             encoding=None if source.path else "utf-8")
+    try:
+        return etree.fromstring(source.data, parser)
+    except etree.XMLSyntaxError as exc:
+        raise source.error(f"not well-formed XML: {exc.msg}") from None
+
+
+def _tag(element: etree._Element) -> str:
+    """The element's name as URDF parsers read it (a prefix is part of the name)."""
+    local = etree.QName(element).localname
+    return f"{element.prefix}:{local}" if element.prefix else local
+
+
+def _children(element: etree._Element, tag: str) -> list[etree._Element]:
+    return [e for e in element if isinstance(e.tag, str) and _tag(e) == tag]
+
+
+def _names(elements: list[etree._Element], kind: str, source: URDFSource) -> list[str]:
+    """The ``name`` of each element; :class:`URDFError` if one is missing or repeated."""
+    names = []
+    for element in elements:
+        name = element.get("name")
+        if not name:
+            raise source.error(f"a <{kind}> without a name (line {element.sourceline})")
+        if name in names:
+            raise source.error(f"two {kind}s named {name!r} (line {element.sourceline})")
+        names.append(name)
+    return names
+
+
+def _link_of(joint: etree._Element, end: str) -> str | None:
+    """The link named by the joint's ``<parent link=..>`` or ``<child link=..>``."""
+    found = _children(joint, end)
+    return found[0].get("link") if found else None
+
+
+def _check_joint(joint: etree._Element, links: set[str], source: URDFSource) -> None:
+    """Type, parent and child links, origin, axis and limits of one joint."""
+    name = joint.get("name")
+    kind = joint.get("type")
+    if kind not in JOINT_TYPES:
+        raise source.error(f"joint {name!r} has type {kind!r}; URDF joint types are "
+                           f"{list(JOINT_TYPES)}")
+    for end in ("parent", "child"):
+        link = _link_of(joint, end)
+        if not link:
+            raise source.error(f"joint {name!r} has no <{end} link=\"...\"/>")
+        if link not in links:
+            close = difflib.get_close_matches(link, links, n=3)
+            hint = f"; close names: {close}" if close else ""
+            raise source.error(f"joint {name!r} names {end} link {link!r}, which is not "
+                               f"defined{hint}")
+    what = f"joint {name!r}"
+    for origin in _children(joint, "origin"):
+        _check_origin(origin, f"{what}: <origin>", source)
+    if kind in _AXIS_TYPES:
+        _check_axis(joint, what, source)
+    for limit in _children(joint, "limit"):
+        _check_limit(limit, kind, what, source)
+
+
+def _check_link(link: etree._Element, source: URDFSource) -> None:
+    """The ``<origin>`` of each ``<visual>``, ``<collision>`` and ``<inertial>`` of a link."""
+    for part in link:
+        if isinstance(part.tag, str):
+            for origin in _children(part, "origin"):
+                _check_origin(origin, f"link {link.get('name')!r}: <{_tag(part)}><origin>",
+                              source)
+
+
+def _check_origin(origin: etree._Element, what: str, source: URDFSource) -> None:
+    """``xyz`` and ``rpy`` (each defaulting to 0 0 0) are three finite numbers."""
+    for attribute in ("xyz", "rpy"):
+        _vector(origin, attribute, what, source)
+
+
+def _check_axis(joint: etree._Element, what: str, source: URDFSource) -> None:
+    """A moving joint's ``<axis xyz>`` (default 1 0 0) is finite and not zero."""
+    for axis in _children(joint, "axis"):
+        xyz = _vector(axis, "xyz", f"{what}: <axis>", source)
+        if xyz is not None and math.hypot(*xyz) == 0.0:
+            raise source.error(f"{what}: <axis xyz={axis.get('xyz')!r}> is zero-length; a "
+                               f"{joint.get('type')} joint needs a direction")
+
+
+def _check_limit(limit: etree._Element, kind: str, what: str, source: URDFSource) -> None:
+    """The ``<limit>`` values are finite numbers, effort and velocity are >= 0, and
+    ``lower <= upper`` on revolute and prismatic joints (``lower > upper`` would leave the joint
+    unlimited)."""
+    values = {key: _number(limit, key, f"{what}: <limit>", source)
+              for key in ("lower", "upper", "effort", "velocity") if limit.get(key) is not None}
+    for key in ("effort", "velocity"):
+        if values.get(key, 0.0) < 0.0:
+            raise source.error(f"{what}: <limit {key}={limit.get(key)!r}> is negative")
+    lower, upper = values.get("lower", 0.0), values.get("upper", 0.0)
+    if kind in _LIMITED_TYPES and lower > upper:
+        raise source.error(f"{what}: <limit lower={limit.get('lower')!r} "
+                           f"upper={limit.get('upper')!r}> has lower > upper")
+
+
+def _vector(element: etree._Element, attribute: str, what: str,
+            source: URDFSource) -> tuple[float, float, float] | None:
+    """The attribute as three finite numbers (None if absent)."""
+    text = element.get(attribute)
+    if text is None:
+        return None
+    try:
+        values = tuple(float(v) for v in text.split())
+    except ValueError:
+        values = ()
+    if len(values) != 3 or not all(math.isfinite(v) for v in values):
+        raise source.error(f"{what} {attribute}={text!r} is not three finite numbers")
+    return values
+
+
+def _number(element: etree._Element, attribute: str, what: str, source: URDFSource) -> float:
+    """The attribute as one finite number."""
+    text = element.get(attribute)
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value):
+        raise source.error(f"{what} {attribute}={text!r} is not a finite number")
+    return value
+
+
+def _check_tree(links: list[str], parents: dict[str, etree._Element],
+                source: URDFSource) -> None:
+    """The links joined by ``parents`` (child link -> its joint) form one tree: no cycle,
+    exactly one root."""
+    done: set[str] = set()
+    for start in links:
+        path: list[str] = []
+        link = start
+        while link in parents and link not in done and link not in path:
+            path.append(link)
+            link = _link_of(parents[link], "parent")
+        if link in path:
+            cycle = (path[path.index(link):] + [link])[::-1]  # parent -> child order
+            joints = [parents[child].get("name") for child in cycle[1:]]
+            raise source.error(f"the links {' -> '.join(map(repr, cycle))} form a cycle "
+                               f"(joints {joints})")
+        done.update(path)
+    roots = [link for link in links if link not in parents]
+    if len(roots) > 1:
+        raise source.error(f"several root links {roots} (links that are no joint's child); a "
+                           "URDF robot is one tree")
+
+
+# -- Pinocchio ---------------------------------------------------------------------------------
+def build_model(source: URDFSource) -> pin.Model:
+    """Pinocchio's model of ``source``. If Pinocchio fails, or its parser prints an error and
+    carries on without the part it could not read, the :class:`URDFError` carries what the
+    parser printed to stderr (the real reason); other output (warnings) is passed on."""
+    try:
+        with captured_stderr() as printed:
+            if source.path is None:
+                model = pin.buildModelFromXML(source.text)
+            else:
+                model = pin.buildModelFromUrdf(str(source.path))
+    except (ValueError, RuntimeError) as exc:
+        reason = _parser_messages(printed.getvalue()) or str(exc)
+        raise source.error(f"Pinocchio cannot parse it: {reason}") from exc
+    if any(line.startswith("Error:") for line in printed.getvalue().splitlines()):
+        # urdfdom skips what it cannot read (a <visual>, say) and only prints why
+        raise source.error(f"Pinocchio's parser reports: {_parser_messages(printed.getvalue())}")
+    sys.stderr.write(printed.getvalue())
+    return model
+
+
+@contextlib.contextmanager
+def captured_stderr() -> Iterator[io.StringIO]:
+    """Redirect file descriptor 2, where C++ libraries print, into the yielded buffer (filled
+    on exit). Process-wide while it lasts: other threads' stderr lands there too."""
+    printed = io.StringIO()
+    sys.stderr.flush()
+    with tempfile.TemporaryFile() as log:
+        saved = os.dup(2)
+        os.dup2(log.fileno(), 2)
+        try:
+            yield printed
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            log.seek(0)
+            printed.write(log.read().decode("utf-8", errors="replace"))
+
+
+def _parser_messages(printed: str) -> str:
+    """urdfdom's error lines, without its "Error:" tags and source locations ("at line 586 in
+    joint.cpp")."""
+    lines = (" ".join(line.split()).removeprefix("Error: ") for line in printed.splitlines())
+    return "; ".join(line for line in lines if line and not line.startswith("at line "))
