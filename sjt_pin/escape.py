@@ -6,12 +6,14 @@ at a minimum but at a saddle (UR5 at q = 0, asked to roll its tool about the los
 moves). Round-off alone takes thousands of steps to leave it.
 
 :class:`SaddleEscape` watches each step's stall ratio (the loop gain along the command, see
-:func:`~sjt_pin.kernels.transpose_step`). After ``WINDOW`` steps without progress it computes
-the Hessian of ``f = 1/2 |e_w|^2`` over the free joints (those of the tasks' chains that are
-not at a position limit) by central differences of its exact gradient ``-J_w^T e_w`` (for the
-pose error, ``Jlog6^T log6 = log6``), 2 n evaluations of the task rows. The negative curvature
-of a saddle is often a mix of a null direction of J and a direction J keeps, so the whole
-Hessian is needed, not its restriction to the small singular directions. Only a clearly
+:func:`~sjt_pin.kernels.methods.transpose_step`). After ``WINDOW`` steps without progress it
+computes, by central differences over the free joints (those of the tasks' chains that are
+not at a position limit; 2 n evaluations of the task rows), the Jacobian H of ``-J_w^T e_w``:
+the field a transpose update follows, the exact gradient of ``f = 1/2 |e_w|^2`` for position
+and orientation rows and its first-order approximation for pose rows. A negative eigenvalue
+of H's symmetric part makes the equilibrium of the update unstable: a saddle. That negative
+curvature is often a mix of a null direction of J and a direction J keeps, so the whole H is
+needed, not its restriction to the small singular directions. Only a clearly
 negative curvature starts an escape: a joint velocity along the most negative direction,
 ramped up and later down within ``RAMP`` seconds, at ``SPEED`` times the URDF speed limits at
 most (also when the solver's speed limits are off), added to the regular update until that

@@ -17,14 +17,21 @@ _WORLD_ALIGNED = pin.LOCAL_WORLD_ALIGNED
 
 class Kinematics:
     """Pinocchio's model and a ``data`` of its own, at the configuration ``q`` of the last
-    :meth:`update` (each solver has one, so solvers never share scratch space)."""
+    :meth:`update` (each solver has one, so solvers never share scratch space). Jacobians are
+    always 2-D, (6, nv), also for a robot with one joint (Pinocchio returns a vector there)."""
 
-    __slots__ = ("model", "data", "q")
+    __slots__ = ("model", "data", "q", "jacobian", "world_aligned_jacobian")
 
     def __init__(self, model: pin.Model):
         self.model = model
         self.data = model.createData()
         self.q: np.ndarray | None = None
+        if model.nv == 1:
+            self.jacobian = self._column(pin.LOCAL)
+            self.world_aligned_jacobian = self._column(pin.LOCAL_WORLD_ALIGNED)
+        else:
+            self.jacobian = self._local_jacobian
+            self.world_aligned_jacobian = self._aligned_jacobian
 
     def update(self, q: np.ndarray) -> None:
         """Forward kinematics and joint Jacobians at ``q`` (nq,), validated by the caller."""
@@ -35,13 +42,22 @@ class Kinematics:
         """World pose ``oMf`` of frame ``frame_id`` (a copy)."""
         return pin.updateFramePlacement(self.model, self.data, frame_id)
 
-    def jacobian(self, frame_id: int) -> np.ndarray:
-        """Frame Jacobian (6, nv), rows [linear; angular], in the frame's LOCAL axes."""
+    def _local_jacobian(self, frame_id: int) -> np.ndarray:
+        """Frame Jacobian (6, nv), rows [linear; angular], in the frame's LOCAL axes
+        (``jacobian``)."""
         return pin.getFrameJacobian(self.model, self.data, frame_id, _LOCAL)
 
-    def world_aligned_jacobian(self, frame_id: int) -> np.ndarray:
-        """Frame Jacobian (6, nv) at the frame's origin in world axes (LOCAL_WORLD_ALIGNED)."""
+    def _aligned_jacobian(self, frame_id: int) -> np.ndarray:
+        """Frame Jacobian (6, nv) at the frame's origin in world axes (LOCAL_WORLD_ALIGNED;
+        ``world_aligned_jacobian``)."""
         return pin.getFrameJacobian(self.model, self.data, frame_id, _WORLD_ALIGNED)
+
+    def _column(self, reference):
+        def jacobian(frame_id: int) -> np.ndarray:
+            J = pin.getFrameJacobian(self.model, self.data, frame_id, reference)
+            return np.ascontiguousarray(J).reshape(6, 1)
+
+        return jacobian
 
     def difference(self, q_ref: np.ndarray) -> np.ndarray:
         """``q_ref ⊖ q`` (nv,): the tangent vector that integrates ``q`` into ``q_ref``."""

@@ -2,17 +2,20 @@
 
 Pure numpy, nothing about robots. ``J`` is an (m, n) task Jacobian (m task rows, n joints).
 
-=====  ===========================  ==============================================
-name   M(J)                         paper
-=====  ===========================  ==============================================
-jp     J^+ (Moore-Penrose)          eq. (4), (8)
-dls    J^T (J J^T + lambda^2 I)^-1  damped least squares (introduction, [4, 11, 12])
-jt     J^T                          eq. (10)
-sjt    D J^T, D = diag(alpha_i)     eq. (20)-(21), alpha_i = 1 / (J_i^T J_i), eq. (18)
-=====  ===========================  ==============================================
+============  ================================  ==========================================
+name          M(J)                              paper
+============  ================================  ==========================================
+jp            J^+ (Moore-Penrose)               eq. (4), (8)
+dls           J^T (J J^T + lambda^2 I)^-1       damped least squares (introduction)
+jt            J^T                               eq. (10)
+sjt           D J^T, D = diag(alpha_i)          eq. (20)-(21), alpha_i = 1 / (J_i^T J_i)
+damped sjt    D J^T (J D J^T + lambda I)^-1     SJT's D as the columns' scale of a damped
+                                                least-squares step (this package's default)
+============  ================================  ==========================================
 
-Every ``*_apply`` function computes ``M(J) v`` without forming M; the ``*_matrix`` functions
-form M for analysis (motion ellipsoids, stability bounds).
+They are the reference formulas: the step kernels (:mod:`.kernels`) compute ``M(J) v`` without
+forming M and are tested against these; the paper's analysis (motion ellipsoids, stability
+bounds) uses them directly.
 """
 
 from __future__ import annotations
@@ -47,6 +50,15 @@ def sjt_matrix(J: np.ndarray, column_tol: float = COLUMN_TOL, length: float = 0.
     return scaling_factors(J, column_tol, length)[:, None] * J.T
 
 
+def damped_sjt_matrix(J: np.ndarray, damping: float, column_tol: float = COLUMN_TOL,
+                      length: float = 0.0) -> np.ndarray:
+    """``D J^T (J D J^T + damping I)^-1``: the damped least-squares step on the unit-norm
+    columns ``J sqrt(D)``, scaled back by ``sqrt(D)``; ``damping`` > 0 is dimensionless."""
+    alpha = scaling_factors(J, column_tol, length)
+    A = (J * alpha) @ J.T
+    return np.linalg.solve(A + damping * np.eye(J.shape[0]), J * alpha).T
+
+
 def jt_matrix(J: np.ndarray) -> np.ndarray:
     """``J^T`` (eq. 10)."""
     return J.T.copy()
@@ -64,27 +76,6 @@ def dls_matrix(J: np.ndarray, damping: float) -> np.ndarray:
     """Damped least squares ``J^T (J J^T + damping^2 I)^-1``; ``damping`` in task units (m, rad)."""
     m = J.shape[0]
     return np.linalg.solve(J @ J.T + damping**2 * np.eye(m), J).T
-
-
-def sjt_apply(J: np.ndarray, v: np.ndarray, alpha: np.ndarray) -> np.ndarray:
-    """``D J^T v`` with precomputed ``alpha`` (see :func:`scaling_factors`)."""
-    return alpha * (v @ J)
-
-
-def jt_apply(J: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """``J^T v``."""
-    return v @ J
-
-
-def jp_apply(J: np.ndarray, v: np.ndarray, rcond: float = JP_RCOND) -> np.ndarray:
-    """``J^+ v``."""
-    return jp_matrix(J, rcond) @ v
-
-
-def dls_apply(J: np.ndarray, v: np.ndarray, damping: float) -> np.ndarray:
-    """``J^T (J J^T + damping^2 I)^-1 v`` (one m x m solve)."""
-    m = J.shape[0]
-    return np.linalg.solve(J @ J.T + damping**2 * np.eye(m), v) @ J
 
 
 def max_loop_eigenvalue(J: np.ndarray, M: np.ndarray) -> float:

@@ -311,7 +311,8 @@ class Solver:
         escape = self.escape
         self._escaped = (self._count, escape is not None and escape.active)
         if escape is not None:
-            if status & K.STALLED and escape.observe(self._count, self._info[K.I_E_SQ]):
+            if (status & K.STALLED and not escape.active
+                    and escape.observe(self._count, self._info[K.I_E_SQ])):
                 escape.test(q, self._weighted_rows(targets))
             velocity = escape.velocity(float(self._info[K.I_REGULAR]), dt)
             if velocity is None:

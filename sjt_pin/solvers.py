@@ -59,11 +59,13 @@ class SJTSolver(Solver):
     columns, so everything below is unit-free. Three updates, by ``feedback`` and
     ``feedforward``:
 
-    - ``feedback="damped"`` (default): ``q_dot = D J^T (J D J^T + (mu^2 + |e|^2) I)^-1
-      (x_dot_d + K e)`` — SJT's D in a damped least-squares step, the SJT analogue of what DLS
-      is to JT (it tends to D J^T / mu^2 as the damping grows), with a Levenberg-Marquardt term
-      that grows with the error so that an arm that cannot reach comes to rest. "auto" is
-      ``K = 1 / dt``. On the accuracy benchmark it tracks 3-20x better than DLS.
+    - ``feedback="damped"`` (default): ``q_dot = D J^T (J D J^T + lambda I)^-1 (x_dot_d + K e)``
+      — SJT's D in a damped least-squares step, the SJT analogue of what DLS is to JT (it
+      tends to D J^T / lambda as the damping grows). ``lambda = mu^2 + |e| sqrt(max alpha)``:
+      a Levenberg-Marquardt term that grows with the error relative to the shortest lever arm
+      (the curvature that the linear model leaves out), so that an arm that cannot reach comes
+      to rest; unit-free like the rest. "auto" is ``K = 1 / dt``. On the accuracy benchmark it
+      tracks 3-30x better than DLS.
     - ``feedback="transpose"``: ``q_dot = D J^T K e`` plus the damped feed-forward: the
       paper's feedback, which corrects slowly along directions J nearly loses.
     - ``feedback="transpose", feedforward="transpose"``: the paper's eq. (21) exactly,

@@ -1,10 +1,19 @@
-"""Accuracy near singularities (``sjt-pin bench accuracy``): each method at its own largest
-stable gain and at ``gain="auto"``, on paths through UR5's wrist singularity, UR5's stretched
-elbow and Panda's stretched arm.
+"""``sjt-pin bench accuracy``: tracking near singularities, rest at unreachable targets, and
+exits from exact saddles, for every method with its default arguments and the URDF limits on.
 
-The methods run bare (no joint limits), as in the paper, so a blow-up shows; the largest stable
-gain comes from the same bisection and stability criterion as the paper's sweeps
-(:mod:`.stability`), between 1 1/s and 2 / dt.
+Variants (:data:`VARIANTS`): the paper's SJT (eq. 21 with "auto"), this package's SJT (its
+defaults: the damped update), SJT with the paper's transpose feedback and the damped
+feed-forward, JT, DLS at this package's damping (0.05) and at the best damping of a small grid
+(chosen per path on its max error), and JP. Three measurements:
+
+- **tracking** (:func:`tracking`): max and RMS task error (m and rad, log6 norm) and the
+  largest joint speed along paths that pass near or through singular configurations, and along
+  plain circles and lines;
+- **rest** (:func:`rest`): RMS joint speed over the last second at a target held 0.3 m beyond
+  the reach (an arm that cannot reach must come to rest);
+- **saddle** (:func:`saddles`): steps from an exact saddle (UR5 at q = 0 asked to roll about
+  the lost axis; UR5 at q5 = 0 asked to move along the lost task direction) until the error is
+  1 % of its start, and the largest joint speed on the way relative to the URDF's.
 """
 
 from __future__ import annotations
@@ -14,102 +23,244 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from ..solvers import make_solver
 from ..robot import Robot
-from ..paper.stability import largest_stable, stability
-from ..tasks import PoseTask
-from ..tracking import TrackingLog, track
-from ..trajectories import PoseInterpolation, Trajectory
+from ..solvers import make_solver
+from ..tasks import PositionTask
+from ..tracking import track
+from ..trajectories import Circle, Line, PoseInterpolation, Trajectory
 
-METHODS = ("sjt", "jt", "jp", "dls")
-DT = 2e-3  # s, the same for every method and path
+#: name -> (method, options)
+VARIANTS = {
+    "SJT (paper, eq. 21)": ("sjt", {"feedback": "transpose", "feedforward": "transpose"}),
+    "SJT": ("sjt", {}),
+    "SJT, transpose feedback": ("sjt", {"feedback": "transpose"}),
+    "JT": ("jt", {}),
+    "DLS (0.05)": ("dls", {}),
+    "DLS (best)": ("dls", None),  # damping from DLS_GRID, best per path
+    "JP": ("jp", {}),
+}
+DLS_GRID = (0.005, 0.01, 0.02, 0.05, 0.1)
+DTS = (1e-3, 2e-3)
+UR5_START = np.array([0.3, -1.2, 1.5, -1.8, -1.5, 0.2])
 
 
 @dataclass
-class SingularPath:
-    """A robot, a start configuration and a pose path that passes near a singularity."""
+class TrackingPath:
+    """A robot, a start configuration and a pose path starting where the end effector is."""
 
     name: str
     robot: Robot
     q0: np.ndarray
     trajectory: Trajectory
-    note: str
 
 
-def singular_paths() -> list[SingularPath]:
-    """The three paths of the benchmark (3 s each, minimum-jerk, starting on the path)."""
-    ur5 = Robot.from_example("ur5")
-    panda = Robot.from_example("panda")
-    # UR5 wrist: 0.01 rad from q5 = 0 (joints 4 and 6 aligned), turn the tool by 0.3 along
-    # the task direction that the singular Jacobian loses (a screw about a nearly lost axis)
+def paths() -> list[TrackingPath]:
+    """The tracking paths: near singularities (UR5 wrist and elbow, Panda stretched), through
+    UR5's wrist singularity q5 = 0, and plain 10 cm circles and 20 cm lines."""
+    ur5, panda = Robot.from_example("ur5"), Robot.from_example("panda")
+    out = []
+    # UR5 wrist: from q5 = 0.01, a screw about the task direction the wrist nearly loses
     wrist = np.array([0.3, -1.2, 1.5, -1.8, 0.0, 0.2])
     lost = np.linalg.svd(ur5.jacobian(wrist))[0][:, -1]
     wrist[4] = 0.01
     start = ur5.fk(wrist)
-    wrist_path = PoseInterpolation(start, start * pin.exp6(pin.Motion(0.3 * lost)), 3.0)
-    # UR5 elbow: from a bent elbow to the straight arm (elbow angle 0, sigma_min = 0 at the end)
+    out.append(TrackingPath("UR5 wrist (q5 -> 0)", ur5, wrist, PoseInterpolation(
+        start, start * pin.exp6(pin.Motion(0.3 * lost)), 3.0)))
     elbow_a = np.array([0.0, -1.2, 1.4, -1.8, -1.5, 0.0])
     elbow_b = np.array([0.0, -0.5, 0.0, -1.2, -1.5, 0.0])
-    # Panda: from the ready pose to the arm stretched upward, joint 4 at its stop (-0.07 rad)
+    out.append(TrackingPath("UR5 elbow stretch", ur5, elbow_a,
+                            PoseInterpolation(ur5.fk(elbow_a), ur5.fk(elbow_b), 3.0)))
     stretched = panda.q0.copy()
     stretched[1], stretched[3], stretched[5] = 0.0, -0.0698, 1.0
-    return [
-        SingularPath("ur5 wrist (q5 -> 0)", ur5, wrist, wrist_path,
-                     "a screw about the wrist's nearly lost direction, from q5 = 0.01"),
-        SingularPath("ur5 elbow stretch", ur5, elbow_a,
-                     PoseInterpolation(ur5.fk(elbow_a), ur5.fk(elbow_b), 3.0),
-                     "to the straight elbow (singular at the end)"),
-        SingularPath("panda stretch", panda, panda.q0.copy(),
-                     PoseInterpolation(panda.fk(panda.q0), panda.fk(stretched), 3.0),
-                     "from the ready pose to the arm stretched upward"),
-    ]
+    out.append(TrackingPath("Panda stretch", panda, panda.q0.copy(),
+                            PoseInterpolation(panda.fk(panda.q0), panda.fk(stretched), 3.0)))
+    through = np.array([0.3, -1.2, 1.5, -1.8, 0.25, 0.2])
+    beyond = through.copy()
+    beyond[4] = -0.25
+    out.append(TrackingPath("UR5 through q5 = 0", ur5, through,
+                            PoseInterpolation(ur5.fk(through), ur5.fk(beyond), 2.0)))
+    for robot, q0, normal, shift in ((ur5, UR5_START, [0, 0, 1], [0.1, 0, 0]),
+                                     (panda, panda.q0, [1, 0, 0], [0, 0.1, 0])):
+        pose = robot.fk(q0)
+        label = "UR5" if robot is ur5 else "Panda"
+        out.append(TrackingPath(f"{label} circle", robot, q0.copy(), Circle(
+            pose.translation - shift, 0.1, 2.0, normal=normal, rotation=pose.rotation)))
+        out.append(TrackingPath(f"{label} line", robot, q0.copy(), Line(
+            pose.translation, pose.translation + [0.1, -0.15, -0.1], 1.5,
+            rotation=pose.rotation, timing="min_jerk")))
+    return out
+
+
+def _solver(variant: str, robot: Robot, dt: float, damping: float | None = None):
+    method, options = VARIANTS[variant]
+    options = {"damping": damping} if options is None else options
+    return make_solver(method, robot, dt=dt, **options)
 
 
 @dataclass
-class AccuracyRow:
+class TrackingRow:
     path: str
-    method: str
-    gain: float | str
+    variant: str
+    dt: float
     max_error: float
     rms_error: float
-    max_joint_speed: float
+    max_joint_speed: float  # rad/s
     diverged: bool
-    reason: str
+    damping: float | None = None  # DLS (best): the damping chosen
 
 
-def _run(path: SingularPath, method: str, gain) -> TrackingLog:
-    solver = make_solver(method, path.robot, gain=gain, dt=DT, task=PoseTask(),
-                         position_limits=False, velocity_limits=False, check_stability=False)
-    return track(solver, path.trajectory, path.q0, duration=path.trajectory.duration + 0.5)
-
-
-def _row(path, method, gain, log) -> AccuracyRow:
-    stable, why = stability(log)
-    return AccuracyRow(path.name, method, gain, float(log.error_norm.max()),
-                       float(np.sqrt(np.mean(log.error_norm**2))), log.max_joint_speed,
-                       not stable, why)
-
-
-def accuracy(methods=METHODS, paths: list[SingularPath] | None = None,
-             progress=None) -> list[AccuracyRow]:
-    """Rows for each path and method at its largest stable gain and at ``"auto"``."""
+def tracking(dts=DTS, variants=tuple(VARIANTS), progress=None) -> list[TrackingRow]:
+    """Every variant on every path of :func:`paths` (held 0.5 s at its end)."""
     rows = []
-    for path in singular_paths() if paths is None else paths:
-        for method in methods:
-            best = largest_stable(lambda g: stability(_run(path, method, g))[0],  # noqa: B023
-                                  1.0, 2.0 / DT, rtol=0.02)
-            for gain in ([best] if best > 0 else []) + ["auto"]:
-                rows.append(_row(path, method, gain, _run(path, method, gain)))
+    for path in paths():
+        for dt in dts:
+            for variant in variants:
+                dampings = DLS_GRID if VARIANTS[variant][1] is None else (None,)
+                best = None
+                for damping in dampings:
+                    log = track(_solver(variant, path.robot, dt, damping), path.trajectory,
+                                path.q0, duration=path.trajectory.duration + 0.5)
+                    row = TrackingRow(path.name, variant, dt, log.max_error, log.rms_error,
+                                      log.max_joint_speed, log.diverged, damping)
+                    if best is None or row.max_error < best.max_error:
+                        best = row
+                rows.append(best)
+                if progress:
+                    progress(best)
+    return rows
+
+
+@dataclass
+class RestRow:
+    robot: str
+    variant: str
+    dt: float
+    rms_speed: float  # rad/s over the last second
+    escapes: int
+
+
+def rest(dts=DTS, variants=tuple(VARIANTS), seconds: float = 3.0, progress=None
+         ) -> list[RestRow]:
+    """A target 0.3 m beyond the reach (radially from the base), held for ``seconds``: RMS
+    joint speed over the last second."""
+    rows = []
+    for name in ("ur5", "panda"):
+        robot = Robot.from_example(name)
+        q0 = UR5_START if name == "ur5" else robot.q0
+        pose = robot.fk(q0)
+        reach = _reach(robot, pose.translation)
+        target = pin.SE3(pose.rotation, (reach + 0.3) * pose.translation
+                         / np.linalg.norm(pose.translation))
+        for dt in dts:
+            for variant in variants:
+                solver = _solver(variant, robot, dt, 0.05 if VARIANTS[variant][1] is None
+                                 else None)
+                q, speeds = q0.copy(), []
+                for _ in range(int(round(seconds / dt))):
+                    q = solver.step(q, target)
+                    speeds.append(float(np.linalg.norm(solver.displacement)) / dt)
+                last = np.array(speeds[-int(round(1.0 / dt)):])
+                escapes = solver.escape.escapes if getattr(solver, "escape", None) else 0
+                rows.append(RestRow(name, variant, dt, float(np.sqrt(np.mean(last**2))),
+                                    escapes))
                 if progress:
                     progress(rows[-1])
     return rows
 
 
-def accuracy_table(rows: list[AccuracyRow]) -> str:
-    lines = ["| path | method | gain [1/s] | max error | RMS error | max joint speed [rad/s] | "
-             "unstable |", "|---|---|---|---|---|---|---|"]
-    for r in rows:
-        gain = r.gain if isinstance(r.gain, str) else f"{r.gain:.4g}"
-        lines.append(f"| {r.path} | {r.method} | {gain} | {r.max_error:.3g} | {r.rms_error:.3g} | "
-                     f"{r.max_joint_speed:.3g} | {r.reason or 'no'} |")
+def _reach(robot: Robot, direction: np.ndarray) -> float:
+    """How far the end effector gets along ``direction`` (m): a solve to 5 m, distance kept."""
+    goal = pin.SE3(np.eye(3), 5.0 * direction / np.linalg.norm(direction))
+    solver = make_solver("sjt", robot, task=PositionTask())
+    q = robot.q0.copy()
+    for _ in range(4000):
+        q = solver.step(q, goal.translation)
+    return float(np.linalg.norm(robot.fk(q).translation))
+
+
+@dataclass
+class SaddleRow:
+    saddle: str
+    variant: str
+    dt: float
+    steps: int | None  # to 1 % of the start error; None: not within the budget
+    peak_speed_ratio: float  # max over steps of max_j |q_dot_j| / v_max,j (URDF)
+    escapes: int
+
+
+def saddle_problems(angle: float = 0.1) -> list[tuple[str, Robot, np.ndarray, pin.SE3]]:
+    """UR5's two exact saddles: at q = 0, a roll about the lost axis; at q5 = 0, a move along
+    the lost task direction u_min (both ``angle`` along the lost direction)."""
+    ur5 = Robot.from_example("ur5")
+    out = []
+    for label, q in (("UR5 q = 0, roll about the lost axis", np.zeros(6)),
+                     ("UR5 q5 = 0, along u_min", np.array([0.3, -1.2, 1.5, -1.8, 0.0, 0.2]))):
+        lost = np.linalg.svd(ur5.jacobian(q))[0][:, -1]
+        out.append((label, ur5, q, ur5.fk(q) * pin.exp6(pin.Motion(angle * lost))))
+    return out
+
+
+def saddles(dts=DTS, variants=tuple(VARIANTS), budget: int = 30_000, progress=None
+            ) -> list[SaddleRow]:
+    """Steps to 1 % of the start error from each saddle of :func:`saddle_problems`."""
+    rows = []
+    for label, robot, q0, target in saddle_problems():
+        limits = robot.velocity_limits
+        for dt in dts:
+            for variant in variants:
+                solver = _solver(variant, robot, dt, 0.05 if VARIANTS[variant][1] is None
+                                 else None)
+                q, start, steps, peak = q0.copy(), None, None, 0.0
+                for k in range(budget):
+                    q = solver.step(q, target)
+                    start = solver.error_norm if start is None else start
+                    peak = max(peak, float(np.max(np.abs(solver.displacement) / dt / limits)))
+                    if solver.error_norm < 0.01 * start:
+                        steps = k + 1
+                        break
+                escapes = solver.escape.escapes if getattr(solver, "escape", None) else 0
+                rows.append(SaddleRow(label, variant, dt, steps, peak, escapes))
+                if progress:
+                    progress(rows[-1])
+    return rows
+
+
+def tracking_table(rows: list[TrackingRow]) -> str:
+    variants = list(dict.fromkeys(r.variant for r in rows))
+    lines = ["| path | dt [ms] | " + " | ".join(variants) + " |",
+             "|---|---|" + "---|" * len(variants)]
+    for (path, dt) in dict.fromkeys((r.path, r.dt) for r in rows):
+        cells = []
+        for v in variants:
+            r = next(x for x in rows if (x.path, x.dt, x.variant) == (path, dt, v))
+            cell = "diverged" if r.diverged else f"{r.max_error:.2g}"
+            if r.damping is not None:
+                cell += f" (λ {r.damping:g})"
+            cells.append(cell)
+        lines.append(f"| {path} | {1e3 * dt:g} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def rest_table(rows: list[RestRow]) -> str:
+    variants = list(dict.fromkeys(r.variant for r in rows))
+    lines = ["| robot | dt [ms] | " + " | ".join(variants) + " |",
+             "|---|---|" + "---|" * len(variants)]
+    for robot, dt in dict.fromkeys((r.robot, r.dt) for r in rows):
+        cells = [f"{next(x for x in rows if (x.robot, x.dt, x.variant) == (robot, dt, v)).rms_speed:.1e}"
+                 for v in variants]
+        lines.append(f"| {robot} | {1e3 * dt:g} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def saddle_table(rows: list[SaddleRow]) -> str:
+    variants = list(dict.fromkeys(r.variant for r in rows))
+    lines = ["| saddle | dt [ms] | " + " | ".join(variants) + " |",
+             "|---|---|" + "---|" * len(variants)]
+    for saddle, dt in dict.fromkeys((r.saddle, r.dt) for r in rows):
+        cells = []
+        for v in variants:
+            r = next(x for x in rows if (x.saddle, x.dt, x.variant) == (saddle, dt, v))
+            steps = "not within the budget" if r.steps is None else f"{r.steps}"
+            cells.append(f"{steps} ({r.peak_speed_ratio:.2f})")
+        lines.append(f"| {saddle} | {1e3 * dt:g} | " + " | ".join(cells) + " |")
     return "\n".join(lines)

@@ -140,7 +140,7 @@ def _transpose_core(J, e, ff, has_ff, mask, work, step):
             e_sq += e[i] * e[i]
             ew_sq += ew * ew
             kew_sq += kew[i] * kew[i]
-    trace, stall = 0.0, 0.0
+    trace, stall, curvature = 0.0, 0.0, 0.0
     for j in range(n):
         norm, acc, acc_task = 0.0, 0.0, 0.0
         if mask[j] != 0.0:
@@ -154,6 +154,10 @@ def _transpose_core(J, e, ff, has_ff, mask, work, step):
         s[j] = alpha[j] if scaled else mask[j]
         trace += s[j] * norm
         stall += s[j] * acc_task * acc_task
+        # the second-order term of 1/2 |e|^2 along joint j is about |e| |J_j|: relative to
+        # the loop's scale s_j, |e| |J_j| s_j (the curvature the gain must also respect)
+        if norm > tol:
+            curvature = max(curvature, math.sqrt(norm) * s[j])
         step[j] = acc  # J_w^T K e_w, scaled below
     stall = stall / (kew_sq * trace) if kew_sq > 0.0 and trace > 0.0 else 0.0
     bound = 1.0
@@ -164,7 +168,7 @@ def _transpose_core(J, e, ff, has_ff, mask, work, step):
     else:
         A, B, C = _matrices(work, m, n)
         gram(J, sw, s, m <= n, A)
-        bound = loop_bound(A, BOUND_PRODUCTS, B, C)
+        bound = loop_bound(A, BOUND_PRODUCTS, B, C) + math.sqrt(ew_sq) * curvature
         gain = work[P_GAIN_ARG] / (dt * bound) if bound > 0.0 else 0.0
     ff_sq = 0.0
     if has_ff:
@@ -179,7 +183,14 @@ def _transpose_core(J, e, ff, has_ff, mask, work, step):
                 v[i] += ff[i]
         for j in range(n):
             step[j] = 0.0
-        _damped_solve(J, v, sw, alpha, work, m, n, dt, step, work[P_LM] * ew_sq)
+        # Levenberg-Marquardt: damping that grows with the error relative to the shortest lever
+        # arm, |e_w| sqrt(max alpha): the curvature of 1/2 |e|^2 on the normalised columns
+        # (unit-free), which the linear model J D J^T leaves out
+        alpha_max = 0.0
+        for j in range(n):
+            alpha_max = max(alpha_max, alpha[j])
+        _damped_solve(J, v, sw, alpha, work, m, n, dt, step,
+                      work[P_LM] * math.sqrt(ew_sq * alpha_max))
     else:
         for j in range(n):
             step[j] *= dt * gain * s[j]
@@ -367,9 +378,12 @@ def transpose_step(J, e, ff, q, work, step):
     D J_w^T (J_w D J_w^T + mu^2 I)^-1 ff_w, a damped solve on the unit-norm columns
     J_w sqrt(D) (unit-free; mu = ``P_MU``). With the damped feedback (``P_FB_MODE``) the
     feedback goes through that solve too,
-    ``D J_w^T (J_w D J_w^T + (mu^2 + lm |e_w|^2) I)^-1 (ff_w + gain K e_w)`` with the
-    Levenberg-Marquardt weight lm = ``P_LM``; its loop eigenvalues are below 1, so "auto" is
-    gain = c / dt. Then the limits (module docstring).
+    ``D J_w^T (J_w D J_w^T + (mu^2 + lm |e_w| sqrt(max alpha)) I)^-1 (ff_w + gain K e_w)`` with
+    the Levenberg-Marquardt weight lm = ``P_LM``; its loop eigenvalues are below 1, so "auto" is
+    gain = c / dt. With the transpose feedback "auto" divides by lambda_hat + |e_w| max_j
+    (|J_j| s_j), the curvature of 1/2 |e|^2 along the joints (about |e| |J_j|) on the loop's
+    scale, which an arm far from an unreachable target would otherwise overshoot. Then the
+    limits (module docstring).
 
     Results: |e|^2, |ff|^2, the gain factor, lambda_hat (1 when not computed), the stall ratio
     (K e_w)^T J_w S J_w^T (K e_w) / (|K e_w|^2 tr) in [0, 1] (its small values flag a saddle),

@@ -10,8 +10,8 @@ from .base import Method
 #: Feed-forward and feedback modes of the transpose methods.
 FEEDFORWARDS = {"damped": K.FF_DAMPED, "transpose": K.FF_TRANSPOSE}
 FEEDBACKS = {"damped": K.FB_DAMPED, "transpose": K.FB_TRANSPOSE}
-#: Levenberg-Marquardt weight of the damped feedback: mu^2 + LM_WEIGHT |e_w|^2, with the pose
-#: error's own convention that 1 m weighs as 1 rad.
+#: Levenberg-Marquardt weight of the damped feedback: its damping is mu^2 + LM_WEIGHT |e_w|
+#: sqrt(max alpha), the curvature of 1/2 |e|^2 on the unit-norm columns (unit-free).
 LM_WEIGHT = 1.0
 #: mu of the damped feed-forward (dimensionless: the columns it solves on have unit norm).
 FF_DAMPING = 0.01
@@ -27,9 +27,9 @@ class TransposeMethod(Method):
             singularities — while the feedback keeps ``S J^T K e``; ``"transpose"``: through
             ``S J^T`` like the feedback, exactly the paper's eq. (10) / (21).
         feedback: ``"transpose"``: ``S J^T K e`` (eq. 10, 21); ``"damped"``: the feedback goes
-            through the damped solve too, ``D J^T (J D J^T + (mu^2 + |e|^2) I)^-1
-            (x_dot_d + K e)`` — the damped least squares of the unit-norm columns, with a
-            Levenberg-Marquardt term that grows with the error (needs
+            through the damped solve too, ``D J^T (J D J^T + lambda I)^-1 (x_dot_d + K e)``,
+            ``lambda = mu^2 + |e| sqrt(max alpha)`` — the damped least squares of the unit-norm
+            columns, with a Levenberg-Marquardt term that grows with the error (needs
             ``feedforward="damped"``).
         ff_damping: mu of the damped solve (dimensionless, > 0).
         column_tol: squared column norm (task units^2) below which a joint counts as not moving

@@ -39,10 +39,9 @@ class PoseTask(Task):
         return super().target(value)
 
     def compute(self, kinematics, target, velocity):
-        model, data, fid = kinematics.model, kinematics.data, self.frame_id
-        oMf = pin.updateFramePlacement(model, data, fid)
+        oMf = kinematics.placement(self.frame_id)
         self.placement = oMf
-        J = pin.getFrameJacobian(model, data, fid, pin.LOCAL)
+        J = kinematics.jacobian(self.frame_id)
         e = pin.log6(oMf.actInv(target)).vector
         if velocity is None:
             return J, e, None

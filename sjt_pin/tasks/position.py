@@ -65,10 +65,9 @@ class PositionTask(Task):
         return as_vector(value, "target_velocity", size)
 
     def compute(self, kinematics, target, velocity):
-        model, data, fid = kinematics.model, kinematics.data, self.frame_id
-        oMf = pin.updateFramePlacement(model, data, fid)
+        oMf = kinematics.placement(self.frame_id)
         self.placement = oMf
-        J6 = pin.getFrameJacobian(model, data, fid, pin.LOCAL_WORLD_ALIGNED)
+        J6 = kinematics.world_aligned_jacobian(self.frame_id)
         position_rows(J6, oMf.np, target, _NO_VELOCITY if velocity is None else velocity,
                       self._out)
         return self._J, self._e, None if velocity is None else self._ff

@@ -1,0 +1,91 @@
+"""The saddle escape: it leaves exact saddles smoothly, within the URDF speeds, and never fires
+at a minimum, where the arm comes to rest."""
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+import sjt_pin as sjt
+from sjt_pin.bench.accuracy import saddle_problems
+
+TRANSPOSE = [("sjt", {}), ("sjt", {"feedback": "transpose"}), ("jt", {})]
+
+
+def run(solver, q, target, steps):
+    """Steps until 1 % of the start error; (steps or None, peak |q_dot_j| / v_max_j, q)."""
+    limits = solver.robot.velocity_limits
+    start, peak = None, 0.0
+    for k in range(steps):
+        q = solver.step(q, target)
+        start = solver.error_norm if start is None else start
+        peak = max(peak, float(np.max(np.abs(solver.displacement) / solver.dt / limits)))
+        if solver.error_norm < 0.01 * start:
+            return k + 1, peak, q
+    return None, peak, q
+
+
+@pytest.mark.parametrize("saddle", [0, 1], ids=["q=0 roll", "q5=0 u_min"])
+def test_default_sjt_leaves_exact_saddles_as_fast_as_dls(saddle):
+    label, robot, q0, target = saddle_problems()[saddle]
+    dls_steps, _, _ = run(sjt.DLSSolver(robot, dt=2e-3), q0, target, 5000)
+    solver = sjt.SJTSolver(robot, dt=2e-3)
+    steps, peak, _ = run(solver, q0, target, 5000)
+    assert steps is not None and steps <= 2 * dls_steps, (label, steps, dls_steps)
+    assert peak <= 1.0 + 1e-9  # never above the URDF speeds
+
+
+@pytest.mark.parametrize("method, options", TRANSPOSE[1:], ids=["sjt transpose", "jt"])
+def test_transpose_feedback_escapes_smoothly_within_the_urdf_speeds(method, options):
+    label, robot, q0, target = saddle_problems()[0]
+    stuck = sjt.make_solver(method, robot, dt=2e-3, escape=False, **options)
+    assert run(stuck, q0, target, 500)[0] is None  # J^T e = 0: without the escape, no motion
+    solver = sjt.make_solver(method, robot, dt=2e-3, velocity_limits=False, **options)
+    steps, peak, _ = run(solver, q0, target, 15_000)
+    assert steps is not None and solver.escape.escapes >= 1
+    assert peak <= 1.0 + 1e-9  # the escape keeps to the URDF speeds, speed limits off or not
+
+
+@pytest.mark.parametrize("saddle", [0, 1], ids=["q=0 roll", "q5=0 u_min"])
+def test_escape_velocity_ramps_without_jumps(saddle):
+    """With the transpose feedback the arm's motion is the escape's: its joint accelerations
+    stay at the ramp's (about 16 rad/s^2 on UR5), not the thousands of a 0.05 rad jump."""
+    _, robot, q0, target = saddle_problems()[saddle]
+    solver = sjt.SJTSolver(robot, dt=1e-3, feedback="transpose", velocity_limits=False)
+    q, speeds = q0, []
+    for _ in range(1500):
+        q = solver.step(q, target)
+        speeds.append(solver.displacement / solver.dt)
+    accelerations = np.abs(np.diff(np.array(speeds), axis=0)).max(axis=1) / solver.dt
+    assert solver.escape.escapes >= 1
+    ramp = solver.escape.SPEED * robot.velocity_limits.max() / solver.escape.RAMP
+    assert accelerations.max() < 2 * ramp  # rad/s^2
+
+
+@pytest.mark.parametrize("method, options", TRANSPOSE, ids=["sjt", "sjt transpose", "jt"])
+@pytest.mark.parametrize("name", ["ur5", "panda"])
+def test_an_arm_that_cannot_reach_comes_to_rest(name, method, options):
+    robot = sjt.Robot.from_example(name)
+    q = np.array([0.3, -1.2, 1.5, -1.8, -1.5, 0.2]) if name == "ur5" else robot.q0.copy()
+    pose = robot.fk(q)
+    far = pin.SE3(pose.rotation, pose.translation * (1.0 + 1.3 / np.linalg.norm(pose.translation)))
+    solver = sjt.make_solver(method, robot, dt=2e-3, **options)
+    speeds = []
+    for _ in range(1500):  # 3 s
+        q = solver.step(q, far)
+        speeds.append(np.linalg.norm(solver.displacement) / solver.dt)
+    assert solver.escape.escapes == 0  # a minimum, not a saddle: the escape never fires
+    assert np.sqrt(np.mean(np.square(speeds[-500:]))) < 1e-3  # rad/s over the last second
+
+
+@pytest.mark.parametrize("method, options", TRANSPOSE, ids=["sjt", "sjt transpose", "jt"])
+def test_a_position_far_above_rests_with_short_wrist_levers(panda, method, options):
+    """A position target 0.8 m straight above Panda's reach: the wrist joints' levers (about
+    0.1 m) are much shorter than the error, whose curvature the gain and the damping must
+    respect — without it the arm chattered at its speed limits."""
+    solver = sjt.make_solver(method, panda, dt=2e-3, task=sjt.PositionTask(), **options)
+    q, speeds = panda.q0.copy(), []
+    for _ in range(1500):  # 3 s
+        q = solver.step(q, np.array([0.0, 0.0, 2.0]))
+        speeds.append(np.linalg.norm(solver.displacement) / solver.dt)
+    assert solver.error_norm > 0.5 and solver.escape.escapes == 0
+    assert np.sqrt(np.mean(np.square(speeds[-500:]))) < 1e-3

@@ -1,0 +1,161 @@
+"""The step pipeline equals the reference formulas of ``mappings`` on random chains, for every
+method and task combination; the package's import surface; solver settings after construction."""
+
+import subprocess
+import sys
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from sjt_pin.robots.planar3 import serial_chain, to_xml
+
+import sjt_pin as sjt
+from sjt_pin import mappings
+from sjt_pin.methods.dls import DLS_DAMPING
+from sjt_pin.methods.sjt import SJT_LENGTH
+from sjt_pin.methods.transpose import FF_DAMPING
+
+DT = 1e-3
+
+
+def random_chain(seed: int, joints: int) -> sjt.Robot:
+    rng = np.random.default_rng(seed)
+    xml = to_xml(serial_chain(list(rng.uniform(0.05, 0.6, joints)),
+                              axes=rng.normal(size=(joints, 3)), gripper=0.1))
+    return sjt.Robot.from_urdf(xml, ee_frame="ee", load_visuals=False)
+
+
+def reference_rows(robot, q, task, target, velocity):
+    """J, e, ff of one task from Pinocchio directly (the conventions of the tasks' docs)."""
+    frame = task.frame or robot.ee_frame
+    oMf = robot.fk(q, frame)
+    local = robot.jacobian(q, frame)
+    if isinstance(task, sjt.PoseTask):
+        ff = oMf.actInv(pin.SE3(np.eye(3), target.translation).act(pin.Motion(velocity)))
+        return local, pin.log6(oMf.actInv(target)).vector, ff.vector
+    if isinstance(task, sjt.OrientationTask):
+        e = pin.log3(oMf.rotation.T @ target.rotation)
+        return local[3:], e, oMf.rotation.T @ velocity[3:]
+    rows = ["xyz".index(a) for a in task.axes]
+    aligned = robot.jacobian(q, frame, reference=pin.LOCAL_WORLD_ALIGNED)
+    return aligned[rows], (target.translation - oMf.translation)[rows], velocity[rows]
+
+
+def reference_step(method, options, J, e, ff, sw, k, mask, target_rows):
+    """dt q_dot of the method from the numpy formulas of ``mappings``."""
+    Jw = sw[:, None] * J * mask
+    ew, ffw = sw * e, sw * ff
+    if method == "jp":
+        return DT * mappings.jp_matrix(Jw) @ (ffw + k * ew)
+    if method == "dls":
+        return DT * mappings.dls_matrix(Jw, DLS_DAMPING) @ (ffw + k * ew)
+    alpha = mappings.scaling_factors(Jw, mappings.COLUMN_TOL, SJT_LENGTH)
+    if method == "sjt" and options.get("feedback", "damped") == "damped":
+        # Levenberg-Marquardt: mu^2 + |e_w| sqrt(max alpha)
+        damping = FF_DAMPING**2 + np.sqrt(ew[:target_rows] @ ew[:target_rows] * alpha.max())
+        return DT * mappings.damped_sjt_matrix(Jw, damping, length=SJT_LENGTH) @ (ffw + k * ew)
+    S = alpha if method == "sjt" else mask
+    feedforward = (S * (Jw.T @ ffw) if options.get("feedforward") == "transpose"
+                   else mappings.damped_sjt_matrix(Jw, FF_DAMPING**2, length=SJT_LENGTH) @ ffw)
+    return DT * (S * (Jw.T @ (k * ew)) + feedforward)
+
+
+COMBINATIONS = {
+    "pose": lambda: [sjt.PoseTask()],
+    "position xz": lambda: [sjt.PositionTask("xz", weight=[2.0, 0.5])],
+    "orientation": lambda: [sjt.OrientationTask()],
+    "pose + posture": lambda: [sjt.PoseTask(weight=[1, 1, 1, 0.5, 0.5, 0.5]),
+                               sjt.PostureTask(weight=0.03)],
+    "two frames": lambda: [sjt.PositionTask(), sjt.OrientationTask(frame="link1")],
+}
+METHODS = [("sjt", {}), ("sjt", {"feedback": "transpose"}),
+           ("sjt", {"feedback": "transpose", "feedforward": "transpose"}), ("jt", {}),
+           ("jp", {}), ("dls", {})]
+
+
+@settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(seed=st.integers(0, 2**32 - 1), joints=st.integers(2, 8),
+       combination=st.sampled_from(sorted(COMBINATIONS)),
+       method=st.sampled_from(range(len(METHODS))), feedforward=st.booleans())
+def test_one_step_is_the_reference_formula(seed, joints, combination, method, feedforward):
+    name, options = METHODS[method]
+    robot = random_chain(seed, joints)
+    rng = np.random.default_rng(seed + 1)
+    tasks = COMBINATIONS[combination]()
+    posture = tasks.pop() if isinstance(tasks[-1], sjt.PostureTask) else None
+    if len(tasks) == 2 and robot.nv < 2:
+        return
+    k = rng.uniform(1.0, 50.0)
+    solver = sjt.make_solver(name, robot, gain=k, dt=DT, task=tasks if len(tasks) > 1 else
+                             tasks[0], posture=posture, position_limits=False,
+                             velocity_limits=False, check_stability=False, **options)
+    q = robot.random_configuration(rng)
+    frames = [t.frame or robot.ee_frame for t in tasks]
+    targets = {f: robot.fk(q, f) * pin.exp6(pin.Motion(rng.normal(scale=0.05, size=6)))
+               for f in frames}
+    velocities = {f: rng.normal(scale=0.2, size=6) for f in frames}
+    single = len(tasks) == 1
+    solver.step(q, targets[frames[0]] if single else targets,
+                (velocities[frames[0]] if single else velocities) if feedforward else None)
+    blocks = [reference_rows(robot, q, t, targets[f], velocities[f] if feedforward
+                             else np.zeros(6)) for t, f in zip(tasks, frames, strict=True)]
+    sw = [np.ones(t.dim) if t.sqrt_weight is None else t.sqrt_weight for t in tasks]
+    target_rows = sum(t.dim for t in tasks)
+    mask = solver.stack.chain
+    if posture is not None:
+        blocks.append((np.eye(robot.nv), pin.difference(robot.model, q, robot.q0),
+                       np.zeros(robot.nv)))
+        sw.append(np.full(robot.nv, np.sqrt(0.03)))
+    J, e, ff = (np.concatenate(part) for part in zip(*blocks, strict=True))
+    expected = reference_step(name, options, J, e, ff, np.concatenate(sw), k, mask, target_rows)
+    np.testing.assert_allclose(solver.displacement, expected, rtol=1e-7,
+                               atol=1e-9 * max(1.0, np.abs(expected).max()))
+    np.testing.assert_allclose(solver.last.error, e[:target_rows], atol=1e-12)
+
+
+def test_import_leaves_the_heavy_optional_modules_out():
+    code = ("import sys, sjt_pin; heavy = {'matplotlib', 'tqdm', 'meshcat', 'pink'}; "
+            "print(sorted(m for m in heavy if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True)
+    assert out.stdout.strip() == "[]"
+
+
+def test_dt_and_gain_set_after_construction_act_on_the_next_step(ur5):
+    q = np.array([0.3, -1.2, 1.5, -1.8, -1.5, 0.2])
+    target = ur5.fk(q) * pin.SE3(np.eye(3), np.array([0.01, 0.0, 0.0]))
+    a = sjt.SJTSolver(ur5, gain=5.0, dt=1e-3, feedback="transpose")
+    b = sjt.SJTSolver(ur5, gain=5.0, dt=1e-2, feedback="transpose")
+    a.dt = 1e-2
+    a.step(q, target)
+    b.step(q, target)
+    np.testing.assert_allclose(a.displacement, b.displacement)
+    a.gain = "auto"
+    a.step(q, target)
+    assert a.last.gain == pytest.approx(1.0 / (1e-2 * a.last.loop_bound))
+    for bad in (0.0, -1e-3, np.nan):
+        with pytest.raises(ValueError, match="dt must be a positive number in s"):
+            a.dt = bad
+    with pytest.raises(TypeError, match="dt must be a number"):
+        a.dt = "fast"
+    with pytest.raises(TypeError, match="gain must be a number"):
+        a.gain = None
+    assert a.dt == 1e-2  # a refused setting leaves the solver as it was
+
+
+def test_robots_with_one_moving_joint_and_none():
+    one = sjt.Robot.from_urdf("tests/fixtures/urdf/one_joint.urdf", load_visuals=False)
+    target = one.fk(np.array([0.3]))
+    for name in ("sjt", "jt", "jp", "dls"):
+        for task in (sjt.PoseTask(), sjt.PositionTask(), sjt.OrientationTask()):
+            solver = sjt.make_solver(name, one, task=task, dt=1e-2)
+            q = one.q0
+            for _ in range(500):
+                q = solver.step(q, target)
+            assert solver.error_norm < 1e-6 and solver.last.dq.shape == (1,)
+            assert solver.solve(target, one.q0).success
+    zero = sjt.Robot.from_urdf("tests/fixtures/urdf/fixed_only.urdf", load_visuals=False)
+    with pytest.raises(ValueError, match="has no moving joint"):
+        sjt.SJTSolver(zero)
