@@ -1,19 +1,136 @@
-"""Real-browser tests: headless Chromium renders the viewer's static HTML and its live page."""
+"""Real-browser tests: headless Chromium renders the viewer's pages, the demo's and the live one.
+
+They check what a person would see: that each robot is drawn (hiding it changes the picture)
+inside the view and big enough, that the legend, the plots and the controls are on screen with
+the methods' colours, that the animation plays on its own, and that the page asks for nothing
+outside itself.
+"""
 
 import numpy as np
 import pytest
 
 import sjt_pin as sjt
-from sjt_pin import scenarios
 from sjt_pin.cli import main
-from sjt_pin.viewer import Viewer
+from sjt_pin.paper import scenarios
+from sjt_pin.viewer import METHOD_COLORS, Viewer
 
-from .browser import Page, changed_fraction, require_chromium
+from .browser import Chromium, changed_fraction, color_pixels, require_chromium
+
+ROBOTS = ("planar3", "ur5", "panda")
+METHODS = ("sjt", "jt", "dls", "jp")
+RUN = 4.0  # s, each demo run (the scenarios' circles)
 
 
-@pytest.fixture(scope="module", autouse=True)
+@pytest.fixture(scope="module")
 def chromium():
-    return require_chromium()
+    require_chromium()
+    browser = Chromium()
+    yield browser
+    browser.close()
+
+
+@pytest.fixture(scope="module")
+def demo_page(chromium, tmp_path_factory):
+    out = tmp_path_factory.mktemp("demo") / "demo.html"
+    assert main(["demo", "--out", str(out)]) == 0
+    page = chromium.open(out.as_uri(), meshes=20, width=1400, height=940)
+    yield page
+    page.close()
+
+
+def test_demo_page_loads_nothing_from_outside_and_has_no_script_error(demo_page):
+    assert demo_page.errors == []
+    assert demo_page.requests and all(u.startswith(("file:", "data:"))
+                                      for u in demo_page.requests), demo_page.requests
+
+
+def test_demo_page_shows_every_robot_inside_the_view_at_a_readable_size(demo_page):
+    shown = demo_page.screenshot(time=0.5)
+    for robot in ROBOTS:
+        hidden = demo_page.screenshot(time=0.5, hide=robot)
+        assert changed_fraction(shown, hidden) > 0.008, f"{robot} is not drawn"
+        low, high = np.array(demo_page.evaluate("""(node) => {
+            const THREE = MeshCat.THREE;  // where the robot's vertices fall on the canvas
+            const low = [Infinity, Infinity], high = [-Infinity, -Infinity];
+            const v = new THREE.Vector3();
+            viewer.scene_tree.find(["meshcat", node, "visuals"]).object.traverse((o) => {
+              if (!o.isMesh) return;
+              const position = o.geometry.attributes.position;
+              for (let i = 0; i < position.count; i++) {
+                v.fromBufferAttribute(position, i).applyMatrix4(o.matrixWorld)
+                 .project(viewer.camera);
+                for (const k of [0, 1]) {
+                  low[k] = Math.min(low[k], v.getComponent(k));
+                  high[k] = Math.max(high[k], v.getComponent(k));
+                }
+              }
+            });
+            return [low, high]; }""", robot))  # canvas from -1 to 1 both ways
+        assert np.all(low >= -1.0) and np.all(high <= 1.0), f"{robot} is cut off"
+        assert high[1] - low[1] > 0.3, f"{robot} is under 15 % of the view's height"
+
+
+def test_demo_page_tags_name_each_robot_and_the_method_on_screen(demo_page):
+    demo_page.pose(time=RUN + 0.5)  # the second run: JT
+    view = demo_page.page.locator("#view").bounding_box()
+    for robot in ROBOTS:
+        tag = demo_page.page.locator(f'.tag[data-robot="{robot}"]')
+        assert tag.is_visible()
+        box = tag.bounding_box()
+        assert view["x"] <= box["x"] and box["x"] + box["width"] <= view["x"] + view["width"]
+        assert view["y"] <= box["y"] and box["y"] + box["height"] <= view["y"] + view["height"]
+        assert tag.inner_text().split()[-1] == "JT"
+
+
+def test_demo_page_legend_and_error_plots_are_visible_in_the_methods_colours(demo_page):
+    page = demo_page.page
+    assert page.locator("h1").inner_text().startswith("sjt-pin demo")
+    names = page.locator("ul.methods li").all_inner_texts()
+    assert [n.split()[0] for n in names] == [m.upper() for m in METHODS]
+    for robot in ROBOTS:
+        section = page.locator(f'section.robot[data-robot="{robot}"]')
+        section.scroll_into_view_if_needed()
+        assert section.locator("h2").inner_text()
+        items = section.locator("ul.legend li")
+        assert [t.split()[0] for t in items.all_inner_texts()] == [m.upper() for m in METHODS]
+        for k, method in enumerate(METHODS):
+            swatch = items.nth(k).locator(".swatch")
+            assert swatch.is_visible()
+            r, g, b = (int(v) for v in swatch.evaluate(
+                "e => getComputedStyle(e).backgroundColor").strip("rgb()").split(","))
+            assert (r << 16 | g << 8 | b) == METHOD_COLORS[method]
+        plot = section.locator("svg.error-plot")
+        assert plot.is_visible()
+        lines = plot.locator("polyline")
+        assert lines.count() == len(METHODS)
+        assert all(len(p.split()) >= 100 for p in
+                   lines.evaluate_all("ls => ls.map(l => l.getAttribute('points'))"))
+        picture = demo_page.image(plot)  # each method's line is drawn, in its colour
+        for method in METHODS:
+            assert color_pixels(picture, METHOD_COLORS[method]) > 40, (robot, method)
+
+
+def test_demo_page_plays_on_open_and_its_controls_work(demo_page):
+    page = demo_page.page
+    page.reload()  # as opened, before other tests paused it
+    page.wait_for_function("() => viewer.animator.actions.length > 0")
+    time_now = "() => viewer.animator.actions.reduce((m, a) => Math.max(m, a.time), 0)"
+    first = page.evaluate(time_now)
+    page.wait_for_timeout(700)
+    assert page.evaluate(time_now) > first + 0.2  # it plays without a click
+    play = page.locator("#play")
+    assert play.is_visible() and play.inner_text() == "Pause"
+    play.click()
+    assert play.inner_text() == "Play" and not page.evaluate("() => viewer.animator.playing")
+    paused = page.evaluate(time_now)
+    page.wait_for_timeout(300)
+    assert page.evaluate(time_now) == paused
+    page.locator("#time").fill(str(2 * RUN + 1.0))  # the third run: DLS
+    assert abs(page.evaluate(time_now) - (2 * RUN + 1.0)) < 0.05
+    for robot in ROBOTS:  # highlighted in each robot's legend by the next frame
+        page.wait_for_function(f"""() => {{
+            const on = document.querySelectorAll('[data-robot="{robot}"] li.playing');
+            return on.length === 1 && on[0].dataset.method === "dls"; }}""", timeout=5000)
 
 
 @pytest.fixture(scope="module")
@@ -21,16 +138,15 @@ def panda_html(tmp_path_factory):
     sc = scenarios.scenario("panda")
     log = sjt.track(sjt.SJTSolver(sc.robot, dt=1e-3, task=sc.task), sc.trajectory, sc.q0)
     path = tmp_path_factory.mktemp("html") / "panda.html"
-    with Viewer(sc.robot, name="panda") as viewer:
+    with Viewer(sc.robot, name="panda", live=False) as viewer:
         viewer.animate(log)
         viewer.save_html(path)
     return path, len(sc.robot.visual_model.geometryObjects)
 
 
-def test_static_panda_animation_draws_the_robot_and_moves(panda_html):
+def test_static_panda_animation_draws_the_robot_and_moves(chromium, panda_html):
     path, geometries = panda_html
-    assert path.stat().st_size > 5e6  # the Panda meshes are embedded
-    page = Page(path.as_uri(), meshes=geometries)
+    page = chromium.open(path.as_uri(), meshes=geometries)
     try:
         start = page.screenshot(time=0.0)
         empty = page.screenshot(time=0.0, hide="panda")
@@ -41,30 +157,15 @@ def test_static_panda_animation_draws_the_robot_and_moves(panda_html):
     assert changed_fraction(start, later) > 0.002  # and it moved between t = 0 and t = 1 s
 
 
-def test_live_viewer_page_shows_the_robot():
+def test_live_viewer_page_shows_the_robot(chromium):
     robot = sjt.Robot.from_example("ur5")
     with Viewer(robot, name="ur5") as viewer:
         viewer.show(np.array([0.3, -1.2, 1.5, -1.8, -1.5, 0.2]))
         viewer.set_camera([1.0, 0.6, 0.5])
-        page = Page(viewer.url, meshes=len(robot.visual_model.geometryObjects))
+        page = chromium.open(viewer.url, meshes=len(robot.visual_model.geometryObjects))
         try:
             shown = page.screenshot()
             empty = page.screenshot(hide="ur5")
         finally:
             page.close()
     assert changed_fraction(shown, empty) > 0.01
-
-
-def test_demo_writes_an_animation_that_renders(tmp_path, capsys):
-    out = tmp_path / "demo.html"
-    assert main(["demo", "--robot", "planar3", "--method", "sjt", "jt", "--out", str(out)]) == 0
-    printed = capsys.readouterr().out
-    assert "http://127.0.0.1:" in printed and str(out.resolve()) in printed
-    page = Page(out.as_uri(), meshes=8)
-    try:
-        first, second = page.screenshot(time=0.5), page.screenshot(time=6.0)  # SJT run, JT run
-        empty = page.screenshot(time=0.5, hide="planar3")
-    finally:
-        page.close()
-    assert changed_fraction(first, empty) > 0.005
-    assert changed_fraction(first, second) > 0.001

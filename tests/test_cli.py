@@ -1,19 +1,150 @@
+"""The ``sjt-pin demo`` command: its table, its progress, where it writes, what it says.
+
+Every test here writes into a temporary folder only: the autouse fixture fails a test that
+leaves a new file in the folder it was started from.
+"""
+
+import argparse
+import contextlib
+import os
+import re
+import subprocess
+import sys
+import urllib.error
+import urllib.request
+import webbrowser
+from pathlib import Path
+
 import pytest
 
-from sjt_pin.cli import main
+import sjt_pin
+from sjt_pin.cli import build_parser, main
+
+FAST = ["--robot", "planar3", "--method", "sjt"]
 
 
-def test_demo_prints_one_row_per_robot_and_method(capsys):
-    assert main(["demo", "--robot", "planar3", "ur5", "--method", "sjt", "jp"]) == 0
+@contextlib.contextmanager
+def no_new_files(folder: Path):
+    """Raise AssertionError if a file appears in ``folder`` meanwhile (e.g. ./demo.html)."""
+    before = set(os.listdir(folder))
+    yield
+    assert set(os.listdir(folder)) - before == set(), f"new files in {folder}"
+
+
+@pytest.fixture(autouse=True)
+def working_folder_left_alone():
+    with no_new_files(Path.cwd()):
+        yield
+
+
+def test_demo_prints_progress_and_one_row_per_robot_and_method(capsys):
+    assert main(["demo", "--robot", "planar3", "ur5", "--method", "sjt", "jp",
+                 "--no-viewer"]) == 0
     out = capsys.readouterr().out
+    progress = re.findall(r"\[(\d)/4\] (\w+) (\w+): 4001 steps in", out)
+    assert progress == [("1", "planar3", "sjt"), ("2", "planar3", "jp"), ("3", "ur5", "sjt"),
+                        ("4", "ur5", "jp")]
     rows = [line.split() for line in out.splitlines() if line.split()[:1] in (["planar3"], ["ur5"])]
     assert [r[:2] for r in rows] == [["planar3", "sjt"], ["planar3", "jp"], ["ur5", "sjt"],
                                      ["ur5", "jp"]]
     for row in rows:
         max_error, rms_error = float(row[2]), float(row[3])
         assert 0 <= rms_error <= max_error < 0.05
+    assert "127.0.0.1" not in out and "Wrote" not in out
+
+
+def test_demo_writes_the_page_where_asked_and_prints_its_size(tmp_path, capsys):
+    out = tmp_path / "new" / "page.html"  # a folder that does not exist yet
+    assert main(["demo", *FAST, "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    size = re.search(rf"Wrote {re.escape(str(out.resolve()))} \((\d+\.\d) MB", printed)
+    assert size and float(size.group(1)) == pytest.approx(out.stat().st_size / 1e6, abs=0.05)
+    assert "http://" not in printed  # no live viewer without --keep, so no link to it
+
+
+def test_demo_writes_demo_html_in_the_working_folder_by_default(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert main(["demo", *FAST]) == 0
+    assert os.listdir(tmp_path) == ["demo.html"]
+
+
+def test_demo_leaves_no_file_in_the_working_folder(tmp_path):
+    before = set(os.listdir())
+    assert main(["demo", *FAST, "--out", str(tmp_path / "demo.html")]) == 0
+    assert set(os.listdir()) == before and (tmp_path / "demo.html").exists()
+
+
+def test_progress_reaches_a_pipe_at_once_and_the_live_link_works_while_announced(tmp_path):
+    here = str(Path(sjt_pin.__file__).parents[1])  # the sjt_pin under test
+    demo = subprocess.Popen(
+        [sys.executable, "-m", "sjt_pin.cli", "demo", *FAST, "--out", str(tmp_path / "d.html"),
+         "--keep", "4"], stdout=subprocess.PIPE, text=True, cwd=tmp_path,
+        env={**os.environ, "PYTHONPATH": here})
+    try:
+        lines = []
+        while not lines or not lines[-1].startswith("Live viewer at"):
+            lines.append(demo.stdout.readline())
+            assert lines[-1], "the demo ended without announcing the live viewer"
+        # the lines came while the demo still runs: stdout, a pipe here, is flushed
+        assert demo.poll() is None
+        assert any(line.startswith("  [1/1] planar3 sjt") for line in lines)
+        url = re.search(r"http://127\.0\.0\.1:\d+/static/", lines[-1]).group(0)
+        assert "for the next 4 s" in lines[-1]
+        with urllib.request.urlopen(url, timeout=5) as page:
+            assert page.status == 200
+        assert demo.wait(timeout=30) == 0
+    finally:
+        demo.kill()
+        demo.wait()
+    assert demo.stdout.read().startswith("Live viewer stopped")
+    with pytest.raises(urllib.error.URLError):
+        urllib.request.urlopen(url, timeout=5)
+
+
+class Browser:
+    """A stand-in for a web browser that records what it was asked to open."""
+
+    def __init__(self, works: bool):
+        self.works, self.opened = works, []
+
+    def open(self, url, new=0, autoraise=True):
+        self.opened.append(url)
+        return self.works
+
+
+def test_open_opens_the_page(tmp_path, capsys, monkeypatch):
+    browser = Browser(works=True)
+    monkeypatch.setattr(webbrowser, "get", lambda using=None: browser)
+    assert main(["demo", *FAST, "--out", str(tmp_path / "d.html"), "--open"]) == 0
+    assert browser.opened == [(tmp_path / "d.html").resolve().as_uri()]
+    assert "Opened it in the web browser" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("case", ["no browser", "browser fails"])
+def test_open_without_a_browser_says_so(case, tmp_path, capsys, monkeypatch):
+    def get(using=None):
+        if case == "no browser":
+            raise webbrowser.Error("could not locate runnable browser")
+        return Browser(works=False)
+
+    monkeypatch.setattr(webbrowser, "get", get)
+    assert main(["demo", *FAST, "--out", str(tmp_path / "d.html"), "--open"]) == 0
+    out = capsys.readouterr().out
+    assert "no web browser found" in out and (tmp_path / "d.html").resolve().as_uri() in out
+
+
+def test_every_demo_option_has_help():
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    options = [a for a in sub.choices["demo"]._actions if a.dest != "help"]
+    assert {a.dest for a in options} == {"robot", "method", "out", "open", "no_viewer", "keep"}
+    assert all(a.help and a.help != argparse.SUPPRESS for a in options)
 
 
 def test_unknown_robot_is_refused():
     with pytest.raises(SystemExit):
         main(["demo", "--robot", "r2d2"])
+
+
+def test_the_working_folder_guard_catches_a_stray_file(tmp_path):
+    with pytest.raises(AssertionError, match="new files"), no_new_files(tmp_path):
+        (tmp_path / "demo.html").write_text("stray")

@@ -1,5 +1,6 @@
 """The meshcat viewer: robots, animated tracking runs, the demo page (imports meshcat)."""
 
-from .viewer import METHOD_COLORS, Viewer
+from .style import METHOD_COLORS
+from .viewer import Viewer
 
 __all__ = ["METHOD_COLORS", "Viewer"]

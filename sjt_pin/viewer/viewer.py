@@ -1,8 +1,11 @@
-"""Meshcat viewer: robots, animated tracking runs, paths, frames, ellipsoids, static HTML.
+"""Meshcat viewer: robots, animated tracking runs, paths, frames, ellipsoids, a static page.
 
 The viewer knows robots and :class:`~sjt_pin.tracking.TrackingLog` objects, nothing of solvers.
-Its meshcat server listens on 127.0.0.1 only and stops when the viewer is closed, when the
-program exits, or when the program is killed (see :mod:`.server`).
+The scene is kept in this process (:mod:`.scene`). :meth:`Viewer.save_html` writes it as one
+self-contained page, with a legend, error plots and play controls (:mod:`.page`). With
+``live=True`` (the default) each change also goes to a meshcat server, whose page shows the
+scene as it is built. That server listens on 127.0.0.1 only and stops when the viewer is closed,
+when the program exits, or when the program is killed (see :mod:`.server`).
 
 Several robots can share one scene (``add_robot`` with an ``offset``); every drawing method takes
 ``robot=`` to pick one (default: the first). Animations of all robots share one timeline.
@@ -20,30 +23,26 @@ import meshcat
 import meshcat.geometry as mg
 import numpy as np
 import pinocchio as pin
-from meshcat.animation import Animation
-from pinocchio.visualize import MeshcatVisualizer
+from meshcat.animation import Animation, AnimationClip, AnimationTrack
+from meshcat.visualizer import ViewerWindow
 
-from .server import LoopbackServer
 from ..robot import Robot
 from ..tracking import TrackingLog
+from .meshes import visual_parts
+from .page import RobotEntry, Run, page_html
+from .scene import SceneRecord
+from .server import LoopbackServer
+from .style import DESIRED_COLOR, EXTRA_COLORS, METHOD_COLORS, OTHER_COLOR, to_int
 
-#: Colours of the methods (as in the figures) and of the desired path.
-METHOD_COLORS = {"sjt": 0x1F77B4, "jt": 0xD62728, "jp": 0x2CA02C, "dls": 0x9467BD}
-DESIRED_COLOR = 0x222222
-_NAMED = {"blue": 0x1F77B4, "red": 0xD62728, "green": 0x2CA02C, "purple": 0x9467BD,
-          "orange": 0xFF7F0E, "black": 0x000000, "gray": 0x7F7F7F, "white": 0xFFFFFF}
-
-
-def _color(color) -> int:
-    """``0xRRGGBB``, a name in ``_NAMED``, or an (r, g, b) triple in [0, 1], as an int."""
-    if isinstance(color, str):
-        if color not in _NAMED:
-            raise ValueError(f"color must be one of {sorted(_NAMED)}, an int or an RGB triple")
-        return _NAMED[color]
-    if isinstance(color, (int, np.integer)):
-        return int(color)
-    rgb = np.clip(np.asarray(color, dtype=float)[:3], 0.0, 1.0)
-    return int(rgb[0] * 255) << 16 | int(rgb[1] * 255) << 8 | int(rgb[2] * 255)
+#: Direction (world, from the scene's centre) the page's camera looks from unless it is set.
+VIEW_DIRECTION = (1.0, 0.3, 0.4)
+#: Points drawn of a run's paths (a 0.2 m circle with 500 points is off by 3 um).
+PATH_POINTS = 500
+#: Dots drawn of a run's desired path.
+DESIRED_DOTS = 60
+_NOT_LIVE = "this viewer has no live server (it was made with live=False)"
+_GRID_SCALE = 0.25
+_BACKGROUND = ([0.97, 0.97, 0.98], [0.80, 0.83, 0.87])  # top and bottom colours, RGB in [0, 1]
 
 
 def _points(points, name: str = "points") -> np.ndarray:
@@ -56,67 +55,108 @@ def _points(points, name: str = "points") -> np.ndarray:
     return arr
 
 
-class _Rig:
-    """One robot in the scene: its Pinocchio visualizer under the node ``name``."""
+def _placement(offset) -> np.ndarray:
+    """A robot base's 4x4 placement: from a ``pin.SE3``, a 4x4 matrix or a translation (m)."""
+    if isinstance(offset, pin.SE3):
+        return offset.homogeneous
+    arr = np.asarray(offset, dtype=float)
+    if arr.shape == (3,):
+        return pin.SE3(np.eye(3), arr).homogeneous
+    if arr.shape != (4, 4) or not np.all(np.isfinite(arr)):
+        raise ValueError("offset must be a translation (3,), a 4x4 matrix or a pin.SE3")
+    return arr
 
-    def __init__(self, viewer: meshcat.Visualizer, robot: Robot, name: str, offset, color):
+
+class _Rig:
+    """One robot in the scene: its visual meshes under the node ``name``, and its runs."""
+
+    def __init__(self, scene: meshcat.Visualizer, robot: Robot, name: str, label: str,
+                 placement: np.ndarray, color):
         if robot.visual_model is None:
             raise ValueError(f"robot {robot.name!r} has no visual model to draw")
-        self.robot, self.name = robot, name
-        self.viz = MeshcatVisualizer(robot.model, None, robot.visual_model)
-        self.viz.initViewer(viewer=viewer)
-        self.viz.loadViewerModel(rootNodeName=name, visual_color=color)
-        self.offset = np.asarray(offset, dtype=float)
-        viewer[name].set_transform(pin.SE3(np.eye(3), self.offset).homogeneous)
-        self.nodes = [self.viz.getViewerNodeName(g, pin.GeometryType.VISUAL)
-                      for g in robot.visual_model.geometryObjects]
+        self.robot, self.name, self.label = robot, name, label
+        self.runs: list[Run] = []
+        self.nodes: list[str] = []
+        self.geometries: list[int] = []
+        for index, geometry in enumerate(robot.visual_model.geometryObjects):
+            parts = visual_parts(geometry)
+            if not parts:
+                continue
+            node = f"{name}/visuals/{geometry.name}"
+            for k, part in enumerate(parts):
+                rgba = part.rgba if color is None else tuple(color)
+                material = mg.MeshPhongMaterial(color=to_int(rgba[:3]), opacity=float(rgba[3]),
+                                                shininess=20.0)
+                scene[f"{node}/{k}"].set_object(
+                    mg.TriangularMeshGeometry(part.vertices, part.faces), material)
+            self.nodes.append(node)
+            self.geometries.append(index)
+        scene[name].set_transform(placement)
         self.data = robot.model.createData()
         self.geometry_data = pin.GeometryData(robot.visual_model)
 
     def placements(self, q: np.ndarray) -> list[np.ndarray]:
-        """4x4 world placements of every visual geometry at ``q`` (rotation and translation)."""
+        """4x4 placements of the drawn geometries at ``q``, in the frame of the robot's base."""
         pin.forwardKinematics(self.robot.model, self.data, q)
         pin.updateGeometryPlacements(self.robot.model, self.data, self.robot.visual_model,
                                      self.geometry_data)
-        return [M.homogeneous for M in self.geometry_data.oMg]
+        return [self.geometry_data.oMg[i].homogeneous for i in self.geometries]
 
 
 class Viewer:
     """A meshcat scene with one or more robots.
 
     Args:
-        robot: the first robot, added under the node ``name`` with its base at ``offset`` (m).
-        open: open the scene in the default web browser.
+        robot: the first robot, added under the node ``name`` (shown as ``label``) with its base
+            at ``offset`` (see :meth:`add_robot`).
+        open: open the live scene in the default web browser.
+        live: start a meshcat server that shows the scene as it is built (:attr:`url`);
+            without it the scene only goes to :meth:`save_html`.
     Use as a context manager (or call :meth:`close`) to stop the server.
     """
 
     def __init__(self, robot: Robot, open: bool = False, *, name: str = "robot",
-                 offset=(0.0, 0.0, 0.0)):
-        self._server = LoopbackServer()
-        with contextlib.redirect_stdout(io.StringIO()):  # meshcat prints its URL on connect
-            self.meshcat = meshcat.Visualizer(zmq_url=self._server.zmq_url)
+                 offset=(0.0, 0.0, 0.0), label: str | None = None, live: bool = True):
+        self._server = LoopbackServer() if live else None
+        window = None
+        if self._server is not None:
+            with contextlib.redirect_stdout(io.StringIO()):  # meshcat prints its URL
+                window = ViewerWindow(self._server.zmq_url, start_server=False, server_args=[])
+        self._record = SceneRecord(window)
+        self.meshcat = meshcat.Visualizer(window=self._record)
         self._rigs: dict[str, _Rig] = {}
         self._animation = Animation()
-        self._animated = False
-        self.add_robot(robot, name, offset)
-        self.set_camera([1.8, 1.1, 0.9])
+        self._camera: np.ndarray | None = None
+        self.meshcat["/Background"].set_property("top_color", _BACKGROUND[0])
+        self.meshcat["/Background"].set_property("bottom_color", _BACKGROUND[1])
+        self.meshcat["/Axes"].set_property("visible", False)
+        # meshcat's grid is 20 m wide, cells of 0.5 m: make it 5 m, cells of 12.5 cm
+        self.meshcat["/Grid"].set_transform(np.diag([_GRID_SCALE] * 3 + [1.0]))
+        self.add_robot(robot, name, offset, label=label)
+        self._send_camera([1.8, 1.1, 0.9])
         if open:
             webbrowser.open(self.url, new=2)
 
     # -- scene -----------------------------------------------------------------------------------
     @property
     def url(self) -> str:
-        """The live viewer's address (on 127.0.0.1)."""
+        """The live viewer's address (on 127.0.0.1); only with ``live=True``."""
+        if self._server is None:
+            raise RuntimeError(_NOT_LIVE)
         return self._server.web_url
 
-    def add_robot(self, robot: Robot, name: str, offset=(0.0, 0.0, 0.0), color=None) -> None:
-        """Add ``robot`` under node ``name``, its base moved by ``offset`` (m, world axes).
+    def add_robot(self, robot: Robot, name: str, offset=(0.0, 0.0, 0.0), color=None,
+                  label: str | None = None) -> None:
+        """Add ``robot`` under node ``name``, shown as ``label`` (default ``name``) on the page.
 
-        ``color`` (RGBA in [0, 1]) overrides the URDF colours, e.g. for a ghost.
+        ``offset`` places its base: a translation (m, world axes), a 4x4 matrix or a
+        ``pin.SE3`` (e.g. to stand a planar arm up). ``color`` (RGBA in [0, 1]) overrides the
+        meshes' colours, e.g. for a ghost.
         """
         if name in self._rigs:
             raise ValueError(f"name {name!r} is already in the scene")
-        self._rigs[name] = _Rig(self.meshcat, robot, name, offset, color)
+        self._rigs[name] = _Rig(self.meshcat, robot, name, label or name, _placement(offset),
+                                color)
         self.show(robot.q0, robot=name)
 
     def _rig(self, robot: str | None) -> _Rig:
@@ -127,27 +167,48 @@ class Viewer:
         return self._rigs[robot]
 
     def set_camera(self, position) -> None:
-        """Put the camera at ``position`` (world, m); it looks at the world origin.
+        """Put the camera at ``position`` (world, m), looking at the world origin.
 
-        Pinocchio's camera helpers fail with meshcat 0.3.2; this sets the camera node directly.
+        Without it the saved page frames the whole scene, seen from :data:`VIEW_DIRECTION`.
         """
+        self._camera = np.asarray(position, dtype=float)
+        self._send_camera(self._camera)
+
+    def _send_camera(self, position) -> None:
+        # Pinocchio's camera helpers fail with meshcat 0.3.2; this sets the camera node directly.
+        # The camera lives in three.js' y-up frame: world (x, y, z) is (x, z, -y) there.
         x, y, z = np.asarray(position, dtype=float)
-        # the camera lives in three.js' y-up frame: world (x, y, z) is (x, z, -y) there
         self.meshcat["/Cameras/default/rotated/<object>"].set_property("position", [x, z, -y])
 
     def show(self, q, robot: str | None = None) -> None:
         """Place ``robot`` at configuration ``q``."""
         rig = self._rig(robot)
-        rig.viz.display(rig.robot.check_q(q))
+        placements = rig.placements(rig.robot.check_q(q))
+        for node, T in zip(rig.nodes, placements, strict=True):
+            self.meshcat[node].set_transform(T)
 
     # -- drawings ----------------------------------------------------------------------------
     def draw_path(self, points, color="blue", name: str = "path", robot: str | None = None,
                   linewidth: float = 2.0) -> None:
         """A polyline through ``points`` (N, 3) in m, in the frame of ``robot``'s base."""
         pts = _points(points)
-        material = mg.LineBasicMaterial(color=_color(color), linewidth=linewidth)
+        material = mg.LineBasicMaterial(color=to_int(color), linewidth=linewidth)
         node = f"{self._rig(robot).name}/paths/{name}"
         self.meshcat[node].set_object(mg.Line(mg.PointsGeometry(pts.T), material))
+
+    def draw_points(self, points, color="blue", name: str = "points", robot: str | None = None,
+                    size: float = 0.03) -> None:
+        """Dots at ``points`` (N, 3) in m, in the frame of ``robot``'s base.
+
+        ``size`` is three.js' point size: a dot is ``size * h / (2 d)`` pixels wide in a view
+        ``h`` pixels high at a distance ``d`` (m), e.g. 4 px for 0.03 at 3 m in 720 px.
+        """
+        pts = _points(points)
+        rgb = np.array([(to_int(color) >> shift & 255) / 255.0 for shift in (16, 8, 0)])
+        node = f"{self._rig(robot).name}/paths/{name}"
+        self.meshcat[node].set_object(mg.Points(  # meshcat's points always take vertex colours
+            mg.PointsGeometry(pts.T, color=np.tile(rgb[:, None], len(pts))),
+            mg.PointsMaterial(size=size)))
 
     def draw_frame(self, pose, name: str = "frame", robot: str | None = None,
                    length: float = 0.1) -> None:
@@ -180,30 +241,68 @@ class Viewer:
             rotation[:, -1] *= -1
         node = self.meshcat[f"{self._rig(robot).name}/ellipsoids/{name}"]
         node.set_object(mg.Ellipsoid(radii), mg.MeshLambertMaterial(
-            color=_color(color), opacity=opacity, transparent=opacity < 1.0))
+            color=to_int(color), opacity=opacity, transparent=opacity < 1.0))
         node.set_transform(pin.SE3(rotation, np.asarray(center, dtype=float)).homogeneous)
 
     # -- animations --------------------------------------------------------------------------
     def animate(self, log: TrackingLog, fps: float = 30.0, robot: str | None = None,
-                color=None, start: float = 0.0) -> float:
+                color=None, start: float = 0.0, label: str | None = None) -> float:
         """Play ``log`` on ``robot`` from ``start`` s of the timeline; returns its end time.
 
-        Draws the desired path (dark) and the path followed (``color``, default the method's);
-        the target and the end effector are drawn as spheres that move with the animation.
+        Draws the desired path (dark) and the path followed (``color``, default the method's,
+        or a free colour when another run already has it); the target and the end effector are
+        drawn as spheres that move with the animation. ``label`` names the run on the page
+        (default: the method).
+        """
+        end = self._add_run(log, fps, robot, color, start, label)
+        self._send_animation()
+        return end
+
+    def compare(self, logs: Mapping[str, TrackingLog] | Sequence[TrackingLog], fps: float = 30.0,
+                robot: str | None = None) -> None:
+        """Several runs on ``robot``, one after another on the timeline, each labelled by its
+        key (a mapping) or its method (a sequence) and drawn in its own colour.
+        """
+        runs = list(logs.items()) if isinstance(logs, Mapping) else [(None, log) for log in logs]
+        if not runs:
+            raise ValueError("logs must hold at least one TrackingLog")
+        start = 0.0
+        for label, log in runs:
+            start = self._add_run(log, fps, robot, None, start, label)
+        self._send_animation()
+
+    def _add_run(self, log: TrackingLog, fps: float, robot: str | None, color,
+                 start: float, label: str | None = None) -> float:
+        """Key ``log``'s frames into the animation (not sent yet); returns the run's end (s).
+
+        The run's followed path and end-effector sphere sit under the node ``runs/<method>`` of
+        the robot, shown only while the run plays; the desired path (dots) and the target (a
+        grey halo around the end effector) are the robot's.
         """
         if not isinstance(log, TrackingLog) or len(log) == 0:
             raise ValueError("log must be a non-empty TrackingLog")
         rig = self._rig(robot)
-        color = METHOD_COLORS.get(log.method, 0x1F77B4) if color is None else color
-        label = log.method or "run"
-        self.draw_path(log.target, DESIRED_COLOR, "desired", robot=rig.name)
-        self.draw_path(log.position, color, label, robot=rig.name)
-        target_node = f"{rig.name}/markers/target"
-        ee_node = f"{rig.name}/markers/ee"
-        self.meshcat[target_node].set_object(
-            mg.Sphere(0.012), mg.MeshLambertMaterial(color=DESIRED_COLOR))
-        self.meshcat[ee_node].set_object(mg.Sphere(0.01), mg.MeshLambertMaterial(color=_color(
-            color)))
+        label = str(label or log.method or "run")
+        if any(run.label == label for run in rig.runs):
+            raise ValueError(f"robot {rig.name!r} already has a run labelled {label!r}")
+        if color is None:
+            taken = {run.color for run in rig.runs}
+            free = [c for c in (METHOD_COLORS.get(log.method, OTHER_COLOR), *EXTRA_COLORS)
+                    if c not in taken]
+            color = free[0] if free else OTHER_COLOR
+        color = to_int(color)
+        safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in label)
+        run_node, target_node = f"{rig.name}/runs/{safe}", f"{rig.name}/markers/target"
+        every = -(-len(log) // PATH_POINTS)  # a path of at most PATH_POINTS points
+        self.draw_points(log.target[:: max(1, len(log) // DESIRED_DOTS)], DESIRED_COLOR,
+                         "desired", robot=rig.name)
+        self.meshcat[f"{run_node}/path"].set_object(mg.Line(
+            mg.PointsGeometry(_points(log.position[::every]).T),
+            mg.LineBasicMaterial(color=color, linewidth=2.0)))
+        self.meshcat[f"{run_node}/ee"].set_object(
+            mg.Sphere(0.011), mg.MeshLambertMaterial(color=color))
+        self.meshcat[target_node].set_object(mg.Sphere(0.02), mg.MeshLambertMaterial(
+            color=DESIRED_COLOR, opacity=0.3, transparent=True))
         self._animation.default_framerate = fps
         frames = np.arange(0.0, log.t[-1] + 0.5 / fps, 1.0 / fps)
         indices = np.minimum(np.searchsorted(log.t, frames), len(log) - 1)
@@ -213,42 +312,58 @@ class Viewer:
                 for node, T in zip(rig.nodes, rig.placements(log.q[i]), strict=True):
                     frame[node].set_transform(T)
                 frame[target_node].set_transform(_translation(log.target[i]))
-                frame[ee_node].set_transform(_translation(log.position[i]))
-        self.meshcat.set_animation(self._animation, play=True, repetitions=1000)
-        return start + frames[-1] + 1.0 / fps
+                frame[f"{run_node}/ee"].set_transform(_translation(log.position[i]))
+        for frame, visible in ((0, first == 0), (first, True), (first + len(frames), False)):
+            with self._animation.at_frame(self.meshcat, frame) as keyed:
+                keyed[run_node].set_property("visible", "boolean", visible)
+        end = start + frames[-1] + 1.0 / fps
+        rig.runs.append(Run(label, log.method, color, start, end, log))
+        return end
 
-    def compare(self, logs: Mapping[str, TrackingLog] | Sequence[TrackingLog], fps: float = 30.0,
-                robot: str | None = None) -> None:
-        """Several methods' runs on ``robot``, one after another on the timeline.
-
-        Each run's followed path stays drawn in its method's colour, so the paths can be
-        compared side by side while the robot replays the runs in turn.
-        """
-        runs = list(logs.values()) if isinstance(logs, Mapping) else list(logs)
-        if not runs:
-            raise ValueError("logs must hold at least one TrackingLog")
-        start = 0.0
-        for log in runs:
-            start = self.animate(log, fps=fps, robot=robot, start=start)
+    def _send_animation(self) -> None:
+        """Send the animation, its tracks lengthened to the last key of all (meshcat loops
+        each track over its own length: tracks of unequal lengths would drift apart)."""
+        last = max(track.frames[-1] for clip in self._animation.clips.values()
+                   for track in clip.tracks.values())
+        padded = Animation(default_framerate=self._animation.default_framerate)
+        for path, clip in self._animation.clips.items():
+            tracks = {}
+            for name, track in clip.tracks.items():
+                more = [last] if track.frames[-1] < last else []
+                tracks[name] = AnimationTrack(track.name, track.jstype, track.frames + more,
+                                              track.values + [track.values[-1]] * len(more))
+            padded.clips[path] = AnimationClip(tracks, fps=clip.fps, name=clip.name)
+        self.meshcat.set_animation(padded, play=True, repetitions=1000)
 
     # -- output ------------------------------------------------------------------------------
-    def static_html(self) -> str:
-        """One self-contained HTML page of the scene and its animation (works offline)."""
-        return self.meshcat.static_html()
+    def static_html(self, title: str = "sjt-pin viewer", description: str = "") -> str:
+        """One self-contained HTML page of the scene and its animation (works offline).
 
-    def save_html(self, path: str | Path) -> Path:
-        """Write :meth:`static_html` to ``path``."""
+        Beside the 3-D view: ``title``, ``description`` (a paragraph), each robot's label and
+        runs in their colours, a plot of each run's tracking error over time; under it a
+        play/pause button and a time slider.
+        """
+        robots = [RobotEntry(rig.name, rig.label, tuple(rig.runs)) for rig in self._rigs.values()]
+        view = None if self._camera is not None else VIEW_DIRECTION
+        return page_html(self._record.commands(), robots, title, description, view)
+
+    def save_html(self, path: str | Path, title: str = "sjt-pin viewer",
+                  description: str = "") -> Path:
+        """Write :meth:`static_html` to ``path``; returns the path."""
         path = Path(path)
-        path.write_text(self.static_html(), encoding="utf-8")
+        path.write_text(self.static_html(title, description), encoding="utf-8")
         return path
 
     def jupyter_cell(self, height: int = 400):
         """The live viewer in a Jupyter cell (an iframe on :attr:`url`)."""
+        if self._server is None:
+            raise RuntimeError(_NOT_LIVE)
         return self.meshcat.jupyter_cell(height=height)
 
     def close(self) -> None:
-        """Stop the meshcat server (idempotent)."""
-        self._server.close()
+        """Stop the meshcat server, if any (idempotent)."""
+        if self._server is not None:
+            self._server.close()
 
     def __enter__(self) -> Viewer:
         return self
@@ -257,7 +372,8 @@ class Viewer:
         self.close()
 
     def __repr__(self) -> str:
-        return f"Viewer({list(self._rigs)}, url={self.url!r})"
+        url = self._server.web_url if self._server is not None else None
+        return f"Viewer({list(self._rigs)}, url={url!r})"
 
 
 def _translation(p) -> np.ndarray:

@@ -1,0 +1,76 @@
+"""The demo's scene: the robots side by side, each replaying its runs of every method in turn.
+
+The robots stand in a row along the world y axis. Each one gets the width it sweeps (its frames
+at the start and the paths of its runs, plus a margin for the links' thickness), and a gap
+separates it from the next. The paper's planar arm moves in its x-y plane; it is stood up so that
+this plane is the vertical y-z plane, facing the camera, with its y axis pointing up.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping, Sequence
+
+import numpy as np
+import pinocchio as pin
+
+from ..robot import Robot
+from ..tracking import TrackingLog
+from .viewer import Viewer
+
+#: How the demo names its robots on the page.
+LABELS = {"planar3": "Planar 3R arm", "ur5": "UR5", "panda": "Franka Panda"}
+#: What each robot's task controls.
+TASKS = {"planar3": "x-y position, the paper's task 3", "ur5": "pose", "panda": "pose"}
+#: The planar arm stood up: its x axis along world y, its y axis up (world z).
+STAND_UP = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+GAP = 0.2  # m between the widths of two robots
+MARGIN = 0.1  # m added on each side of a robot's frames and paths for the links' thickness
+
+
+def demo_viewer(runs: Mapping[str, tuple[Robot, Mapping[str, TrackingLog]]],
+                live: bool = False) -> Viewer:
+    """A viewer of ``runs`` (robot name -> (robot, method -> log)) laid out for the demo page.
+
+    ``live`` also starts the meshcat server (see :class:`Viewer`).
+    """
+    rotations = {name: STAND_UP if name == "planar3" else np.eye(3) for name in runs}
+    spans = {name: _span(robot, logs.values(), rotations[name])
+             for name, (robot, logs) in runs.items()}
+    widths = [hi - lo for lo, hi in spans.values()]
+    left = -(sum(widths) + GAP * (len(widths) - 1)) / 2
+    viewer = None
+    for name, (robot, logs) in runs.items():
+        lo, hi = spans[name]
+        placement = pin.SE3(rotations[name], np.array([0.0, left - lo, 0.0]))
+        left += hi - lo + GAP
+        if viewer is None:
+            viewer = Viewer(robot, name=name, offset=placement, label=LABELS.get(name),
+                            live=live)
+        else:
+            viewer.add_robot(robot, name, offset=placement, label=LABELS.get(name))
+        viewer.compare(logs, robot=name)
+    if viewer is None:
+        raise ValueError("runs must hold at least one robot")
+    return viewer
+
+
+def describe(names: Sequence[str], dt: float) -> str:
+    """The page's description of the demo's runs on the robots ``names``, period ``dt`` (s)."""
+    tasks = "; ".join(f"{LABELS.get(n, n)}: {TASKS.get(n, 'its task')}" for n in names)
+    return (f"Each robot tracks a circle with each method in turn, at a {1e3 * dt:g} ms control "
+            f"period ({tasks}). The errors are too small to see in the view: the plots show "
+            "them.")
+
+
+def _span(robot: Robot, logs: Iterable[TrackingLog],
+          rotation: np.ndarray) -> tuple[float, float]:
+    """Lowest and highest world y (m) of ``robot``'s frames at its runs' start and of their
+    paths, with its base rotated by ``rotation`` and at the origin, widened by MARGIN."""
+    logs = list(logs)
+    data = robot.model.createData()
+    points = [log.position for log in logs] + [log.target for log in logs]
+    for q in [log.q[0] for log in logs] or [robot.q0]:
+        pin.framesForwardKinematics(robot.model, data, q)
+        points.append(np.array([frame.translation for frame in data.oMf]))
+    y = np.concatenate(points) @ rotation[1]
+    return float(y.min()) - MARGIN, float(y.max()) + MARGIN
