@@ -1,17 +1,20 @@
-"""Matplotlib figures of the paper's experiments (Figs. 2/3, 6 and 7) from :mod:`.paper` results."""
+"""Matplotlib figures of the paper's experiments (Figs. 2/3, 6 and 7) from :mod:`.paper` results.
+
+This module leaves matplotlib's backend alone: a notebook keeps its inline backend (the figures
+show under the cell that makes them), and :func:`save` writes PNG files with whatever backend the
+process has (``savefig`` renders with Agg for PNG whatever the backend; with no display,
+matplotlib picks Agg by itself).
+"""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
+import matplotlib.pyplot as plt
+import numpy as np
 
-matplotlib.use("Agg")  # files only; notebooks pick their own backend before importing pyplot
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from .experiments import PAPER_GAINS, Sweep  # noqa: E402
-from ..tracking import TrackingLog  # noqa: E402
+from ..tracking import TrackingLog
+from .experiments import PAPER_GAINS, Sweep
 
 COLORS = {"sjt": "tab:blue", "jt": "tab:red", "jp": "tab:green", "dls": "tab:purple"}
 TASK_TITLES = {1: "task 1: line inside the workspace", 2: "task 2: line leaving the workspace",
@@ -81,26 +84,6 @@ def error_series_figure(logs: dict[str, TrackingLog], number: int = 3) -> plt.Fi
     ax.set_title(f"{TASK_TITLES[number]}, each method at its largest stable gain")
     ax.legend(fontsize=8)
     ax.grid(True, which="both", alpha=0.3)
-    fig.tight_layout()
-    return fig
-
-
-def scale_figure(report) -> plt.Figure:
-    """SJT step time (and the Pinocchio floor) against the number of joints."""
-    rows = sorted(report.rows, key=lambda r: r.nv)
-    nv = [r.nv for r in rows]
-    fig, ax = plt.subplots(figsize=(6, 4))
-    ax.plot(nv, [r.step.median for r in rows], "o-", color=COLORS["sjt"], label="SJT step")
-    ax.plot(nv, [r.primitives.median for r in rows], "s--", color="0.4",
-            label="Pinocchio calls of the step")
-    for r in rows:
-        ax.annotate(r.robot, (r.nv, r.step.median), textcoords="offset points", xytext=(4, 4),
-                    fontsize=7)
-    ax.set_xlabel("joints (nv)")
-    ax.set_ylabel("median time per step [us]")
-    ax.set_title("SJT step time against the number of joints")
-    ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=8)
     fig.tight_layout()
     return fig
 
