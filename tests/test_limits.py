@@ -70,3 +70,27 @@ def test_velocity_limits_scale_the_whole_velocity(ur5):
     np.testing.assert_allclose(limited.last.dq, scale * free.last.dq)  # same direction
     with pytest.raises(ValueError, match=r"velocity_limits must have shape \(6,\)"):
         sjt.SJTSolver(ur5, velocity_limits=[1.0, 2.0])
+
+
+def test_a_start_outside_the_limits_returns_at_the_allowed_speed():
+    """Kinova's SRDF pose puts joint 3 at -1.571 rad, outside its URDF range [0.33, 5.95]:
+    Robot clips q0 (with a warning), and a start out of range is brought back at the joint's
+    speed limit, never jumped into range."""
+    with pytest.warns(UserWarning, match=r"\['j2s6s200_joint_3'\] outside their URDF limits"):
+        kinova = sjt.Robot.from_example("kinova")
+    assert np.all(kinova.q0 >= kinova.lower_limits) and np.all(kinova.q0 <= kinova.upper_limits)
+    joint = kinova.model.getJointId("j2s6s200_joint_3")
+    i, v = kinova.model.idx_qs[joint], kinova.model.idx_vs[joint]
+    q = kinova.q0.copy()
+    q[i] = -1.571  # the SRDF's value
+    target = kinova.fk(kinova.q0)
+    vmax = kinova.velocity_limits[v]
+    solver = sjt.SJTSolver(kinova, dt=1e-3)
+    for _ in range(200):
+        q = solver.step(q, target)
+        assert abs(solver.last.dq[v]) <= vmax * (1 + 1e-12)  # never faster than allowed
+        assert v in solver.last.clamped  # held to its return motion while outside
+    assert q[i] == pytest.approx(-1.571 + 200 * 1e-3 * vmax)  # moving back at the limit
+    result = solver.solve(target, q)  # a seed out of range works too
+    assert result.success
+    assert np.all(result.q >= kinova.lower_limits) and np.all(result.q <= kinova.upper_limits)

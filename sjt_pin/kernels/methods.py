@@ -11,8 +11,9 @@ After the mapping, :func:`_limits` applies the limits as :class:`~sjt_pin.limits
 and :class:`~sjt_pin.limits.VelocityLimit` describe them (their Python methods are the
 reference): the escape velocity is added, a joint that would leave its position range is fixed
 onto its limit (one outside it returns at its speed limit) and the mapping solved again for the
-other joints with the task velocity the fixed ones leave them, then the whole step is scaled
-down if a joint is faster than its speed limit. The kernels return the status bits of
+other joints with the task velocity the fixed ones leave them; then the free joints' step is
+scaled down together if one is faster than its speed limit, and a fixed joint's motion is
+capped at its own. The kernels return the status bits of
 :mod:`.layout` (0: nothing to do but integrate).
 """
 
@@ -297,16 +298,22 @@ def _step(kind, J, e, ff, q, work, step):
         for j in range(n):
             step[j] += dt * work[extra + j]
     status |= _clamp_position(kind, J, e, ff, has_ff, q, mask, work, step, escaping)
-    # the speed limits: the whole step scaled down, its direction kept
-    speed = int(work[P_SPEED])
+    # the speed limits: the free joints' step scaled down together, its direction kept; a
+    # clamped joint follows its own motion (onto its limit, or back into range), capped alone
+    speed, clamped = int(work[P_SPEED]), int(work[P_CLAMPED])
     worst = 0.0
     for j in range(n):
-        worst = max(worst, abs(step[j]) * work[speed + j])
+        if work[clamped + j] != 0.0:
+            cap = dt / work[speed + j] if work[speed + j] > 0.0 else math.inf
+            step[j] = min(max(step[j], -cap), cap)
+        else:
+            worst = max(worst, abs(step[j]) * work[speed + j])
     worst /= dt
     work[INFO + I_SCALE] = 1.0
     if worst > 1.0:
         for j in range(n):
-            step[j] /= worst
+            if work[clamped + j] == 0.0:
+                step[j] /= worst
         work[INFO + I_SCALE] = 1.0 / worst
         status |= SCALED
     return status

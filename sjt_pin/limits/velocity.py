@@ -8,9 +8,10 @@ from .base import Limit
 
 
 class VelocityLimit(Limit):
-    """No joint faster than its limit: the whole joint velocity is scaled down uniformly, so
-    the direction of the update (and of the task motion) is kept. A solver runs it inside its
-    step kernel; these methods are the reference.
+    """No joint faster than its limit: the joint velocity is scaled down uniformly, so the
+    direction of the update (and of the task motion) is kept. A solver runs it inside its step
+    kernel, where a joint held by the position limit (moving onto its limit, or back into its
+    range) is capped on its own and the others scaled; these methods are the reference.
 
     Args:
         limits: (nv,) speed limits in rad/s or m/s (``inf`` for none).
