@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
 import time
 import webbrowser
 from collections.abc import Sequence
+from pathlib import Path
 
 from .paper import scenarios
 from .solvers import SOLVERS, make_solver
@@ -29,48 +31,67 @@ def _table(rows: list[tuple[str, str, TrackingLog, float]]) -> str:
 
 
 def demo(args: argparse.Namespace) -> int:
-    """Track each robot's demo trajectory with each method, print the table, write the HTML."""
+    """Track each robot's demo trajectory with each method, print the table, write the page."""
     rows, runs = [], {}
+    total = len(args.robot) * len(args.method)
+    print(f"Tracking {len(args.robot)} robot(s) x {len(args.method)} method(s), dt = "
+          f"{DEMO_DT:g} s\n(the first time on a machine, the solvers' kernels are compiled "
+          "first: about half a minute on 2 cores)", flush=True)
     for name in args.robot:
+        print(f"  {name}: loading the robot, finding its start on the path ...", end=" ",
+              flush=True)
+        start = time.perf_counter()
         sc = scenarios.scenario(name)
+        print(f"{time.perf_counter() - start:.1f} s", flush=True)
         runs[name] = (sc.robot, {})
         for method in args.method:
             solver = make_solver(method, sc.robot, gain="auto", dt=DEMO_DT, task=sc.task)
             start = time.perf_counter()
             log = track(solver, sc.trajectory, sc.q0)
-            rows.append((name, method, log, time.perf_counter() - start))
+            seconds = time.perf_counter() - start
+            rows.append((name, method, log, seconds))
             runs[name][1][method] = log
-    print(f"Tracking the demo trajectories (dt = {DEMO_DT:g} s, gain = auto; errors in m/rad, "
-          "joint speeds in rad/s)")
-    print(_table(rows))
+            print(f"  [{len(rows)}/{total}] {name} {method}: {len(log)} steps in "
+                  f"{seconds:.1f} s, max error {log.max_error:.2g}", flush=True)
+    print(f"\nErrors in m/rad, joint speeds in rad/s (gain = auto)\n{_table(rows)}", flush=True)
     if args.no_viewer:
         return 0
-    from .viewer import Viewer
+    from .viewer.demo import demo_viewer, describe
 
-    spacing = 2.0  # m between the robots' bases, along y, centred on the origin
-    viewer = None
+    print("\nWriting the page ...", flush=True)
+    methods = ", ".join(m.upper() for m in args.method)
+    viewer = demo_viewer(runs, live=args.keep > 0)
     try:
-        for k, (name, (robot, logs)) in enumerate(runs.items()):
-            offset = (0.0, spacing * (k - (len(runs) - 1) / 2), 0.0)
-            if viewer is None:
-                viewer = Viewer(robot, name=name, offset=offset)
-            else:
-                viewer.add_robot(robot, name, offset=offset)
-            viewer.compare(logs, robot=name)
-        viewer.set_camera([1.2 + 0.6 * len(runs), 0.4, 0.6 + 0.3 * len(runs)])
-        path = viewer.save_html(args.out)
-        print(f"\nLive viewer (while this command runs): {viewer.url}")
-        print(f"Animation written to {path.resolve()} ({path.stat().st_size / 1e6:.1f} MB, "
-              "self-contained; open it in a browser, the timeline is under Open Controls)")
+        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+        path = viewer.save_html(args.out, f"sjt-pin demo: tracking a circle with {methods}",
+                                describe(args.robot, DEMO_DT))
+        print(f"Wrote {path.resolve()} ({path.stat().st_size / 1e6:.1f} MB, self-contained, "
+              "works offline): open it in a web browser", flush=True)
         if args.open:
-            webbrowser.open(path.resolve().as_uri(), new=2)
+            _open_in_browser(path)
         if args.keep > 0:
-            print(f"Serving the live viewer for {args.keep:g} s")
-            time.sleep(args.keep)
+            print(f"Live viewer at {viewer.url} for the next {args.keep:g} s "
+                  "(Ctrl+C stops it)", flush=True)
+            with contextlib.suppress(KeyboardInterrupt):
+                time.sleep(args.keep)
+            print("Live viewer stopped", flush=True)
     finally:
-        if viewer is not None:
-            viewer.close()
+        viewer.close()
     return 0
+
+
+def _open_in_browser(path: Path) -> None:
+    """Open ``path`` in the default web browser, or say that there is none."""
+    uri = path.resolve().as_uri()
+    try:
+        opened = webbrowser.get().open(uri, new=2)
+    except webbrowser.Error:
+        opened = False
+    if opened:
+        print("Opened it in the web browser", flush=True)
+    else:
+        print(f"--open: no web browser found on this machine; open {uri} in one yourself",
+              flush=True)
 
 
 def reproduce(args: argparse.Namespace) -> int:
@@ -92,43 +113,42 @@ def _write_json(path: str | None, payload) -> None:
 
 
 def bench(args: argparse.Namespace) -> int:
-    """``sjt-pin bench speed|scale|accuracy|ik``."""
+    """``sjt-pin bench speed|accuracy|ik``: the tables of the README's Benchmarks section."""
     from dataclasses import asdict
 
     from .bench import speed as speed_bench
 
-    def show(row):
-        print(f"  {row.robot:16s} {row.method:18s} {row.step.median:8.2f} us "
-              f"(floor {row.primitives.median:.2f}, ratio {row.ratio:.2f})", flush=True)
-
     machine = speed_bench.machine()
-    print(f"{machine.get('cpu', machine['machine'])}; Python {machine['python']}, "
-          f"Pinocchio {machine['pinocchio']}, NumPy {machine['numpy']}")
+    print(f"{machine.get('cpu') or machine['machine']}; Python {machine['python']}, "
+          f"Pinocchio {machine['pinocchio']}, NumPy {machine['numpy']}", flush=True)
     if args.kind == "speed":
+        def show(row):
+            print(f"  {row.robot:6s} {row.path:44s} {row.step.median:7.2f} us  "
+                  f"{row.ratio:5.2f} x floor  p90/median {row.step.jitter:4.2f}", flush=True)
+
         report = speed_bench.speed(steps=args.steps, peers=args.peers, progress=show)
         print(speed_bench.speed_table(report))
         for robot, ratio in sorted(speed_bench.peer_ratios(report).items()):
-            print(f"pink / sjt step time on {robot}: {ratio:.1f}x")
-        print("\nWhere an SJT step's time goes (us):")
-        for name in ("ur5", "panda"):
-            for label, us in speed_bench.breakdown(name):
-                print(f"  {name:6s} {us:6.2f}  {label}")
-        _write_json(args.json, report.to_dict())
-    elif args.kind == "scale":
-        report = speed_bench.scale(steps=args.steps, progress=show)
-        print(speed_bench.speed_table(report))
-        if args.plot:
-            from .paper.figures import save, scale_figure
-
-            save(scale_figure(report), args.plot)
-            print(f"wrote {args.plot}")
+            print(f"pink / SJT with a target velocity on {robot}: {ratio:.1f}x")
         _write_json(args.json, report.to_dict())
     elif args.kind == "accuracy":
-        from .bench.accuracy import accuracy, accuracy_table
+        from .bench import accuracy
 
-        rows = accuracy(progress=lambda r: print(f"  {r.path}: {r.method} done", flush=True))
-        print(accuracy_table(rows))
-        _write_json(args.json, {"machine": machine, "rows": [asdict(r) for r in rows]})
+        def show(row):
+            print(f"  {row}", flush=True)
+
+        tracking = accuracy.tracking(progress=show)
+        rest = accuracy.rest(progress=show)
+        saddles = accuracy.saddles(progress=show)
+        print("\nMax task error (m and rad) along the paths:\n" + accuracy.tracking_table(tracking))
+        print("\nRMS joint speed (rad/s) over the last second at a target 0.3 m beyond reach:\n"
+              + accuracy.rest_table(rest))
+        print("\nSteps to 1 % of the start error from an exact saddle (peak joint speed / URDF "
+              "limit):\n" + accuracy.saddle_table(saddles))
+        _write_json(args.json, {"machine": machine,
+                                "tracking": [asdict(r) for r in tracking],
+                                "rest": [asdict(r) for r in rest],
+                                "saddles": [asdict(r) for r in saddles]})
     else:
         from .bench.ik import ik_benchmark, ik_table
 
@@ -143,15 +163,21 @@ def bench(args: argparse.Namespace) -> int:
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="sjt-pin", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
-    p = sub.add_parser("demo", help="track a trajectory on the planar arm, UR5 and Panda")
-    p.add_argument("--robot", nargs="+", choices=scenarios.ROBOTS, default=list(scenarios.ROBOTS))
+    about = ("track a circle on the planar arm, UR5 and Panda with each method; print a table "
+             "and write a self-contained animated page")
+    p = sub.add_parser("demo", help=about, description=about[0].upper() + about[1:] + ".")
+    p.add_argument("--robot", nargs="+", choices=scenarios.ROBOTS, default=list(scenarios.ROBOTS),
+                   help="robots to track (default: all)")
     p.add_argument("--method", nargs="+", choices=sorted(SOLVERS),
-                   default=["sjt", "jt", "dls", "jp"])
-    p.add_argument("--out", default="demo.html", help="static HTML animation (demo.html)")
-    p.add_argument("--open", action="store_true", help="open the HTML file in a web browser")
-    p.add_argument("--no-viewer", action="store_true", help="print the table only")
-    p.add_argument("--keep", type=float, default=0.0,
-                   help="seconds to keep the live viewer up before exiting (default 0)")
+                   default=["sjt", "jt", "dls", "jp"], help="methods to compare "
+                   "(default: sjt jt dls jp)")
+    p.add_argument("--out", default="demo.html", metavar="PATH",
+                   help="where to write the page (default: ./demo.html)")
+    p.add_argument("--open", action="store_true", help="open the page in a web browser")
+    p.add_argument("--no-viewer", action="store_true", help="print the table only, no page")
+    p.add_argument("--keep", type=float, default=0.0, metavar="SECONDS",
+                   help="also serve the live meshcat viewer on 127.0.0.1 for SECONDS before "
+                   "exiting (default 0: no live viewer)")
     p.set_defaults(func=demo)
     p = sub.add_parser("reproduce", help="the paper's simulations: figures and results.md")
     p.add_argument("--out", default="results", help="output folder (default: results)")
@@ -160,14 +186,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--grid", type=int, default=30, help="gains per sweep (default: 30)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=reproduce)
-    p = sub.add_parser("bench", help="benchmarks: speed, scale, accuracy, ik")
-    p.add_argument("kind", choices=["speed", "scale", "accuracy", "ik"])
-    p.add_argument("--peers", action="store_true", help="speed: add pink (the bench extra)")
-    p.add_argument("--steps", type=int, default=5000, help="speed/scale: timed steps")
-    p.add_argument("--poses", type=int, default=1000, help="ik: random poses per robot")
-    p.add_argument("--no-peers", action="store_true", help="ik: skip pink and TRAC-IK")
-    p.add_argument("--plot", default=None, help="scale: write the step-time plot (PNG)")
-    p.add_argument("--json", default=None, help="write the results as JSON")
+    p = sub.add_parser("bench", help="benchmarks: step speed, accuracy, solve to a pose",
+                       description="The benchmarks of the README: speed (every step path "
+                       "against its Pinocchio floor), accuracy (tracking near singularities, "
+                       "rest at unreachable targets, exits from saddles), ik (TRAC-IK's "
+                       "protocol on five arms).")
+    p.add_argument("kind", choices=["speed", "accuracy", "ik"], help="which benchmark")
+    p.add_argument("--peers", action="store_true",
+                   help="speed: add pink's solve_ik (pip install -e '.[bench]')")
+    p.add_argument("--steps", type=int, default=5000, help="speed: timed steps per path "
+                   "(default: 5000)")
+    p.add_argument("--poses", type=int, default=1000, help="ik: random poses per robot "
+                   "(default: 1000)")
+    p.add_argument("--no-peers", action="store_true",
+                   help="ik: skip TRAC-IK and robotics-toolbox's ik_LM")
+    p.add_argument("--json", default=None, metavar="PATH", help="also write the results as JSON")
     p.set_defaults(func=bench)
     return parser
 

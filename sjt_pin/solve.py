@@ -6,8 +6,8 @@ call (:func:`~sjt_pin.kernels.search.search_iteration`) that accepts or rejects 
 computes the next step ``S J^T (J S J^T + lambda I)^-1 e`` — S = D for SJT (the paper's scaling
 factors as the preconditioner: as lambda grows the step turns into SJT's direction ``D J^T e``,
 a descent direction everywhere, eq. 24-25; as it shrinks, into the Gauss-Newton step, which
-converges quadratically) and S = I for the other methods (plain Levenberg-Marquardt; DLS adds
-its damping). ``lambda = mu^2 + nu |e_w|^2`` grows with the error (Sugihara's damping), with
+converges quadratically) and S = I for the other methods (plain Levenberg-Marquardt: DLS's
+damping is for tracking; a search that kept it as a floor would stall short of the tolerance). ``lambda = mu^2 + nu |e_w|^2`` grows with the error (Sugihara's damping), with
 ``nu`` adapted as in Levenberg-Marquardt. Joint limits hold at every iteration: a joint that
 would leave its range is fixed onto its limit and the others solved again; a joint whose range
 spans a full turn wraps by 2 pi instead. A start ends when the error is below ``tol``
@@ -80,7 +80,7 @@ class Search:
         self.work = work = layout.allocate()
         layout.sqrt_weight(work)[:] = stack.sqrt_weight
         layout.joint_mask(work)[:] = stack.chain
-        work[K.P_MU] = max(MU, getattr(method, "damping", 0.0))
+        work[K.P_MU] = MU  # the search's own damping: DLS's tracking damping would stall it
         work[K.P_COL_TOL] = getattr(method, "column_tol", COLUMN_TOL)
         work[K.P_LENGTH2] = getattr(method, "length", 0.0) ** 2
         work[K.P_SCALED] = 1.0 if getattr(method, "scaled", False) else 0.0
