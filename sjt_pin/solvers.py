@@ -11,11 +11,12 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from .gains import Gain
+from .limits import Limit
 from .mappings import COLUMN_TOL, JP_RCOND
 from .methods import DLS, JP, JT, SJT
 from .methods.dls import DLS_DAMPING
-from .methods.transpose import FF_DAMPING
 from .methods.sjt import SJT_LENGTH
+from .methods.transpose import FF_DAMPING
 from .robot import Robot
 from .solver import Solver
 from .tasks import PostureTask, Task
@@ -38,6 +39,8 @@ _COMMON = """
             (none), or an (nv,) array in rad/s or m/s (``inf`` for none).
         check_stability: warn once (:class:`~sjt_pin.GainWarning`) when a fixed gain exceeds
             the stability bound ``2 / (dt lambda_max(J M))`` at the current configuration.
+        limits: further :class:`~sjt_pin.limits.Limit` objects, applied after the URDF's
+            position and speed limits (see the README's "Extend it").
 """
 
 _TRANSPOSE = """
@@ -97,12 +100,13 @@ class SJTSolver(Solver):
         position_limits: bool | None = None,
         velocity_limits: bool | np.ndarray | None = None,
         check_stability: bool = True,
+        limits: Sequence[Limit] = (),
     ):
         method = SJT(feedforward, ff_damping, column_tol, length, feedback)
         super().__init__(robot, method, gain, dt, task,
                          posture=posture, position_limits=position_limits,
                          velocity_limits=velocity_limits, escape=escape,
-                         check_stability=check_stability)
+                         check_stability=check_stability, limits=limits)
 
 
 class JTSolver(Solver):
@@ -131,11 +135,12 @@ class JTSolver(Solver):
         position_limits: bool | None = None,
         velocity_limits: bool | np.ndarray | None = None,
         check_stability: bool = True,
+        limits: Sequence[Limit] = (),
     ):
         super().__init__(robot, JT(feedforward, ff_damping, column_tol, SJT_LENGTH), gain, dt, task,
                          posture=posture, position_limits=position_limits,
                          velocity_limits=velocity_limits, escape=escape,
-                         check_stability=check_stability)
+                         check_stability=check_stability, limits=limits)
 
 
 class JPSolver(Solver):
@@ -160,10 +165,11 @@ class JPSolver(Solver):
         position_limits: bool | None = None,
         velocity_limits: bool | np.ndarray | None = None,
         check_stability: bool = True,
+        limits: Sequence[Limit] = (),
     ):
         super().__init__(robot, JP(rcond), gain, dt, task, posture=posture,
                          position_limits=position_limits, velocity_limits=velocity_limits,
-                         check_stability=check_stability)
+                         check_stability=check_stability, limits=limits)
 
     @property
     def rcond(self) -> float:
@@ -191,10 +197,11 @@ class DLSSolver(Solver):
         position_limits: bool | None = None,
         velocity_limits: bool | np.ndarray | None = None,
         check_stability: bool = True,
+        limits: Sequence[Limit] = (),
     ):
         super().__init__(robot, DLS(damping), gain, dt, task, posture=posture,
                          position_limits=position_limits, velocity_limits=velocity_limits,
-                         check_stability=check_stability)
+                         check_stability=check_stability, limits=limits)
 
     @property
     def damping(self) -> float:

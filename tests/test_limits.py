@@ -94,3 +94,42 @@ def test_a_start_outside_the_limits_returns_at_the_allowed_speed():
     result = solver.solve(target, q)  # a seed out of range works too
     assert result.success
     assert np.all(result.q >= kinova.lower_limits) and np.all(result.q <= kinova.upper_limits)
+
+
+def _run(solver, q, targets):
+    steps, clamped = [], 0
+    for target in targets:
+        q = solver.step(q, target)
+        steps.append(solver.displacement.copy())
+        clamped += len(solver.last.clamped)
+    return np.array(steps), clamped
+
+
+def test_the_reference_limits_as_extra_limits_give_the_kernel_steps(ur5, rng):
+    """PositionLimit and VelocityLimit, run in Python through ``limits=``, take the same steps
+    as the limits compiled into the step kernel, where only one of them acts."""
+    from sjt_pin.limits import PositionLimit, VelocityLimit
+
+    q = np.array([0.3, -1.2, ur5.upper_limits[2] - 0.02, -1.8, -1.5, 0.2])
+    targets = [ur5.fk(q) * pin.exp6(pin.Motion(rng.normal(scale=0.05, size=6)))
+               for _ in range(60)]
+    moving = np.ones(6)
+    box = PositionLimit(ur5, moving, ur5.velocity_limits)
+    compiled = sjt.SJTSolver(ur5, dt=0.01, velocity_limits=False)
+    python = sjt.SJTSolver(ur5, dt=0.01, velocity_limits=False, position_limits=False,
+                           limits=[box])
+    reference, clamped = _run(compiled, q, targets)
+    assert clamped > 0  # the elbow's limit acted
+    np.testing.assert_allclose(_run(python, q, targets)[0], reference, atol=1e-12)
+    speeds = np.full(6, 0.3)
+    compiled = sjt.SJTSolver(ur5, dt=0.01, velocity_limits=speeds, position_limits=False)
+    python = sjt.SJTSolver(ur5, dt=0.01, velocity_limits=False, position_limits=False,
+                           limits=[VelocityLimit(speeds)])
+    reference, _ = _run(compiled, q, targets)
+    assert np.abs(reference / 0.01).max() == pytest.approx(0.3)  # the speed limit acted
+    np.testing.assert_allclose(_run(python, q, targets)[0], reference, atol=1e-12)
+
+
+def test_extra_limits_must_be_limit_objects(ur5):
+    with pytest.raises(TypeError, match="Limit"):
+        sjt.SJTSolver(ur5, limits=[object()])

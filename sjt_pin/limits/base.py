@@ -27,6 +27,3 @@ class Limit(ABC):
     @abstractmethod
     def enforce(self, q: np.ndarray, step: np.ndarray, dt: float, remap: Remap) -> np.ndarray:
         """An admissible step close to ``step`` (may modify and return ``step``)."""
-
-    def reset(self) -> None:
-        """Forget what the last :meth:`enforce` did (called before each step's limits)."""

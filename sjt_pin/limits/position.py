@@ -44,8 +44,6 @@ class PositionLimit(Limit):
         self.recovery_speeds = np.asarray(recovery_speeds, dtype=float)[self.v_index]
         self._fixed = np.zeros(model.nv)
         self._fixed_step = np.zeros(model.nv)
-        #: tangent (v) indices of the joints clamped by the last step
-        self.clamped = np.zeros(0, dtype=np.int64)
 
     @property
     def active(self) -> bool:
@@ -55,10 +53,6 @@ class PositionLimit(Limit):
     def violated(self, q, step, dt):
         new = q[self.q_index] + step[self.v_index]
         return bool(np.any(new > self.upper) or np.any(new < self.lower))
-
-    def reset(self):
-        if self.clamped.size:
-            self.clamped = np.zeros(0, dtype=np.int64)
 
     def enforce(self, q, step, dt, remap):
         fixed, fixed_step = self._fixed, self._fixed_step
@@ -72,11 +66,4 @@ class PositionLimit(Limit):
             held = fixed != 0.0
             step = remap(~held, fixed_step / dt)
             step[held] = fixed_step[held]
-        self.clamped = np.flatnonzero(fixed)
         return step
-
-    def clip(self, q: np.ndarray, q_next: np.ndarray) -> None:
-        """Clip round-off: a joint inside its range at ``q`` stays inside at ``q_next``."""
-        qi = self.q_index
-        inside = (q[qi] >= self.lower) & (q[qi] <= self.upper)
-        q_next[qi[inside]] = np.clip(q_next[qi[inside]], self.lower[inside], self.upper[inside])

@@ -20,8 +20,6 @@ class VelocityLimit(Limit):
     def __init__(self, limits: np.ndarray):
         self.limits = np.asarray(limits, dtype=float)
         self._inv = 1.0 / self.limits
-        #: the factor (<= 1) the last step was scaled by
-        self.scale = 1.0
 
     @property
     def active(self) -> bool:
@@ -30,12 +28,8 @@ class VelocityLimit(Limit):
     def violated(self, q, step, dt):
         return bool(np.max(np.abs(step) * self._inv) > dt)
 
-    def reset(self):
-        self.scale = 1.0
-
     def enforce(self, q, step, dt, remap):
         worst = float(np.max(np.abs(step) * self._inv)) / dt
-        self.scale = 1.0 / worst if worst > 1.0 else 1.0
         if worst > 1.0:
             step /= worst
         return step
