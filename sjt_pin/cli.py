@@ -135,7 +135,8 @@ def bench(args: argparse.Namespace) -> int:
         from .bench import accuracy
 
         def show(row):
-            print(f"  {row}", flush=True)
+            what = getattr(row, "path", None) or getattr(row, "saddle", None) or row.robot
+            print(f"  {what}, {row.variant}, dt = {1e3 * row.dt:g} ms", flush=True)
 
         tracking = accuracy.tracking(progress=show)
         rest = accuracy.rest(progress=show)
@@ -150,13 +151,18 @@ def bench(args: argparse.Namespace) -> int:
                                 "rest": [asdict(r) for r in rest],
                                 "saddles": [asdict(r) for r in saddles]})
     else:
-        from .bench.ik import ik_benchmark, ik_table
+        from .bench.ik import ik_benchmark, ik_table, many_throughput
 
         rows = ik_benchmark(poses=args.poses, peers=not args.no_peers,
                             progress=lambda r: print(f"  {r.robot} {r.method}: "
                                                      f"{100 * r.success:.1f} %", flush=True))
         print(ik_table(rows))
-        _write_json(args.json, {"machine": machine, "rows": [asdict(r) for r in rows]})
+        many = [many_throughput(name, poses=20 * args.poses) for name in ("ur5", "panda")]
+        for m in many:
+            print(f"solve_many on {m.robot}, {m.poses} poses: {m.single:.0f} poses/s in 1 "
+                  f"process, {m.parallel:.0f} in {m.processes} ({m.speedup:.2f}x)")
+        _write_json(args.json, {"machine": machine, "rows": [asdict(r) for r in rows],
+                                "solve_many": [asdict(m) for m in many]})
     return 0
 
 

@@ -7,7 +7,8 @@ computes the next step ``S J^T (J S J^T + lambda I)^-1 e`` — S = D for SJT (th
 factors as the preconditioner: as lambda grows the step turns into SJT's direction ``D J^T e``,
 a descent direction everywhere, eq. 24-25; as it shrinks, into the Gauss-Newton step, which
 converges quadratically) and S = I for the other methods (plain Levenberg-Marquardt: DLS's
-damping is for tracking; a search that kept it as a floor would stall short of the tolerance). ``lambda = mu^2 + nu |e_w|^2`` grows with the error (Sugihara's damping), with
+damping is for tracking; a search that kept it as a floor would stall short of the
+tolerance). ``lambda = mu^2 + nu |e_w|^2`` grows with the error (Sugihara's damping), with
 ``nu`` adapted as in Levenberg-Marquardt. Joint limits hold at every iteration: a joint that
 would leave its range is fixed onto its limit and the others solved again; a joint whose range
 spans a full turn wraps by 2 pi instead. A start ends when the error is below ``tol``
@@ -31,10 +32,8 @@ from .kernels.search import (
     CONVERGED,
     S_BEST,
     S_ERROR_ROWS,
-    S_ITER,
     S_MAX_STEP,
     S_NU,
-    S_STALE,
     S_TOL_SQ,
     STATE_SIZE,
     search_iteration,
@@ -219,19 +218,39 @@ def _count(value, name: str) -> int:
 
 
 # -- many targets ----------------------------------------------------------------------------------
+#: a worker's problem: the solver, the targets, their seeds and the options of ``solve``
 _WORKER: dict = {}
 
 
-def _init_worker(solver) -> None:
-    _WORKER["solver"] = solver
+def _init_worker(solver, targets, seeds, seed, options) -> None:
+    _WORKER.update(solver=solver, targets=targets, seeds=seeds, seed=seed, options=options)
 
 
-def _solve_chunk(chunk):
-    solver = _WORKER["solver"]
-    options = chunk[0]
-    return [solver.solve(target, seed, rng=np.random.default_rng([options["seed"], index]),
-                         **options["kwargs"])
-            for index, target, seed in chunk[1]]
+def _solve_range(bounds: tuple[int, int]) -> tuple:
+    """Targets ``start:stop`` of the worker's problem, as arrays (cheap to send back)."""
+    w, (start, stop) = _WORKER, bounds
+    return _solve_part(w["solver"], w["targets"][start:stop], w["seeds"][start:stop], start,
+                       w["seed"], w["options"])
+
+
+def _solve_part(solver, targets, seeds, first: int, seed: int, options: dict) -> tuple:
+    """Targets numbered ``first, first + 1, ...``: (q (n, nq), success, iterations, error,
+    restarts)."""
+    results = [solver.solve(target, q0, rng=np.random.default_rng([seed, first + k]), **options)
+               for k, (target, q0) in enumerate(zip(targets, seeds, strict=True))]
+    return (np.array([r.q for r in results]), [r.success for r in results],
+            [r.iterations for r in results], [r.error for r in results],
+            [r.restarts for r in results])
+
+
+def _results(part: tuple) -> list[IKResult]:
+    return [IKResult(*fields) for fields in zip(*part, strict=True)]
+
+
+def _solve_with(payload: bytes, targets, seeds, first: int, seed: int, options: dict) -> tuple:
+    """A chunk on a solver of its own (unpickled from ``payload``): executors have no
+    initializer, and threads must not share one solver's buffers."""
+    return _solve_part(pickle.loads(payload), targets, seeds, first, seed, options)
 
 
 def solve_many(solver, targets: Sequence, q0, *, processes: int | None = None,
@@ -244,63 +263,58 @@ def solve_many(solver, targets: Sequence, q0, *, processes: int | None = None,
     gives the same. With the default ``timeout`` a slower machine may restart less often; pass
     ``timeout=None`` for results that depend on the inputs only.
 
+    Each worker process receives the solver and all targets once (at its start) and then only
+    index ranges of ``chunk`` targets; it sends back arrays.
+
     Args:
         targets: the targets, as ``step`` takes them.
         q0: one start for every target (nq,), or one per target (N, nq).
         processes: worker processes (default: one per core); 1 solves in this process.
         executor: a ``concurrent.futures.Executor`` to run on instead (e.g. Dask's
-            ``client.get_executor()``); it receives chunks of ``chunk`` targets.
+            ``client.get_executor()``); each task it receives carries the pickled solver and
+            its ``chunk`` targets.
         progress: a progress bar (tqdm) on standard error.
+        chunk: targets per task (>= 1).
+        seed: the seed of the random restarts (see above).
         options: passed to ``solve`` (``tol``, ``max_iters``, ``timeout``, ...).
     """
     targets = list(targets)
+    chunk = _count(chunk, "chunk")
     seeds = np.asarray(q0, dtype=float)
     if seeds.ndim == 1:
         seeds = np.broadcast_to(solver.robot.check_q(seeds, "q0"), (len(targets), seeds.size))
     elif seeds.shape != (len(targets), solver.robot.nq):
         raise ValueError(f"q0 must have shape ({solver.robot.nq},) or ({len(targets)}, "
                          f"{solver.robot.nq}), got {seeds.shape}")
-    items = [(k, t, seeds[k]) for k, t in enumerate(targets)]
-    chunks = [({"seed": seed, "kwargs": options}, items[i:i + chunk])
-              for i in range(0, len(items), chunk)]
-    bar = _progress(len(items), progress)
+    problem = (solver, targets, seeds, seed, options)
+    ranges = [(i, min(i + chunk, len(targets))) for i in range(0, len(targets), chunk)]
+    bar = _progress(len(targets), progress)
     results: list[IKResult] = []
+
+    def collect(parts):
+        for part in parts:
+            results.extend(_results(part))
+            bar.update(len(part[1]))
+        return results
+
     try:
-        if executor is None and (processes == 1 or len(chunks) <= 1):
-            _init_worker(solver)
-            for c in chunks:
-                results += _solve_chunk(c)
-                bar.update(len(c[1]))
-            return results
+        if executor is None and (processes == 1 or len(ranges) <= 1):
+            _init_worker(*problem)
+            return collect(map(_solve_range, ranges))
         if executor is None:
             from concurrent.futures import ProcessPoolExecutor
 
             workers = processes or os.cpu_count() or 1
             with ProcessPoolExecutor(workers, initializer=_init_worker,
-                                     initargs=(solver,)) as pool:
-                for part in pool.map(_solve_chunk, chunks):
-                    results += part
-                    bar.update(len(part))
-            return results
-        payload = pickle.dumps(solver)  # each chunk unpickles a solver of its own
-        futures = [executor.submit(_solve_with, payload, c) for c in chunks]
-        for future in futures:
-            part = future.result()
-            results += part
-            bar.update(len(part))
-        return results
+                                     initargs=problem) as pool:
+                return collect(pool.map(_solve_range, ranges))
+        payload = pickle.dumps(solver)
+        futures = [executor.submit(_solve_with, payload, targets[a:b], seeds[a:b], a, seed,
+                                   options) for a, b in ranges]
+        return collect(future.result() for future in futures)
     finally:
+        _WORKER.clear()
         bar.close()
-
-
-def _solve_with(payload: bytes, chunk):
-    """A chunk with a solver of its own (executors have no initializer, and threads must not
-    share one solver's buffers)."""
-    solver = pickle.loads(payload)
-    options = chunk[0]
-    return [solver.solve(target, seed, rng=np.random.default_rng([options["seed"], index]),
-                         **options["kwargs"])
-            for index, target, seed in chunk[1]]
 
 
 def _progress(total: int, show: bool):

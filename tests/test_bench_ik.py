@@ -75,3 +75,9 @@ def test_tracik_sees_the_same_kinova(kinova):
     found = [ik.solved(kinova, run(target, seed).q, target)
              for target, seed in ik.problems(kinova, 5)]
     assert sum(found) >= 4  # its eps, 1e-5 per component, may miss 1e-5 m in norm
+
+
+def test_solve_many_throughput_row():
+    row = ik.many_throughput("ur5", poses=40)
+    assert row.poses == 40 and row.processes == 2
+    assert row.single > 0 and row.parallel > 0 and row.speedup == row.parallel / row.single

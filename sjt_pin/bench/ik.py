@@ -329,3 +329,35 @@ def ik_table(rows: list[IKRow]) -> str:
                      f"{r.median_ms:.3f} | {r.p90_ms:.3f} | {r.p99_ms:.3f} | {iterations} | "
                      f"{restarts} |")
     return "\n".join(lines)
+
+
+@dataclass
+class ManyRow:
+    """``solve_many`` throughput on one robot: poses per second with 1 and with ``processes``
+    processes (``timeout=None``, so both solve exactly the same problems)."""
+
+    robot: str
+    poses: int
+    processes: int
+    single: float  # poses/s
+    parallel: float  # poses/s
+
+    @property
+    def speedup(self) -> float:
+        return self.parallel / self.single
+
+
+def many_throughput(name: str = "ur5", poses: int = 20_000, processes: int = 2) -> ManyRow:
+    """Wall-clock throughput of :func:`~sjt_pin.solve_many` (pool start included)."""
+    from ..solve import solve_many
+
+    robot = Robot.from_example(name)
+    pairs = problems(robot, poses, seed=1)
+    targets, seeds = [t for t, _ in pairs], np.array([s for _, s in pairs])
+    solver = make_solver("sjt", robot)
+    rates = []
+    for count in (1, processes):
+        start = time.perf_counter()
+        solve_many(solver, targets, seeds, processes=count, progress=False, timeout=None)
+        rates.append(poses / (time.perf_counter() - start))
+    return ManyRow(robot.name, poses, processes, *rates)
