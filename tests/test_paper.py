@@ -1,12 +1,13 @@
 """The paper's facts (Sections 3.3 and 4) as tests, on the same code as ``sjt-pin reproduce``."""
 
+import re
 from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from sjt_pin.paper import experiments as paper
 from sjt_pin.cli import main
+from sjt_pin.paper import experiments as paper
 
 SETTINGS = paper.PaperSettings()
 
@@ -83,9 +84,12 @@ def test_jp_cannot_follow_task_2_out_of_the_workspace():
     assert not paper.stability(log)[0]
 
 
-def test_reproduce_writes_figures_and_results(tmp_path):
-    assert main(["reproduce", "--out", str(tmp_path), "--grid", "3", "--quiet",
-                 "--processes", "2"]) == 0
+def test_reproduce_writes_figures_and_results(tmp_path, capsys):
+    assert main(["reproduce", "--out", str(tmp_path), "--grid", "3", "--processes", "2"]) == 0
+    # not on a terminal (captured): progress comes as plain lines, the last of each stage full
+    err = capsys.readouterr().err
+    assert re.search(r"^SJT task 3: (\d+)/\1 \(\d+ s\)$", err, re.M), err
+    assert re.search(r"^length units: (\d+)/\1 ", err, re.M), err
     names = {p.name for p in tmp_path.iterdir()}
     assert {"results.md", "fig2_3_ellipsoids.png", "fig6a_task1.png", "fig6b_task2.png",
             "fig6c_task3.png", "fig7_task3_errors.png"} <= names

@@ -21,24 +21,26 @@ from __future__ import annotations
 
 import functools
 import os
-from collections.abc import Iterable, Sequence
+import sys
+import time
+from collections.abc import Iterable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 import pinocchio as pin
 
-from .ellipsoids import linear_gain_bound, motion_ellipsoid
 from ..mappings import jt_matrix, sjt_matrix
-from ..solvers import make_solver
 from ..robot import Robot
 from ..robots import planar3 as generator
-from .scenarios import PLANAR3_START, settle
-from .stability import largest_stable
-from .stability import stability as run_stability
+from ..solvers import make_solver
 from ..tasks import PositionTask
 from ..tracking import TrackingLog, track
 from ..trajectories import Circle, Line, Trajectory
+from .ellipsoids import linear_gain_bound, motion_ellipsoid
+from .scenarios import PLANAR3_START, settle
+from .stability import largest_stable
+from .stability import stability as run_stability
 
 #: The paper's own updates: eq. (10) and eq. (21) exactly (alpha_i = 1 / J_i^T J_i, eq. 18).
 PAPER_FORM = {
@@ -153,17 +155,33 @@ def _evaluate(args: tuple[str, int, float, PaperSettings]) -> tuple[float, bool]
 
 
 def _map(function, items: Sequence, processes: int | None, progress: str | None) -> list:
-    """``[function(x) for x in items]``, in ``processes`` processes, with a tqdm bar."""
-    from tqdm.auto import tqdm
-
-    # disable=None: no bar when not on a terminal (CI logs)
-    bar = dict(total=len(items), desc=progress, disable=True if progress is None else None,
-               leave=False)
+    """``[function(x) for x in items]``, in ``processes`` processes, with progress: a tqdm bar on
+    a terminal, else a line per tenth of the items (CI logs, ``| tee``)."""
+    items = list(items)
     if processes is None or processes > 1:
         workers = processes or os.cpu_count() or 1
         with ProcessPoolExecutor(max_workers=workers) as pool:
-            return list(tqdm(pool.map(function, items), **bar))
-    return [function(x) for x in tqdm(items, **bar)]
+            return list(_progress(pool.map(function, items), len(items), progress))
+    return list(_progress(map(function, items), len(items), progress))
+
+
+def _progress(results: Iterator, total: int, label: str | None) -> Iterator:
+    """``results``, reporting on stderr how many of ``total`` are done under ``label``."""
+    if label is None:
+        yield from results
+        return
+    if sys.stderr.isatty():
+        from tqdm.auto import tqdm
+
+        yield from tqdm(results, total=total, desc=label, leave=False)
+        return
+    start, reported = time.perf_counter(), 0
+    for done, result in enumerate(results, 1):
+        yield result
+        if done * 10 // total > reported or done == total:
+            reported = done * 10 // total
+            print(f"{label}: {done}/{total} ({time.perf_counter() - start:.0f} s)",
+                  file=sys.stderr, flush=True)
 
 
 @dataclass
