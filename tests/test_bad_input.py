@@ -1,4 +1,4 @@
-"""Every public entry point rejects bad input with an error naming the argument (DESIGN.md 5)."""
+"""Every public entry point rejects bad input with an error naming the argument."""
 
 import numpy as np
 import pinocchio as pin

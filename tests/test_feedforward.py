@@ -2,7 +2,6 @@
 and unit-free."""
 
 import numpy as np
-import pinocchio as pin
 import pytest
 
 import sjt_pin as sjt

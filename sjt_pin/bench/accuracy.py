@@ -245,9 +245,9 @@ def rest_table(rows: list[RestRow]) -> str:
     variants = list(dict.fromkeys(r.variant for r in rows))
     lines = ["| robot | dt [ms] | " + " | ".join(variants) + " |",
              "|---|---|" + "---|" * len(variants)]
+    speed = {(r.robot, r.dt, r.variant): r.rms_speed for r in rows}
     for robot, dt in dict.fromkeys((r.robot, r.dt) for r in rows):
-        cells = [f"{next(x for x in rows if (x.robot, x.dt, x.variant) == (robot, dt, v)).rms_speed:.1e}"
-                 for v in variants]
+        cells = [f"{speed[(robot, dt, v)]:.1e}" for v in variants]
         lines.append(f"| {robot} | {1e3 * dt:g} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 

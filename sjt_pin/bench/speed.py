@@ -182,7 +182,7 @@ def _floor(robot: Robot, frames: tuple[str, ...], position: bool, posture: bool)
                 pin.getFrameJacobian(model, data, fid, aligned)
             else:
                 pin.getFrameJacobian(model, data, fid, local)
-                pin.log6(oMf.actInv(targets[frame][0])).vector
+                pin.log6(oMf.actInv(targets[frame][0])).vector  # noqa: B018 (a step reads it)
         if posture:
             pin.difference(model, q, q_ref)
         return pin.integrate(model, q, delta)

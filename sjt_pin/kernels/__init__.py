@@ -16,7 +16,9 @@ per-user folder (:data:`~.compile.CACHE_DIR`), never inside the installed packag
 """
 
 from .layout import *  # noqa: F403 (the slot names are the kernels' vocabulary)
-from .limits import box_status, clamp_pass
-from .linalg import cholesky_solve, loop_bound, symmetric_eigen
-from .methods import least_squares_step, transpose_step
-from .tasks import frame_velocity, position_rows, rotation_defect
+
+# the entry points the rest of the package calls, re-exported
+from .limits import box_status, clamp_pass  # noqa: F401
+from .linalg import cholesky_solve, loop_bound, symmetric_eigen  # noqa: F401
+from .methods import least_squares_step, transpose_step  # noqa: F401
+from .tasks import frame_velocity, position_rows, rotation_defect  # noqa: F401

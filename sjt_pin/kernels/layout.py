@@ -95,8 +95,3 @@ class Layout:
     def clamped_joints(self, work: np.ndarray) -> np.ndarray:
         """1 for the joints the last step held at a position limit."""
         return work[self.clamped:self.clamped + self.n]
-
-
-def work_size(m: int, n: int, c: int = 0) -> int:
-    """Length of ``work`` for m task rows, n joints and c position-limited joints."""
-    return Layout(m, n, c).size

@@ -71,9 +71,9 @@ def loop_bound(A, products, B, C):
 
 
 @compiled(inline=True)
-def cholesky_solve(A, shift, rhs, out):
-    """``out = (A + shift I)^-1 rhs`` for a symmetric PSD ``A``, ``shift`` > 0 (A is overwritten
-    by its Cholesky factor). Returns False if the shifted matrix is not positive definite."""
+def cholesky_factor(A, shift):
+    """Overwrite the lower triangle of the symmetric ``A`` with the Cholesky factor L of
+    ``A + shift I``. Returns False if that matrix is not positive definite."""
     p = A.shape[0]
     for j in range(p):
         d = A[j, j] + shift
@@ -88,16 +88,32 @@ def cholesky_solve(A, shift, rhs, out):
             for k in range(j):
                 acc -= A[i, k] * A[j, k]
             A[i, j] = acc / d
+    return True
+
+
+@compiled(inline=True)
+def cholesky_substitute(L, rhs, out):
+    """``out = (L L^T)^-1 rhs`` for the lower-triangular factor ``L``."""
+    p = L.shape[0]
     for i in range(p):  # L y = rhs
         acc = rhs[i]
         for k in range(i):
-            acc -= A[i, k] * out[k]
-        out[i] = acc / A[i, i]
+            acc -= L[i, k] * out[k]
+        out[i] = acc / L[i, i]
     for i in range(p - 1, -1, -1):  # L^T x = y
         acc = out[i]
         for k in range(i + 1, p):
-            acc -= A[k, i] * out[k]
-        out[i] = acc / A[i, i]
+            acc -= L[k, i] * out[k]
+        out[i] = acc / L[i, i]
+
+
+@compiled(inline=True)
+def cholesky_solve(A, shift, rhs, out):
+    """``out = (A + shift I)^-1 rhs`` for a symmetric PSD ``A``, ``shift`` > 0 (A is overwritten
+    by its Cholesky factor). Returns False if the shifted matrix is not positive definite."""
+    if not cholesky_factor(A, shift):
+        return False
+    cholesky_substitute(A, rhs, out)
     return True
 
 

@@ -69,7 +69,14 @@ from .layout import (
     STALLED,
 )
 from .limits import clamp_pass
-from .linalg import cholesky_solve, gram, loop_bound, symmetric_eigen
+from .linalg import (
+    cholesky_factor,
+    cholesky_solve,
+    cholesky_substitute,
+    gram,
+    loop_bound,
+    symmetric_eigen,
+)
 
 TRANSPOSE, LEAST_SQUARES = 0, 1
 
@@ -430,21 +437,7 @@ def _pseudo_solve(A, V, rhs, sol, rcond):
     for i in range(p):
         for j in range(p):
             V[i, j] = A[i, j]
-    ok = True
-    for j in range(p):
-        d = V[j, j]
-        for t in range(j):
-            d -= V[j, t] * V[j, t]
-        if not d > 0.0:
-            ok = False
-            break
-        d = math.sqrt(d)
-        V[j, j] = d
-        for i in range(j + 1, p):
-            acc = V[i, j]
-            for t in range(j):
-                acc -= V[i, t] * V[j, t]
-            V[i, j] = acc / d
+    ok = cholesky_factor(V, 0.0)
     if ok:  # tr(A^-1) = |L^-1|_F^2, one unit column at a time (sol as scratch)
         inverse_trace = 0.0
         for c in range(p):
@@ -456,16 +449,7 @@ def _pseudo_solve(A, V, rhs, sol, rcond):
                 inverse_trace += sol[i] * sol[i]
         ok = inverse_trace * cutoff < 1.0
     if ok:
-        for i in range(p):
-            acc = rhs[i]
-            for t in range(i):
-                acc -= V[i, t] * sol[t]
-            sol[i] = acc / V[i, i]
-        for i in range(p - 1, -1, -1):
-            acc = sol[i]
-            for t in range(i + 1, p):
-                acc -= V[t, i] * sol[t]
-            sol[i] = acc / V[i, i]
+        cholesky_substitute(V, rhs, sol)
         return
     symmetric_eigen(A, V)
     for i in range(p):

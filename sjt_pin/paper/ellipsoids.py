@@ -50,8 +50,3 @@ def linear_gain_bound(jacobians, matrices, dt: float) -> float:
     """``k_lin = 2 / (dt max_t lambda_max(J M))`` over a sequence of (J, M) pairs (1/s)."""
     lam = max(max_loop_eigenvalue(J, M) for J, M in zip(jacobians, matrices, strict=True))
     return np.inf if lam <= 0 else 2.0 / (dt * lam)
-
-
-def manipulability(J: np.ndarray) -> float:
-    """Yoshikawa's manipulability ``sqrt(det(J J^T))`` (0 at singular configurations)."""
-    return float(np.prod(np.linalg.svd(J, compute_uv=False)))

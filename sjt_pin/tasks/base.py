@@ -68,7 +68,7 @@ class Task(ABC):
         bound.frame = robot.model.frames[bound.frame_id].name
         return bound
 
-    def write_into(self, J: np.ndarray, e: np.ndarray, ff: np.ndarray) -> None:
+    def write_into(self, J: np.ndarray, e: np.ndarray, ff: np.ndarray) -> None:  # noqa: B027
         """Offer views of the stacked buffers for this task's rows: a task may compute its
         rows straight into them (and return them) instead of into arrays of its own."""
 

@@ -6,7 +6,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..kernels import frame_velocity, rotation_defect
-from ..validation import RIGID_TOL, check_rigid
+from ..validation import RIGID_TOL
 from .base import Task
 
 
