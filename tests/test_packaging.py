@@ -32,8 +32,9 @@ def test_wheel_ships_planar3_urdf_and_generator(tmp_path):
 
 def test_every_package_of_the_source_tree_is_in_the_wheel():
     """pyproject.toml lists the packages (robots/ ships as sjt_pin.robots): none forgotten."""
-    import tomllib
     from pathlib import Path
+
+    import tomllib
 
     root = Path(__file__).resolve().parents[1]
     listed = set(tomllib.loads((root / "pyproject.toml").read_text())["tool"]["setuptools"]
@@ -41,3 +42,16 @@ def test_every_package_of_the_source_tree_is_in_the_wheel():
     found = {".".join(p.parent.relative_to(root).parts)
              for p in (root / "sjt_pin").rglob("__init__.py")}
     assert found | {"sjt_pin.robots"} == listed
+
+
+def test_the_version_is_one():
+    """``sjt_pin.__version__`` is the version pip installs (pyproject.toml)."""
+    from pathlib import Path
+
+    import tomllib
+
+    import sjt_pin
+
+    root = Path(__file__).resolve().parents[1]
+    assert tomllib.loads((root / "pyproject.toml").read_text())["project"]["version"] == \
+        sjt_pin.__version__
