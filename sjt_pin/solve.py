@@ -39,7 +39,7 @@ from .kernels.search import (
     search_iteration,
 )
 from .mappings import COLUMN_TOL
-from .validation import positive
+from .validation import positive, raise_non_finite_targets
 
 #: |e| (m and rad, the target rows) below which a pose counts as solved
 TOL = 1e-6
@@ -186,11 +186,16 @@ def solve(solver, target, q0, *, tol: float = TOL, max_iters: int = MAX_ITERS,
     """
     search = solver.search()
     tol = positive(tol, "tol", "task units")
-    max_iters, budget = _count(max_iters, "max_iters"), _count(budget, "budget")
-    if restarts is not None and (isinstance(restarts, bool) or int(restarts) < 0):
-        raise ValueError(f"restarts must be None or an integer >= 0, got {restarts!r}")
+    max_iters, budget = _integer(max_iters, "max_iters"), _integer(budget, "budget")
+    if restarts is not None:
+        restarts = _integer(restarts, "restarts", 0)
     q = solver.robot.check_q(q0, "q0").copy()
     targets, _ = search.stack.targets(target, None)
+    _, e, _ = search.stack.evaluate(q, targets, None)
+    with np.errstate(over="ignore"):
+        finite = math.isfinite(float(e @ e))
+    if not finite:  # as step() says it: a NaN target, or one so far away that |e|^2 overflows
+        raise_non_finite_targets(targets)
     if not isinstance(rng, np.random.Generator):
         rng = np.random.default_rng(0 if rng is None else rng)
     deadline = math.inf if timeout is None else time.perf_counter() + positive(timeout, "timeout",
@@ -211,26 +216,32 @@ def solve(solver, target, q0, *, tol: float = TOL, max_iters: int = MAX_ITERS,
         attempt += 1
 
 
-def _count(value, name: str) -> int:
-    if isinstance(value, bool) or int(value) != value or int(value) < 1:
-        raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
+def _integer(value, name: str, minimum: int = 1) -> int:
+    """``value`` as an int >= ``minimum``, or an error naming ``name``."""
+    whole = (isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
+             or isinstance(value, (float, np.floating)) and float(value).is_integer())
+    if not whole:
+        raise TypeError(f"{name} must be an integer >= {minimum}, got {value!r}")
+    if int(value) < minimum:
+        raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
     return int(value)
 
 
 # -- many targets ----------------------------------------------------------------------------------
-#: a worker's problem: the solver, the targets, their seeds and the options of ``solve``
+#: a worker process's problem: the solver, the targets, their seeds, the numbering and options
 _WORKER: dict = {}
 
 
-def _init_worker(solver, targets, seeds, seed, options) -> None:
-    _WORKER.update(solver=solver, targets=targets, seeds=seeds, seed=seed, options=options)
+def _init_worker(solver, targets, seeds, first, seed, options) -> None:
+    _WORKER.update(solver=solver, targets=targets, seeds=seeds, first=first, seed=seed,
+                   options=options)
 
 
 def _solve_range(bounds: tuple[int, int]) -> tuple:
     """Targets ``start:stop`` of the worker's problem, as arrays (cheap to send back)."""
     w, (start, stop) = _WORKER, bounds
-    return _solve_part(w["solver"], w["targets"][start:stop], w["seeds"][start:stop], start,
-                       w["seed"], w["options"])
+    return _solve_part(w["solver"], w["targets"][start:stop], w["seeds"][start:stop],
+                       w["first"] + start, w["seed"], w["options"])
 
 
 def _solve_part(solver, targets, seeds, first: int, seed: int, options: dict) -> tuple:
@@ -255,13 +266,14 @@ def _solve_with(payload: bytes, targets, seeds, first: int, seed: int, options: 
 
 def solve_many(solver, targets: Sequence, q0, *, processes: int | None = None,
                executor=None, progress: bool = True, chunk: int = 64, seed: int = 0,
-               **options) -> list[IKResult]:
+               first: int = 0, **options) -> list[IKResult]:
     """:meth:`~sjt_pin.Solver.solve` for every target, in parallel; results in order.
 
-    Target ``k`` is solved with ``rng = numpy.random.default_rng([seed, k])``, so the results do
-    not depend on how the targets are spread over processes: ``solve_many(..., processes=1)``
-    gives the same. With the default ``timeout`` a slower machine may restart less often; pass
-    ``timeout=None`` for results that depend on the inputs only.
+    Target ``k`` is solved with ``rng = numpy.random.default_rng([seed, first + k])``, so the
+    results do not depend on how the targets are spread over processes, nor on how a large
+    batch is cut into calls (pass each part's position in the whole as ``first``). With the
+    default ``timeout`` a slower machine may restart less often; pass ``timeout=None`` for
+    results that depend on the inputs only.
 
     Each worker process receives the solver and all targets once (at its start) and then only
     index ranges of ``chunk`` targets; it sends back arrays.
@@ -269,24 +281,32 @@ def solve_many(solver, targets: Sequence, q0, *, processes: int | None = None,
     Args:
         targets: the targets, as ``step`` takes them.
         q0: one start for every target (nq,), or one per target (N, nq).
-        processes: worker processes (default: one per core); 1 solves in this process.
+        processes: worker processes (default: one per core); 1 solves in this thread.
         executor: a ``concurrent.futures.Executor`` to run on instead (e.g. Dask's
             ``client.get_executor()``); each task it receives carries the pickled solver and
             its ``chunk`` targets.
         progress: a progress bar (tqdm) on standard error.
         chunk: targets per task (>= 1).
-        seed: the seed of the random restarts (see above).
+        seed: the seed of the random restarts (an integer >= 0; see above).
+        first: the number of the first target (see above; >= 0).
         options: passed to ``solve`` (``tol``, ``max_iters``, ``timeout``, ...).
     """
     targets = list(targets)
-    chunk = _count(chunk, "chunk")
+    chunk = _integer(chunk, "chunk")
+    seed, first = _integer(seed, "seed", 0), _integer(first, "first", 0)
+    if processes is not None:
+        processes = _integer(processes, "processes")
+    nq = solver.robot.nq
+    if np.iscomplexobj(q0):
+        raise ValueError("q0 must be real, got complex values")
     seeds = np.asarray(q0, dtype=float)
     if seeds.ndim == 1:
-        seeds = np.broadcast_to(solver.robot.check_q(seeds, "q0"), (len(targets), seeds.size))
-    elif seeds.shape != (len(targets), solver.robot.nq):
-        raise ValueError(f"q0 must have shape ({solver.robot.nq},) or ({len(targets)}, "
-                         f"{solver.robot.nq}), got {seeds.shape}")
-    problem = (solver, targets, seeds, seed, options)
+        seeds = np.broadcast_to(solver.robot.check_q(seeds, "q0"), (len(targets), nq))
+    elif seeds.shape != (len(targets), nq):
+        raise ValueError(f"q0 must have shape ({nq},) or ({len(targets)}, {nq}), "
+                         f"got {seeds.shape}")
+    elif not np.all(np.isfinite(seeds)):
+        raise ValueError("q0 contains NaN or inf")
     ranges = [(i, min(i + chunk, len(targets))) for i in range(0, len(targets), chunk)]
     bar = _progress(len(targets), progress)
     results: list[IKResult] = []
@@ -299,21 +319,20 @@ def solve_many(solver, targets: Sequence, q0, *, processes: int | None = None,
 
     try:
         if executor is None and (processes == 1 or len(ranges) <= 1):
-            _init_worker(*problem)
-            return collect(map(_solve_range, ranges))
+            return collect(_solve_part(solver, targets[a:b], seeds[a:b], first + a, seed,
+                                       options) for a, b in ranges)
         if executor is None:
             from concurrent.futures import ProcessPoolExecutor
 
-            workers = processes or os.cpu_count() or 1
-            with ProcessPoolExecutor(workers, initializer=_init_worker,
-                                     initargs=problem) as pool:
+            with ProcessPoolExecutor(processes or os.cpu_count() or 1, initializer=_init_worker,
+                                     initargs=(solver, targets, seeds, first, seed,
+                                               options)) as pool:
                 return collect(pool.map(_solve_range, ranges))
         payload = pickle.dumps(solver)
-        futures = [executor.submit(_solve_with, payload, targets[a:b], seeds[a:b], a, seed,
-                                   options) for a, b in ranges]
+        futures = [executor.submit(_solve_with, payload, targets[a:b], seeds[a:b], first + a,
+                                   seed, options) for a, b in ranges]
         return collect(future.result() for future in futures)
     finally:
-        _WORKER.clear()
         bar.close()
 
 

@@ -40,7 +40,7 @@ from .methods import Method
 from .robot import Robot
 from .stack import TaskStack, normalise_tasks
 from .tasks import PostureTask, Task
-from .validation import positive
+from .validation import positive, raise_non_finite_targets
 
 _F64 = np.dtype(np.float64)
 _NONE_CLAMPED = np.zeros(0, dtype=np.int64)
@@ -424,20 +424,12 @@ class Solver:
             f"{self.method.name.upper()} gain {self._gain.largest:g} 1/s exceeds the stability "
             f"bound 2 / (dt lambda_max(J M)) = {2.0 / (self._dt * lam):.4g} 1/s at the current "
             f"configuration (dt = {self._dt:g} s); the closed loop will oscillate or diverge",
-            GainWarning, stacklevel=5)
+            GainWarning, stacklevel=4)
 
     def _raise_non_finite(self, q: np.ndarray, targets) -> None:
         self.robot.check_q(q)  # names q if it holds NaN or inf
-        info = self._info
-        if not math.isfinite(info[K.I_E_SQ]):
-            for target in targets:
-                if target is None:
-                    continue
-                values = target.np if isinstance(target, pin.SE3) else np.asarray(target)
-                if not np.all(np.isfinite(values)):
-                    raise ValueError("target contains NaN or inf")
-            raise ValueError("target is too far for a finite task error (a translation above "
-                             "about 1e150 m overflows): check its units")
+        if not math.isfinite(self._info[K.I_E_SQ]):
+            raise_non_finite_targets(targets)
         raise ValueError("target_velocity contains NaN or inf (the feed-forward is not finite)")
 
     # -- other entry points ----------------------------------------------------------------------

@@ -110,3 +110,16 @@ def real_number(value, name: str, unit: str = "") -> float:
     except (TypeError, ValueError) as exc:
         raise TypeError(f"{name} must be a number{' in ' + unit if unit else ''}, "
                         f"got {value!r}") from exc
+
+
+def raise_non_finite_targets(targets) -> None:
+    """Raise the ``ValueError`` that explains a non-finite task error whose configuration is
+    finite: a target holding NaN or inf, or one so far away that the error overflows."""
+    for target in targets:
+        if target is None:
+            continue
+        values = target.np if isinstance(target, pin.SE3) else np.asarray(target)
+        if not np.all(np.isfinite(values)):
+            raise ValueError("target contains NaN or inf")
+    raise ValueError("target is too far for a finite task error (a translation above about "
+                     "1e150 m overflows): check its units")

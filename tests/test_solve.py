@@ -74,6 +74,13 @@ def test_bad_targets_raise_as_step_does(ur5):
     scaled.rotation = 1.1 * scaled.rotation
     with pytest.raises(ValueError, match="not a rotation"):
         solver.solve(scaled, ur5.q0)
+    far = ur5.fk(ur5.q0) * pin.SE3(np.eye(3), np.array([1e200, 0.0, 0.0]))
+    for solve_or_step in (lambda t: solver.solve(t, ur5.q0), lambda t: solver.step(ur5.q0, t)):
+        with pytest.raises(ValueError, match="too far"):
+            solve_or_step(far)
+    position = sjt.SJTSolver(ur5, task=sjt.PositionTask())
+    with pytest.raises(ValueError, match="NaN"):
+        position.solve([np.nan, 0.0, 0.0], ur5.q0)
 
 
 def test_solve_arguments(ur5):
@@ -85,8 +92,12 @@ def test_solve_arguments(ur5):
         solver.solve(target, np.zeros(2))
     with pytest.raises(ValueError, match="max_iters must be an integer >= 1"):
         solver.solve(target, ur5.q0, max_iters=0)
-    with pytest.raises(ValueError, match="restarts must be None or an integer >= 0"):
+    with pytest.raises(ValueError, match="restarts must be an integer >= 0"):
         solver.solve(target, ur5.q0, restarts=-1)
+    with pytest.raises(TypeError, match="max_iters must be an integer"):
+        solver.solve(target, ur5.q0, max_iters=None)
+    with pytest.raises(TypeError, match="restarts must be an integer"):
+        solver.solve(target, ur5.q0, restarts="3")
     with pytest.raises(ValueError, match="timeout must be a positive number"):
         solver.solve(target, ur5.q0, timeout=-1.0)
 
@@ -152,3 +163,52 @@ def test_solve_many_takes_any_executor(ur5):
                                progress=False, timeout=None)
     for a, b in zip(results, reference, strict=True):
         np.testing.assert_array_equal(a.q, b.q)
+
+
+def test_solve_many_in_parts_equals_one_call(ur5):
+    """``first=`` numbers a part of a larger batch: parts solved apart (as on a cluster) give
+    what one call gives."""
+    solver = sjt.SJTSolver(ur5)
+    pairs = problems(ur5, 8, seed=6)
+    targets, seeds = [t for t, _ in pairs], np.array([s for _, s in pairs])
+    whole = sjt.solve_many(solver, targets, seeds, processes=1, progress=False, timeout=None)
+    parts = (sjt.solve_many(solver, targets[:5], seeds[:5], processes=1, progress=False,
+                            timeout=None)
+             + sjt.solve_many(solver, targets[5:], seeds[5:], processes=1, progress=False,
+                              timeout=None, first=5))
+    for a, b in zip(whole, parts, strict=True):
+        np.testing.assert_array_equal(a.q, b.q)
+        assert a.iterations == b.iterations
+
+
+def test_solve_many_in_two_threads_with_their_own_solvers(ur5):
+    """Solving in this process keeps no module state: two threads, each with its own solver,
+    get what each gets alone."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    pairs = problems(ur5, 12, seed=7)
+    batches = [[t for t, _ in pairs[:6]], [t for t, _ in pairs[6:]]]
+
+    def run(targets):
+        return sjt.solve_many(sjt.SJTSolver(ur5), targets, ur5.q0, processes=1, chunk=2,
+                              progress=False, timeout=None)
+
+    alone = [run(b) for b in batches]
+    with ThreadPoolExecutor(2) as pool:
+        together = list(pool.map(run, batches))
+    for a, b in zip(sum(alone, []), sum(together, []), strict=True):
+        np.testing.assert_array_equal(a.q, b.q)
+
+
+def test_solve_many_arguments(ur5):
+    solver, target = sjt.SJTSolver(ur5), ur5.fk(ur5.q0)
+    assert sjt.solve_many(solver, [], ur5.q0, progress=False) == []
+    for name, value, error in [("chunk", 0, ValueError), ("processes", 0, ValueError),
+                               ("seed", None, TypeError), ("first", -1, ValueError)]:
+        with pytest.raises(error, match=f"{name} must be an integer"):
+            sjt.solve_many(solver, [target], ur5.q0, progress=False, **{name: value})
+    with pytest.raises(ValueError, match="q0 must be real"):
+        sjt.solve_many(solver, [target], np.array([ur5.q0 + 0j]), progress=False)
+    with pytest.raises(ValueError, match="q0 contains NaN"):
+        sjt.solve_many(solver, [target], np.full((1, 6), np.nan), progress=False)
+

@@ -141,8 +141,9 @@ def test_gain_above_the_stability_bound_warns_once(planar3, feedback):
     if feedback == "damped":
         return  # lambda_max of the damped loop stays below 1: nothing to warn
     solver.gain = 1.01 * bound
-    with pytest.warns(sjt.GainWarning, match=f"{bound:.4g}"):
+    with pytest.warns(sjt.GainWarning, match=f"{bound:.4g}") as caught:
         solver.step(q, [0.0, 1.0, 0.0])
+    assert caught[0].filename == __file__  # the warning points at the caller of step()
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         solver.step(q, [0.0, 1.0, 0.0])  # once per solver
