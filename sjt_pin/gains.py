@@ -45,7 +45,7 @@ class Gain:
 class FixedGain(Gain):
     """K as given: a number (K = k I) or one number per task row, in 1/s, >= 0."""
 
-    def __init__(self, value: float | Sequence[float], dim: int):
+    def __init__(self, value: float | Sequence[float], dim: int | None = None):
         if np.ndim(value) == 0:
             k = real_number(value, "gain", "1/s")
             if not np.isfinite(k) or k < 0:
@@ -55,6 +55,7 @@ class FixedGain(Gain):
             if np.iscomplexobj(value):
                 raise TypeError(f"gain must be real, got {value!r}")
             arr = np.asarray(value, dtype=float)
+            dim = arr.size if dim is None else dim
             if arr.shape != (dim,) or not np.all(np.isfinite(arr)) or np.any(arr < 0):
                 raise ValueError(
                     f"gain as a sequence must have shape ({dim},) (one per task row) "
@@ -94,6 +95,8 @@ class AutoGain(Gain):
 def as_gain(value, dim: int) -> Gain:
     """``value`` (a :class:`Gain`, ``"auto"``, a number or a sequence of ``dim`` numbers) as a
     :class:`Gain`."""
+    if isinstance(value, FixedGain) and np.ndim(value.value) == 1 and value.value.size != dim:
+        raise ValueError(f"gain has {value.value.size} rows, the tasks have {dim}")
     if isinstance(value, Gain):
         return value
     if isinstance(value, str):

@@ -92,6 +92,12 @@ def test_bad_task_and_trajectory_arguments():
         sjt.PoseTask(weight=[1, 1, 1, 1, 1, 0])
     with pytest.raises(ValueError, match=r"weight must have shape \(3,\)"):
         sjt.OrientationTask(weight=[1, 2])
+    for make in (sjt.PoseTask, sjt.PositionTask, sjt.PostureTask):
+        for weight in (True, "a", None if make is sjt.PostureTask else "1"):
+            with pytest.raises(TypeError, match="weight must be"):
+                make(weight=weight)
+    with pytest.raises(TypeError, match="weight must be numbers"):
+        sjt.PositionTask(weight=[True, True, True])
     with pytest.raises(ValueError, match="duration must be a positive number"):
         sjt.Line([0, 0, 0], [1, 0, 0], duration=0)
     with pytest.raises(ValueError, match=r"start must have shape \(3,\)"):

@@ -2,6 +2,7 @@
 
 import numpy as np
 import pinocchio as pin
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -70,3 +71,11 @@ def test_the_loop_with_the_auto_gain_is_stable(seed, joints, method):
     assert np.all(np.isfinite(errors))
     assert errors.max() <= 1.5 * errors[0]  # stable: no growth, at most a small overshoot
     assert errors[-1] < 0.1 * errors[0] or errors[-1] < 1e-7  # and it converges
+
+
+def test_a_fixed_gain_object_needs_no_row_count_but_must_fit_the_tasks(ur5):
+    assert sjt.SJTSolver(ur5, gain=sjt.FixedGain(5.0)).gain == 5.0
+    rows = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]
+    assert list(sjt.SJTSolver(ur5, gain=sjt.FixedGain(rows)).gain) == rows
+    with pytest.raises(ValueError, match="gain has 3 rows, the tasks have 6"):
+        sjt.SJTSolver(ur5, gain=sjt.FixedGain([1.0, 2.0, 3.0]))

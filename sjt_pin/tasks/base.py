@@ -18,7 +18,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..kinematics import Kinematics
-from ..validation import as_motion, as_pose, as_vector
+from ..validation import as_motion, as_pose, as_vector, real_number
 
 
 class Task(ABC):
@@ -55,8 +55,11 @@ class Task(ABC):
 
     @staticmethod
     def _sqrt_weight(weight, dim: int) -> np.ndarray:
-        w = np.full(dim, float(weight)) if np.ndim(weight) == 0 else weight
-        w = as_vector(w, "weight", dim)
+        if np.ndim(weight) == 0:
+            weight = np.full(dim, real_number(weight, "weight"))
+        elif np.asarray(weight).dtype == bool:
+            raise TypeError(f"weight must be numbers, got {weight!r}")
+        w = as_vector(weight, "weight", dim)
         if np.any(w <= 0):
             raise ValueError(f"weight must be positive, got {w}")
         return np.sqrt(w)

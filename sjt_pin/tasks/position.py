@@ -21,10 +21,9 @@ class PositionTask(Task):
     velocities are ``pin.Motion``, 6-vectors (the linear part is used) or 3-vectors (m/s).
 
     With position rows only, nothing bounds SJT's scaling factors from above: a joint whose
-    axis passes 1 mm from the point has ``|J_i| = 1e-3`` and ``alpha_i = 1e6``. The solvers'
-    ``column_tol`` (default (1 cm)^2 for position rows, see :class:`~sjt_pin.SJTSolver`) is the
-    principled floor: a column shorter than a characteristic length moves the point less than
-    its own rotation, and its alpha is capped at ``1 / column_tol``.
+    axis passes 1 mm from the point has ``|J_i| = 1e-3`` and ``alpha_i = 1e6``. SJT's
+    ``length`` l (default 0.1 m, see :class:`~sjt_pin.SJTSolver`) is the floor:
+    ``alpha_i = 1 / max(|J_i|^2, l^2)``, so ``|q_dot_i| <= k |e| / l``.
     """
 
     def __init__(self, axes: str = "xyz", frame: str | None = None, weight=None):

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..validation import as_vector
+from ..validation import as_vector, real_number
 from .base import Task
 
 
@@ -25,8 +25,13 @@ class PostureTask(Task):
 
     def __init__(self, q_ref=None, weight=1e-2):
         self.q_ref = None if q_ref is None else as_vector(q_ref, "q_ref")
-        w = np.asarray(weight, dtype=float)
-        if w.ndim > 1 or not np.all(np.isfinite(w)) or np.any(w <= 0):
+        if np.ndim(weight) == 0:
+            w = np.asarray(real_number(weight, "weight"))
+        elif np.asarray(weight).dtype == bool:
+            raise TypeError(f"weight must be numbers, got {weight!r}")
+        else:
+            w = as_vector(weight, "weight")
+        if not np.all(np.isfinite(w)) or np.any(w <= 0):
             raise ValueError(f"weight must be positive (a number or one per joint), "
                              f"got {weight!r}")
         self.weight = w
