@@ -39,6 +39,10 @@ DEFAULT_EE_FRAMES: dict[str, str] = {
 }
 
 
+#: guards Pinocchio's global random generator (seeded and drawn by random_configuration)
+_PINOCCHIO_RNG = threading.Lock()
+
+
 class Robot:
     """A kinematic model (``pin.Model``) with one end-effector frame.
 
@@ -248,12 +252,14 @@ class Robot:
         return np.asarray(J, dtype=float).reshape(6, self.model.nv)
 
     def random_configuration(self, rng: np.random.Generator | None = None) -> np.ndarray:
-        """A configuration drawn uniformly within the position limits (``[-pi, pi]`` if none)."""
+        """A configuration drawn uniformly within the position limits (``[-pi, pi]`` if none),
+        reproducibly from ``rng`` (it reseeds Pinocchio's global generator, under a lock)."""
         rng = np.random.default_rng() if rng is None else rng
         lower = np.where(np.isfinite(self.lower_limits), self.lower_limits, -np.pi)
         upper = np.where(np.isfinite(self.upper_limits), self.upper_limits, np.pi)
-        pin.seed(int(rng.integers(2**31 - 1)))
-        return pin.randomConfiguration(self.model, lower, upper)
+        with _PINOCCHIO_RNG:  # Pinocchio draws from one global generator, seeded from rng
+            pin.seed(int(rng.integers(2**31 - 1)))
+            return pin.randomConfiguration(self.model, lower, upper)
 
     def __repr__(self) -> str:
         return f"Robot({self.name!r}, ee_frame={self.ee_frame!r}, nq={self.nq}, nv={self.nv})"

@@ -18,6 +18,7 @@ import atexit
 import ctypes
 import os
 import re
+import select
 import signal
 import subprocess
 import sys
@@ -34,15 +35,18 @@ class LoopbackServer:
         self.process = subprocess.Popen(
             [sys.executable, "-u", "-m", __name__, "--parent", str(os.getpid())],
             stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, start_new_session=True,
+            bufsize=0,  # unbuffered: select() then sees every line that has not been read
         )
         atexit.register(self.close)
         deadline = time.monotonic() + timeout
         urls: dict[str, str] = {}
         while len(urls) < 2:
-            line = self.process.stdout.readline().decode()
-            if not line and (self.process.poll() is not None or time.monotonic() > deadline):
+            remaining = deadline - time.monotonic()
+            ready = remaining > 0 and select.select([self.process.stdout], [], [], remaining)[0]
+            line = self.process.stdout.readline().decode() if ready else ""
+            if not line:  # the deadline passed, or the child exited
                 self.close()
-                raise RuntimeError("the meshcat server did not start")
+                raise RuntimeError(f"the meshcat server did not start within {timeout:g} s")
             match = re.match(r"(zmq_url|web_url)=(\S+)", line.strip())
             if match:
                 urls[match.group(1)] = match.group(2)
@@ -54,6 +58,7 @@ class LoopbackServer:
 
     def close(self) -> None:
         """Stop the server (idempotent)."""
+        atexit.unregister(self.close)
         if self.process.poll() is None:
             self.process.terminate()
             try:
