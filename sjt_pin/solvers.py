@@ -67,8 +67,9 @@ class SJTSolver(Solver):
       tends to D J^T / lambda as the damping grows). ``lambda = mu^2 + |e| sqrt(max alpha)``:
       a Levenberg-Marquardt term that grows with the error relative to the shortest lever arm
       (the curvature that the linear model leaves out), so that an arm that cannot reach comes
-      to rest; unit-free like the rest. "auto" is ``K = 1 / dt``. On the accuracy benchmark it
-      tracks 3-30x better than DLS.
+      to rest; unit-free like the rest. "auto" is ``K = 1 / dt``. On the accuracy benchmark its
+      max error is at most DLS's (damping 0.05) on every path but UR5's wrist at dt = 2 ms
+      (1.4x), and it rests at unreachable targets, which DLS does not.
     - ``feedback="transpose"``: ``q_dot = D J^T K e`` plus the damped feed-forward: the
       paper's feedback, which corrects slowly along directions J nearly loses.
     - ``feedback="transpose", feedforward="transpose"``: the paper's eq. (21) exactly,

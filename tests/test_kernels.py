@@ -174,21 +174,6 @@ def test_position_rows(rng):
     np.testing.assert_array_equal(ff_out, velocity[[2, 0]])
 
 
-def test_box_status():
-    layout = K.Layout(1, 3, 3)
-    work = layout.allocate()
-    for part, values in enumerate((np.arange(3), np.arange(3), -np.ones(3), np.ones(3))):
-        layout.box_part(work, part)[:] = values  # q, v indices; limits [-1, 1]
-    layout.inverse_speeds(work)[:] = 1.0 / np.array([10.0, 10.0, np.inf])  # rad/s
-    work[K.P_DT] = 1e-3
-    q, small = np.array([0.5, -0.9, 0.0]), np.full(3, 0.001)  # 1 rad/s
-    assert K.box_status(q, small, work) == 0
-    assert K.box_status(q, np.array([0.0, -0.2, 0.0]), work) == K.OUTSIDE | K.TOO_FAST
-    assert K.box_status(q, np.array([0.0, 0.0, 0.5]), work) == 0  # no speed limit on joint 3
-    assert K.box_status(np.array([1.0, 0, 0]), np.zeros(3), work) == 0  # on a limit is inside
-    assert K.box_status(np.array([1.5, 0, 0]), np.zeros(3), work) == K.OUTSIDE  # starts out
-
-
 def test_clamp_pass():
     q = np.array([0.0, 0.9, 1.5, -1.5])  # joints 3 and 4 start outside [-1, 1]
     index = np.arange(4)

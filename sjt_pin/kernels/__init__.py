@@ -12,13 +12,13 @@ per-user folder (:data:`~.compile.CACHE_DIR`), never inside the installed packag
   loop-eigenvalue bound);
 - :mod:`.methods`: one step of each family of CLIK mappings, limits test included;
 - :mod:`.tasks`: the arithmetic of the pose and position tasks;
-- :mod:`.limits`: the box test and the clamping of joints at their position limits.
+- :mod:`.limits`: the clamping of joints at their position limits.
 """
 
 from .layout import *  # noqa: F403 (the slot names are the kernels' vocabulary)
 
 # the entry points the rest of the package calls, re-exported
-from .limits import box_status, clamp_pass  # noqa: F401
+from .limits import clamp_pass  # noqa: F401
 from .linalg import cholesky_solve, loop_bound, symmetric_eigen  # noqa: F401
 from .methods import least_squares_step, transpose_step  # noqa: F401
 from .tasks import frame_velocity, position_rows, rotation_defect  # noqa: F401

@@ -30,8 +30,6 @@ FB_TRANSPOSE, FB_DAMPED = 0, 1
 #: status bits a step kernel returns (0: nothing to do but integrate): errors and a stall need
 #: Python; joints clamped at a position limit and a step scaled for the speed limits do not
 NON_FINITE, STALLED, CLAMPED, SCALED = 1, 2, 4, 8
-#: bits of :func:`~.limits.box_status`
-OUTSIDE, TOO_FAST = 1, 2
 #: matrix products of the loop-eigenvalue bound (tr A^(2^(s+1)))^(1/2^(s+1))
 BOUND_PRODUCTS = 2
 #: smallest eigenvalue of J J^T, relative to the largest, that the pseudoinverse inverts: the

@@ -1,30 +1,8 @@
-"""Joint limits in a step: the box test of every limited joint, and the clamping pass."""
+"""Joint limits in a step: the clamping pass of the joints that would leave their range."""
 
 from __future__ import annotations
 
 from .compile import compiled
-from .layout import OUTSIDE, P_BOX, P_BOX_COUNT, P_DT, P_SPEED, TOO_FAST
-
-
-@compiled
-def box_status(q, step, work):
-    """Whether ``q + step`` leaves the position box (``OUTSIDE``: a limited 1-DoF joint would
-    end outside its range, or starts there) or some joint is faster than its limit
-    (``TOO_FAST``: ``|step_j| > v_max,j dt``); the box and the inverse speed limits are read
-    from ``work``."""
-    status = 0
-    box, count = int(work[P_BOX]), int(work[P_BOX_COUNT])
-    for c in range(count):
-        new = q[int(work[box + c])] + step[int(work[box + count + c])]
-        if new > work[box + 3 * count + c] or new < work[box + 2 * count + c]:
-            status = OUTSIDE
-            break
-    speed = int(work[P_SPEED])
-    for j in range(step.shape[0]):
-        if abs(step[j]) * work[speed + j] > work[P_DT]:
-            status |= TOO_FAST
-            break
-    return status
 
 
 @compiled(inline=True)

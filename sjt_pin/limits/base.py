@@ -12,8 +12,9 @@ from collections.abc import Callable
 
 import numpy as np
 
-#: ``remap(mask, extra_velocity)``: the method's step recomputed with only the joints of
-#: ``mask`` free and ``extra_velocity`` (task units/s) added to the desired task velocity.
+#: ``remap(free, fixed_velocity)``: the method's step recomputed with only the joints of
+#: ``free`` (nv,) moving, the others moving at ``fixed_velocity`` (nv,; rad/s or m/s): the
+#: task velocity ``J fixed_velocity`` they provide is taken off the free joints' share.
 Remap = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
 

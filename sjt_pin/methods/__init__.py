@@ -6,6 +6,4 @@ from .jp import JP
 from .jt import JT
 from .sjt import SJT
 
-METHODS: dict[str, type[Method]] = {cls.name: cls for cls in (SJT, JT, JP, DLS)}
-
-__all__ = ["DLS", "JP", "JT", "METHODS", "Method", "SJT"]
+__all__ = ["DLS", "JP", "JT", "Method", "SJT"]

@@ -1,6 +1,6 @@
 """Analysis of a mapping M(J): motion ellipsoids (paper Section 3.3) and stability bounds.
 
-Pure numpy on top of :mod:`.mappings`.
+Pure numpy on top of :mod:`sjt_pin.mappings`.
 """
 
 from __future__ import annotations

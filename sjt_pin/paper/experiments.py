@@ -143,7 +143,7 @@ def reachable_max_error(log: TrackingLog, task: PaperTask) -> float:
 
 
 def stability(log: TrackingLog, settings: PaperSettings = PaperSettings()) -> tuple[bool, str]:
-    """:func:`sjt_pin.stability.stability` with the settings' tolerances (scaled lengths)."""
+    """:func:`sjt_pin.paper.stability.stability` with the settings' tolerances (scaled lengths)."""
     return run_stability(log, settings.oscillation_tol * settings.scale, settings.speed_bound)
 
 

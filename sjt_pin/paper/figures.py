@@ -1,4 +1,5 @@
-"""Matplotlib figures of the paper's experiments (Figs. 2/3, 6 and 7) from :mod:`.paper` results.
+"""Matplotlib figures of the paper's experiments (Figs. 2/3, 6 and 7), from the results of
+:mod:`sjt_pin.paper.experiments`.
 
 This module leaves matplotlib's backend alone: a notebook keeps its inline backend (the figures
 show under the cell that makes them), and :func:`save` writes PNG files with whatever backend the

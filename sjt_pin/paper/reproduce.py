@@ -52,7 +52,8 @@ def _study_table(table: dict, labels: list[str], title: str) -> list[str]:
 
 def reproduce(out: str | Path, processes: int | None = None, progress: bool = True,
               grid: int = 30) -> Path:
-    """Run every experiment of :mod:`.paper`, write PNG figures and ``results.md`` into ``out``.
+    """Run every experiment of :mod:`sjt_pin.paper.experiments`; write PNG figures and
+    ``results.md`` into ``out``.
 
     ``grid`` is the number of gains per sweep (Fig. 6); fewer is quicker, with the same code.
     """

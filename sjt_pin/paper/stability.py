@@ -1,6 +1,6 @@
 """When is a closed-loop run stable, and what is the largest stable gain (by simulation)?
 
-Used by the paper's gain sweeps (:mod:`.paper`) and by the accuracy benchmark (:mod:`.bench`).
+Used by the paper's gain sweeps (:mod:`sjt_pin.paper.experiments`).
 """
 
 from __future__ import annotations
