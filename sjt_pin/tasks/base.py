@@ -21,6 +21,20 @@ from ..kinematics import Kinematics
 from ..validation import as_motion, as_pose, as_vector, real_number
 
 
+def checked_weight(weight) -> np.ndarray:
+    """``weight`` as a 0-d array (one value for every row) or a vector of positive numbers
+    (dimensionless); its length is checked where the rows are known."""
+    if np.ndim(weight) == 0:
+        w = np.asarray(real_number(weight, "weight"))
+    elif np.asarray(weight).dtype == bool:
+        raise TypeError(f"weight must be numbers, got {weight!r}")
+    else:
+        w = as_vector(weight, "weight")
+    if not np.all(np.isfinite(w)) or np.any(w <= 0):
+        raise ValueError(f"weight must be positive (a number or one per row), got {weight!r}")
+    return w
+
+
 class Task(ABC):
     """Base class: ``dim`` rows on one frame (default: the robot's end effector).
 
@@ -55,14 +69,10 @@ class Task(ABC):
 
     @staticmethod
     def _sqrt_weight(weight, dim: int) -> np.ndarray:
-        if np.ndim(weight) == 0:
-            weight = np.full(dim, real_number(weight, "weight"))
-        elif np.asarray(weight).dtype == bool:
-            raise TypeError(f"weight must be numbers, got {weight!r}")
-        w = as_vector(weight, "weight", dim)
-        if np.any(w <= 0):
-            raise ValueError(f"weight must be positive, got {w}")
-        return np.sqrt(w)
+        w = checked_weight(weight)
+        if w.ndim == 1 and w.shape != (dim,):
+            raise ValueError(f"weight must have shape ({dim},), got shape {w.shape}")
+        return np.sqrt(np.broadcast_to(w, (dim,))).copy()
 
     def bind(self, robot) -> Task:
         """A copy of this task for ``robot``: its frame resolved (``FrameNotFound`` if absent)."""

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..validation import as_vector, real_number
-from .base import Task
+from ..validation import as_vector
+from .base import Task, checked_weight
 
 
 class PostureTask(Task):
@@ -25,16 +25,7 @@ class PostureTask(Task):
 
     def __init__(self, q_ref=None, weight=1e-2):
         self.q_ref = None if q_ref is None else as_vector(q_ref, "q_ref")
-        if np.ndim(weight) == 0:
-            w = np.asarray(real_number(weight, "weight"))
-        elif np.asarray(weight).dtype == bool:
-            raise TypeError(f"weight must be numbers, got {weight!r}")
-        else:
-            w = as_vector(weight, "weight")
-        if not np.all(np.isfinite(w)) or np.any(w <= 0):
-            raise ValueError(f"weight must be positive (a number or one per joint), "
-                             f"got {weight!r}")
-        self.weight = w
+        self.weight = checked_weight(weight)
         super().__init__(None, None)
 
     def bind(self, robot):
@@ -43,10 +34,7 @@ class PostureTask(Task):
         bound.dim = robot.nv
         bound.q_ref = robot.q0.copy() if self.q_ref is None else robot.check_q(self.q_ref,
                                                                                  "q_ref")
-        if self.weight.ndim == 1 and self.weight.shape != (robot.nv,):
-            raise ValueError(f"weight must be a number or have shape ({robot.nv},), "
-                             f"got shape {self.weight.shape}")
-        bound.sqrt_weight = np.sqrt(np.broadcast_to(self.weight, (robot.nv,))).copy()
+        bound.sqrt_weight = self._sqrt_weight(self.weight, robot.nv)
         bound._J = np.eye(robot.nv)
         return bound
 
