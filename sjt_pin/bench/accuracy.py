@@ -225,42 +225,35 @@ def saddles(dts=DTS, variants=tuple(VARIANTS), budget: int = 30_000, progress=No
     return rows
 
 
-def tracking_table(rows: list[TrackingRow]) -> str:
+def _table(rows: list, what: str, cell) -> str:
+    """Markdown: one line per (``row.<what>``, dt), one column per variant, ``cell(row)``."""
     variants = list(dict.fromkeys(r.variant for r in rows))
-    lines = ["| path | dt [ms] | " + " | ".join(variants) + " |",
+    by = {(getattr(r, what), r.dt, r.variant): r for r in rows}
+    lines = [f"| {what} | dt [ms] | " + " | ".join(variants) + " |",
              "|---|---|" + "---|" * len(variants)]
-    for (path, dt) in dict.fromkeys((r.path, r.dt) for r in rows):
-        cells = []
-        for v in variants:
-            r = next(x for x in rows if (x.path, x.dt, x.variant) == (path, dt, v))
-            cell = "diverged" if r.diverged else f"{r.max_error:.2g}"
-            if r.damping is not None:
-                cell += f" (λ {r.damping:g})"
-            cells.append(cell)
-        lines.append(f"| {path} | {1e3 * dt:g} | " + " | ".join(cells) + " |")
+    for key, dt in dict.fromkeys((getattr(r, what), r.dt) for r in rows):
+        cells = [cell(by[(key, dt, v)]) for v in variants]
+        lines.append(f"| {key} | {1e3 * dt:g} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
+
+
+def _tracking_cell(r: TrackingRow) -> str:
+    cell = "diverged" if r.diverged else f"{r.max_error:.2g}"
+    return cell if r.damping is None else f"{cell} (λ {r.damping:g})"
+
+
+def _saddle_cell(r: SaddleRow) -> str:
+    steps = "not within the budget" if r.steps is None else f"{r.steps}"
+    return f"{steps} ({r.peak_speed_ratio:.2f})"
+
+
+def tracking_table(rows: list[TrackingRow]) -> str:
+    return _table(rows, "path", _tracking_cell)
 
 
 def rest_table(rows: list[RestRow]) -> str:
-    variants = list(dict.fromkeys(r.variant for r in rows))
-    lines = ["| robot | dt [ms] | " + " | ".join(variants) + " |",
-             "|---|---|" + "---|" * len(variants)]
-    speed = {(r.robot, r.dt, r.variant): r.rms_speed for r in rows}
-    for robot, dt in dict.fromkeys((r.robot, r.dt) for r in rows):
-        cells = [f"{speed[(robot, dt, v)]:.1e}" for v in variants]
-        lines.append(f"| {robot} | {1e3 * dt:g} | " + " | ".join(cells) + " |")
-    return "\n".join(lines)
+    return _table(rows, "robot", lambda r: f"{r.rms_speed:.1e}")
 
 
 def saddle_table(rows: list[SaddleRow]) -> str:
-    variants = list(dict.fromkeys(r.variant for r in rows))
-    lines = ["| saddle | dt [ms] | " + " | ".join(variants) + " |",
-             "|---|---|" + "---|" * len(variants)]
-    for saddle, dt in dict.fromkeys((r.saddle, r.dt) for r in rows):
-        cells = []
-        for v in variants:
-            r = next(x for x in rows if (x.saddle, x.dt, x.variant) == (saddle, dt, v))
-            steps = "not within the budget" if r.steps is None else f"{r.steps}"
-            cells.append(f"{steps} ({r.peak_speed_ratio:.2f})")
-        lines.append(f"| {saddle} | {1e3 * dt:g} | " + " | ".join(cells) + " |")
-    return "\n".join(lines)
+    return _table(rows, "saddle", _saddle_cell)
