@@ -41,6 +41,11 @@ class Gain:
         """The largest entry of a fixed K (1/s); inf for the modes that choose K themselves."""
         return np.inf
 
+    @property
+    def argument(self):
+        """What ``gain=`` was given to make this gain (the object itself unless simpler)."""
+        return self
+
 
 class FixedGain(Gain):
     """K as given: a number (K = k I) or one number per task row, in 1/s, >= 0."""
@@ -72,6 +77,10 @@ class FixedGain(Gain):
     def largest(self):
         return float(np.max(self.value))
 
+    @property
+    def argument(self):
+        return self.value
+
     def __repr__(self):
         return repr(self.value if np.ndim(self.value) == 0 else self.value.tolist())
 
@@ -87,6 +96,10 @@ class AutoGain(Gain):
         if not 0.0 < factor < 2.0:
             raise ValueError(f"factor must be in (0, 2) (2 is the stability bound), got {factor}")
         self.factor = factor
+
+    @property
+    def argument(self):
+        return "auto" if self.factor == AUTO_FACTOR else self
 
     def __repr__(self):
         return "'auto'" if self.factor == AUTO_FACTOR else f"AutoGain({self.factor:g})"

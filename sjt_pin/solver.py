@@ -204,11 +204,7 @@ class Solver:
     @property
     def gain(self) -> float | np.ndarray | str | Gain:
         """K (1/s): a number, one per task row, ``"auto"`` or a Gain object."""
-        value = self._gain
-        if hasattr(value, "value"):
-            return value.value
-        text = repr(value)
-        return text.strip("'") if text.startswith("'") else value
+        return self._gain.argument
 
     @gain.setter
     def gain(self, gain) -> None:
