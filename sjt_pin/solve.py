@@ -124,7 +124,8 @@ class Search:
     def error(self) -> float:
         """|e| of the target rows at the current configuration."""
         rows = self.stack.target_dim
-        return float(np.sqrt(self.e[:rows] @ self.e[:rows]))
+        with np.errstate(over="ignore"):
+            return float(np.sqrt(self.e[:rows] @ self.e[:rows]))
 
     def random(self, seed: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         return self._sampler(seed, rng)
@@ -191,11 +192,6 @@ def solve(solver, target, q0, *, tol: float = TOL, max_iters: int = MAX_ITERS,
         restarts = _integer(restarts, "restarts", 0)
     q = solver.robot.check_q(q0, "q0").copy()
     targets, _ = search.stack.targets(target, None)
-    _, e, _ = search.stack.evaluate(q, targets, None)
-    with np.errstate(over="ignore"):
-        finite = math.isfinite(float(e @ e))
-    if not finite:  # as step() says it: a NaN target, or one so far away that |e|^2 overflows
-        raise_non_finite_targets(targets)
     if not isinstance(rng, np.random.Generator):
         rng = np.random.default_rng(0 if rng is None else rng)
     deadline = math.inf if timeout is None else time.perf_counter() + positive(timeout, "timeout",
@@ -206,6 +202,8 @@ def solve(solver, target, q0, *, tol: float = TOL, max_iters: int = MAX_ITERS,
         success, used = search.run(start, targets, tol, max_iters, budget - total, deadline)
         total += used
         error = search.error()
+        if not math.isfinite(error):  # a NaN target, or one so far that |e|^2 overflows
+            raise_non_finite_targets(targets)  # as step() says it
         if best is None or error < best[1]:
             best = (search.q.copy(), error)
         if success:
