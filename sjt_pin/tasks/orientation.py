@@ -5,8 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from ..kernels import frame_velocity, rotation_defect
-from ..validation import RIGID_TOL
+from ..kernels import frame_velocity
 from .base import Task
 
 
@@ -23,11 +22,6 @@ class OrientationTask(Task):
         bound = super().bind(robot)
         bound._ff = np.zeros(6)
         return bound
-
-    def target(self, value):
-        if type(value) is pin.SE3 and rotation_defect(value.np) <= RIGID_TOL:
-            return value
-        return super().target(value)
 
     def compute(self, kinematics, target, velocity):
         oMf = kinematics.placement(self.frame_id)

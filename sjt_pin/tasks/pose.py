@@ -5,8 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from ..kernels import frame_velocity, rotation_defect
-from ..validation import RIGID_TOL
+from ..kernels import frame_velocity
 from .base import Task
 
 
@@ -32,11 +31,6 @@ class PoseTask(Task):
 
     def write_into(self, J, e, ff):
         self._ff = ff  # the feed-forward is computed here; J and e come from Pinocchio
-
-    def target(self, value):
-        if type(value) is pin.SE3 and rotation_defect(value.np) <= RIGID_TOL:
-            return value  # a rigid pose (NaN shows in the error)
-        return super().target(value)
 
     def compute(self, kinematics, target, velocity):
         oMf = kinematics.placement(self.frame_id)
