@@ -35,7 +35,9 @@ from . import kernels as K
 from .escape import SaddleEscape
 from .exceptions import GainWarning
 from .gains import Gain, as_gain
-from .limits import Limit, PositionLimit, VelocityLimit
+from .constraints import ConstraintStage
+from .limits import AccelerationLimit, JerkLimit, Limit, Motion, PositionLimit, VelocityLimit
+from .limits.position import braking_speed
 from .methods import Method
 from .robot import Robot
 from .stack import TaskStack, normalise_tasks
@@ -44,8 +46,10 @@ from .validation import positive, raise_non_finite_targets
 
 _F64 = np.dtype(np.float64)
 _NONE_CLAMPED = np.zeros(0, dtype=np.int64)
-#: status bits that need Python: an error to raise, a stall for the escape to look at
-_PYTHON = K.NON_FINITE | K.STALLED
+#: status bits that need Python: an error to raise, a stall for the escape to look at, a
+#: joint velocity outside the position or speed box (the constraint stage's work)
+_PYTHON = K.NON_FINITE | K.STALLED | K.CLAMPED | K.SCALED
+_BOXED = K.CLAMPED | K.SCALED
 
 
 @dataclass(frozen=True)
@@ -67,8 +71,17 @@ class StepInfo:
             ``None`` for the other methods.
         escaped: a saddle escape velocity was added (JT, SJT).
         clamped: velocity (tangent) indices — columns of J, entries of ``dq`` — of the joints
-            held at a position limit; ``clamped_joints`` are their names.
-        velocity_scale: factor (<= 1) applied to the whole joint velocity for the speed limits.
+            at a bound of the constraint stage (held there while the others take over the
+            task); ``clamped_joints`` are their names.
+        task_scale: the factor s in [0, 1] by which the constraint stage scaled the task
+            velocity (x_dot_d + K e) because no joint velocity within the limits could meet
+            all of it (1: the whole task).
+        active_limits: ``(limit, joint)`` name pairs of the bounds the joint velocity is on
+            (``("velocity", "torso_lift_joint")``, ``("position", "elbow_joint")``, ...).
+        active_rows: names of the limits whose general rows (``A q_dot <= b``) are active.
+        limit_conflicts: joints whose acceleration or jerk limit had to yield to a position or
+            speed limit (a start outside the range, limits changed between steps).
+        velocity_scale: the same as ``task_scale`` (its former name).
     """
 
     error: np.ndarray
@@ -81,7 +94,14 @@ class StepInfo:
     escaped: bool
     clamped: np.ndarray
     clamped_joints: tuple[str, ...]
-    velocity_scale: float
+    task_scale: float = 1.0
+    active_limits: tuple[tuple[str, str], ...] = ()
+    active_rows: tuple[str, ...] = ()
+    limit_conflicts: tuple[str, ...] = ()
+
+    @property
+    def velocity_scale(self) -> float:
+        return self.task_scale
 
     def __repr__(self) -> str:
         return (f"StepInfo(error_norm={self.error_norm:.3g}, "
@@ -112,7 +132,16 @@ class Solver:
         escape: add a smooth escape at the saddles of singular configurations (JT, SJT).
         check_stability: warn (:class:`~sjt_pin.GainWarning`, once) when a fixed gain exceeds
             the linear stability bound ``2 / (dt lambda_max(J M))`` at the current q.
-        limits: further :class:`~sjt_pin.limits.Limit` objects, applied after the built-in ones.
+        acceleration_limits: joint acceleration limits (rad/s^2 or m/s^2; one number or one
+            per velocity coordinate, ``inf`` for none), or ``None`` (the default: URDFs do not
+            carry them).
+        jerk_limits: joint jerk limits (rad/s^3 or m/s^3), or ``None``.
+        limits: further :class:`~sjt_pin.limits.Limit` objects for the constraint stage.
+
+    With acceleration or jerk limits the solver keeps the velocity and acceleration it
+    commanded last as its state (a run starts from rest); :meth:`reset` returns to rest. The
+    state belongs to the command stream, not to the ``q`` passed in: feeding back a measured
+    ``q`` near the last output is fine; after a jump of the robot elsewhere, call ``reset()``.
     """
 
     def __init__(
@@ -128,6 +157,8 @@ class Solver:
         velocity_limits: bool | np.ndarray | None = None,
         escape: bool = True,
         check_stability: bool = True,
+        acceleration_limits=None,
+        jerk_limits=None,
         limits: Sequence[Limit] = (),
     ):
         if not isinstance(robot, Robot):
@@ -145,29 +176,45 @@ class Solver:
         self._model = robot.model
         self._q_shape = (robot.nq,)
         self._dt = positive(dt, "dt", "s")
-        self._kernel = method.kernel
-        # limits: the built-in ones run inside the method's kernel (their data in ``work``);
-        # further Limit objects after it, in Python
+        self._kernel = method.kernel if method.kernel is not None else method.python_step
+        # the constraint stage: the URDF's position and speed limits, acceleration and jerk
+        # limits when given, and the user's limits
         urdf_speeds = robot.velocity_limits
         moving = stack.chain > 0
+        accel = None if acceleration_limits is None else AccelerationLimit(acceleration_limits, n)
+        jerk = None if jerk_limits is None else JerkLimit(jerk_limits, n)
+        if jerk is not None and accel is None:
+            raise ValueError("jerk_limits need acceleration_limits (the braking distance of a "
+                             "jerk-limited stop depends on both)")
         position = PositionLimit(robot, moving, np.where(np.isfinite(urdf_speeds), urdf_speeds,
-                                                         SaddleEscape.DEFAULT_SPEED))
+                                                         SaddleEscape.DEFAULT_SPEED),
+                                 None if accel is None else accel.limits,
+                                 None if jerk is None else jerk.limits)
         use_position = position.active if position_limits is None else (
             bool(position_limits) and position.active)
         self.position_limit = position if use_position else None
         speeds = np.where(moving, _speed_limits(velocity_limits, urdf_speeds, n), np.inf)
         velocity = VelocityLimit(speeds)
         self.velocity_limit = velocity if velocity.active else None
-        self._extra_limits = list(limits)
-        for extra in self._extra_limits:
-            if not isinstance(extra, Limit):
-                raise TypeError(f"limits must hold sjt_pin Limit objects, got {extra!r}")
-        self.limits: list[Limit] = [x for x in (self.position_limit, self.velocity_limit)
-                                    if x is not None] + self._extra_limits
+        extra = list(limits)
+        for limit in extra:
+            if not isinstance(limit, Limit):
+                raise TypeError(f"limits must hold sjt_pin Limit objects, got {limit!r}")
+        self.acceleration_limit, self.jerk_limit = accel, jerk
+        self.stage = ConstraintStage(
+            [x for x in (self.position_limit, self.velocity_limit, accel, jerk, *extra)
+             if x is not None], moving, robot.velocity_names, stack.target_dim)
+        #: limits the kernel cannot test for the stage: every step goes through it
+        self._staged = bool(extra) or accel is not None or method.kernel is None
+        #: the commanded velocity and acceleration of the last step (the stage's state)
+        self._motion = Motion(np.zeros(robot.nq), np.zeros(n), np.zeros(n), 1.0)
+        self._tracks_motion = accel is not None or bool(extra)
         self.escape = (SaddleEscape(robot.model, stack.chain, urdf_speeds, self.position_limit)
                        if escape and method.stalls else None)
         # the kernel's work vector: parameters, weights, gains, mask, box, speeds, scratch
-        box = self.position_limit
+        # the kernel tests the position and speed box, so that a step within them costs nothing
+        # more; beyond them (or with limits it cannot test) the stage takes over
+        box = None if self._staged else self.position_limit
         self._layout = layout = K.Layout(stack.dim, n, 0 if box is None else box.q_index.size)
         self._work = work = layout.allocate()
         self._info = layout.info(work)
@@ -180,7 +227,10 @@ class Solver:
                 layout.box_part(work, part)[:] = values
         self._escape_velocity = layout.extra_velocity(work)
         self._clamped = layout.clamped_joints(work)
-        layout.inverse_speeds(work)[:] = np.where(np.isfinite(speeds), 1.0 / speeds, 0.0)
+        if not self._staged:
+            layout.inverse_speeds(work)[:] = np.where(np.isfinite(speeds), 1.0 / speeds, 0.0)
+        self._raw_work = work.copy()  # the method alone, for the stage's solves
+        self._outcome, self._outcome_count = None, -1
         work[K.P_ERROR_ROWS] = stack.target_dim
         work[K.P_STALL_RATIO] = -1.0 if self.escape is None else SaddleEscape.STALL_RATIO
         work[K.P_STALL_ERROR] = SaddleEscape.ERROR_FLOOR ** 2
@@ -243,13 +293,24 @@ class Solver:
         self._gain_check = (self._check_stability and not self._warned
                             and gain.mode == K.GAIN_FIXED
                             and (bound is None or self._k_dt * bound >= 2.0))
+        self._motion.dt = self._dt
         self._update_slow()
 
     def _update_slow(self) -> None:
         """Whether every step must take the slow path (an escape in progress, a pending
         stability check, limits outside the kernel's box)."""
-        self._always = (self._gain_check or bool(self._extra_limits)
+        self._always = (self._gain_check or self._staged
                         or (self.escape is not None and self.escape.active))
+
+    def reset(self) -> None:
+        """Forget the commanded velocity and acceleration (the next step starts from rest)
+        and any saddle escape in progress."""
+        self._motion.dq[:] = 0.0
+        self._motion.ddq[:] = 0.0
+        if self.escape is not None:
+            self.escape.reset()
+        self._work[K.P_ESCAPING] = 0.0
+        self._escape_velocity[:] = 0.0
 
     # -- one control period --------------------------------------------------------------------
     def step(self, q, target, target_velocity=None) -> np.ndarray:
@@ -294,6 +355,12 @@ class Solver:
             step = self._slow(status, q, J, e, ff, targets)
         # 4. integrate on the manifold; the record of the step (StepInfo) is built on demand
         self._record, self._last = (J, e, step, status), None
+        if self._tracks_motion:
+            motion, dt = self._motion, self._dt
+            dq = step / dt
+            np.subtract(dq, motion.dq, out=motion.ddq)
+            motion.ddq /= dt
+            motion.dq[:] = dq
         return pin.integrate(self._model, q, step)
 
     def _slow(self, status, q, J, e, ff, targets) -> np.ndarray:
@@ -317,30 +384,84 @@ class Solver:
             else:  # the kernel adds it, within the limits, from the next step on
                 self._work[K.P_ESCAPING] = 1.0
                 self._escape_velocity[:] = velocity
-        for limit in self._extra_limits:
-            if limit.violated(q, step, dt):
-                step = limit.enforce(q, step, dt, self._remap(q, J, e, ff))
+        if status & _BOXED or self._staged:
+            step = self._constrain(q, J, e, ff, status, step)
         self._update_slow()
         return step
 
-    def _remap(self, q, J, e, ff):
-        """``remap(free, fixed_velocity)``: the method's step with only the ``free`` joints and
-        the task velocity the others (moving at ``fixed_velocity``) leave to them."""
+    # -- the constraint stage ------------------------------------------------------------------
+    def _constrain(self, q, J, e, ff, status, step) -> np.ndarray:
+        """Run the constraint stage on the method's step (see :mod:`sjt_pin.constraints`)."""
+        dt, layout, raw = self._dt, self._layout, self._raw_work
+        np.copyto(raw, self._work)
+        raw[K.P_BOX_COUNT] = 0.0
+        layout.inverse_speeds(raw)[:] = 0.0
+        stack = self.stack
+        chain = stack.chain
+        ff_in = ff if self._ff_on else np.zeros(stack.dim)
+        out = np.empty_like(self._step)
+        feedback = [1.0]  # the factor of K e in the task velocity the stage re-solves with
 
-        def remap(free: np.ndarray, fixed_velocity: np.ndarray) -> np.ndarray:
-            work, mask = self._work, self._mask
-            saved = mask.copy()
-            mask *= free
-            work[K.P_HAS_FF] = 1.0
-            out = np.empty_like(self._step)
-            try:
-                self._kernel(J, e, ff - J @ fixed_velocity, q, work, out)
-            finally:
-                mask[:] = saved
-                work[K.P_HAS_FF] = 1.0 if self._ff_on else 0.0
-            return out
+        def solve(free, held, scale=None):
+            scale = feedback[0] if scale is None else scale
+            v = ff_in if held is None else ff_in - J @ held
+            layout.joint_mask(raw)[:] = chain * free
+            raw[K.P_HAS_FF] = 1.0
+            if scale != 1.0:  # a fixed gain of scale times the one this step used
+                raw[K.P_GAIN_MODE] = K.GAIN_FIXED
+                gains = layout.gains(raw)
+                gains[:] = layout.gains(self._work) * scale
+                if self._gain.mode != K.GAIN_FIXED:
+                    gains *= float(self._info[K.I_GAIN])
+            self._kernel(J, e, v, q, raw, out)
+            raw[K.P_GAIN_MODE] = self._work[K.P_GAIN_MODE]
+            layout.gains(raw)[:] = layout.gains(self._work)
+            return out / dt
 
-        return remap
+        everything = np.ones(chain.size, dtype=bool)
+        if status & _BOXED:
+            dq = solve(everything, None)
+        else:
+            dq = step / dt
+        motion = self._motion
+        motion.q = q
+        if self.acceleration_limit is not None:
+            dq, feedback[0] = self._brake_feedback(dq, solve(everything, None, 0.0))
+        outcome = self.stage.enforce(dq, solve, stack.kinematics, motion,
+                                     lambda: stack.sqrt_weight[:, None] * J * chain)
+        self._outcome, self._outcome_count = outcome, self._count
+        step = np.multiply(outcome.dq, dt, out=self._step)
+        limit = self.position_limit
+        if limit is not None:  # exactly onto a limit, not a rounding error past it
+            x = q[limit.q_index]
+            inside = (x >= limit.lower) & (x <= limit.upper)
+            v = limit.v_index[inside]
+            step[v] = np.clip(step[v], (limit.lower - x)[inside], (limit.upper - x)[inside])
+        return step
+
+    def _brake_feedback(self, dq: np.ndarray, dq_ff: np.ndarray) -> tuple[np.ndarray, float]:
+        """With acceleration limits: slow the feedback part of ``dq`` (along its direction) so
+        that every joint can still stop where the error says the target is — the remaining
+        joint displacement ``(dq - dq_ff) / k`` — within its acceleration and jerk limits: a
+        target that jumps gives a ramp, and an arm arriving at a still target comes to rest
+        instead of overshooting. Returns the slowed ``dq`` and its factor on ``K e``."""
+        feedback = dq - dq_ff
+        k = float(np.mean(self._layout.gains(self._work)[:self.stack.target_dim]))
+        if self._gain.mode != K.GAIN_FIXED:
+            k *= float(self._info[K.I_GAIN])
+        if not k > 0.0:
+            return dq, 1.0
+        toward = np.sign(feedback)
+        motion = self._motion
+        allowed = braking_speed(np.abs(feedback) / k, motion.dq * toward, motion.ddq * toward,
+                                self._dt, self.acceleration_limit.limits,
+                                None if self.jerk_limit is None else self.jerk_limit.limits)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = np.where(feedback != 0.0, np.maximum(allowed, 0.0) / np.abs(feedback), np.inf)
+        sigma = float(min(1.0, np.min(ratio, initial=np.inf)))
+        if sigma >= 1.0:
+            return dq, 1.0
+        return dq_ff + sigma * feedback, sigma
 
     def _weighted_rows(self, targets):
         """``q -> (J_w, e_w)``: the weighted, masked task rows for ``targets``, evaluated on a
@@ -392,14 +513,20 @@ class Solver:
             Jw = stack.sqrt_weight[:, None] * J * stack.chain
             alpha = self.method.scaling_factors(Jw)
             escaped = self._escaped[1] and self._escaped[0] == self._count
-            clamped = (np.flatnonzero(self._clamped) if status & K.CLAMPED else _NONE_CLAMPED)
-            scale = float(info[K.I_SCALE]) if status & K.SCALED else 1.0
+            outcome = self._outcome if self._outcome_count == self._count else None
+            if outcome is None:
+                clamped, names, extras = _NONE_CLAMPED, (), {}
+            else:
+                names = tuple(dict.fromkeys(joint for _, joint in outcome.active))
+                index = {name: i for i, name in enumerate(self._v_names)}
+                clamped = np.array([index[name] for name in names], dtype=np.int64)
+                extras = dict(task_scale=float(outcome.scale), active_limits=outcome.active,
+                              active_rows=outcome.rows, limit_conflicts=outcome.conflict)
             self._last = StepInfo(
                 error=np.array(self.error, dtype=float), error_norm=math.sqrt(info[K.I_E_SQ]),
                 dq=step / self._dt, gain=k, loop_bound=float(info[K.I_LOOP]),
                 pose=stack.poses(), alpha=alpha, escaped=escaped,
-                clamped=np.array(clamped), velocity_scale=float(scale),
-                clamped_joints=tuple(self._v_names[i] for i in clamped))
+                clamped=clamped, clamped_joints=names, **extras)
         return self._last
 
     # -- safeguards ----------------------------------------------------------------------------

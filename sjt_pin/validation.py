@@ -123,3 +123,16 @@ def raise_non_finite_targets(targets) -> None:
             raise ValueError("target contains NaN or inf")
     raise ValueError("target is too far for a finite task error (a translation above about "
                      "1e150 m overflows): check its units")
+
+
+def positive_limits(value, size: int, name: str, unit: str) -> np.ndarray:
+    """``value`` (a number or ``size`` numbers) as a float vector of positive limits in
+    ``unit`` (``inf`` for none)."""
+    if isinstance(value, (str, bytes, bool)) or value is None or np.iscomplexobj(value):
+        raise TypeError(f"{name} must be a number or {size} numbers in {unit}, got {value!r}")
+    limits = np.broadcast_to(np.asarray(value, dtype=float), (size,)).copy() \
+        if np.ndim(value) == 0 else np.asarray(value, dtype=float)
+    if limits.shape != (size,) or np.any(np.isnan(limits)) or np.any(limits <= 0):
+        raise ValueError(f"{name} must be one positive number or {size} (one per velocity "
+                         f"coordinate) in {unit}, inf for none; got {value!r}")
+    return limits

@@ -49,7 +49,9 @@ def test_a_joint_at_its_limit_is_clamped_out_and_the_others_take_over(ur5):
     free.step(q, target)
     assert free.last.dq[2] > 0  # the unconstrained update pushes the elbow outward
     q_next = solver.step(q, target)
-    assert list(solver.last.clamped) == [2]
+    info = solver.last
+    assert 2 in info.clamped and ("position", "elbow_joint") in info.active_limits
+    assert np.all(np.abs(info.dq) <= ur5.velocity_limits * (1 + 1e-12))
     assert q_next[2] == elbow_max  # stays on the limit
     for _ in range(500):
         q = solver.step(q, target)
@@ -57,19 +59,46 @@ def test_a_joint_at_its_limit_is_clamped_out_and_the_others_take_over(ur5):
     assert solver.last.error_norm < 1e-6  # the other joints reached the target
 
 
-def test_velocity_limits_scale_the_whole_velocity(ur5):
+def test_a_joint_at_its_speed_limit_is_held_and_the_others_keep_the_task(ur5):
+    """Saturation in the Null Space: one slow joint does not slow the whole arm."""
+    q = np.array([0.3, -1.2, 1.5, -1.8, -1.5, 0.2])
+    target = ur5.fk(q) * pin.SE3(np.eye(3), np.array([0.002, 0.0, 0.0]))
+    speeds = np.full(6, np.inf)
+    speeds[0] = 0.2  # the base joint is slow
+    free = sjt.SJTSolver(ur5, dt=1e-3, velocity_limits=False, task=sjt.PositionTask())
+    limited = sjt.SJTSolver(ur5, dt=1e-3, velocity_limits=speeds,
+                            task=sjt.PositionTask())
+    free.step(q, target.translation)
+    limited.step(q, target.translation)
+    assert abs(free.last.dq[0]) > 0.2  # the base joint would be too fast
+    info = limited.last
+    assert ("velocity", "shoulder_pan_joint") in info.active_limits
+    assert abs(info.dq[0]) == pytest.approx(0.2)
+    assert info.task_scale == 1.0  # the other five joints make up for it: the whole task
+    J = ur5.jacobian(q, reference=pin.LOCAL_WORLD_ALIGNED)[:3]
+    # within the damping of the solve on five columns (constraints.TASK_KEPT)
+    made, wanted = J @ info.dq, J @ free.last.dq
+    assert np.linalg.norm(made - wanted) <= 0.05 * np.linalg.norm(wanted)
+    with pytest.raises(ValueError, match=r"velocity_limits must have shape \(6,\)"):
+        sjt.SJTSolver(ur5, velocity_limits=[1.0, 2.0])
+
+
+def test_a_task_beyond_every_speed_is_scaled_along_its_direction(ur5):
     q = np.array([0.3, -1.2, 1.5, -1.8, -1.5, 0.2])
     target = ur5.fk(q) * pin.SE3(np.eye(3), np.array([0.3, 0.0, 0.0]))
     limited = sjt.SJTSolver(ur5, gain=150.0, dt=1e-3, velocity_limits=np.full(6, 0.5))
     free = sjt.SJTSolver(ur5, gain=150.0, dt=1e-3, velocity_limits=False)
     limited.step(q, target)
     free.step(q, target)
-    scale = limited.last.velocity_scale
-    assert scale < 1
-    assert np.abs(limited.last.dq).max() == pytest.approx(0.5)
-    np.testing.assert_allclose(limited.last.dq, scale * free.last.dq)  # same direction
-    with pytest.raises(ValueError, match=r"velocity_limits must have shape \(6,\)"):
-        sjt.SJTSolver(ur5, velocity_limits=[1.0, 2.0])
+    info = limited.last
+    assert 0 < info.task_scale < 1
+    assert np.abs(info.dq).max() == pytest.approx(0.5)
+    J = ur5.jacobian(q)
+    wanted, made = J @ free.last.dq, J @ info.dq
+    cosine = wanted @ made / np.linalg.norm(wanted) / np.linalg.norm(made)
+    assert cosine > 1 - 1e-9  # the same task direction, slower
+    assert np.linalg.norm(made) == pytest.approx(info.task_scale * np.linalg.norm(wanted),
+                                                 rel=1e-6)
 
 
 def test_a_start_outside_the_limits_returns_at_the_allowed_speed():

@@ -1,7 +1,9 @@
-"""Limits applied inside a step, one class per file (see :mod:`.base`)."""
+"""Limits of the constraint stage, one class per file (see :mod:`.base`)."""
 
-from .base import Limit
+from .acceleration import AccelerationLimit
+from .base import Limit, Motion
+from .jerk import JerkLimit
 from .position import PositionLimit
 from .velocity import VelocityLimit
 
-__all__ = ["Limit", "PositionLimit", "VelocityLimit"]
+__all__ = ["AccelerationLimit", "JerkLimit", "Limit", "Motion", "PositionLimit", "VelocityLimit"]

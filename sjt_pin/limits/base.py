@@ -1,30 +1,68 @@
-"""The limit protocol: a constraint on each step's joint displacement.
+"""The limit protocol: linear inequalities on the joint velocity of one step.
 
-After the method has computed a step, every limit tests it (:meth:`Limit.violated`, one
-compiled call) and, only when it is violated, makes it admissible (:meth:`Limit.enforce`). A new
-limit is one subclass; see the README's "Extend it".
+A limit does not change a step itself. It says what joint velocities ``q_dot`` (nv,; rad/s or
+m/s per velocity coordinate) are admissible at the step's configuration, in one of two shapes
+(the shapes of pink's ``compute_qp_inequalities(configuration, dt)``):
+
+- **bounds** on each velocity coordinate, ``lower <= q_dot <= upper`` (box rows: position,
+  speed, acceleration and jerk limits, a joint band), from :meth:`Limit.bounds`;
+- **general rows** ``A q_dot <= b`` computed from the step's
+  :class:`~sjt_pin.kinematics.Kinematics` (a workspace bound, a collision damper), from
+  :meth:`Limit.rows`.
+
+The solver's constraint stage (:mod:`sjt_pin.constraints`) intersects every limit's
+inequalities and enforces them after the method, whatever the method: joints that reach a
+bound are held there and the others take over the task; a task that cannot be met at all is
+scaled down along its own direction. A new limit is one subclass; see the README's "Extend it".
 """
 
 from __future__ import annotations
 
-from abc import ABC, abstractmethod
-from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
-#: ``remap(free, fixed_velocity)``: the method's step recomputed with only the joints of
-#: ``free`` (nv,) moving, the others moving at ``fixed_velocity`` (nv,; rad/s or m/s): the
-#: task velocity ``J fixed_velocity`` they provide is taken off the free joints' share.
-Remap = Callable[[np.ndarray, np.ndarray], np.ndarray]
+from ..kinematics import Kinematics
 
 
-class Limit(ABC):
-    """A constraint on the displacement ``step = q_dot dt`` (nv,) from configuration ``q``."""
+@dataclass
+class Motion:
+    """The state a limit may read besides the kinematics: the configuration ``q`` (nq,), the
+    velocity ``dq`` (nv,, rad/s or m/s) and acceleration ``ddq`` (nv,, rad/s^2 or m/s^2) the
+    solver commanded in its previous step (zero after construction or ``reset()``), and the
+    control period ``dt`` (s)."""
 
-    @abstractmethod
-    def violated(self, q: np.ndarray, step: np.ndarray, dt: float) -> bool:
-        """Whether ``step`` from ``q`` breaks this limit (cheap: called at every step)."""
+    q: np.ndarray
+    dq: np.ndarray
+    ddq: np.ndarray
+    dt: float
 
-    @abstractmethod
-    def enforce(self, q: np.ndarray, step: np.ndarray, dt: float, remap: Remap) -> np.ndarray:
-        """An admissible step close to ``step`` (may modify and return ``step``)."""
+
+class Limit:
+    """A limit of the constraint stage. Override :meth:`bounds`, :meth:`rows` or both.
+
+    Attributes:
+        name: how :class:`~sjt_pin.StepInfo` names the limit when it is active.
+        hard: ``True`` for limits the stage never gives up (positions, speeds, collisions);
+            ``False`` for smoothness limits (acceleration, jerk), which yield to the hard ones
+            when both cannot hold (a start outside the position range, limits changed between
+            steps).
+    """
+
+    name: str = "limit"
+    hard: bool = True
+
+    def bounds(self, kinematics: Kinematics, motion: Motion
+               ) -> tuple[np.ndarray, np.ndarray] | None:
+        """``(lower, upper)`` (nv,) bounds on this step's joint velocity (rad/s or m/s;
+        ``-inf``/``inf`` where this limit says nothing), or ``None`` when it says nothing."""
+        return None
+
+    def rows(self, kinematics: Kinematics, motion: Motion
+             ) -> tuple[np.ndarray, np.ndarray] | None:
+        """``(A, b)`` with ``A q_dot <= b`` (A: (k, nv), b: (k,)) at this step's configuration,
+        or ``None`` when no row applies (e.g. nothing within a collision's influence)."""
+        return None
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}()"

@@ -1,8 +1,12 @@
 """The method protocol: the mapping M(J) of the CLIK law ``q_dot = M(J) (x_dot_d + K e)``.
 
-A method owns one compiled kernel (:mod:`~sjt_pin.kernels`) that computes a whole step's joint
-displacement from the stacked task rows, and the numpy form of its matrix for analysis and
-tests (the reference formulas are in :mod:`~sjt_pin.mappings`).
+A method is its matrix ``M(J)`` (:meth:`Method.matrix`, numpy; the reference formulas are in
+:mod:`~sjt_pin.mappings`). The built-in methods also own a compiled kernel
+(:mod:`~sjt_pin.kernels`) that computes a whole step from the stacked task rows in one call; a
+method of your own needs only ``name`` and ``matrix``, and its step is computed from the matrix
+(:meth:`Method.python_step`). Limits are none of a method's business: the solver's constraint
+stage (:mod:`~sjt_pin.constraints`) enforces them after any method, by solving it again on fewer
+joints.
 """
 
 from __future__ import annotations
@@ -22,7 +26,9 @@ class Method(ABC):
     name: ClassVar[str]
     #: transpose-type updates stall at saddles of exactly singular configurations
     stalls: ClassVar[bool] = False
-    kernel: ClassVar
+    #: the compiled step ``(J, e, ff, q, work, step) -> status`` of a built-in method; ``None``
+    #: for a method of your own, whose step :meth:`python_step` computes from :meth:`matrix`
+    kernel: ClassVar = None
 
     def configure(self, work: np.ndarray, gain: Gain, dt: float, n_chain: int) -> None:
         """Write the kernel's parameters into ``work`` (its ``P_*`` slots)."""
@@ -50,6 +56,42 @@ class Method(ABC):
     def feedforward_mode(self) -> int:
         """The kernels' ``P_FF_MODE``: how a desired velocity is mapped."""
         return K.FF_TRANSPOSE
+
+    def python_step(self, J: np.ndarray, e: np.ndarray, ff: np.ndarray, q: np.ndarray,
+                    work: np.ndarray, step: np.ndarray) -> int:
+        """The kernel's contract in numpy, from :meth:`matrix`: ``step = dt M(J_w)
+        (ff_w + gain K e_w)`` on the joints of the mask (plus the escape velocity), with
+        ``J_w = diag(sw) J`` and "auto" ``gain = c / (dt lambda_max(J_w M))``; writes the
+        kernel's results into ``work`` and returns its status bits."""
+        m, n = J.shape
+        rows, mask_at = int(work[K.P_ROWS]), int(work[K.P_MASK])
+        sw, k = work[rows:rows + m], work[rows + m:rows + 2 * m]
+        mask = work[mask_at:mask_at + n]
+        dt = work[K.P_DT]
+        Jw = sw[:, None] * J * mask
+        ew = sw * e
+        M = np.asarray(self.matrix(Jw), dtype=float)
+        loop = float(np.max(np.linalg.eigvals(Jw @ M).real, initial=0.0)) if m else 0.0
+        if work[K.P_GAIN_MODE] == K.GAIN_FIXED:
+            gain = 1.0
+        else:
+            gain = work[K.P_GAIN_ARG] / (dt * loop) if loop > 0.0 else 0.0
+        v = gain * k * ew
+        has_ff = work[K.P_HAS_FF] != 0.0
+        if has_ff:
+            v = v + sw * ff
+        step[:] = dt * (M @ v) * mask
+        if work[K.P_ESCAPING] != 0.0:
+            step += dt * work[int(work[K.P_EXTRA]):int(work[K.P_EXTRA]) + n]
+        rows_e = int(work[K.P_ERROR_ROWS])
+        info = work[K.INFO:K.INFO + K.INFO_SIZE]
+        info[K.I_E_SQ] = float(e[:rows_e] @ e[:rows_e])
+        info[K.I_FF_SQ] = float(ff @ ff) if has_ff else 0.0
+        info[K.I_EW_SQ] = float(ew[:rows_e] @ ew[:rows_e])
+        info[K.I_GAIN], info[K.I_LOOP], info[K.I_STALL] = gain, max(loop, 1.0), 1.0
+        info[K.I_TRACE], info[K.I_SCALE] = float(np.trace(Jw @ M)), 1.0
+        info[K.I_REGULAR] = float(np.linalg.norm(step)) / dt
+        return 0 if np.isfinite(info[K.I_E_SQ] + info[K.I_FF_SQ]) else K.NON_FINITE
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}()"

@@ -1,0 +1,323 @@
+"""The constraint stage: every limit's inequalities on the joint velocity, enforced after the
+method, for every method.
+
+A step's method proposes a joint velocity ``q_dot* = M (x_dot_d + K e)``. Each limit
+(:mod:`sjt_pin.limits`) bounds the joint velocity of this step — box rows
+``lower <= q_dot <= upper`` or general rows ``A q_dot <= b``. The stage returns the admissible
+velocity closest to what the method wants, in the method's own terms:
+
+1. **Box rows** by *Saturation in the Null Space* (SNS; Flacco, De Luca and Khatib, "Control of
+   redundant robots under hard joint constraints: Saturation in the Null Space", IEEE T-RO
+   31(3), 2015): the joint that limits the task most is held at its bound, and the method is
+   solved again on the other joints for the task velocity the held ones leave to them — the
+   same mapping M on fewer columns, so SJT keeps its scaling D. When no set of held joints can
+   meet the whole task, the task velocity is scaled down, ``s (x_dot_d + K e)`` with the
+   largest ``s`` in [0, 1] that the bounds allow: the motion keeps its direction, slower,
+   never distorted. Each round costs one or two solves of the method.
+2. **General rows** (collision dampers, workspace bounds) that the result still breaks: the
+   smallest correction in the metric ``J_w^T J_w + rho I`` — changes of the task motion cost
+   much, self-motion little, so the other joints take over — subject to every row and bound,
+   a small convex QP solved exactly on its dual by an active-set method.
+
+The box of each joint is the intersection of every limit's bounds. *Hard* limits (positions,
+speeds, collisions) win over *smoothness* limits (acceleration, jerk) when both cannot hold —
+a start outside the range, limits changed between steps: the velocity is then the point of the
+hard box nearest the smoothness box, and the step reports it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from .limits.base import Limit, Motion
+
+#: ``solve(free, held)``: the method's joint velocity (nv,; rad/s) with only the ``free``
+#: joints moving and the others at ``held`` (nv,): the task velocity the held ones produce is
+#: taken off the free joints' share. ``solve(free, None)`` leaves the held joints at rest.
+Solve = Callable[[np.ndarray, np.ndarray | None], np.ndarray]
+
+#: a bound counts as reached within this many rad/s (m/s) of it
+TOLERANCE = 1e-12
+
+
+@dataclass
+class Box:
+    """The per-joint bounds of one step, and which limit set each of them."""
+
+    lower: np.ndarray
+    upper: np.ndarray
+    lower_by: np.ndarray  # index into the stage's limits (-1: none)
+    upper_by: np.ndarray
+    conflict: np.ndarray  # joints where a smoothness limit yielded to a hard one
+
+
+@dataclass
+class Outcome:
+    """What the stage did to one step's joint velocity."""
+
+    dq: np.ndarray
+    scale: float = 1.0  # the task scale s (1: the whole task)
+    held: np.ndarray | None = None  # bool (nv,): joints held at a bound
+    active: tuple[tuple[str, str], ...] = ()  # (limit, joint) pairs at their bound
+    rows: tuple[str, ...] = ()  # limits whose general rows were active
+    conflict: tuple[str, ...] = ()  # joints whose acceleration/jerk limit yielded
+
+
+class ConstraintStage:
+    """The limits of one solver and the stage that enforces them (see the module docstring).
+
+    Args:
+        limits: the :class:`~sjt_pin.limits.Limit` objects.
+        moving: (nv,) bool, the joints the solver moves (the others keep ``q_dot = 0``).
+        names: the name of each velocity coordinate's joint (for reports).
+        task_rows: how many of the stacked rows are the tasks' (the posture rows that may
+            follow are not a task the stage keeps).
+    """
+
+    def __init__(self, limits: Sequence[Limit], moving: np.ndarray, names: Sequence[str],
+                 task_rows: int):
+        self.task_rows = task_rows
+        self.limits = list(limits)
+        self.moving = np.asarray(moving, dtype=bool)
+        self.names = list(names)
+        self.nv = self.moving.size
+
+    # -- the box ---------------------------------------------------------------------------
+    def box(self, kinematics, motion: Motion) -> Box | None:
+        """The intersection of every limit's bounds at this step, or ``None`` if none bounds."""
+        n = self.nv
+        hard_lo, hard_hi = np.full(n, -np.inf), np.full(n, np.inf)
+        soft_lo, soft_hi = np.full(n, -np.inf), np.full(n, np.inf)
+        hard_lo_by, hard_hi_by = np.full(n, -1), np.full(n, -1)
+        soft_lo_by, soft_hi_by = np.full(n, -1), np.full(n, -1)
+        any_bound = False
+        for k, limit in enumerate(self.limits):
+            bounds = limit.bounds(kinematics, motion)
+            if bounds is None:
+                continue
+            any_bound = True
+            lo, hi = bounds
+            if limit.hard:
+                lo_t, hi_t, lo_by, hi_by = hard_lo, hard_hi, hard_lo_by, hard_hi_by
+            else:
+                lo_t, hi_t, lo_by, hi_by = soft_lo, soft_hi, soft_lo_by, soft_hi_by
+            tighter = lo > lo_t
+            lo_t[tighter], lo_by[tighter] = lo[tighter], k
+            tighter = hi < hi_t
+            hi_t[tighter], hi_by[tighter] = hi[tighter], k
+        if not any_bound:
+            return None
+        lower = np.maximum(hard_lo, soft_lo)
+        upper = np.minimum(hard_hi, soft_hi)
+        lower_by = np.where(soft_lo > hard_lo, soft_lo_by, hard_lo_by)
+        upper_by = np.where(soft_hi < hard_hi, soft_hi_by, hard_hi_by)
+        # a smoothness box outside the hard one: its nearest point in the hard box
+        conflict = lower > upper
+        if conflict.any():
+            point = np.clip(np.where(soft_lo > hard_hi, hard_hi, hard_lo), hard_lo, hard_hi)
+            lower[conflict] = upper[conflict] = point[conflict]
+            lower_by[conflict] = np.where(soft_lo > hard_hi, hard_hi_by, hard_lo_by)[conflict]
+            upper_by[conflict] = lower_by[conflict]
+        # joints the solver does not move stay at rest
+        still = ~self.moving
+        lower[still], upper[still] = np.minimum(lower[still], 0.0), np.maximum(upper[still], 0.0)
+        return Box(lower, upper, lower_by, upper_by, conflict)
+
+    def general_rows(self, kinematics, motion: Motion):
+        """Every limit's general rows: ``(A, b, owners)`` or ``None``."""
+        blocks, owners = [], []
+        for limit in self.limits:
+            rows = limit.rows(kinematics, motion)
+            if rows is None:
+                continue
+            A, b = np.atleast_2d(np.asarray(rows[0], dtype=float)), np.atleast_1d(
+                np.asarray(rows[1], dtype=float))
+            if A.shape != (b.size, self.nv):
+                raise ValueError(f"{limit!r}.rows() must return A of shape (k, {self.nv}) and "
+                                 f"b of shape (k,), got {A.shape} and {b.shape}")
+            blocks.append((A, b))
+            owners += [limit.name] * b.size
+        if not blocks:
+            return None
+        return np.vstack([a for a, _ in blocks]), np.concatenate([b for _, b in blocks]), owners
+
+    # -- enforcing ---------------------------------------------------------------------------
+    def enforce(self, dq: np.ndarray, solve: Solve, kinematics, motion: Motion,
+                metric: Callable[[], np.ndarray] | None = None) -> Outcome:
+        """The admissible joint velocity closest to the method's ``dq`` (rad/s; see the module
+        docstring). ``solve`` re-solves the method on a subset of joints; ``metric()`` gives
+        ``J_w`` (m, nv) for the general rows' correction (only called when a row is broken)."""
+        box = self.box(kinematics, motion)
+        rows = self.general_rows(kinematics, motion)
+        rows_w = []
+
+        def weighted():
+            if not rows_w:
+                rows_w.append(metric() if metric is not None else np.zeros((0, self.nv)))
+            return rows_w[0]
+
+        def task(x):
+            return weighted()[:self.task_rows] @ x
+
+        outcome = Outcome(dq)
+        if box is not None and not _inside(dq, box.lower, box.upper):
+            outcome = saturate(dq, solve, box.lower, box.upper, self.moving, task)
+        if box is not None:
+            outcome.conflict = tuple(self.names[j] for j in np.flatnonzero(box.conflict))
+            outcome.active = self._active(outcome.dq, box)
+        if rows is not None:
+            A, b, owners = rows
+            slack = A @ outcome.dq - b
+            if np.any(slack > TOLERANCE * (1.0 + np.abs(b))):
+                lower = box.lower if box is not None else np.full(self.nv, -np.inf)
+                upper = box.upper if box is not None else np.full(self.nv, np.inf)
+                Jw = weighted()
+                outcome.dq = project(outcome.dq, Jw, A, b, lower, upper, self.moving)
+                slack = A @ outcome.dq - b
+            tight = slack > -1e-9 * (1.0 + np.abs(b))
+            outcome.rows = tuple(sorted({owners[i] for i in np.flatnonzero(tight)}))
+        return outcome
+
+    def _active(self, dq: np.ndarray, box: Box) -> tuple[tuple[str, str], ...]:
+        """(limit name, joint name) for each joint at one of its bounds."""
+        pairs = []
+        at_lower = (dq <= box.lower + TOLERANCE) & (box.lower_by >= 0) & np.isfinite(box.lower)
+        at_upper = (dq >= box.upper - TOLERANCE) & (box.upper_by >= 0) & np.isfinite(box.upper)
+        for j in np.flatnonzero(at_lower | at_upper):
+            k = box.upper_by[j] if at_upper[j] else box.lower_by[j]
+            pairs.append((self.limits[k].name, self.names[j]))
+        return tuple(pairs)
+
+
+def _inside(dq, lower, upper) -> bool:
+    return bool(np.all(dq >= lower - TOLERANCE) and np.all(dq <= upper + TOLERANCE))
+
+
+def task_scale(a: np.ndarray, b: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+               free: np.ndarray) -> tuple[float, int]:
+    """The largest ``s`` in [0, 1] with ``lower <= b + s a <= upper`` on the ``free`` joints,
+    and the joint that limits it (-1 when s = 1 fits); ``s = -1`` when no ``s`` in [0, 1]
+    fits (the held joints alone already push a free one out of its box)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        top = np.where(a > 0, (upper - b) / a, np.where(a < 0, (lower - b) / a, np.inf))
+        bottom = np.where(a > 0, (lower - b) / a, np.where(a < 0, (upper - b) / a, -np.inf))
+    still_out = (a == 0) & ((b < lower - TOLERANCE) | (b > upper + TOLERANCE))
+    top = np.where(free & ~still_out, top, np.where(free, -np.inf, np.inf))
+    bottom = np.where(free, bottom, -np.inf)
+    k = int(np.argmin(top))
+    s_max, s_min = float(top[k]), float(np.max(bottom, initial=-np.inf))
+    if s_max >= 1.0 and s_min <= 1.0:
+        return 1.0, -1
+    if s_max < 0.0 or s_min > min(s_max, 1.0) + 1e-12:
+        return -1.0, k
+    return max(min(s_max, 1.0), 0.0), k
+
+
+#: a re-solve on fewer joints keeps the task when its task velocity is within this fraction of
+#: the method's own (else the held joints took a direction the others cannot make up for)
+TASK_KEPT = 0.05
+
+
+def saturate(dq: np.ndarray, solve: Solve, lower: np.ndarray, upper: np.ndarray,
+             moving: np.ndarray, task: Callable[[np.ndarray], np.ndarray]) -> Outcome:
+    """Saturation in the Null Space on the box ``[lower, upper]`` (module docstring, step 1).
+
+    ``task(x)`` is the task velocity (the target rows, weighted) of a joint velocity ``x``.
+    The first candidate is the method's own ``dq`` scaled down as a whole, which keeps the task
+    direction exactly; each round of SNS adds a candidate — the held joints at their bounds,
+    the others solved again and the task scaled — that counts only if its task velocity is the
+    method's, scaled (within :data:`TASK_KEPT`): fewer free joints than the task needs cannot
+    keep it, and then holding more joints cannot either. The largest scale wins.
+    """
+    n = dq.size
+    free = moving.copy()
+    held = np.zeros(n, dtype=bool)
+    held_velocity = np.zeros(n)
+    wanted = task(dq)
+    size = float(np.linalg.norm(wanted))
+    s, _ = task_scale(dq, np.zeros(n), lower, upper, free)
+    best = (s, dq, np.zeros(n), held.copy(), held_velocity.copy())
+    a, b = dq, np.zeros(n)
+    for _ in range(n):
+        s, k = task_scale(a, b, lower, upper, free)
+        if s >= 0.0 and held.any():
+            x = np.where(held, held_velocity, b + s * a)
+            if np.linalg.norm(task(x) - s * wanted) > TASK_KEPT * s * size + 1e-12 * size:
+                break  # the free joints no longer make the task: holding more will not help
+        if s > best[0]:
+            best = (s, a, b, held.copy(), held_velocity.copy())
+        if s >= 1.0 or k < 0:
+            break
+        # hold the joint that limits the task at the bound it reaches first
+        direction = a[k] if a[k] != 0.0 else (b[k] - upper[k] if b[k] > upper[k] else b[k])
+        held[k], free[k] = True, False
+        held_velocity[k] = upper[k] if direction > 0 else lower[k]
+        if not free.any():
+            break
+        a = solve(free, None)
+        b = solve(free, held_velocity) - a
+    s, a, b, held, held_velocity = best
+    scale = max(s, 0.0)
+    out = np.where(held, held_velocity, b + scale * a)
+    out[~moving] = 0.0
+    # when no scale fitted (s = -1), the nearest point of the box
+    np.clip(out, lower, upper, out=out)
+    return Outcome(out, scale if s >= 0 else 0.0, held)
+
+
+def project(dq: np.ndarray, Jw: np.ndarray, A: np.ndarray, b: np.ndarray, lower: np.ndarray,
+            upper: np.ndarray, moving: np.ndarray) -> np.ndarray:
+    """``argmin (x - dq)^T H (x - dq)`` with ``H = Jw^T Jw + rho I`` over the ``moving`` joints,
+    subject to ``A x <= b`` and ``lower <= x <= upper`` (module docstring, step 2)."""
+    cols = np.flatnonzero(moving)
+    x0 = dq[cols]
+    H = Jw[:, cols].T @ Jw[:, cols] if Jw.size else np.zeros((cols.size, cols.size))
+    rho = 1e-3 * max(float(np.trace(H)) / max(cols.size, 1), 1e-12)
+    H += rho * np.eye(cols.size)
+    finite_lo, finite_hi = np.isfinite(lower[cols]), np.isfinite(upper[cols])
+    eye = np.eye(cols.size)
+    G = np.vstack([A[:, cols], -eye[finite_lo], eye[finite_hi]])
+    h = np.concatenate([b - A[:, ~moving] @ dq[~moving] if (~moving).any() else b,
+                        -lower[cols][finite_lo], upper[cols][finite_hi]])
+    L = np.linalg.cholesky(H)
+    C = np.linalg.solve(L, G.T).T  # G L^-T
+    r = h - G @ x0
+    y = nonnegative_qp(C @ C.T, r)
+    z = -C.T @ y  # z = L^T (x - x0)
+    out = dq.copy()
+    out[cols] = x0 + np.linalg.solve(L.T, z)
+    return out
+
+
+def nonnegative_qp(Q: np.ndarray, r: np.ndarray, tol: float = 1e-13) -> np.ndarray:
+    """``argmin 1/2 y^T Q y + r^T y`` over ``y >= 0`` for a symmetric PSD ``Q``: the active-set
+    method of Lawson and Hanson's NNLS, on the normal equations of the passive set."""
+    k = r.size
+    y = np.zeros(k)
+    passive = np.zeros(k, dtype=bool)
+    scale = tol * (1.0 + float(np.max(np.abs(r), initial=0.0)))
+    for _ in range(3 * k + 10):
+        w = -(Q @ y + r)
+        w[passive] = -np.inf
+        t = int(np.argmax(w)) if k else 0
+        if k == 0 or w[t] <= scale:
+            break
+        passive[t] = True
+        for _ in range(3 * k + 10):
+            idx = np.flatnonzero(passive)
+            s = np.zeros(k)
+            s[idx] = np.linalg.lstsq(Q[np.ix_(idx, idx)], -r[idx], rcond=None)[0]
+            if np.all(s[idx] > 0):
+                y = s
+                break
+            negative = idx[s[idx] <= 0]
+            alpha = float(np.min(y[negative] / (y[negative] - s[negative])))
+            y = y + alpha * (s - y)
+            passive &= y > 1e-15
+            y[~passive] = 0.0
+            if not passive.any():
+                break
+    return y
