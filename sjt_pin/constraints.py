@@ -110,6 +110,10 @@ class ConstraintStage:
             hi_t[tighter], hi_by[tighter] = hi[tighter], k
         if not any_bound:
             return None
+        # smoothness limits that contradict each other: the middle of their bounds
+        torn = soft_lo > soft_hi
+        if torn.any():
+            soft_lo[torn] = soft_hi[torn] = 0.5 * (soft_lo[torn] + soft_hi[torn])
         lower = np.maximum(hard_lo, soft_lo)
         upper = np.minimum(hard_hi, soft_hi)
         lower_by = np.where(soft_lo > hard_lo, soft_lo_by, hard_lo_by)
@@ -216,9 +220,10 @@ def task_scale(a: np.ndarray, b: np.ndarray, lower: np.ndarray, upper: np.ndarra
     return max(min(s_max, 1.0), 0.0), k
 
 
-#: a re-solve on fewer joints keeps the task when its task velocity is within this fraction of
-#: the method's own (else the held joints took a direction the others cannot make up for)
-TASK_KEPT = 0.05
+#: a re-solve on fewer joints keeps the task when its task velocity leaves the direction of the
+#: method's own by at most this fraction (else the held joints took a direction the others
+#: cannot make up for); a damped method's re-solve may be shorter along it
+TASK_KEPT = 0.25
 
 
 def saturate(dq: np.ndarray, solve: Solve, lower: np.ndarray, upper: np.ndarray,
@@ -229,7 +234,7 @@ def saturate(dq: np.ndarray, solve: Solve, lower: np.ndarray, upper: np.ndarray,
     The first candidate is the method's own ``dq`` scaled down as a whole, which keeps the task
     direction exactly; each round of SNS adds a candidate — the held joints at their bounds,
     the others solved again and the task scaled — that counts only if its task velocity is the
-    method's, scaled (within :data:`TASK_KEPT`): fewer free joints than the task needs cannot
+    method's direction (within :data:`TASK_KEPT`): fewer free joints than the task needs cannot
     keep it, and then holding more joints cannot either. The largest scale wins.
     """
     n = dq.size
@@ -239,16 +244,19 @@ def saturate(dq: np.ndarray, solve: Solve, lower: np.ndarray, upper: np.ndarray,
     wanted = task(dq)
     size = float(np.linalg.norm(wanted))
     s, _ = task_scale(dq, np.zeros(n), lower, upper, free)
-    best = (s, dq, np.zeros(n), held.copy(), held_velocity.copy())
+    best = (s, dq, np.zeros(n), held.copy(), held_velocity.copy(), s)
     a, b = dq, np.zeros(n)
     for _ in range(n):
         s, k = task_scale(a, b, lower, upper, free)
-        if s >= 0.0 and held.any():
-            x = np.where(held, held_velocity, b + s * a)
-            if np.linalg.norm(task(x) - s * wanted) > TASK_KEPT * s * size + 1e-12 * size:
-                break  # the free joints no longer make the task: holding more will not help
-        if s > best[0]:
-            best = (s, a, b, held.copy(), held_velocity.copy())
+        progress = s  # how far along the method's task velocity the candidate goes
+        if s > 0.0 and held.any() and size > 0.0:
+            made = task(np.where(held, held_velocity, b + s * a))
+            along = float(made @ wanted) / size
+            if np.linalg.norm(made - along * wanted / size) > TASK_KEPT * max(along, 0.0):
+                break  # the free joints no longer make the task's direction: nor will fewer
+            progress = min(s, along / size)
+        if progress > best[0]:
+            best = (progress, a, b, held.copy(), held_velocity.copy(), s)
         if s >= 1.0 or k < 0:
             break
         # hold the joint that limits the task at the bound it reaches first
@@ -259,13 +267,12 @@ def saturate(dq: np.ndarray, solve: Solve, lower: np.ndarray, upper: np.ndarray,
             break
         a = solve(free, None)
         b = solve(free, held_velocity) - a
-    s, a, b, held, held_velocity = best
-    scale = max(s, 0.0)
-    out = np.where(held, held_velocity, b + scale * a)
+    progress, a, b, held, held_velocity, s = best
+    out = np.where(held, held_velocity, b + max(s, 0.0) * a)
     out[~moving] = 0.0
     # when no scale fitted (s = -1), the nearest point of the box
     np.clip(out, lower, upper, out=out)
-    return Outcome(out, scale if s >= 0 else 0.0, held)
+    return Outcome(out, min(max(progress, 0.0), 1.0), held)
 
 
 def project(dq: np.ndarray, Jw: np.ndarray, A: np.ndarray, b: np.ndarray, lower: np.ndarray,

@@ -32,10 +32,10 @@ import numpy as np
 import pinocchio as pin
 
 from . import kernels as K
+from .constraints import ConstraintStage
 from .escape import SaddleEscape
 from .exceptions import GainWarning
 from .gains import Gain, as_gain
-from .constraints import ConstraintStage
 from .limits import AccelerationLimit, JerkLimit, Limit, Motion, PositionLimit, VelocityLimit
 from .limits.position import braking_speed
 from .methods import Method
@@ -148,10 +148,10 @@ class Solver:
         self,
         robot: Robot,
         method: Method,
+        *,
         gain: float | str | Sequence[float] | Gain = "auto",
         dt: float = 1e-3,
         task: Task | Sequence[Task] | Mapping[str, Task] | None = None,
-        *,
         posture: PostureTask | None = None,
         position_limits: bool | None = None,
         velocity_limits: bool | np.ndarray | None = None,
@@ -182,7 +182,8 @@ class Solver:
         urdf_speeds = robot.velocity_limits
         moving = stack.chain > 0
         accel = None if acceleration_limits is None else AccelerationLimit(acceleration_limits, n)
-        jerk = None if jerk_limits is None else JerkLimit(jerk_limits, n)
+        jerk = None if jerk_limits is None else JerkLimit(
+            jerk_limits, n, _speed_limits(velocity_limits, robot.velocity_limits, n))
         if jerk is not None and accel is None:
             raise ValueError("jerk_limits need acceleration_limits (the braking distance of a "
                              "jerk-limited stop depends on both)")

@@ -8,10 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 
-import numpy as np
-
 from .gains import Gain
-from .limits import Limit
 from .mappings import COLUMN_TOL, JP_RCOND
 from .methods import DLS, JP, JT, SJT
 from .methods.dls import DLS_DAMPING
@@ -19,7 +16,7 @@ from .methods.sjt import SJT_LENGTH
 from .methods.transpose import FF_DAMPING
 from .robot import Robot
 from .solver import Solver
-from .tasks import PostureTask, Task
+from .tasks import Task
 
 _COMMON = """
     Common arguments:
@@ -39,8 +36,13 @@ _COMMON = """
             (none), or an (nv,) array in rad/s or m/s (``inf`` for none).
         check_stability: warn once (:class:`~sjt_pin.GainWarning`) when a fixed gain exceeds
             the stability bound ``2 / (dt lambda_max(J M))`` at the current configuration.
-        limits: further :class:`~sjt_pin.limits.Limit` objects, applied after the URDF's
-            position and speed limits (see the README's "Extend it").
+        acceleration_limits: joint acceleration limits (rad/s^2 or m/s^2; a number or one
+            per velocity coordinate, ``inf`` for none; default ``None``: URDFs have none).
+        jerk_limits: joint jerk limits (rad/s^3 or m/s^3; needs ``acceleration_limits``).
+        limits: further :class:`~sjt_pin.limits.Limit` objects for the constraint stage (see
+            the README's "Extend it").
+
+    Every option is keyword-only: ``SJTSolver(robot, dt=1e-3)``.
 """
 
 _TRANSPOSE = """
@@ -87,27 +89,20 @@ class SJTSolver(Solver):
     def __init__(
         self,
         robot: Robot,
+        *,
         gain: float | str | Sequence[float] | Gain = "auto",
         dt: float = 1e-3,
         task: Task | Sequence[Task] | Mapping[str, Task] | None = None,
-        *,
         feedback: str = "damped",
         feedforward: str = "damped",
         ff_damping: float = FF_DAMPING,
         length: float = SJT_LENGTH,
         column_tol: float = COLUMN_TOL,
         escape: bool = True,
-        posture: PostureTask | None = None,
-        position_limits: bool | None = None,
-        velocity_limits: bool | np.ndarray | None = None,
-        check_stability: bool = True,
-        limits: Sequence[Limit] = (),
+        **options,
     ):
         method = SJT(feedforward, ff_damping, column_tol, length, feedback)
-        super().__init__(robot, method, gain, dt, task,
-                         posture=posture, position_limits=position_limits,
-                         velocity_limits=velocity_limits, escape=escape,
-                         check_stability=check_stability, limits=limits)
+        super().__init__(robot, method, gain=gain, dt=dt, task=task, escape=escape, **options)
 
 
 class JTSolver(Solver):
@@ -124,24 +119,18 @@ class JTSolver(Solver):
     def __init__(
         self,
         robot: Robot,
+        *,
         gain: float | str | Sequence[float] | Gain = "auto",
         dt: float = 1e-3,
         task: Task | Sequence[Task] | Mapping[str, Task] | None = None,
-        *,
         feedforward: str = "damped",
         ff_damping: float = FF_DAMPING,
         column_tol: float = COLUMN_TOL,
         escape: bool = True,
-        posture: PostureTask | None = None,
-        position_limits: bool | None = None,
-        velocity_limits: bool | np.ndarray | None = None,
-        check_stability: bool = True,
-        limits: Sequence[Limit] = (),
+        **options,
     ):
-        super().__init__(robot, JT(feedforward, ff_damping, column_tol, SJT_LENGTH), gain, dt, task,
-                         posture=posture, position_limits=position_limits,
-                         velocity_limits=velocity_limits, escape=escape,
-                         check_stability=check_stability, limits=limits)
+        super().__init__(robot, JT(feedforward, ff_damping, column_tol, SJT_LENGTH), gain=gain,
+                         dt=dt, task=task, escape=escape, **options)
 
 
 class JPSolver(Solver):
@@ -157,20 +146,14 @@ class JPSolver(Solver):
     def __init__(
         self,
         robot: Robot,
+        *,
         gain: float | str | Sequence[float] | Gain = "auto",
         dt: float = 1e-3,
         task: Task | Sequence[Task] | Mapping[str, Task] | None = None,
-        *,
         rcond: float = JP_RCOND,
-        posture: PostureTask | None = None,
-        position_limits: bool | None = None,
-        velocity_limits: bool | np.ndarray | None = None,
-        check_stability: bool = True,
-        limits: Sequence[Limit] = (),
+        **options,
     ):
-        super().__init__(robot, JP(rcond), gain, dt, task, posture=posture,
-                         position_limits=position_limits, velocity_limits=velocity_limits,
-                         check_stability=check_stability, limits=limits)
+        super().__init__(robot, JP(rcond), gain=gain, dt=dt, task=task, **options)
 
     @property
     def rcond(self) -> float:
@@ -189,20 +172,14 @@ class DLSSolver(Solver):
     def __init__(
         self,
         robot: Robot,
+        *,
         gain: float | str | Sequence[float] | Gain = "auto",
         dt: float = 1e-3,
         task: Task | Sequence[Task] | Mapping[str, Task] | None = None,
-        *,
         damping: float = DLS_DAMPING,
-        posture: PostureTask | None = None,
-        position_limits: bool | None = None,
-        velocity_limits: bool | np.ndarray | None = None,
-        check_stability: bool = True,
-        limits: Sequence[Limit] = (),
+        **options,
     ):
-        super().__init__(robot, DLS(damping), gain, dt, task, posture=posture,
-                         position_limits=position_limits, velocity_limits=velocity_limits,
-                         check_stability=check_stability, limits=limits)
+        super().__init__(robot, DLS(damping), gain=gain, dt=dt, task=task, **options)
 
     @property
     def damping(self) -> float:

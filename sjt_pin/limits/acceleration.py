@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import numpy as np
-
 from ..validation import positive_limits
 from .base import Limit, Motion
 

@@ -20,10 +20,24 @@ class JerkLimit(Limit):
     name = "jerk"
     hard = False
 
-    def __init__(self, limits, nv: int):
+    def __init__(self, limits, nv: int, speeds: np.ndarray | None = None):
         self.limits = positive_limits(limits, nv, "jerk_limits", "rad/s^3 or m/s^3")
+        self.speeds = np.full(nv, np.inf) if speeds is None else np.asarray(speeds, dtype=float)
 
     def bounds(self, kinematics, motion: Motion):
-        dt = motion.dt
-        change = self.limits * dt
-        return (motion.dq + dt * (motion.ddq - change), motion.dq + dt * (motion.ddq + change))
+        dt, J = motion.dt, self.limits
+        change = J * dt
+        lower = motion.dq + dt * (motion.ddq - change)
+        upper = motion.dq + dt * (motion.ddq + change)
+        # approach a speed limit with an acceleration that can ramp down to 0 before it:
+        # a + a^2 / (2 J) per unit of the velocity left, v_next + a_next^2 / (2 J) <= v_max
+        with np.errstate(invalid="ignore"):
+            for sign in (1.0, -1.0):
+                left = np.maximum(self.speeds - sign * motion.dq, 0.0)
+                a_max = J * (-dt + np.sqrt(dt * dt + 2.0 * left / J))
+                bound = motion.dq + sign * dt * a_max
+                if sign > 0:
+                    upper = np.where(np.isfinite(bound), np.minimum(upper, bound), upper)
+                else:
+                    lower = np.where(np.isfinite(bound), np.maximum(lower, bound), lower)
+        return lower, upper

@@ -78,34 +78,72 @@ class PositionLimit(Limit):
         return lo, hi
 
 
+def stopping_distance(w: np.ndarray, a0: np.ndarray, A: np.ndarray, J: np.ndarray
+                      ) -> np.ndarray:
+    """Distance (rad or m) to stop from velocity ``w > 0`` with acceleration ``a0`` along it
+    (positive: still speeding up), braking at the acceleration limit ``A`` reached and left
+    at the jerk limit ``J`` (``inf``: instantly). Phases: ramp ``a0`` down to 0 if positive;
+    ramp the deceleration to ``A`` (or to the peak of a triangular profile when ``A`` is not
+    reached); hold it; ramp back to 0. When the deceleration ``-a0`` is already more than the
+    velocity needs, ``w`` times the time to ramp it down bounds the distance."""
+    finite = np.isfinite(J)
+    inv_j = np.where(finite, 1.0 / np.where(finite, J, 1.0), 0.0)
+    jerk = np.where(finite, J, 0.0)
+    up = np.maximum(a0, 0.0)  # speeding up: ramp a0 down to 0 first
+    t0 = up * inv_j
+    d0 = w * t0 + up * t0 * t0 / 3.0
+    w = w + 0.5 * up * up * inv_j
+    beta = np.maximum(-a0, 0.0)  # already braking at beta
+    # trapezoid: ramp beta -> A, hold A, ramp A -> 0
+    t1 = (A - beta) * inv_j
+    d1 = w * t1 - 0.5 * beta * t1 * t1 - jerk * t1 ** 3 / 6.0
+    v1 = w - 0.5 * (A * A - beta * beta) * inv_j
+    v2 = 0.5 * A * A * inv_j
+    t2 = np.maximum(v1 - v2, 0.0) / A
+    trapezoid = d1 + v1 * t2 - 0.5 * A * t2 * t2 + A ** 3 * inv_j * inv_j / 6.0
+    # triangle: peak a_p with (a_p^2 - beta^2) / 2J + a_p^2 / 2J = w, then back to 0
+    a_p = np.sqrt(np.maximum(w * jerk + 0.5 * beta * beta, 0.0))
+    ta = (a_p - beta) * inv_j
+    triangle = np.where(a_p >= beta,
+                        w * ta - 0.5 * beta * ta * ta - jerk * ta ** 3 / 6.0
+                        + a_p ** 3 * inv_j * inv_j / 6.0,
+                        w * beta * inv_j)
+    return d0 + np.where(v1 >= v2, trapezoid, triangle)
+
+
 def braking_speed(room: np.ndarray, v: np.ndarray, a: np.ndarray, dt: float,
                   acceleration: np.ndarray | None, jerk: np.ndarray | None) -> np.ndarray:
-    """The largest velocity toward a point ``room`` away (rad or m; a position limit, or the
+    """The largest velocity x toward a point ``room`` away (rad or m: a position limit, or the
     rest of the way to a target) after which a joint can still stop before it within the
-    ``acceleration`` and ``jerk`` limits (``inf`` without an acceleration limit); ``v`` and
-    ``a`` are its previous velocity and acceleration toward that point (rad/s, rad/s^2).
+    ``acceleration`` and ``jerk`` limits (``inf`` without an acceleration limit); ``v`` is its
+    previous velocity toward that point (rad/s), so this step's acceleration is
+    ``(x - v) / dt`` (``a``, the previous acceleration, is not needed).
 
-    The stopping distance is bounded by ``s(w) = w^2 / (2 A) + w A / (2 J)`` (braking at the
-    acceleration limit A, reached and left at the jerk limit J; it bounds the exact
-    jerk-limited distance of both the trapezoidal and the triangular profile), after ramping
-    down an acceleration toward the point that this step may still have (``a + J dt``,
-    capped at A), which adds ``c0 = a_b^2 / (2 J)`` to the velocity and ``a_b^3 / (3 J^2)`` plus
-    ``v a_b / J`` to the distance; with this step's own ``v dt`` the condition is a quadratic
-    in v.
+    The condition ``x dt + stopping_distance(x, (x - v) / dt) <= room`` grows with x; it is
+    solved by bisection (40 halvings) between ``v - A dt`` and ``v + A dt`` (what one step can
+    reach), and without a jerk limit in closed form, ``x dt + x^2 / (2 A) <= room``.
     """
     if acceleration is None:
         return np.full(np.shape(room), np.inf)
     A = acceleration
-    J = np.full(np.shape(room), np.inf) if jerk is None else jerk
+    room = np.maximum(room, 0.0)
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        finite_j = np.isfinite(J)
-        inv_j = np.where(finite_j, 1.0 / J, 0.0)
-        a_b = np.where(finite_j, np.clip(a + np.where(finite_j, J, 0.0) * dt, 0.0, A), 0.0)
-        c0 = 0.5 * a_b * a_b * inv_j
-        b = dt + a_b * inv_j + c0 / A + 0.5 * A * inv_j
-        c = a_b ** 3 * inv_j * inv_j / 3.0 + 0.5 * c0 * c0 / A + 0.5 * c0 * A * inv_j - room
-        disc = b * b - 2.0 * c / A
-        speed = A * (-b + np.sqrt(np.maximum(disc, 0.0)))
-        # too late to stop in time (a start the solver did not command): brake at the limit
-        speed = np.where(disc >= 0, speed, v - A * dt)
+        if jerk is None:
+            speed = A * (-dt + np.sqrt(dt * dt + 2.0 * room / A))
+            return np.where(np.isfinite(A), speed, np.inf)
+        J = jerk
+
+        def fits(x):
+            positive = np.maximum(x, 0.0)
+            return x * dt + np.where(x > 0, stopping_distance(
+                positive, (x - v) / dt, A, J), 0.0) <= room
+
+        low, high = v - 2.0 * A * dt, v + 2.0 * A * dt
+        ok_high = fits(high)
+        for _ in range(40):
+            middle = 0.5 * (low + high)
+            good = fits(middle)
+            low = np.where(good, middle, low)
+            high = np.where(good, high, middle)
+        speed = np.where(ok_high, np.inf, low)
         return np.where(np.isfinite(A), speed, np.inf)
