@@ -45,13 +45,18 @@ TOLERANCE = 1e-12
 
 @dataclass
 class Box:
-    """The per-joint bounds of one step, and which limit set each of them."""
+    """The per-joint bounds of one step: the hard limits' (positions, speeds, ...) and the
+    smoothness limits' (acceleration, jerk; ``None`` when the solver has none), and for each
+    bound the index of the limit that set it (-1: none)."""
 
     lower: np.ndarray
     upper: np.ndarray
-    lower_by: np.ndarray  # index into the stage's limits (-1: none)
+    lower_by: np.ndarray
     upper_by: np.ndarray
-    conflict: np.ndarray  # joints where a smoothness limit yielded to a hard one
+    smooth_lower: np.ndarray | None = None
+    smooth_upper: np.ndarray | None = None
+    smooth_lower_by: np.ndarray | None = None
+    smooth_upper_by: np.ndarray | None = None
 
 
 @dataclass
@@ -87,48 +92,39 @@ class ConstraintStage:
 
     # -- the box ---------------------------------------------------------------------------
     def box(self, kinematics, motion: Motion) -> Box | None:
-        """The intersection of every limit's bounds at this step, or ``None`` if none bounds."""
+        """The intersections of the hard limits' bounds and of the smoothness limits' bounds at
+        this step, or ``None`` if no limit bounds."""
         n = self.nv
-        hard_lo, hard_hi = np.full(n, -np.inf), np.full(n, np.inf)
-        soft_lo, soft_hi = np.full(n, -np.inf), np.full(n, np.inf)
-        hard_lo_by, hard_hi_by = np.full(n, -1), np.full(n, -1)
-        soft_lo_by, soft_hi_by = np.full(n, -1), np.full(n, -1)
-        any_bound = False
+        parts = {}
         for k, limit in enumerate(self.limits):
             bounds = limit.bounds(kinematics, motion)
             if bounds is None:
                 continue
-            any_bound = True
+            if limit.hard not in parts:
+                parts[limit.hard] = [np.full(n, -np.inf), np.full(n, np.inf), np.full(n, -1),
+                                     np.full(n, -1)]
+            lo_t, hi_t, lo_by, hi_by = parts[limit.hard]
             lo, hi = bounds
-            if limit.hard:
-                lo_t, hi_t, lo_by, hi_by = hard_lo, hard_hi, hard_lo_by, hard_hi_by
-            else:
-                lo_t, hi_t, lo_by, hi_by = soft_lo, soft_hi, soft_lo_by, soft_hi_by
             tighter = lo > lo_t
             lo_t[tighter], lo_by[tighter] = lo[tighter], k
             tighter = hi < hi_t
             hi_t[tighter], hi_by[tighter] = hi[tighter], k
-        if not any_bound:
+        if not parts:
             return None
-        # smoothness limits that contradict each other: the middle of their bounds
-        torn = soft_lo > soft_hi
-        if torn.any():
-            soft_lo[torn] = soft_hi[torn] = 0.5 * (soft_lo[torn] + soft_hi[torn])
-        lower = np.maximum(hard_lo, soft_lo)
-        upper = np.minimum(hard_hi, soft_hi)
-        lower_by = np.where(soft_lo > hard_lo, soft_lo_by, hard_lo_by)
-        upper_by = np.where(soft_hi < hard_hi, soft_hi_by, hard_hi_by)
-        # a smoothness box outside the hard one: its nearest point in the hard box
-        conflict = lower > upper
-        if conflict.any():
-            point = np.clip(np.where(soft_lo > hard_hi, hard_hi, hard_lo), hard_lo, hard_hi)
-            lower[conflict] = upper[conflict] = point[conflict]
-            lower_by[conflict] = np.where(soft_lo > hard_hi, hard_hi_by, hard_lo_by)[conflict]
-            upper_by[conflict] = lower_by[conflict]
+        lower, upper, lower_by, upper_by = parts.get(True) or [
+            np.full(n, -np.inf), np.full(n, np.inf), np.full(n, -1), np.full(n, -1)]
         # joints the solver does not move stay at rest
         still = ~self.moving
         lower[still], upper[still] = np.minimum(lower[still], 0.0), np.maximum(upper[still], 0.0)
-        return Box(lower, upper, lower_by, upper_by, conflict)
+        box = Box(lower, upper, lower_by, upper_by)
+        if False in parts:
+            box.smooth_lower, box.smooth_upper, box.smooth_lower_by, box.smooth_upper_by = \
+                parts[False]
+            # smoothness limits that contradict each other: the middle of their bounds
+            torn = box.smooth_lower > box.smooth_upper
+            middle = 0.5 * (box.smooth_lower + box.smooth_upper)
+            box.smooth_lower[torn] = box.smooth_upper[torn] = middle[torn]
+        return box
 
     def general_rows(self, kinematics, motion: Motion):
         """Every limit's general rows: ``(A, b, owners)`` or ``None``."""
@@ -163,36 +159,42 @@ class ConstraintStage:
                 rows_w.append(metric() if metric is not None else np.zeros((0, self.nv)))
             return rows_w[0]
 
-        def task(x):
-            return weighted()[:self.task_rows] @ x
-
         outcome = Outcome(dq)
         if box is not None and not _inside(dq, box.lower, box.upper):
-            outcome = saturate(dq, solve, box.lower, box.upper, self.moving, task)
-        if box is not None:
-            outcome.conflict = tuple(self.names[j] for j in np.flatnonzero(box.conflict))
-            outcome.active = self._active(outcome.dq, box)
+            outcome = saturate(dq, solve, box.lower, box.upper, self.moving,
+                               lambda: weighted()[:self.task_rows])
+        if box is not None and box.smooth_lower is not None:
+            outcome.dq, torn = smooth(outcome.dq, box)
+            outcome.conflict = tuple(self.names[j] for j in np.flatnonzero(torn))
         if rows is not None:
             A, b, owners = rows
             slack = A @ outcome.dq - b
             if np.any(slack > TOLERANCE * (1.0 + np.abs(b))):
                 lower = box.lower if box is not None else np.full(self.nv, -np.inf)
                 upper = box.upper if box is not None else np.full(self.nv, np.inf)
-                Jw = weighted()
-                outcome.dq = project(outcome.dq, Jw, A, b, lower, upper, self.moving)
+                outcome.dq = project(outcome.dq, weighted(), A, b, lower, upper, self.moving)
                 slack = A @ outcome.dq - b
             tight = slack > -1e-9 * (1.0 + np.abs(b))
             outcome.rows = tuple(sorted({owners[i] for i in np.flatnonzero(tight)}))
+        if box is not None:
+            outcome.active = self._active(outcome.dq, box)
         return outcome
 
     def _active(self, dq: np.ndarray, box: Box) -> tuple[tuple[str, str], ...]:
         """(limit name, joint name) for each joint at one of its bounds."""
         pairs = []
-        at_lower = (dq <= box.lower + TOLERANCE) & (box.lower_by >= 0) & np.isfinite(box.lower)
-        at_upper = (dq >= box.upper - TOLERANCE) & (box.upper_by >= 0) & np.isfinite(box.upper)
-        for j in np.flatnonzero(at_lower | at_upper):
-            k = box.upper_by[j] if at_upper[j] else box.lower_by[j]
-            pairs.append((self.limits[k].name, self.names[j]))
+        for lower, upper, lower_by, upper_by in (
+                (box.lower, box.upper, box.lower_by, box.upper_by),
+                (box.smooth_lower, box.smooth_upper, box.smooth_lower_by, box.smooth_upper_by)):
+            if lower is None:
+                continue
+            at_lower = (dq <= lower + TOLERANCE) & (lower_by >= 0)
+            at_upper = (dq >= upper - TOLERANCE) & (upper_by >= 0)
+            for j in np.flatnonzero(at_lower | at_upper):
+                k = upper_by[j] if at_upper[j] else lower_by[j]
+                pair = (self.limits[k].name, self.names[j])
+                if pair not in pairs:
+                    pairs.append(pair)
         return tuple(pairs)
 
 
@@ -220,43 +222,39 @@ def task_scale(a: np.ndarray, b: np.ndarray, lower: np.ndarray, upper: np.ndarra
     return max(min(s_max, 1.0), 0.0), k
 
 
-#: a re-solve on fewer joints keeps the task when its task velocity leaves the direction of the
-#: method's own by at most this fraction (else the held joints took a direction the others
-#: cannot make up for); a damped method's re-solve may be shorter along it
-TASK_KEPT = 0.25
+#: the free joints still span the task space while the smallest singular value of their
+#: normalised task columns is above this fraction of the largest (Flacco's rank test)
+RANK_TOL = 1e-6
 
 
 def saturate(dq: np.ndarray, solve: Solve, lower: np.ndarray, upper: np.ndarray,
-             moving: np.ndarray, task: Callable[[np.ndarray], np.ndarray]) -> Outcome:
+             moving: np.ndarray, rows: Callable[[], np.ndarray]) -> Outcome:
     """Saturation in the Null Space on the box ``[lower, upper]`` (module docstring, step 1).
 
-    ``task(x)`` is the task velocity (the target rows, weighted) of a joint velocity ``x``.
-    The first candidate is the method's own ``dq`` scaled down as a whole, which keeps the task
-    direction exactly; each round of SNS adds a candidate — the held joints at their bounds,
-    the others solved again and the task scaled — that counts only if its task velocity is the
-    method's direction (within :data:`TASK_KEPT`): fewer free joints than the task needs cannot
-    keep it, and then holding more joints cannot either. The largest scale wins.
+    ``rows()`` gives the tasks' weighted rows (without posture rows). The first candidate is
+    the method's own ``dq`` scaled down as a whole, which keeps the task direction exactly;
+    each round of SNS adds a candidate — the held joints at their bounds, the others solved
+    again and the task scaled — as long as the free joints still span the task space (their
+    task columns, normalised, have full row rank within :data:`RANK_TOL`): with fewer, the
+    method would distort the task instead of keeping it, and holding more joints cannot help.
+    The largest scale wins.
     """
     n = dq.size
     free = moving.copy()
     held = np.zeros(n, dtype=bool)
     held_velocity = np.zeros(n)
-    wanted = task(dq)
-    size = float(np.linalg.norm(wanted))
     s, _ = task_scale(dq, np.zeros(n), lower, upper, free)
-    best = (s, dq, np.zeros(n), held.copy(), held_velocity.copy(), s)
+    best = (s, dq, np.zeros(n), held.copy(), held_velocity.copy())
     a, b = dq, np.zeros(n)
+    J = None
     for _ in range(n):
         s, k = task_scale(a, b, lower, upper, free)
-        progress = s  # how far along the method's task velocity the candidate goes
-        if s > 0.0 and held.any() and size > 0.0:
-            made = task(np.where(held, held_velocity, b + s * a))
-            along = float(made @ wanted) / size
-            if np.linalg.norm(made - along * wanted / size) > TASK_KEPT * max(along, 0.0):
-                break  # the free joints no longer make the task's direction: nor will fewer
-            progress = min(s, along / size)
-        if progress > best[0]:
-            best = (progress, a, b, held.copy(), held_velocity.copy(), s)
+        if held.any():
+            J = rows() if J is None else J
+            if not _spans(J[:, free]):
+                break  # the free joints no longer make the task: nor will fewer
+        if s > best[0]:
+            best = (s, a, b, held.copy(), held_velocity.copy())
         if s >= 1.0 or k < 0:
             break
         # hold the joint that limits the task at the bound it reaches first
@@ -267,12 +265,45 @@ def saturate(dq: np.ndarray, solve: Solve, lower: np.ndarray, upper: np.ndarray,
             break
         a = solve(free, None)
         b = solve(free, held_velocity) - a
-    progress, a, b, held, held_velocity, s = best
+    s, a, b, held, held_velocity = best
     out = np.where(held, held_velocity, b + max(s, 0.0) * a)
     out[~moving] = 0.0
     # when no scale fitted (s = -1), the nearest point of the box
     np.clip(out, lower, upper, out=out)
-    return Outcome(out, min(max(progress, 0.0), 1.0), held)
+    return Outcome(out, max(s, 0.0), held)
+
+
+def _spans(J: np.ndarray) -> bool:
+    """Whether the columns of ``J`` (m, k), each scaled to unit norm, span R^m."""
+    m, k = J.shape
+    if k < m:
+        return False
+    norms = np.linalg.norm(J, axis=0)
+    Jn = J[:, norms > 0] / norms[norms > 0]
+    if Jn.shape[1] < m:
+        return False
+    sv = np.linalg.svd(Jn, compute_uv=False)
+    return bool(sv[m - 1] > RANK_TOL * sv[0])
+
+
+def smooth(dq: np.ndarray, box: Box) -> tuple[np.ndarray, np.ndarray]:
+    """Step 3: the joint velocity moves from where the smoothness limits are centred (the
+    previous velocity, carried on at the previous acceleration under a jerk limit) toward
+    ``dq`` as far as they allow, along a straight line: ``u + tau (dq - u)`` with the largest
+    ``tau`` in [0, 1]. A joint that this leaves outside its hard bounds is put on them (the
+    hard limit wins); returns the velocity and those joints."""
+    lower, upper = box.smooth_lower, box.smooth_upper
+    base = 0.5 * (np.where(np.isfinite(lower), lower, upper) + np.where(np.isfinite(upper),
+                                                                          upper, lower))
+    base = np.where(np.isfinite(base), base, dq)
+    change = dq - base
+    with np.errstate(divide="ignore", invalid="ignore"):
+        room = np.where(change > 0, (upper - base) / change,
+                        np.where(change < 0, (lower - base) / change, np.inf))
+    tau = float(np.clip(np.min(room, initial=1.0), 0.0, 1.0))
+    out = base + tau * change
+    torn = (out < box.lower) | (out > box.upper)
+    return np.clip(out, box.lower, box.upper), torn
 
 
 def project(dq: np.ndarray, Jw: np.ndarray, A: np.ndarray, b: np.ndarray, lower: np.ndarray,

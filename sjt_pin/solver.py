@@ -427,7 +427,7 @@ class Solver:
         motion = self._motion
         motion.q = q
         if self.acceleration_limit is not None:
-            dq, feedback[0] = self._brake_feedback(dq, solve(everything, None, 0.0))
+            dq, feedback[0] = self._brake_feedback(dq, solve(everything, None, 0.0), J, e)
         outcome = self.stage.enforce(dq, solve, stack.kinematics, motion,
                                      lambda: stack.sqrt_weight[:, None] * J * chain)
         self._outcome, self._outcome_count = outcome, self._count
@@ -440,26 +440,38 @@ class Solver:
             step[v] = np.clip(step[v], (limit.lower - x)[inside], (limit.upper - x)[inside])
         return step
 
-    def _brake_feedback(self, dq: np.ndarray, dq_ff: np.ndarray) -> tuple[np.ndarray, float]:
+    def _brake_feedback(self, dq: np.ndarray, dq_ff: np.ndarray, J: np.ndarray, e: np.ndarray
+                        ) -> tuple[np.ndarray, float]:
         """With acceleration limits: slow the feedback part of ``dq`` (along its direction) so
         that every joint can still stop where the error says the target is — the remaining
-        joint displacement ``(dq - dq_ff) / k`` — within its acceleration and jerk limits: a
-        target that jumps gives a ramp, and an arm arriving at a still target comes to rest
-        instead of overshooting. Returns the slowed ``dq`` and its factor on ``K e``."""
+        joint displacement ``delta = (dq - dq_ff) / k``, the method's own — within its
+        acceleration and jerk limits: a target that jumps gives a ramp, and an arm arriving at
+        a still target comes to rest instead of overshooting. Returns the slowed ``dq`` and its
+        factor on ``K e``."""
         feedback = dq - dq_ff
-        k = float(np.mean(self._layout.gains(self._work)[:self.stack.target_dim]))
+        stack = self.stack
+        k = float(np.mean(self._layout.gains(self._work)[:stack.target_dim]))
         if self._gain.mode != K.GAIN_FIXED:
             k *= float(self._info[K.I_GAIN])
         if not k > 0.0:
             return dq, 1.0
-        toward = np.sign(feedback)
+        delta = feedback / k
+        # the motion along delta as one coordinate p (0 here, 1 at the target): its
+        # acceleration and jerk limits are the joints' divided by how far each must go
+        size = float(delta @ delta)
+        rate = float(feedback @ delta) / size if size > 0.0 else 0.0
+        if not rate > 0.0:
+            return dq, 1.0
+        span = np.abs(delta)
+        moving = span > 0.0
         motion = self._motion
-        allowed = braking_speed(np.abs(feedback) / k, motion.dq * toward, motion.ddq * toward,
-                                self._dt, self.acceleration_limit.limits,
-                                None if self.jerk_limit is None else self.jerk_limit.limits)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            ratio = np.where(feedback != 0.0, np.maximum(allowed, 0.0) / np.abs(feedback), np.inf)
-        sigma = float(min(1.0, np.min(ratio, initial=np.inf)))
+        jerk = None if self.jerk_limit is None else np.array(
+            [np.min(self.jerk_limit.limits[moving] / span[moving])])
+        allowed = braking_speed(np.array([1.0]), np.array([float(motion.dq @ delta) / size]),
+                                np.array([float(motion.ddq @ delta) / size]), self._dt,
+                                np.array([np.min(self.acceleration_limit.limits[moving]
+                                                 / span[moving])]), jerk)[0]
+        sigma = float(min(1.0, max(allowed, 0.0) / rate))
         if sigma >= 1.0:
             return dq, 1.0
         return dq_ff + sigma * feedback, sigma

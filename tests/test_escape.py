@@ -84,7 +84,8 @@ def test_a_position_far_above_rests_with_short_wrist_levers(panda, method, optio
     respect — without it the arm chattered at its speed limits."""
     solver = sjt.make_solver(method, panda, dt=2e-3, task=sjt.PositionTask(), **options)
     q, speeds = panda.q0.copy(), []
-    for _ in range(1500):  # 3 s
+    for _ in range(2500):  # 5 s (JT: the joints held at their speed limits on the way leave
+        # it in a valley of small curvature, where it settles more slowly)
         q = solver.step(q, np.array([0.0, 0.0, 2.0]))
         speeds.append(np.linalg.norm(solver.displacement) / solver.dt)
     assert solver.error_norm > 0.5 and solver.escape.escapes == 0
