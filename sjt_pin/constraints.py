@@ -180,6 +180,38 @@ class ConstraintStage:
             outcome.active = self._active(outcome.dq, box)
         return outcome
 
+    def user_limits(self) -> ConstraintStage | None:
+        """A stage of the limits beyond the built-in ones (position, velocity, acceleration,
+        jerk), or ``None`` if there are none: what ``solve()`` must honour besides the URDF."""
+        from .limits import AccelerationLimit, JerkLimit, PositionLimit, VelocityLimit
+
+        builtin = (AccelerationLimit, JerkLimit, PositionLimit, VelocityLimit)
+        user = [limit for limit in self.limits if type(limit) not in builtin]
+        if not user:
+            return None
+        return ConstraintStage(user, self.moving, self.names, self.task_rows)
+
+    def admits_rest(self, kinematics, motion: Motion, tol: float = 1e-9) -> bool:
+        """Whether standing still (``q_dot = 0``) meets every limit: the configuration is
+        within them."""
+        box = self.box(kinematics, motion)
+        if box is not None and (np.any(box.lower > tol) or np.any(box.upper < -tol)):
+            return False
+        rows = self.general_rows(kinematics, motion)
+        return rows is None or bool(np.all(rows[1] >= -tol))
+
+    def project(self, dq: np.ndarray, Jw: np.ndarray, kinematics, motion: Motion) -> np.ndarray:
+        """``dq`` moved onto every limit's bounds and rows by the smallest change in the
+        metric of the task rows ``Jw`` (:func:`project`), or ``dq`` if it already meets them."""
+        box = self.box(kinematics, motion)
+        rows = self.general_rows(kinematics, motion)
+        lower = box.lower if box is not None else np.full(self.nv, -np.inf)
+        upper = box.upper if box is not None else np.full(self.nv, np.inf)
+        A, b = (rows[0], rows[1]) if rows is not None else (np.zeros((0, self.nv)), np.zeros(0))
+        if _inside(dq, lower, upper) and np.all(A @ dq <= b + TOLERANCE * (1 + np.abs(b))):
+            return dq
+        return project(dq, Jw, A, b, lower, upper, self.moving)
+
     def _active(self, dq: np.ndarray, box: Box) -> tuple[tuple[str, str], ...]:
         """(limit name, joint name) for each joint at one of its bounds."""
         pairs = []
@@ -313,7 +345,7 @@ def project(dq: np.ndarray, Jw: np.ndarray, A: np.ndarray, b: np.ndarray, lower:
     cols = np.flatnonzero(moving)
     x0 = dq[cols]
     H = Jw[:, cols].T @ Jw[:, cols] if Jw.size else np.zeros((cols.size, cols.size))
-    rho = 1e-3 * max(float(np.trace(H)) / max(cols.size, 1), 1e-12)
+    rho = max(float(np.trace(H)) / max(cols.size, 1), 1e-12)
     H += rho * np.eye(cols.size)
     finite_lo, finite_hi = np.isfinite(lower[cols]), np.isfinite(upper[cols])
     eye = np.eye(cols.size)

@@ -38,6 +38,8 @@ from .kernels.search import (
     STATE_SIZE,
     search_iteration,
 )
+from .kinematics import Kinematics
+from .limits.base import Motion
 from .mappings import COLUMN_TOL
 from .validation import positive, raise_non_finite_targets
 
@@ -87,6 +89,10 @@ class Search:
         self.limits = (np.zeros((4, 0)) if limit is None else
                        np.vstack([limit.q_index, limit.v_index, limit.lower, limit.upper])
                        .astype(float))
+        # the user's limits hold at every iteration too (the URDF's position limits are the
+        # search kernel's own): each displacement is a velocity over a period of 1
+        self.user_limits = solver.stage.user_limits()
+        self.kinematics = Kinematics(robot.model)
         self.state = np.zeros(STATE_SIZE)
         self.J = np.zeros((m, n))
         self.e = np.zeros(m)
@@ -114,12 +120,35 @@ class Search:
             status = search_iteration(J, e, q, self.J, self.e, self.q, self.limits, self.work,
                                       self.state, self.step)
             iterations += 1
+            if status == CONVERGED and self.user_limits is not None:
+                if not self.admissible(self.q):
+                    return False, iterations  # converged outside a limit: another start
             if status:
                 return status == CONVERGED, iterations
             if iterations % 16 == 0 and clock() > deadline:
                 break
+            if self.user_limits is not None:
+                self.limit(self.step, J)
             q = pin.integrate(model, self.q, self.step)
         return False, iterations
+
+    def _motion(self, q: np.ndarray) -> Motion:
+        self.kinematics.update(q)
+        nv = self.robot.nv
+        return Motion(q, np.zeros(nv), np.zeros(nv), 1.0)
+
+    def admissible(self, q: np.ndarray) -> bool:
+        """Whether ``q`` is within the user's limits (standing still there is admissible)."""
+        motion = self._motion(q)
+        return self.user_limits.admits_rest(self.kinematics, motion)
+
+    def limit(self, step: np.ndarray, J: np.ndarray) -> None:
+        """Keep the next displacement from the current configuration within the user's limits
+        (in place): the smallest change in the metric of the task rows (see
+        :func:`~sjt_pin.constraints.project`)."""
+        motion = self._motion(self.q)
+        rows = self.stack.sqrt_weight[:, None] * self.J * self.stack.chain
+        step[:] = self.user_limits.project(step, rows, self.kinematics, motion)
 
     def error(self) -> float:
         """|e| of the target rows at the current configuration."""

@@ -510,6 +510,14 @@ class Solver:
         return self._record[1] if self.stack.single else self.stack.error
 
     @property
+    def task_scale(self) -> float:
+        """The last step's task scale s in [0, 1] (1: the constraint stage kept the whole task;
+        see :attr:`StepInfo.task_scale`), without building :attr:`last`."""
+        if self._outcome is not None and self._outcome_count == self._count:
+            return float(self._outcome.scale)
+        return 1.0
+
+    @property
     def displacement(self) -> np.ndarray:
         """The last step's joint displacement ``q_dot dt`` (nv,), as a view that the next step
         overwrites."""

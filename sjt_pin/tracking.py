@@ -29,6 +29,9 @@ class TrackingLog:
         target: desired position (N, 3) in m.
         error: task error vectors (N, m) in task units (m, rad).
         error_norm: their norms (N,).
+        task_scale: the factor (N,) by which the constraint stage scaled each step's task
+            velocity (1: the whole task; below 1: a limit kept the path from being followed
+            at full speed — see ``StepInfo.active_limits`` for which).
         diverged: the run was stopped because the state blew up (see ``track``).
         reason: why it was stopped, empty when it ran to the end.
         method: the solver's method name; ``dt`` its period (s); ``gain`` its gain setting.
@@ -41,6 +44,7 @@ class TrackingLog:
     target: np.ndarray
     error: np.ndarray
     error_norm: np.ndarray
+    task_scale: np.ndarray | None = None
     diverged: bool = False
     reason: str = ""
     method: str = ""
@@ -109,6 +113,7 @@ def track(
     n, nq, nv, m = times.size, solver.robot.nq, solver.robot.nv, solver.stack.target_dim
     qs, steps = np.empty((n, nq)), np.empty((n, nv))
     positions, errors, norms = np.empty((n, 3)), np.empty((n, m)), np.empty(n)
+    scales = np.ones(n)
     target = pin.SE3(np.array(rotations_d[0]), np.array(positions_d[0]))
     task = solver.stack.task
     step = solver.step
@@ -126,6 +131,7 @@ def track(
                 break
             qs[k], steps[k], errors[k] = q, solver.displacement, solver.error
             norms[k] = norm = solver.error_norm
+            scales[k] = solver.task_scale
             positions[k] = task.placement.translation
             if not norm < max_error:
                 diverged, reason = True, (f"error above {max_error:g} at t = {times[k]:.4g} s"
@@ -143,4 +149,5 @@ def track(
     return TrackingLog(
         t=times[:end], q=qs[:end], dq=steps[:end] / dt, position=positions[:end],
         target=np.array(positions_d[:end]), error=errors[:end], error_norm=norms[:end],
+        task_scale=scales[:end],
         diverged=diverged, reason=reason, method=solver.method.name, dt=dt, gain=solver.gain)

@@ -1,0 +1,232 @@
+"""The constraint stage: every limit's bounds and rows hold after any method; saturated joints
+are held and the others take over; an infeasible task is scaled along its direction; the
+stage agrees with a reference QP; acceleration and jerk limits hold on the returned stream."""
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from scipy.optimize import minimize
+
+import sjt_pin as sjt
+from sjt_pin.constraints import project, saturate
+from sjt_pin.limits import Limit
+from sjt_pin.methods import Method
+
+# Franka Panda's published joint limits (its control interface's "necessary conditions"); the
+# fingers get small ones of their own
+PANDA_ACCELERATION = np.array([15, 7.5, 10, 12.5, 15, 20, 20, 1.0, 1.0])  # rad/s^2, m/s^2
+PANDA_JERK = np.array([7500, 3750, 5000, 6250, 7500, 10000, 10000, 500, 500])  # rad/s^3
+
+
+class Pinv(Method):
+    """A method of a user's own: only its matrix."""
+
+    name = "pinv"
+
+    def matrix(self, J):
+        return np.linalg.pinv(J, rcond=1e-10)
+
+
+class JointBand(Limit):
+    name = "band"
+
+    def __init__(self, robot, joint, lower, upper):
+        j = robot.model.joints[robot.model.getJointId(joint)]
+        self.iq, self.iv, self.nv = j.idx_q, j.idx_v, robot.nv
+        self.lower, self.upper = lower, upper
+
+    def bounds(self, kinematics, motion):
+        lo, hi = np.full(self.nv, -np.inf), np.full(self.nv, np.inf)
+        x = motion.q[self.iq]
+        lo[self.iv], hi[self.iv] = (self.lower - x) / motion.dt, (self.upper - x) / motion.dt
+        return lo, hi
+
+
+class Floor(Limit):
+    """A frame's origin stays above ``z_min`` (m): ``z_dot >= -gain (z - z_min) / dt``."""
+
+    name = "floor"
+
+    def __init__(self, robot, frame, z_min, gain=0.5):
+        self.frame_id, self.z_min, self.gain = robot.frame_id(frame), z_min, gain
+
+    def rows(self, kinematics, motion):
+        z = kinematics.placement(self.frame_id).translation[2]
+        J_z = kinematics.world_aligned_jacobian(self.frame_id)[2]
+        return -J_z[None, :], np.array([self.gain * (z - self.z_min) / motion.dt])
+
+
+def test_a_method_of_ones_own_keeps_the_urdf_limits(ur5):
+    q = np.array([0.3, -1.2, 3.0, -1.8, -1.5, 0.2])
+    target = ur5.fk(q) * pin.SE3(np.eye(3), np.array([0.0, 0.0, 0.08]))  # elbow outward
+    solver = sjt.Solver(ur5, Pinv(), task=sjt.PositionTask())
+    for _ in range(2000):
+        q = solver.step(q, target.translation)
+        assert ur5.lower_limits[2] <= q[2] <= ur5.upper_limits[2]
+        assert np.all(np.abs(solver.last.dq) <= ur5.velocity_limits * (1 + 1e-12))
+    assert solver.error_norm < 1e-6  # the other joints reached it
+
+
+def test_solve_honours_the_limits_step_honours(ur5):
+    q = np.array([0.3, -1.2, 1.5, -1.8, -1.5, 0.2])
+    band = JointBand(ur5, "elbow_joint", 0.5, 1.53)
+    solver = sjt.SJTSolver(ur5, task=sjt.PositionTask(), limits=[band])
+    target = ur5.fk(q).translation + [-0.15, 0.0, 0.0]  # without the band: elbow at 1.578
+    for _ in range(3000):
+        q = solver.step(q, target)
+        assert q[2] <= 1.53 + 1e-12
+    assert solver.error_norm < 1e-6
+    result = solver.solve(target, np.array([0.3, -1.2, 1.5, -1.8, -1.5, 0.2]))
+    assert result.success and result.q[2] <= 1.53 + 1e-9
+    free = sjt.SJTSolver(ur5, task=sjt.PositionTask()).solve(target, result.q * 0 + q)
+    assert free.success
+
+
+def test_a_general_row_limit_in_step_and_solve(panda):
+    """A floor under the hand: the rows come from the step's kinematics."""
+    floor = Floor(panda, "panda_hand", z_min=0.25)
+    solver = sjt.SJTSolver(panda, task=sjt.PositionTask(), limits=[floor])
+    q = panda.q0.copy()
+    start = panda.fk(q).translation
+    target = start + [0.1, 0.0, -0.6]  # below the floor
+    low = np.inf
+    for _ in range(6000):
+        q = solver.step(q, target)
+        low = min(low, panda.fk(q).translation[2])
+    assert low >= 0.25 - 1e-5  # first order: the row is linear in q_dot
+    assert "floor" in solver.last.active_rows
+    assert np.linalg.norm(solver.last.dq) < 1e-3  # at rest against the floor
+    reachable = start + [0.1, 0.05, -0.1]
+    result = solver.solve(reachable, panda.q0)
+    assert result.success and panda.fk(result.q).translation[2] >= 0.25 - 1e-9
+
+
+def test_the_stage_equals_a_reference_qp_where_one_joint_saturates():
+    """With the pseudoinverse and one joint over its bound, Saturation in the Null Space gives
+    the minimum-norm joint velocity that meets the task within the box: the QP's solution."""
+    rng = np.random.default_rng(7)
+    checked = 0
+    for _ in range(40):
+        J = rng.normal(size=(3, 7))
+        xdot = rng.normal(size=3)
+        dq0 = np.linalg.pinv(J) @ xdot
+        k = int(np.argmax(np.abs(dq0)))
+        lower, upper = np.full(7, -10.0), np.full(7, 10.0)
+        if dq0[k] > 0:
+            upper[k] = 0.5 * dq0[k]
+        else:
+            lower[k] = 0.5 * dq0[k]
+
+        def solve(free, held):
+            held = np.zeros(7) if held is None else held
+            out = np.zeros(7)
+            out[free] = np.linalg.pinv(J[:, free]) @ (xdot - J @ held)
+            return out
+
+        outcome = saturate(dq0, solve, lower, upper, np.ones(7, dtype=bool), lambda: J)
+        reference = minimize(lambda x: x @ x, dq0, jac=lambda x: 2 * x, method="SLSQP",
+                             bounds=list(zip(lower, upper, strict=True)),
+                             constraints=[{"type": "eq", "fun": lambda x: J @ x - xdot,
+                                           "jac": lambda x: J}],
+                             options={"ftol": 1e-14, "maxiter": 500})
+        if not (reference.success and np.all(np.abs(reference.x) < 9.9)):
+            continue  # another bound became active: not the case under test
+        assert outcome.scale == 1.0
+        np.testing.assert_allclose(J @ outcome.dq, xdot, atol=1e-9)  # the task is kept
+        np.testing.assert_allclose(outcome.dq, reference.x, atol=1e-5)
+        checked += 1
+    assert checked >= 20
+
+
+def test_an_infeasible_task_is_scaled_along_its_direction():
+    rng = np.random.default_rng(3)
+    for _ in range(30):
+        J = rng.normal(size=(3, 5))
+        xdot = rng.normal(size=3) * 10
+        dq0 = np.linalg.pinv(J) @ xdot
+        lower, upper = np.full(5, -1.0), np.full(5, 1.0)
+
+        def solve(free, held):
+            held = np.zeros(5) if held is None else held
+            out = np.zeros(5)
+            out[free] = np.linalg.pinv(J[:, free]) @ (xdot - J @ held)
+            return out
+
+        outcome = saturate(dq0, solve, lower, upper, np.ones(5, dtype=bool), lambda: J)
+        assert np.all(outcome.dq >= lower - 1e-12) and np.all(outcome.dq <= upper + 1e-12)
+        made = J @ outcome.dq
+        if outcome.scale < 1:
+            np.testing.assert_allclose(made, outcome.scale * xdot, atol=1e-9)  # not distorted
+
+
+def test_the_row_projection_meets_every_row_at_least_cost():
+    rng = np.random.default_rng(4)
+    for _ in range(30):
+        n = 6
+        Jw = rng.normal(size=(4, n))
+        A, b = rng.normal(size=(3, n)), rng.uniform(0.0, 0.5, 3)
+        dq = rng.normal(size=n)
+        lower, upper = np.full(n, -2.0), np.full(n, 2.0)
+        out = project(dq, Jw, A, b, lower, upper, np.ones(n, dtype=bool))
+        assert np.all(A @ out <= b + 1e-9) and np.all(np.abs(out) <= 2 + 1e-12)
+        H = Jw.T @ Jw
+        H += np.trace(H) / n * np.eye(n)
+        ref = minimize(lambda x: (x - dq) @ H @ (x - dq), np.zeros(n), method="SLSQP",
+                       jac=lambda x: 2 * H @ (x - dq),
+                       bounds=list(zip(lower, upper, strict=True)),
+                       constraints=[{"type": "ineq", "fun": lambda x: b - A @ x,
+                                     "jac": lambda x: -A}], options={"ftol": 1e-14})
+        cost = (out - dq) @ H @ (out - dq)
+        assert cost <= (ref.x - dq) @ H @ (ref.x - dq) + 1e-7
+
+
+def test_tiago_holds_its_slow_torso_and_the_arm_takes_over():
+    """TIAGo's torso lift allows 0.07 m/s; a 15 cm circle that needs 0.14 m/s of it is still
+    tracked by the arm within every limit."""
+    tiago = sjt.Robot.from_example("tiago_no_hand", ee_frame="arm_tool_link")
+    q0 = tiago.q0.copy()
+    q0[:8] = [0.201, 1.436, 0.208, -1.368, 1.266, 0.445, -0.493, -0.092]
+    start = tiago.fk(q0)
+    around = sjt.Circle(start.translation, 0.075, 3.0, normal=[1, 0, 0], rotation=start.rotation)
+    first, _ = around.sample(0.0)
+    circle = sjt.Circle(2 * start.translation - first.translation, 0.075, 3.0, normal=[1, 0, 0],
+                        rotation=start.rotation)
+    for name in ["sjt", "dls"]:
+        log = sjt.track(sjt.make_solver(name, tiago), circle, q0)
+        assert log.max_error < 1e-5, name
+        assert np.all(np.abs(log.dq) <= tiago.velocity_limits * (1 + 1e-9))
+        assert np.abs(log.dq[:, 0]).max() == pytest.approx(0.07)  # the torso at its limit
+
+
+def test_franka_conditions_acceleration_and_jerk_limits_hold_on_the_stream(panda):
+    """Targets jumping every 0.5 s (one out of reach), then held: the finite differences of
+    the returned q stay within the position, speed, acceleration and jerk limits; the arm
+    reaches the last target and comes to rest."""
+    dt = 1e-3
+    solver = sjt.SJTSolver(panda, dt=dt, acceleration_limits=PANDA_ACCELERATION,
+                           jerk_limits=PANDA_JERK)
+    rng = np.random.default_rng(11)
+    q = panda.q0.copy()
+    qs = [q]
+    near = panda.q0 + np.r_[rng.uniform(-0.3, 0.3, 7), 0, 0]
+    targets = [panda.fk(panda.random_configuration(rng)),
+               pin.SE3(np.eye(3), np.array([1.5, 0.3, 0.9])),  # out of reach
+               panda.fk(np.clip(near, panda.lower_limits, panda.upper_limits))]
+    for target, steps in zip(targets, [500, 500, 3000], strict=True):
+        for _ in range(steps):
+            q = solver.step(q, target)
+            qs.append(q)
+    qs = np.array(qs)
+    v = np.diff(qs, axis=0) / dt
+    a = np.diff(v, axis=0) / dt
+    j = np.diff(a, axis=0) / dt
+    assert np.all(qs >= panda.lower_limits) and np.all(qs <= panda.upper_limits)
+    assert np.all(np.abs(v) <= panda.velocity_limits * 1.01)
+    assert np.all(np.abs(a) <= PANDA_ACCELERATION * 1.25)  # measured: 1.17 at worst
+    assert np.all(np.abs(j) <= PANDA_JERK * 1.25)
+    assert np.abs(v[0]).max() <= PANDA_ACCELERATION.max() * dt  # it starts from rest
+    assert solver.error_norm < 1e-3
+    assert np.sqrt(np.mean(v[-500:] ** 2)) < 1e-3  # and ends at rest
+    solver.reset()
+    q2 = solver.step(q, targets[0])
+    assert np.all(np.abs(q2 - q) / dt <= PANDA_ACCELERATION * dt * 1.0001)  # from rest again
