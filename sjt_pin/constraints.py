@@ -164,6 +164,14 @@ class ConstraintStage:
             outcome = saturate(dq, solve, box.lower, box.upper, self.moving,
                                lambda: weighted()[:self.task_rows])
         if box is not None and box.smooth_lower is not None:
+            for limit in self.limits:  # reach the wanted velocity without overshooting it
+                approach = getattr(limit, "approach", None)
+                if approach is not None:
+                    lo, hi = approach(outcome.dq, motion)
+                    np.maximum(box.smooth_lower, np.minimum(lo, box.smooth_upper),
+                               out=box.smooth_lower)
+                    np.minimum(box.smooth_upper, np.maximum(hi, box.smooth_lower),
+                               out=box.smooth_upper)
             outcome.dq, torn = smooth(outcome.dq, box)
             outcome.conflict = tuple(self.names[j] for j in np.flatnonzero(torn))
         if rows is not None:

@@ -457,7 +457,7 @@ class Solver:
             return dq, 1.0
         delta = feedback / k
         # the motion along delta as one coordinate p (0 here, 1 at the target): its
-        # acceleration and jerk limits are the joints' divided by how far each must go
+        # acceleration limit is the joints' divided by how far each must go
         size = float(delta @ delta)
         rate = float(feedback @ delta) / size if size > 0.0 else 0.0
         if not rate > 0.0:
@@ -465,12 +465,11 @@ class Solver:
         span = np.abs(delta)
         moving = span > 0.0
         motion = self._motion
-        jerk = None if self.jerk_limit is None else np.array(
-            [np.min(self.jerk_limit.limits[moving] / span[moving])])
+        # (the jerk limit is the smoothing's: a jerk-aware braking here lags behind a path)
         allowed = braking_speed(np.array([1.0]), np.array([float(motion.dq @ delta) / size]),
-                                np.array([float(motion.ddq @ delta) / size]), self._dt,
+                                np.zeros(1), self._dt,
                                 np.array([np.min(self.acceleration_limit.limits[moving]
-                                                 / span[moving])]), jerk)[0]
+                                                 / span[moving])]), None)[0]
         sigma = float(min(1.0, max(allowed, 0.0) / rate))
         if sigma >= 1.0:
             return dq, 1.0

@@ -41,3 +41,14 @@ class JerkLimit(Limit):
                 else:
                     lower = np.where(np.isfinite(bound), np.maximum(lower, bound), lower)
         return lower, upper
+
+    def approach(self, desired: np.ndarray, motion: Motion) -> tuple[np.ndarray, np.ndarray]:
+        """Bounds that let each joint's velocity reach ``desired`` (rad/s) without
+        overshooting it: the acceleration toward it must be able to ramp down to 0 at the jerk
+        limit before it is reached, ``a^2 / (2 J) + a dt <= |desired - dq|``."""
+        dt, J = motion.dt, self.limits
+        gap = desired - motion.dq
+        a_max = J * (-dt + np.sqrt(dt * dt + 2.0 * np.abs(gap) / J))
+        step = np.where(np.isfinite(a_max), dt * a_max, np.inf)
+        return (np.where(gap < 0, motion.dq - step, -np.inf),
+                np.where(gap > 0, motion.dq + step, np.inf))
