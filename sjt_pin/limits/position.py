@@ -132,6 +132,14 @@ def braking_speed(room: np.ndarray, v: np.ndarray, a: np.ndarray, dt: float,
             speed = A * (-dt + np.sqrt(dt * dt + 2.0 * room / A))
             return np.where(np.isfinite(A), speed, np.inf)
         J = jerk
+        # only joints within the distance a stop from the highest speed one step can reach
+        # needs can be bounded by it: the others are left free (bisection is the cost here)
+        top = np.abs(v) + 2.0 * A * dt
+        near = room < top * dt + stopping_distance(top, 2.0 * A, A, J)
+        if not np.any(near):
+            return np.full(np.shape(room), np.inf)
+        full = np.full(np.shape(room), np.inf)
+        room, v, A, J = room[near], v[near], A[near], J[near]
 
         def fits(x):
             positive = np.maximum(x, 0.0)
@@ -145,5 +153,5 @@ def braking_speed(room: np.ndarray, v: np.ndarray, a: np.ndarray, dt: float,
             good = fits(middle)
             low = np.where(good, middle, low)
             high = np.where(good, high, middle)
-        speed = np.where(ok_high, np.inf, low)
-        return np.where(np.isfinite(A), speed, np.inf)
+        full[near] = np.where(ok_high | ~np.isfinite(A), np.inf, low)
+        return full
