@@ -151,10 +151,23 @@ def bench(args: argparse.Namespace) -> int:
               + accuracy.rest_table(rest))
         print("\nSteps to 1 % of the start error from an exact saddle (peak joint speed / URDF "
               "limit):\n" + accuracy.saddle_table(saddles))
+        from .bench import limits
+
+        def shown(row):
+            print(f"  {row.path}, {row.method}", flush=True)
+
+        saturating = limits.saturating(progress=shown)
+        franka = limits.franka(progress=shown)
+        print("\nOne joint saturates (TIAGo's torso lift, 0.07 m/s), every limit on:\n"
+              + limits.saturating_table(saturating))
+        print("\nFranka's conditions (Panda, 1 kHz, its acceleration and jerk limits, targets "
+              "jumping every 0.5 s, then held):\n" + limits.franka_table(franka))
         _write_json(args.json, {"machine": machine,
                                 "tracking": [asdict(r) for r in tracking],
                                 "rest": [asdict(r) for r in rest],
-                                "saddles": [asdict(r) for r in saddles]})
+                                "saddles": [asdict(r) for r in saddles],
+                                "saturating": [asdict(r) for r in saturating],
+                                "franka": [asdict(r) for r in franka]})
     else:
         from .bench.ik import ik_benchmark, ik_table, many_throughput
 

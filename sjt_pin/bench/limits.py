@@ -1,0 +1,169 @@
+"""``sjt-pin bench accuracy``'s limit tables: paths where one joint saturates, and a run under
+Franka's conditions, for every method (and pink, with its own limits, when installed).
+
+- **saturating** (:func:`saturating`): TIAGo's torso lift allows 0.07 m/s; 15 cm circles that
+  need about twice that from it, and that the arm can follow within every limit. Max pose
+  error, and the largest joint speed over its URDF limit.
+- **franka** (:func:`franka`): Panda at 1 kHz with its published acceleration and jerk limits,
+  targets jumping every 0.5 s (every third one out of reach), then a reachable target held for
+  3 s. The largest finite-difference velocity, acceleration and jerk of the returned ``q`` over
+  their limits, whether ``q`` left the URDF range, the final error, and the RMS joint speed
+  over the last second.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from ..robot import Robot
+from ..solvers import make_solver
+from ..tracking import track
+from ..trajectories import Circle
+
+#: Franka Panda's published joint limits (its control interface's "necessary conditions"),
+#: and small ones for the fingers
+PANDA_ACCELERATION = np.array([15, 7.5, 10, 12.5, 15, 20, 20, 1.0, 1.0])  # rad/s^2, m/s^2
+PANDA_JERK = np.array([7500, 3750, 5000, 6250, 7500, 10000, 10000, 500, 500])  # rad/s^3
+METHODS = ("sjt", "dls", "jp", "jt")
+#: TIAGo's arm with the torso raised, where circles in these planes need about 0.14 and
+#: 0.19 m/s of the torso (found by sampling; the arm follows them within every other limit)
+TIAGO_START = [0.201, 1.436, 0.208, -1.368, 1.266, 0.445, -0.493, -0.092]
+TIAGO_NORMALS = {"TIAGo 15 cm circle, y-z plane": (1.0, 0.0, 0.0),
+                 "TIAGo 15 cm circle, x-y plane": (0.0, 0.0, 1.0)}
+
+
+@dataclass
+class LimitRow:
+    path: str
+    method: str
+    max_error: float
+    speed: float  # the largest |q_dot| / limit
+    acceleration: float = float("nan")
+    jerk: float = float("nan")
+    in_range: bool = True
+    final_error: float = float("nan")
+    rest: float = float("nan")
+
+
+def _circle(robot: Robot, q0: np.ndarray, normal) -> Circle:
+    start = robot.fk(q0)
+    around = Circle(start.translation, 0.075, 3.0, normal=normal, rotation=start.rotation)
+    first, _ = around.sample(0.0)
+    return Circle(2 * start.translation - first.translation, 0.075, 3.0, normal=normal,
+                  rotation=start.rotation)
+
+
+def saturating(methods=METHODS, peers: bool = True, progress=None) -> list[LimitRow]:
+    """Every method on TIAGo's circles (module docstring)."""
+    tiago = Robot.from_example("tiago_no_hand", ee_frame="arm_tool_link")
+    q0 = tiago.q0.copy()
+    q0[:len(TIAGO_START)] = TIAGO_START
+    vmax = tiago.velocity_limits
+    rows = []
+    for path, normal in TIAGO_NORMALS.items():
+        circle = _circle(tiago, q0, normal)
+        for method in methods:
+            log = track(make_solver(method, tiago), circle, q0)
+            row = LimitRow(path, method.upper(), log.max_error,
+                           float(np.max(np.abs(log.dq) / vmax)))
+            rows.append(row)
+            if progress:
+                progress(row)
+        if peers:
+            row = _pink_circle(tiago, q0, circle, path)
+            if row is not None:
+                rows.append(row)
+                if progress:
+                    progress(row)
+    return rows
+
+
+def _pink_circle(robot: Robot, q0: np.ndarray, circle: Circle, path: str) -> LimitRow | None:
+    """pink's solve_ik on the same circle: a FrameTask, a small PostureTask, its configuration
+    and velocity limits (its QP keeps per-joint bounds)."""
+    try:
+        import pink
+        import qpsolvers
+        from pink.tasks import FrameTask
+        from pink.tasks import PostureTask as PinkPosture
+    except ImportError:
+        return None
+    qp = "daqp" if "daqp" in qpsolvers.available_solvers else qpsolvers.available_solvers[0]
+    dt = 1e-3
+    configuration = pink.Configuration(robot.model, robot.model.createData(), q0)
+    task = FrameTask(robot.ee_frame, position_cost=1.0, orientation_cost=1.0)
+    posture = PinkPosture(cost=1e-3)
+    posture.set_target(q0)
+    q, worst, speed = q0.copy(), 0.0, 0.0
+    for t in circle.times(dt):
+        target, _ = circle.sample(float(t))
+        configuration.update(q)
+        error = pin.log6(robot.fk(q).actInv(target)).vector
+        worst = max(worst, float(np.linalg.norm(error)))
+        task.set_target(target)
+        velocity = pink.solve_ik(configuration, [task, posture], dt, solver=qp)
+        speed = max(speed, float(np.max(np.abs(velocity) / robot.velocity_limits)))
+        q = configuration.integrate(velocity, dt)
+    return LimitRow(path, "pink", worst, speed)
+
+
+def franka(methods=METHODS, seconds: float = 20.0, progress=None) -> list[LimitRow]:
+    """Every method under Franka's conditions (module docstring)."""
+    panda = Robot.from_example("panda")
+    dt = 1e-3
+    rows = []
+    for method in methods:
+        rng = np.random.default_rng(0)
+        solver = make_solver(method, panda, dt=dt, acceleration_limits=PANDA_ACCELERATION,
+                             jerk_limits=PANDA_JERK)
+        q = panda.q0.copy()
+        qs = [q]
+        for jump in range(int(seconds / 0.5)):
+            if jump % 3 == 2:  # out of reach: 1.5-2 m from the base
+                direction = rng.normal(size=3)
+                target = pin.SE3(pin.exp3(rng.normal(size=3)),
+                                 rng.uniform(1.5, 2.0) * direction / np.linalg.norm(direction))
+            else:
+                target = panda.fk(panda.random_configuration(rng))
+            for _ in range(500):
+                q = solver.step(q, target)
+                qs.append(q)
+        near = np.clip(q + np.r_[rng.uniform(-0.3, 0.3, 7), 0, 0], panda.lower_limits,
+                       panda.upper_limits)
+        held = panda.fk(near)
+        for _ in range(3000):
+            q = solver.step(q, held)
+            qs.append(q)
+        qs = np.array(qs)
+        v = np.diff(qs, axis=0) / dt
+        a = np.diff(v, axis=0) / dt
+        j = np.diff(a, axis=0) / dt
+        row = LimitRow(
+            "Panda, targets jumping (Franka's limits)", method.upper(), float("nan"),
+            float(np.max(np.abs(v) / panda.velocity_limits)),
+            float(np.max(np.abs(a) / PANDA_ACCELERATION)), float(np.max(np.abs(j) / PANDA_JERK)),
+            bool(np.all(qs >= panda.lower_limits) and np.all(qs <= panda.upper_limits)),
+            float(solver.error_norm), float(np.sqrt(np.mean(v[-1000:] ** 2))))
+        rows.append(row)
+        if progress:
+            progress(row)
+    return rows
+
+
+def saturating_table(rows: list[LimitRow]) -> str:
+    out = ["| path | method | max error | max speed / limit |", "|---|---|---|---|"]
+    out += [f"| {r.path} | {r.method} | {r.max_error:.2g} | {r.speed:.3f} |" for r in rows]
+    return "\n".join(out)
+
+
+def franka_table(rows: list[LimitRow]) -> str:
+    out = ["| method | max speed / limit | max acceleration / limit | max jerk / limit | "
+           "within range | final error | RMS speed, last 1 s [rad/s] |",
+           "|---|---|---|---|---|---|---|"]
+    out += [f"| {r.method} | {r.speed:.3f} | {r.acceleration:.3f} | {r.jerk:.3f} | "
+            f"{'yes' if r.in_range else 'NO'} | {r.final_error:.2g} | {r.rest:.2g} |"
+            for r in rows]
+    return "\n".join(out)
