@@ -16,6 +16,8 @@ def test_wheel_ships_planar3_urdf_and_generator(tmp_path):
     assert "sjt_pin/robots/planar3.urdf" in names
     assert "sjt_pin/robots/planar3.py" in names
     assert not any("__pycache__" in n or n.startswith("tests/") for n in names)
+    assert "sjt_pin/py.typed" in names  # type hints are part of the API (PEP 561)
+    assert any(n.endswith("LICENSE") for n in names)
     # installed apart from the source tree, the URDF is found as package data
     target = tmp_path / "site"
     subprocess.run([sys.executable, "-m", "pip", "install", "--no-deps", "-q", "--target",
