@@ -336,6 +336,11 @@ def smooth(dq: np.ndarray, box: Box) -> tuple[np.ndarray, np.ndarray]:
     base = 0.5 * (np.where(np.isfinite(lower), lower, upper) + np.where(np.isfinite(upper),
                                                                           upper, lower))
     base = np.where(np.isfinite(base), base, dq)
+    # a joint whose carried-on motion breaks a hard bound (braking before a position limit)
+    # starts from the point of both boxes nearest to it
+    both_lo, both_hi = np.maximum(lower, box.lower), np.minimum(upper, box.upper)
+    fits = both_lo <= both_hi
+    base = np.where(fits, np.clip(base, both_lo, both_hi), base)
     change = dq - base
     with np.errstate(divide="ignore", invalid="ignore"):
         room = np.where(change > 0, (upper - base) / change,

@@ -7,6 +7,10 @@ import numpy as np
 from .base import Limit, Motion
 
 
+#: the share of the acceleration and jerk limits that a braking plan keeps in reserve
+BRAKING_RESERVE = 0.2
+
+
 class PositionLimit(Limit):
     """The URDF position limits of 1-DoF joints (revolute, prismatic) are never crossed.
 
@@ -51,6 +55,11 @@ class PositionLimit(Limit):
         self.acceleration = (None if acceleration is None
                              else np.asarray(acceleration, dtype=float)[self.v_index])
         self.jerk = None if jerk is None else np.asarray(jerk, dtype=float)[self.v_index]
+        # the braking plans with a reserve of the limits (BRAKING_RESERVE), which the other
+        # joints' coupling through the task may take from a step
+        self._braking = (None if self.acceleration is None
+                         else (1.0 - BRAKING_RESERVE) * self.acceleration,
+                         None if self.jerk is None else (1.0 - BRAKING_RESERVE) * self.jerk)
 
     @property
     def active(self) -> bool:
@@ -64,9 +73,10 @@ class PositionLimit(Limit):
         x = motion.q[self.q_index]
         v, a = motion.dq[self.v_index], motion.ddq[self.v_index]
         room_up, room_down = self.upper - x, x - self.lower
-        upper = np.minimum(braking_speed(room_up, v, a, dt, self.acceleration, self.jerk),
+        A, J = self._braking
+        upper = np.minimum(braking_speed(room_up, v, a, dt, A, J),
                            room_up / dt)
-        lower = -np.minimum(braking_speed(room_down, -v, -a, dt, self.acceleration, self.jerk),
+        lower = -np.minimum(braking_speed(room_down, -v, -a, dt, A, J),
                             room_down / dt)
         # outside the range: back toward it at the recovery speed, no further than the limit
         above, below = room_up < 0, room_down < 0
