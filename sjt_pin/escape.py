@@ -6,7 +6,7 @@ at a minimum but at a saddle (UR5 at q = 0, asked to roll its tool about the los
 moves). Round-off alone takes thousands of steps to leave it.
 
 :class:`SaddleEscape` watches each step's stall ratio (the loop gain along the command, see
-:func:`~sjt_pin.kernels.methods.transpose_step`). After ``WINDOW`` steps without progress it
+:func:`~sjt_pin.kernels.transpose_step`). After ``WINDOW`` steps without progress it
 computes, by central differences over the free joints (those of the tasks' chains that are
 not at a position limit; 2 n evaluations of the task rows), the Jacobian H of ``-J_w^T e_w``:
 the field a transpose update follows, the exact gradient of ``f = 1/2 |e_w|^2`` for position

@@ -2,7 +2,7 @@
 from random configurations within the limits until it succeeds or its budget runs out.
 
 Each iteration evaluates the task rows once, at the trial configuration, and makes one compiled
-call (:func:`~sjt_pin.kernels.search.search_iteration`) that accepts or rejects the trial and
+call (``sjt_pin.kernels.search_iteration``) that accepts or rejects the trial and
 computes the next step ``S J^T (J S J^T + lambda I)^-1 e`` — S = D for SJT (the paper's scaling
 factors as the preconditioner: as lambda grows the step turns into SJT's direction ``D J^T e``,
 a descent direction everywhere, eq. 24-25; as it shrinks, into the Gauss-Newton step, which
@@ -28,7 +28,7 @@ import numpy as np
 import pinocchio as pin
 
 from . import kernels as K
-from .kernels.search import (
+from .kernels import (
     CONVERGED,
     S_BEST,
     S_ERROR_ROWS,

@@ -184,3 +184,44 @@ def test_clamp_pass():
     count = K.clamp_pass(q, step, index, index, lower, upper, speeds, 1e-3, fixed, fixed_step)
     assert count == 3 and list(fixed) == [0.0, 1.0, 1.0, 1.0]
     np.testing.assert_allclose(fixed_step[1:], [0.1, -0.05, 0.05])  # onto the limit; back
+
+
+def test_the_compiled_layout_is_the_python_one():
+    """The C kernels were compiled for the slots of kernels/layout.py."""
+    from sjt_pin.kernels import _kernels, layout
+
+    assert _kernels.PARAMETER_SLOTS == layout.INFO == _kernels.INFO
+    assert _kernels.INFO_SIZE == layout.INFO_SIZE
+    assert (_kernels.P_HAS_FF, _kernels.P_SCRATCH, _kernels.I_REGULAR) == (
+        layout.P_HAS_FF, layout.P_SCRATCH, layout.I_REGULAR)
+
+
+def test_bad_arguments_raise_instead_of_crashing():
+    J, e, ff, rows, mask = problem(0, 3, 5)
+    work = K.Layout(3, 5, 0).allocate()
+    step = np.zeros(5)
+    with pytest.raises(TypeError, match="J must be a float64 array"):
+        K.transpose_step("J", e, ff, np.zeros(5), work, step)
+    with pytest.raises(TypeError, match="float64"):
+        K.transpose_step(J.astype(np.float32), e, ff, np.zeros(5), work, step)
+    with pytest.raises(ValueError, match="do not fit"):
+        K.transpose_step(J, e[:2], ff, np.zeros(5), work, step)
+    with pytest.raises(ValueError, match="work does not fit"):
+        K.transpose_step(J, e, ff, np.zeros(5), np.zeros(10), step)
+    with pytest.raises(TypeError, match="writable"):
+        readonly = np.zeros(5)
+        readonly.flags.writeable = False
+        K.transpose_step(J, e, ff, np.zeros(5), work, readonly)
+    with pytest.raises(TypeError, match="takes 6 arguments"):
+        K.transpose_step(J, e, ff)
+    with pytest.raises(ValueError, match="4x4"):
+        K.rotation_defect(np.eye(3))
+
+
+def test_strided_inputs_give_the_contiguous_results():
+    """Inputs may be views with any strides (a column of a matrix, a transposed J)."""
+    J, e, ff, rows, mask = problem(1, 4, 6)
+    contiguous, _ = run(K.least_squares_step, J, e, ff, rows, mask, ff_mode=1.0)
+    strided, _ = run(K.least_squares_step, np.asfortranarray(J), np.c_[e, e][:, 0],
+                     np.c_[ff, ff][:, 0], rows, mask, ff_mode=1.0)
+    np.testing.assert_array_equal(strided, contiguous)

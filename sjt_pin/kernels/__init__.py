@@ -1,24 +1,34 @@
-"""Compiled inner loops (numba): each stage of a step in one call instead of a dozen numpy calls.
+"""Compiled inner loops: each stage of a step in one call instead of a dozen numpy calls.
 
 On arrays of 6 x n numbers every numpy call costs about 0.3 us whatever it computes, so a step
-would spend more in call overhead than in arithmetic. Each function here does its whole loop in
-one compiled call; ``tests/test_kernels.py`` checks them against the numpy reference formulas of
-:mod:`sjt_pin.mappings` and against Pinocchio. They are compiled on first use and cached in a
-per-user folder (:data:`~.compile.CACHE_DIR`), never inside the installed package.
+would spend more in call overhead than in arithmetic. The kernels are plain C on the CPython
+API (``_kernels.c``), compiled once by ``pip install`` — nothing is compiled at run time — and
+called with numpy arrays through the buffer protocol. ``tests/test_kernels.py`` checks them
+against the numpy reference formulas of :mod:`sjt_pin.mappings` and against Pinocchio.
 
 - :mod:`.layout`: where a solver's parameters, constants, results and scratch sit in its
-  ``work`` vector, and the status bits a step returns;
-- :mod:`.linalg`: small dense linear algebra (Gram matrices, Cholesky, Jacobi eigenvalues, the
-  loop-eigenvalue bound);
-- :mod:`.methods`: one step of each family of CLIK mappings, limits test included;
-- :mod:`.tasks`: the arithmetic of the pose and position tasks;
-- :mod:`.limits`: the clamping of joints at their position limits.
+  ``work`` vector, the status bits a step returns, and the search's state;
+- ``transpose_step(J, e, ff, q, work, step)``: one step of a Jacobian-transpose-type CLIK law
+  (JT eq. 10, SJT eq. 21, and the damped forms: ``D J_w^T (J_w D J_w^T + lambda I)^-1``), then
+  the position box and speed test; ``least_squares_step``: the pseudoinverse (eq. 8) or damped
+  least squares; both return the status bits of :mod:`.layout`;
+- ``search_iteration(...)``: one Levenberg-Marquardt iteration of ``solve()`` on SJT's
+  normalised columns, within the joint limits;
+- ``frame_velocity``, ``position_rows``, ``rotation_defect``: the tasks' small transforms;
+- ``cholesky_solve``, ``loop_bound``, ``symmetric_eigen``, ``clamp_pass``: the small dense
+  linear algebra and the clamping pass, exposed for the tests.
 """
 
+from ._kernels import (  # noqa: F401
+    cholesky_solve,
+    clamp_pass,
+    frame_velocity,
+    least_squares_step,
+    loop_bound,
+    position_rows,
+    rotation_defect,
+    search_iteration,
+    symmetric_eigen,
+    transpose_step,
+)
 from .layout import *  # noqa: F403 (the slot names are the kernels' vocabulary)
-
-# the entry points the rest of the package calls, re-exported
-from .limits import clamp_pass  # noqa: F401
-from .linalg import cholesky_solve, loop_bound, symmetric_eigen  # noqa: F401
-from .methods import least_squares_step, transpose_step  # noqa: F401
-from .tasks import frame_velocity, position_rows, rotation_defect  # noqa: F401

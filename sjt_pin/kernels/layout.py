@@ -93,3 +93,9 @@ class Layout:
     def clamped_joints(self, work: np.ndarray) -> np.ndarray:
         """1 for the joints the last step held at a position limit."""
         return work[self.clamped:self.clamped + self.n]
+
+# -- the set-point search's state vector (search_iteration) -------------------------------------
+S_F, S_NU, S_ITER, S_BEST, S_STALE, S_TOL_SQ, S_MAX_STEP, S_ERROR_ROWS = range(8)
+STATE_SIZE = 8
+#: what an iteration reports
+CONTINUE, CONVERGED, SEARCH_STALLED = 0, 1, 2

@@ -6,7 +6,6 @@ import numpy as np
 
 from .base import Limit, Motion
 
-
 #: the share of the acceleration and jerk limits that a braking plan keeps in reserve
 BRAKING_RESERVE = 0.2
 

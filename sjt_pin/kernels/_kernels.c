@@ -1,0 +1,1193 @@
+/* The compiled inner loops of sjt-pin: one step of each family of CLIK mappings (the paper's
+ * eq. 8, 10, 21 and the damped forms), their joint limits, the set-point search, and the
+ * tasks' small transforms. Plain C on the CPython API, built by `pip install`: nothing is
+ * compiled at run time. Arrays come in through the buffer protocol (float64; 2-D arrays with
+ * any strides, 1-D inputs copied when not contiguous); the Python reference formulas are in
+ * sjt_pin/mappings.py and tests/test_kernels.py checks these functions against them.
+ *
+ * Every function keeps the name, arguments and results of the Python-visible kernel it
+ * implements (see sjt_pin/kernels/__init__.py); the slot numbers of a solver's `work` vector
+ * are those of sjt_pin/kernels/layout.py, exported below and checked by a test. */
+
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#ifndef M_PI
+#define M_PI 3.14159265358979323846
+#endif
+
+/* -- the work vector's slots (sjt_pin/kernels/layout.py) ------------------------------------- */
+enum {
+    P_DT, P_GAIN_MODE, P_GAIN_ARG, P_FF_MODE, P_MU, P_COL_TOL, P_SCALED, P_RCOND, P_LENGTH2,
+    P_FB_MODE, P_LM, P_ERROR_ROWS, P_STALL_RATIO, P_STALL_ERROR, P_ROWS, P_MASK, P_BOX,
+    P_BOX_COUNT, P_SPEED, P_SCRATCH, P_EXTRA, P_CLAMPED, P_ESCAPING, P_HAS_FF, P_COUNT
+};
+#define INFO 24
+enum { I_E_SQ, I_FF_SQ, I_GAIN, I_LOOP, I_STALL, I_TRACE, I_EW_SQ, I_SCALE, I_REGULAR, I_COUNT };
+#define GAIN_FIXED 0
+#define FF_TRANSPOSE 1
+#define FF_DAMPED 2
+#define FB_DAMPED 1
+#define NON_FINITE 1
+#define STALLED 2
+#define CLAMPED 4
+#define SCALED 8
+#define BOUND_PRODUCTS 2
+#define EIGEN_FLOOR (1e3 * 2.220446049250313e-16)
+#define TRANSPOSE 0
+#define LEAST_SQUARES 1
+/* the search's state slots (sjt_pin/kernels/search.py) */
+enum { S_F, S_NU, S_ITER, S_BEST, S_STALE, S_TOL_SQ, S_MAX_STEP, S_ERROR_ROWS };
+#define CONTINUE 0
+#define CONVERGED 1
+#define SEARCH_STALLED 2
+#define NU_DOWN 3.0
+#define NU_UP 4.0
+#define NU_MIN 1e-6
+#define NU_MAX 1e8
+#define STALE_LIMIT 12
+
+/* a read-only matrix with element strides */
+typedef struct { const double *p; Py_ssize_t m, n, s0, s1; } Mat;
+#define AT(M, i, j) ((M).p[(i) * (M).s0 + (j) * (M).s1])
+
+static inline double dmin(double a, double b) { return a < b ? a : b; }
+static inline double dmax(double a, double b) { return a > b ? a : b; }
+
+/* -- small dense linear algebra ------------------------------------------------------------- */
+
+/* The p x p loop matrix of J_w S J_w^T (m x m when use_rows, m <= n), or of
+ * S^1/2 J_w^T J_w S^1/2 (n x n): both have the same non-zero eigenvalues. */
+static void gram(Mat J, const double *sw, const double *s, int use_rows, double *out)
+{
+    Py_ssize_t m = J.m, n = J.n;
+    if (use_rows) {
+        for (Py_ssize_t a = 0; a < m; a++)
+            for (Py_ssize_t b = 0; b <= a; b++) {
+                double acc = 0.0;
+                for (Py_ssize_t j = 0; j < n; j++) acc += s[j] * AT(J, a, j) * AT(J, b, j);
+                out[a * m + b] = out[b * m + a] = acc * sw[a] * sw[b];
+            }
+    } else {
+        for (Py_ssize_t i = 0; i < n; i++)
+            for (Py_ssize_t j = 0; j <= i; j++) {
+                double acc = 0.0;
+                if (s[i] > 0.0 && s[j] > 0.0) {
+                    for (Py_ssize_t a = 0; a < m; a++)
+                        acc += sw[a] * sw[a] * AT(J, a, i) * AT(J, a, j);
+                    acc *= sqrt(s[i] * s[j]);
+                }
+                out[i * n + j] = out[j * n + i] = acc;
+            }
+    }
+}
+
+/* An upper bound of lambda_max of the symmetric PSD A (p x p): (tr A^(2^(s+1)))^(1/2^(s+1)),
+ * s = products matrix products; B, C are scratch of A's size. 0 for A = 0. */
+static double loop_bound_c(const double *A, Py_ssize_t p, int products, double *B, double *C)
+{
+    double trace = 0.0;
+    for (Py_ssize_t i = 0; i < p; i++) trace += A[i * p + i];
+    if (trace <= 0.0) return 0.0;
+    double log_scale = log(trace);
+    for (Py_ssize_t i = 0; i < p * p; i++) B[i] = A[i] / trace;
+    for (int t = 0; t < products; t++) {
+        double frob = 0.0;
+        for (Py_ssize_t i = 0; i < p * p; i++) frob += B[i] * B[i];
+        for (Py_ssize_t i = 0; i < p; i++)
+            for (Py_ssize_t j = 0; j <= i; j++) {
+                double acc = 0.0;
+                for (Py_ssize_t k = 0; k < p; k++) acc += B[i * p + k] * B[k * p + j];
+                C[i * p + j] = C[j * p + i] = acc / frob;
+            }
+        memcpy(B, C, (size_t)(p * p) * sizeof(double));
+        log_scale = 2.0 * log_scale + log(frob);
+    }
+    double frob = 0.0;
+    for (Py_ssize_t i = 0; i < p * p; i++) frob += B[i] * B[i];
+    double exponent = pow(2.0, products + 1);
+    return exp((2.0 * log_scale + log(frob)) / exponent);
+}
+
+/* The lower triangle of A (p x p) becomes the Cholesky factor of A + shift I; 0 if that
+ * matrix is not positive definite. */
+static int cholesky_factor(double *A, Py_ssize_t p, double shift)
+{
+    for (Py_ssize_t j = 0; j < p; j++) {
+        double d = A[j * p + j] + shift;
+        for (Py_ssize_t k = 0; k < j; k++) d -= A[j * p + k] * A[j * p + k];
+        if (!(d > 0.0)) return 0;
+        d = sqrt(d);
+        A[j * p + j] = d;
+        for (Py_ssize_t i = j + 1; i < p; i++) {
+            double acc = A[i * p + j];
+            for (Py_ssize_t k = 0; k < j; k++) acc -= A[i * p + k] * A[j * p + k];
+            A[i * p + j] = acc / d;
+        }
+    }
+    return 1;
+}
+
+/* out = (L L^T)^-1 rhs for the lower-triangular factor L (p x p) */
+static void cholesky_substitute(const double *L, Py_ssize_t p, const double *rhs, double *out)
+{
+    for (Py_ssize_t i = 0; i < p; i++) {
+        double acc = rhs[i];
+        for (Py_ssize_t k = 0; k < i; k++) acc -= L[i * p + k] * out[k];
+        out[i] = acc / L[i * p + i];
+    }
+    for (Py_ssize_t i = p - 1; i >= 0; i--) {
+        double acc = out[i];
+        for (Py_ssize_t k = i + 1; k < p; k++) acc -= L[k * p + i] * out[k];
+        out[i] = acc / L[i * p + i];
+    }
+}
+
+static int cholesky_solve_c(double *A, Py_ssize_t p, double shift, const double *rhs, double *out)
+{
+    if (!cholesky_factor(A, p, shift)) return 0;
+    cholesky_substitute(A, p, rhs, out);
+    return 1;
+}
+
+/* Eigen-decomposition of the symmetric A (p x p) by cyclic Jacobi rotations, in place: A's
+ * diagonal holds the eigenvalues and V's columns the eigenvectors. */
+static void symmetric_eigen_c(double *A, double *V, Py_ssize_t p)
+{
+    for (Py_ssize_t i = 0; i < p; i++)
+        for (Py_ssize_t j = 0; j < p; j++) V[i * p + j] = i == j ? 1.0 : 0.0;
+    for (int sweep = 0; sweep < 50; sweep++) {
+        double off = 0.0, diag = 0.0;
+        for (Py_ssize_t i = 0; i < p; i++) {
+            diag += A[i * p + i] * A[i * p + i];
+            for (Py_ssize_t j = 0; j < i; j++) off += A[i * p + j] * A[i * p + j];
+        }
+        if (off <= 1e-32 * diag || off == 0.0) break;
+        for (Py_ssize_t a = 0; a < p - 1; a++)
+            for (Py_ssize_t b = a + 1; b < p; b++) {
+                double apq = A[a * p + b];
+                if (apq == 0.0) continue;
+                double theta = (A[b * p + b] - A[a * p + a]) / (2.0 * apq);
+                double t = 1.0 / (fabs(theta) + sqrt(theta * theta + 1.0));
+                if (theta < 0.0) t = -t;
+                double c = 1.0 / sqrt(t * t + 1.0), s = t * c;
+                for (Py_ssize_t k = 0; k < p; k++) {
+                    if (k != a && k != b) {
+                        double akp = A[k * p + a], akq = A[k * p + b];
+                        A[k * p + a] = A[a * p + k] = c * akp - s * akq;
+                        A[k * p + b] = A[b * p + k] = s * akp + c * akq;
+                    }
+                }
+                A[a * p + a] -= t * apq;
+                A[b * p + b] += t * apq;
+                A[a * p + b] = A[b * p + a] = 0.0;
+                for (Py_ssize_t k = 0; k < p; k++) {
+                    double vkp = V[k * p + a], vkq = V[k * p + b];
+                    V[k * p + a] = c * vkp - s * vkq;
+                    V[k * p + b] = s * vkp + c * vkq;
+                }
+            }
+    }
+}
+
+/* -- the step kernels ------------------------------------------------------------------------- */
+
+/* three p x p scratch matrices after the scratch vectors, p = min(m, n) */
+static double *matrices(double *work, Py_ssize_t m, Py_ssize_t n)
+{
+    return work + (Py_ssize_t)work[P_SCRATCH] + 4 * m + 6 * n;
+}
+
+/* step += dt D J_w^T (J_w D J_w^T + (mu^2 + extra) I)^-1 (sw v) (m x m solve when m <= n), or
+ * the same as dt sqrt(D) (G + (mu^2 + extra) I)^-1 sqrt(D) J_w^T (sw v) (n x n) */
+static void damped_solve(Mat J, const double *v, const double *sw, const double *alpha,
+                         double *work, double dt, double *step, double extra)
+{
+    Py_ssize_t m = J.m, n = J.n;
+    double *A = matrices(work, m, n);
+    double mu2 = work[P_MU] * work[P_MU] + extra;
+    Py_ssize_t start = (Py_ssize_t)work[P_SCRATCH] + m + 3 * n;
+    gram(J, sw, alpha, m <= n, A);
+    if (m <= n) {
+        double *rhs = work + start, *y = work + start + m;
+        for (Py_ssize_t i = 0; i < m; i++) rhs[i] = sw[i] * v[i];
+        cholesky_solve_c(A, m, mu2, rhs, y);
+        for (Py_ssize_t j = 0; j < n; j++) {
+            double acc = 0.0;
+            for (Py_ssize_t i = 0; i < m; i++) acc += sw[i] * AT(J, i, j) * y[i];
+            step[j] += dt * alpha[j] * acc;
+        }
+    } else {
+        double *rhs = work + start, *x = work + start + n;
+        for (Py_ssize_t j = 0; j < n; j++) {
+            double acc = 0.0;
+            for (Py_ssize_t i = 0; i < m; i++) acc += sw[i] * sw[i] * AT(J, i, j) * v[i];
+            rhs[j] = sqrt(alpha[j]) * acc;
+        }
+        cholesky_solve_c(A, n, mu2, rhs, x);
+        for (Py_ssize_t j = 0; j < n; j++) step[j] += dt * sqrt(alpha[j]) * x[j];
+    }
+}
+
+/* results of a mapping: |e|^2, |ff|^2, |e_w|^2, gain, lambda_hat, stall ratio, trace */
+typedef struct { double e_sq, ff_sq, ew_sq, gain, bound, stall, trace; } Core;
+
+/* the transpose-type mapping (JT eq. 10, SJT eq. 21, and the damped forms) on the joints of
+ * mask; see transpose_step's docstring in sjt_pin/kernels/__init__.py */
+static Core transpose_core(Mat J, const double *e, const double *ff, int has_ff,
+                           const double *mask, double *work, double *step)
+{
+    Py_ssize_t m = J.m, n = J.n;
+    double dt = work[P_DT];
+    Py_ssize_t rows = (Py_ssize_t)work[P_ROWS];
+    const double *sw = work + rows, *k = work + rows + m;
+    Py_ssize_t scratch = (Py_ssize_t)work[P_SCRATCH];
+    double *kew = work + scratch, *alpha = work + scratch + m, *s = work + scratch + m + n;
+    double tol = work[P_COL_TOL], length2 = work[P_LENGTH2];
+    int scaled = work[P_SCALED] != 0.0, damped = work[P_FB_MODE] == FB_DAMPED;
+    Py_ssize_t error_rows = (Py_ssize_t)work[P_ERROR_ROWS];
+    Core r = {0};
+    double kew_sq = 0.0;
+    for (Py_ssize_t i = 0; i < m; i++) {
+        double ew = sw[i] * e[i];
+        kew[i] = k[i] * ew;
+        if (i < error_rows) {
+            r.e_sq += e[i] * e[i];
+            r.ew_sq += ew * ew;
+            kew_sq += kew[i] * kew[i];
+        }
+    }
+    double trace = 0.0, stall = 0.0, curvature = 0.0;
+    for (Py_ssize_t j = 0; j < n; j++) {
+        double norm = 0.0, acc = 0.0, acc_task = 0.0;
+        if (mask[j] != 0.0) {
+            for (Py_ssize_t i = 0; i < m; i++) {
+                double wij = sw[i] * AT(J, i, j);
+                norm += wij * wij;
+                acc += wij * kew[i];
+                if (i < error_rows) acc_task += wij * kew[i];
+            }
+        }
+        alpha[j] = norm > tol ? 1.0 / dmax(norm, length2) : 0.0;
+        s[j] = scaled ? alpha[j] : mask[j];
+        trace += s[j] * norm;
+        stall += s[j] * acc_task * acc_task;
+        if (norm > tol) curvature = dmax(curvature, sqrt(norm) * s[j]);
+        step[j] = acc;
+    }
+    stall = kew_sq > 0.0 && trace > 0.0 ? stall / (kew_sq * trace) : 0.0;
+    double bound = 1.0, gain;
+    if (work[P_GAIN_MODE] == GAIN_FIXED) {
+        gain = 1.0;
+    } else if (damped) {
+        gain = work[P_GAIN_ARG] / dt;
+    } else {
+        double *A = matrices(work, m, n);
+        Py_ssize_t p = m < n ? m : n;
+        gram(J, sw, s, m <= n, A);
+        bound = loop_bound_c(A, p, BOUND_PRODUCTS, A + p * p, A + 2 * p * p)
+                + sqrt(r.ew_sq) * curvature;
+        gain = bound > 0.0 ? work[P_GAIN_ARG] / (dt * bound) : 0.0;
+    }
+    if (has_ff)
+        for (Py_ssize_t i = 0; i < m; i++) r.ff_sq += ff[i] * ff[i];
+    double ff_mode = work[P_FF_MODE];
+    if (damped) {
+        double *v = work + scratch + 3 * m + 6 * n;
+        for (Py_ssize_t i = 0; i < m; i++) {
+            v[i] = gain * k[i] * e[i];
+            if (has_ff) v[i] += ff[i];
+        }
+        for (Py_ssize_t j = 0; j < n; j++) step[j] = 0.0;
+        double alpha_max = 0.0;
+        for (Py_ssize_t j = 0; j < n; j++) alpha_max = dmax(alpha_max, alpha[j]);
+        damped_solve(J, v, sw, alpha, work, dt, step, work[P_LM] * sqrt(r.ew_sq * alpha_max));
+    } else {
+        for (Py_ssize_t j = 0; j < n; j++) step[j] *= dt * gain * s[j];
+        if (has_ff && ff_mode == FF_TRANSPOSE) {
+            for (Py_ssize_t j = 0; j < n; j++) {
+                double acc = 0.0;
+                for (Py_ssize_t i = 0; i < m; i++) acc += sw[i] * sw[i] * AT(J, i, j) * ff[i];
+                step[j] += dt * s[j] * acc;
+            }
+        } else if (has_ff && ff_mode == FF_DAMPED) {
+            damped_solve(J, ff, sw, alpha, work, dt, step, 0.0);
+        }
+    }
+    r.gain = gain;
+    r.bound = bound;
+    r.stall = stall;
+    r.trace = trace;
+    return r;
+}
+
+/* sol = A^+ rhs for the PSD A (p x p, overwritten), singular values of the underlying J below
+ * rcond sigma_max treated as zero: by Cholesky when that is exact (lambda_min(A) >= 1 /
+ * tr(A^-1) above the cutoff), else by Jacobi eigenvalues */
+static void pseudo_solve(double *A, double *V, Py_ssize_t p, const double *rhs, double *sol,
+                         double rcond)
+{
+    double top = 0.0;
+    for (Py_ssize_t i = 0; i < p; i++) top = dmax(top, A[i * p + i]);
+    double cutoff = dmax(rcond * rcond, EIGEN_FLOOR) * top;
+    memcpy(V, A, (size_t)(p * p) * sizeof(double));
+    int ok = cholesky_factor(V, p, 0.0);
+    if (ok) {
+        double inverse_trace = 0.0;
+        for (Py_ssize_t c = 0; c < p; c++)
+            for (Py_ssize_t i = 0; i < p; i++) {
+                double acc = i == c ? 1.0 : 0.0;
+                for (Py_ssize_t t = c; t < i; t++) acc -= V[i * p + t] * sol[t];
+                sol[i] = i >= c ? acc / V[i * p + i] : 0.0;
+                inverse_trace += sol[i] * sol[i];
+            }
+        ok = inverse_trace * cutoff < 1.0;
+    }
+    if (ok) {
+        cholesky_substitute(V, p, rhs, sol);
+        return;
+    }
+    symmetric_eigen_c(A, V, p);
+    for (Py_ssize_t i = 0; i < p; i++) sol[i] = 0.0;
+    for (Py_ssize_t c = 0; c < p; c++) {
+        double lam = A[c * p + c];
+        if (lam <= cutoff) continue;
+        double proj = 0.0;
+        for (Py_ssize_t i = 0; i < p; i++) proj += V[i * p + c] * rhs[i];
+        proj /= lam;
+        for (Py_ssize_t i = 0; i < p; i++) sol[i] += proj * V[i * p + c];
+    }
+}
+
+/* the least-squares mapping (JP eq. 8, DLS) on the joints of mask */
+static Core least_squares_core(Mat J, const double *e, const double *ff, int has_ff,
+                               const double *mask, double *work, double *step)
+{
+    Py_ssize_t m = J.m, n = J.n, p = m < n ? m : n;
+    int use_rows = m <= n;
+    double dt = work[P_DT];
+    double gain = work[P_GAIN_MODE] != GAIN_FIXED ? work[P_GAIN_ARG] / dt : 1.0;
+    Py_ssize_t rows = (Py_ssize_t)work[P_ROWS];
+    const double *sw = work + rows, *k = work + rows + m;
+    Py_ssize_t scratch = (Py_ssize_t)work[P_SCRATCH];
+    double *v = work + scratch, *r = work + scratch + m, *sol = work + scratch + m + n;
+    double *A = matrices(work, m, n), *V = A + p * p;
+    Core out = {0};
+    Py_ssize_t error_rows = (Py_ssize_t)work[P_ERROR_ROWS];
+    for (Py_ssize_t i = 0; i < m; i++) {
+        double ew = sw[i] * e[i];
+        if (i < error_rows) {
+            out.e_sq += e[i] * e[i];
+            out.ew_sq += ew * ew;
+        }
+        v[i] = gain * k[i] * ew;
+        if (has_ff) {
+            v[i] += sw[i] * ff[i];
+            out.ff_sq += ff[i] * ff[i];
+        }
+    }
+    gram(J, sw, mask, use_rows, A);
+    if (!use_rows)
+        for (Py_ssize_t j = 0; j < n; j++) {
+            double acc = 0.0;
+            for (Py_ssize_t i = 0; i < m; i++) acc += sw[i] * AT(J, i, j) * v[i];
+            r[j] = mask[j] * acc;
+        }
+    const double *rhs = use_rows ? v : r;
+    double damping = work[P_MU];
+    if (damping > 0.0)
+        cholesky_solve_c(A, p, damping * damping, rhs, sol);
+    else
+        pseudo_solve(A, V, p, rhs, sol, work[P_RCOND]);
+    for (Py_ssize_t j = 0; j < n; j++) {
+        if (use_rows) {
+            double acc = 0.0;
+            for (Py_ssize_t i = 0; i < m; i++) acc += sw[i] * AT(J, i, j) * sol[i];
+            step[j] = dt * mask[j] * acc;
+        } else {
+            step[j] = dt * mask[j] * sol[j];
+        }
+    }
+    out.gain = gain;
+    out.bound = 1.0;
+    out.stall = 1.0;
+    out.trace = 0.0;
+    return out;
+}
+
+static Core core(int kind, Mat J, const double *e, const double *ff, int has_ff,
+                 const double *mask, double *work, double *step)
+{
+    if (kind == TRANSPOSE) return transpose_core(J, e, ff, has_ff, mask, work, step);
+    return least_squares_core(J, e, ff, has_ff, mask, work, step);
+}
+
+/* Fix the joints that q + step takes out of [lower, upper]; returns how many (see
+ * clamp_pass in sjt_pin/kernels/__init__.py). Indices are read through `index_at`. */
+typedef double (*IndexAt)(const void *, Py_ssize_t);
+static double float_at(const void *p, Py_ssize_t i) { return ((const double *)p)[i]; }
+static double int_at(const void *p, Py_ssize_t i) { return (double)((const long long *)p)[i]; }
+
+static int clamp_pass_c(const double *q, const double *step, const void *q_index,
+                        const void *v_index, IndexAt at, const double *lower,
+                        const double *upper, const double *speeds, Py_ssize_t count, double dt,
+                        double *fixed, double *fixed_step)
+{
+    int changed = 0;
+    for (Py_ssize_t c = 0; c < count; c++) {
+        Py_ssize_t v = (Py_ssize_t)at(v_index, c);
+        if (fixed[v] != 0.0) continue;
+        double qc = q[(Py_ssize_t)at(q_index, c)], lo = lower[c], hi = upper[c];
+        double next = qc + step[v];
+        if (lo <= qc && qc <= hi) {
+            if (lo <= next && next <= hi) continue;
+            fixed_step[v] = dmin(dmax(next, lo), hi) - qc;
+        } else if (qc > hi) {
+            fixed_step[v] = -dmin(speeds[c] * dt, qc - hi);
+        } else {
+            fixed_step[v] = dmin(speeds[c] * dt, lo - qc);
+        }
+        fixed[v] = 1.0;
+        changed++;
+    }
+    return changed;
+}
+
+/* Fix the joints that q + step takes out of their range and solve again for the others;
+ * returns CLAMPED or 0 */
+static int clamp_position(int kind, Mat J, const double *e, const double *ff, int has_ff,
+                          const double *q, const double *mask, double *work, double *step,
+                          int escaping)
+{
+    Py_ssize_t m = J.m, n = J.n;
+    double dt = work[P_DT];
+    Py_ssize_t box = (Py_ssize_t)work[P_BOX], count = (Py_ssize_t)work[P_BOX_COUNT];
+    Py_ssize_t clamped = (Py_ssize_t)work[P_CLAMPED];
+    int outside = 0;
+    for (Py_ssize_t c = 0; c < count; c++) {
+        double next = q[(Py_ssize_t)work[box + c]] + step[(Py_ssize_t)work[box + count + c]];
+        if (next > work[box + 3 * count + c] || next < work[box + 2 * count + c]) {
+            outside = 1;
+            break;
+        }
+    }
+    if (!outside) {
+        for (Py_ssize_t j = 0; j < n; j++) work[clamped + j] = 0.0;
+        return 0;
+    }
+    double *fixed = work + clamped, *fixed_step = work + clamped + n;
+    double *free_ = work + clamped + 2 * n, *ff2 = work + clamped + 3 * n;
+    Py_ssize_t extra = (Py_ssize_t)work[P_EXTRA];
+    for (Py_ssize_t j = 0; j < n; j++) {
+        fixed[j] = 0.0;
+        fixed_step[j] = 0.0;
+        free_[j] = mask[j];
+    }
+    for (Py_ssize_t round = 0; round < count; round++) {
+        if (!clamp_pass_c(q, step, work + box, work + box + count, float_at,
+                          work + box + 2 * count, work + box + 3 * count,
+                          work + box + 4 * count, count, dt, fixed, fixed_step))
+            break;
+        for (Py_ssize_t i = 0; i < m; i++) {
+            double acc = has_ff ? ff[i] : 0.0;
+            for (Py_ssize_t j = 0; j < n; j++)
+                if (fixed[j] != 0.0) acc -= AT(J, i, j) * fixed_step[j] / dt;
+            ff2[i] = acc;
+        }
+        for (Py_ssize_t j = 0; j < n; j++) free_[j] = fixed[j] != 0.0 ? 0.0 : mask[j];
+        core(kind, J, e, ff2, 1, free_, work, step);
+        for (Py_ssize_t j = 0; j < n; j++) {
+            if (fixed[j] != 0.0)
+                step[j] = fixed_step[j];
+            else if (escaping)
+                step[j] += dt * work[extra + j];
+        }
+    }
+    return CLAMPED;
+}
+
+/* the mapping, then the limits; returns the status bits */
+static int step_c(int kind, Mat J, const double *e, const double *ff, const double *q,
+                  double *work, double *step)
+{
+    Py_ssize_t n = J.n;
+    double dt = work[P_DT];
+    const double *mask = work + (Py_ssize_t)work[P_MASK];
+    int has_ff = work[P_HAS_FF] != 0.0;
+    Core r = core(kind, J, e, ff, has_ff, mask, work, step);
+    double *info = work + INFO;
+    info[I_E_SQ] = r.e_sq;
+    info[I_FF_SQ] = r.ff_sq;
+    info[I_EW_SQ] = r.ew_sq;
+    info[I_GAIN] = r.gain;
+    info[I_LOOP] = r.bound;
+    info[I_STALL] = r.stall;
+    info[I_TRACE] = r.trace;
+    if (!isfinite(r.e_sq + r.ff_sq)) return NON_FINITE;
+    double regular = 0.0;
+    for (Py_ssize_t j = 0; j < n; j++) regular += step[j] * step[j];
+    info[I_REGULAR] = sqrt(regular) / dt;
+    int status = 0;
+    if (r.stall < work[P_STALL_RATIO] && r.e_sq > work[P_STALL_ERROR]) status = STALLED;
+    int escaping = work[P_ESCAPING] != 0.0;
+    Py_ssize_t extra = (Py_ssize_t)work[P_EXTRA];
+    if (escaping)
+        for (Py_ssize_t j = 0; j < n; j++) step[j] += dt * work[extra + j];
+    status |= clamp_position(kind, J, e, ff, has_ff, q, mask, work, step, escaping);
+    Py_ssize_t speed = (Py_ssize_t)work[P_SPEED], clamped = (Py_ssize_t)work[P_CLAMPED];
+    double worst = 0.0;
+    for (Py_ssize_t j = 0; j < n; j++) {
+        if (work[clamped + j] != 0.0) {
+            double cap = work[speed + j] > 0.0 ? dt / work[speed + j] : INFINITY;
+            step[j] = dmin(dmax(step[j], -cap), cap);
+        } else {
+            worst = dmax(worst, fabs(step[j]) * work[speed + j]);
+        }
+    }
+    worst /= dt;
+    info[I_SCALE] = 1.0;
+    if (worst > 1.0) {
+        for (Py_ssize_t j = 0; j < n; j++)
+            if (work[clamped + j] == 0.0) step[j] /= worst;
+        info[I_SCALE] = 1.0 / worst;
+        status |= SCALED;
+    }
+    return status;
+}
+
+/* -- the set-point search ---------------------------------------------------------------------- */
+
+/* Wrap or fix the free joints that q + step takes out of their range; 1 if one was fixed */
+static int search_clamp(const double *q, double *step, const double *limits, Py_ssize_t c,
+                        double *free_, double *fixed)
+{
+    int changed = 0;
+    for (Py_ssize_t k = 0; k < c; k++) {
+        Py_ssize_t qi = (Py_ssize_t)limits[k], vi = (Py_ssize_t)limits[c + k];
+        if (free_[vi] == 0.0) continue;
+        double lo = limits[2 * c + k], hi = limits[3 * c + k];
+        double next = q[qi] + step[vi];
+        if (lo <= next && next <= hi) continue;
+        if (hi - lo >= 2.0 * M_PI) {
+            double turn = next > hi ? -2.0 * M_PI : 2.0 * M_PI;
+            if (lo <= next + turn && next + turn <= hi) {
+                step[vi] += turn;
+                continue;
+            }
+        }
+        free_[vi] = 0.0;
+        fixed[vi] = dmin(dmax(next, lo), hi) - q[qi];
+        changed = 1;
+    }
+    return changed;
+}
+
+/* the damped step from (J, e) at q, scaled to the trust region, within the limits */
+static void limited_step(Mat J, const double *e, const double *q, const double *limits,
+                         Py_ssize_t c, double *work, double *state, double *step)
+{
+    Py_ssize_t m = J.m, n = J.n;
+    Py_ssize_t rows = (Py_ssize_t)work[P_ROWS], mask_at = (Py_ssize_t)work[P_MASK];
+    const double *sw = work + rows, *mask = work + mask_at;
+    Py_ssize_t scratch = (Py_ssize_t)work[P_SCRATCH];
+    double *alpha = work + scratch + m, *free_ = work + scratch + m + n;
+    double *fixed = work + scratch + m + 2 * n, *v = work + scratch + 3 * m + 6 * n;
+    double ew_sq = 0.0;
+    for (Py_ssize_t i = 0; i < m; i++) ew_sq += (sw[i] * e[i]) * (sw[i] * e[i]);
+    double damping = state[S_NU] * ew_sq;
+    double tol = work[P_COL_TOL], length2 = work[P_LENGTH2];
+    int scaled = work[P_SCALED] != 0.0;
+    for (Py_ssize_t j = 0; j < n; j++) {
+        free_[j] = mask[j];
+        fixed[j] = 0.0;
+    }
+    for (Py_ssize_t round = 0; round < c + 1; round++) {
+        for (Py_ssize_t i = 0; i < m; i++) {
+            double acc = e[i];
+            for (Py_ssize_t j = 0; j < n; j++)
+                if (free_[j] == 0.0 && mask[j] != 0.0) acc -= AT(J, i, j) * fixed[j];
+            v[i] = acc;
+        }
+        for (Py_ssize_t j = 0; j < n; j++) {
+            double norm = 0.0;
+            if (free_[j] != 0.0)
+                for (Py_ssize_t i = 0; i < m; i++) norm += (sw[i] * AT(J, i, j)) * (sw[i] * AT(J, i, j));
+            if (norm <= tol)
+                alpha[j] = 0.0;
+            else if (scaled)
+                alpha[j] = 1.0 / dmax(norm, length2);
+            else
+                alpha[j] = 1.0;
+            step[j] = 0.0;
+        }
+        damped_solve(J, v, sw, alpha, work, 1.0, step, damping);
+        double biggest = 0.0;
+        for (Py_ssize_t j = 0; j < n; j++) {
+            if (free_[j] == 0.0 && mask[j] != 0.0) step[j] = fixed[j];
+            biggest = dmax(biggest, fabs(step[j]));
+        }
+        if (biggest > state[S_MAX_STEP]) {
+            double scale = state[S_MAX_STEP] / biggest;
+            for (Py_ssize_t j = 0; j < n; j++) step[j] *= scale;
+        }
+        if (!search_clamp(q, step, limits, c, free_, fixed)) break;
+    }
+}
+
+static int search_iteration_c(Mat J, const double *e, const double *q, Py_ssize_t nq,
+                              double *J_cur, double *e_cur, double *q_cur, const double *limits,
+                              Py_ssize_t c, double *work, double *state, double *step)
+{
+    Py_ssize_t m = J.m, n = J.n;
+    const double *sw = work + (Py_ssize_t)work[P_ROWS];
+    Py_ssize_t error_rows = (Py_ssize_t)state[S_ERROR_ROWS];
+    double f = 0.0, e_sq = 0.0;
+    for (Py_ssize_t i = 0; i < m; i++) {
+        f += 0.5 * (sw[i] * e[i]) * (sw[i] * e[i]);
+        if (i < error_rows) e_sq += e[i] * e[i];
+    }
+    int first = state[S_ITER] == 0.0;
+    state[S_ITER] += 1.0;
+    if (first || f < state[S_F]) {
+        for (Py_ssize_t i = 0; i < m; i++) {
+            e_cur[i] = e[i];
+            for (Py_ssize_t j = 0; j < n; j++) J_cur[i * n + j] = AT(J, i, j);
+        }
+        memcpy(q_cur, q, (size_t)nq * sizeof(double));
+        state[S_F] = f;
+        if (!first) state[S_NU] = dmax(state[S_NU] / NU_DOWN, NU_MIN);
+        if (e_sq <= state[S_TOL_SQ]) return CONVERGED;
+    } else {
+        state[S_NU] *= NU_UP;
+    }
+    if (f < 0.99 * state[S_BEST] || first) {
+        state[S_BEST] = dmin(f, state[S_F]);
+        state[S_STALE] = 0.0;
+    } else {
+        state[S_STALE] += 1.0;
+    }
+    if (state[S_STALE] >= STALE_LIMIT || state[S_NU] > NU_MAX || !isfinite(f))
+        return SEARCH_STALLED;
+    Mat cur = {J_cur, m, n, n, 1};
+    limited_step(cur, e_cur, q_cur, limits, c, work, state, step);
+    return CONTINUE;
+}
+
+/* -- the tasks' transforms ---------------------------------------------------------------------- */
+
+static void frame_velocity_c(Mat oMf, Mat oMd, const double *velocity, double *out)
+{
+    double d0 = AT(oMf, 0, 3) - AT(oMd, 0, 3), d1 = AT(oMf, 1, 3) - AT(oMd, 1, 3);
+    double d2 = AT(oMf, 2, 3) - AT(oMd, 2, 3);
+    double w0 = velocity[3], w1 = velocity[4], w2 = velocity[5];
+    double v0 = velocity[0] + w1 * d2 - w2 * d1, v1 = velocity[1] + w2 * d0 - w0 * d2;
+    double v2 = velocity[2] + w0 * d1 - w1 * d0;
+    for (int a = 0; a < 3; a++) {
+        out[a] = AT(oMf, 0, a) * v0 + AT(oMf, 1, a) * v1 + AT(oMf, 2, a) * v2;
+        out[3 + a] = AT(oMf, 0, a) * w0 + AT(oMf, 1, a) * w1 + AT(oMf, 2, a) * w2;
+    }
+}
+
+static double rotation_defect_c(Mat M)
+{
+    double defect = 0.0;
+    for (int a = 0; a < 3; a++)
+        for (int b = 0; b < 3; b++) {
+            double acc = a == b ? -1.0 : 0.0;
+            for (int c = 0; c < 3; c++) acc += AT(M, c, a) * AT(M, c, b);
+            defect = dmax(defect, fabs(acc));
+            if (acc != acc) defect = NAN;
+        }
+    double det = AT(M, 0, 0) * (AT(M, 1, 1) * AT(M, 2, 2) - AT(M, 1, 2) * AT(M, 2, 1))
+                 - AT(M, 0, 1) * (AT(M, 1, 0) * AT(M, 2, 2) - AT(M, 1, 2) * AT(M, 2, 0))
+                 + AT(M, 0, 2) * (AT(M, 1, 0) * AT(M, 2, 1) - AT(M, 1, 1) * AT(M, 2, 0));
+    if (defect != defect || det != det
+        || !(isfinite(AT(M, 0, 3)) && isfinite(AT(M, 1, 3)) && isfinite(AT(M, 2, 3))))
+        return NAN;
+    if (!(det > 0.0) || AT(M, 3, 0) != 0.0 || AT(M, 3, 1) != 0.0 || AT(M, 3, 2) != 0.0
+        || AT(M, 3, 3) != 1.0)
+        return INFINITY;
+    return defect;
+}
+
+static void position_rows_c(Mat J6, Mat oMf, const double *p_d, const double *velocity,
+                            Py_ssize_t velocity_size, double *out, Py_ssize_t size)
+{
+    Py_ssize_t n = J6.n;
+    Py_ssize_t d = size / (n + 3);
+    for (Py_ssize_t r = 0; r < d; r++) {
+        Py_ssize_t a = (Py_ssize_t)out[r];
+        for (Py_ssize_t j = 0; j < n; j++) out[d + r * n + j] = AT(J6, a, j);
+        out[d + d * n + r] = p_d[a] - AT(oMf, a, 3);
+        if (velocity_size >= 3) out[2 * d + d * n + r] = velocity[a];
+    }
+}
+
+/* -- the Python side: buffers ------------------------------------------------------------------- */
+
+typedef struct {
+    Py_buffer view;
+    int held;
+    double *copy; /* a contiguous copy of a strided 1-D input */
+} Arg;
+
+static int format_ok(const Py_buffer *b, int integer)
+{
+    const char *f = b->format ? b->format : "B";
+    if (*f == '<' || *f == '=' || *f == '@') f++;
+    if (b->itemsize != 8 || f[1] != '\0') return 0;
+    return integer ? (*f == 'q' || *f == 'l' || *f == 'd') : *f == 'd';
+}
+
+static void release(Arg *a)
+{
+    if (a->held) PyBuffer_Release(&a->view);
+    a->held = 0;
+    free(a->copy);
+    a->copy = NULL;
+}
+
+/* a float64 buffer (int64 accepted when `integer`) of `ndim` dimensions (-1: any) */
+static int acquire(PyObject *obj, Arg *a, int writable, int ndim, int integer, const char *name)
+{
+    a->held = 0;
+    a->copy = NULL;
+    int flags = PyBUF_STRIDES | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
+    if (PyObject_GetBuffer(obj, &a->view, flags) < 0) {
+        PyErr_Clear();
+        PyErr_Format(PyExc_TypeError, "%s must be a %sfloat64 array, got %.100s", name,
+                     writable ? "writable " : "", Py_TYPE(obj)->tp_name);
+        return -1;
+    }
+    a->held = 1;
+    if (!format_ok(&a->view, integer)) {
+        PyErr_Format(PyExc_TypeError, "%s must hold float64 numbers", name);
+        release(a);
+        return -1;
+    }
+    if (ndim >= 0 && a->view.ndim != ndim) {
+        PyErr_Format(PyExc_ValueError, "%s must be %d-dimensional, got %d dimensions", name, ndim,
+                     a->view.ndim);
+        release(a);
+        return -1;
+    }
+    return 0;
+}
+
+static Py_ssize_t length(const Arg *a) { return a->view.ndim == 0 ? 1 : a->view.shape[0]; }
+
+/* a contiguous pointer to a 1-D buffer (a copy of a strided read-only one) */
+static double *vec(Arg *a, const char *name)
+{
+    if (a->view.ndim == 0) return (double *)a->view.buf;
+    Py_ssize_t stride = a->view.strides[0], n = a->view.shape[0];
+    if (stride == 8 || n <= 1) return (double *)a->view.buf;
+    a->copy = (double *)malloc((size_t)(n > 0 ? n : 1) * sizeof(double));
+    if (!a->copy) {
+        PyErr_NoMemory();
+        return NULL;
+    }
+    for (Py_ssize_t i = 0; i < n; i++)
+        a->copy[i] = *(const double *)((const char *)a->view.buf + i * stride);
+    (void)name;
+    return a->copy;
+}
+
+/* a writable 1-D output must be contiguous (results are written in place) */
+static double *out_vec(Arg *a, const char *name)
+{
+    if (a->view.ndim != 1 || (a->view.strides[0] != 8 && a->view.shape[0] > 1)) {
+        PyErr_Format(PyExc_ValueError, "%s must be a contiguous 1-D array", name);
+        return NULL;
+    }
+    return (double *)a->view.buf;
+}
+
+static Mat mat(const Arg *a)
+{
+    Mat M = {(const double *)a->view.buf, a->view.shape[0], a->view.shape[1],
+             a->view.strides[0] / 8, a->view.strides[1] / 8};
+    return M;
+}
+
+static double *out_mat(Arg *a, const char *name)
+{
+    if (a->view.ndim != 2 || a->view.strides[1] != 8 || a->view.strides[0] != 8 * a->view.shape[1]) {
+        PyErr_Format(PyExc_ValueError, "%s must be a C-contiguous 2-D array", name);
+        return NULL;
+    }
+    return (double *)a->view.buf;
+}
+
+static int nargs_ok(Py_ssize_t got, Py_ssize_t want, const char *name)
+{
+    if (got == want) return 1;
+    PyErr_Format(PyExc_TypeError, "%s() takes %zd arguments (%zd given)", name, want, got);
+    return 0;
+}
+
+static int check_work(const Arg *work, Py_ssize_t m, Py_ssize_t n)
+{
+    Py_ssize_t size = length(work);
+    if (size < INFO + I_COUNT) goto bad;
+    const double *w = (const double *)work->view.buf;
+    double scratch = w[P_SCRATCH];
+    Py_ssize_t p = m < n ? m : n;
+    if (!(scratch >= 0 && scratch + 4 * m + 6 * n + 3 * p * p <= size)) goto bad;
+    return 0;
+bad:
+    PyErr_Format(PyExc_ValueError, "work does not fit rows of shape (%zd, %zd): make it with "
+                 "sjt_pin.kernels.Layout(m, n, c).allocate()", m, n);
+    return -1;
+}
+
+/* transpose_step / least_squares_step (J, e, ff, q, work, step) -> status */
+static PyObject *step_wrapper(int kind, PyObject *const *args, Py_ssize_t nargs, const char *fn)
+{
+    if (!nargs_ok(nargs, 6, fn)) return NULL;
+    Arg J = {0}, e = {0}, ff = {0}, q = {0}, work = {0}, step = {0};
+    PyObject *result = NULL;
+    if (acquire(args[0], &J, 0, 2, 0, "J") || acquire(args[1], &e, 0, 1, 0, "e")
+        || acquire(args[2], &ff, 0, 1, 0, "ff") || acquire(args[3], &q, 0, 1, 0, "q")
+        || acquire(args[4], &work, 1, 1, 0, "work") || acquire(args[5], &step, 1, 1, 0, "step"))
+        goto done;
+    Mat Jm = mat(&J);
+    if (length(&e) != Jm.m || length(&step) != Jm.n
+        || (((double *)work.view.buf)[P_HAS_FF] != 0.0 && length(&ff) != Jm.m)) {
+        PyErr_Format(PyExc_ValueError, "J (%zd, %zd), e (%zd,), ff (%zd,) and step (%zd,) do not "
+                     "fit", Jm.m, Jm.n, length(&e), length(&ff), length(&step));
+        goto done;
+    }
+    if (check_work(&work, Jm.m, Jm.n)) goto done;
+    double *ev = vec(&e, "e"), *ffv = vec(&ff, "ff"), *qv = vec(&q, "q");
+    double *wv = out_vec(&work, "work"), *sv = out_vec(&step, "step");
+    if (!ev || !ffv || !qv || !wv || !sv) goto done;
+    int status;
+    Py_BEGIN_ALLOW_THREADS
+    status = step_c(kind, Jm, ev, ffv, qv, wv, sv);
+    Py_END_ALLOW_THREADS
+    result = PyLong_FromLong(status);
+done:
+    release(&J); release(&e); release(&ff); release(&q); release(&work); release(&step);
+    return result;
+}
+
+static PyObject *py_transpose_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    return step_wrapper(TRANSPOSE, args, nargs, "transpose_step");
+}
+
+static PyObject *py_least_squares_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    return step_wrapper(LEAST_SQUARES, args, nargs, "least_squares_step");
+}
+
+/* clamp_pass(q, step, q_index, v_index, lower, upper, speeds, dt, fixed, fixed_step) -> int */
+static PyObject *py_clamp_pass(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (!nargs_ok(nargs, 10, "clamp_pass")) return NULL;
+    Arg q = {0}, step = {0}, qi = {0}, vi = {0}, lo = {0}, hi = {0}, sp = {0}, fx = {0}, fs = {0};
+    PyObject *result = NULL;
+    double dt = PyFloat_AsDouble(args[7]);
+    if (dt == -1.0 && PyErr_Occurred()) return NULL;
+    if (acquire(args[0], &q, 0, 1, 0, "q") || acquire(args[1], &step, 0, 1, 0, "step")
+        || acquire(args[2], &qi, 0, 1, 1, "q_index") || acquire(args[3], &vi, 0, 1, 1, "v_index")
+        || acquire(args[4], &lo, 0, 1, 0, "lower") || acquire(args[5], &hi, 0, 1, 0, "upper")
+        || acquire(args[6], &sp, 0, 1, 0, "speeds") || acquire(args[8], &fx, 1, 1, 0, "fixed")
+        || acquire(args[9], &fs, 1, 1, 0, "fixed_step"))
+        goto done;
+    Py_ssize_t count = length(&qi);
+    if (length(&vi) != count || length(&lo) != count || length(&hi) != count
+        || length(&sp) != count || length(&fx) != length(&step) || length(&fs) != length(&step)) {
+        PyErr_SetString(PyExc_ValueError, "clamp_pass: the index, limit and speed arrays must "
+                        "have one entry per limited joint, fixed and fixed_step one per "
+                        "velocity coordinate");
+        goto done;
+    }
+    int integer = qi.view.format && strchr(qi.view.format, 'd') == NULL;
+    double *qv = vec(&q, "q"), *sv = vec(&step, "step"), *lov = vec(&lo, "lower");
+    double *hiv = vec(&hi, "upper"), *spv = vec(&sp, "speeds");
+    double *fxv = out_vec(&fx, "fixed"), *fsv = out_vec(&fs, "fixed_step");
+    if (!qv || !sv || !lov || !hiv || !spv || !fxv || !fsv) goto done;
+    if (qi.view.strides[0] != 8 || vi.view.strides[0] != 8) {
+        PyErr_SetString(PyExc_ValueError, "q_index and v_index must be contiguous");
+        goto done;
+    }
+    Py_ssize_t nq = length(&q), nv = length(&step);
+    IndexAt at = integer ? int_at : float_at;
+    for (Py_ssize_t c = 0; c < count; c++) {
+        double a = at(qi.view.buf, c), b = at(vi.view.buf, c);
+        if (!(a >= 0 && a < nq && b >= 0 && b < nv)) {
+            PyErr_SetString(PyExc_IndexError, "clamp_pass: an index is out of range");
+            goto done;
+        }
+    }
+    int changed = clamp_pass_c(qv, sv, qi.view.buf, vi.view.buf, at, lov, hiv, spv, count, dt,
+                               fxv, fsv);
+    result = PyLong_FromLong(changed);
+done:
+    release(&q); release(&step); release(&qi); release(&vi); release(&lo); release(&hi);
+    release(&sp); release(&fx); release(&fs);
+    return result;
+}
+
+static double *square(Arg *a, Py_ssize_t *p, const char *name)
+{
+    double *buf = out_mat(a, name);
+    if (!buf) return NULL;
+    if (a->view.shape[0] != a->view.shape[1]) {
+        PyErr_Format(PyExc_ValueError, "%s must be square", name);
+        return NULL;
+    }
+    *p = a->view.shape[0];
+    return buf;
+}
+
+/* cholesky_solve(A, shift, rhs, out) -> bool */
+static PyObject *py_cholesky_solve(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (!nargs_ok(nargs, 4, "cholesky_solve")) return NULL;
+    double shift = PyFloat_AsDouble(args[1]);
+    if (shift == -1.0 && PyErr_Occurred()) return NULL;
+    Arg A = {0}, rhs = {0}, out = {0};
+    PyObject *result = NULL;
+    Py_ssize_t p;
+    if (acquire(args[0], &A, 1, 2, 0, "A") || acquire(args[2], &rhs, 0, 1, 0, "rhs")
+        || acquire(args[3], &out, 1, 1, 0, "out"))
+        goto done;
+    double *Av = square(&A, &p, "A"), *rv = vec(&rhs, "rhs"), *ov = out_vec(&out, "out");
+    if (!Av || !rv || !ov) goto done;
+    if (length(&rhs) != p || length(&out) != p) {
+        PyErr_SetString(PyExc_ValueError, "rhs and out must have A's size");
+        goto done;
+    }
+    result = PyBool_FromLong(cholesky_solve_c(Av, p, shift, rv, ov));
+done:
+    release(&A); release(&rhs); release(&out);
+    return result;
+}
+
+/* loop_bound(A, products, B, C) -> float */
+static PyObject *py_loop_bound(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (!nargs_ok(nargs, 4, "loop_bound")) return NULL;
+    long products = PyLong_AsLong(args[1]);
+    if (products == -1 && PyErr_Occurred()) return NULL;
+    Arg A = {0}, B = {0}, C = {0};
+    PyObject *result = NULL;
+    Py_ssize_t p, pb, pc;
+    if (acquire(args[0], &A, 0, 2, 0, "A") || acquire(args[2], &B, 1, 2, 0, "B")
+        || acquire(args[3], &C, 1, 2, 0, "C"))
+        goto done;
+    Mat Am = mat(&A);
+    double *Bv = square(&B, &pb, "B"), *Cv = square(&C, &pc, "C");
+    if (!Bv || !Cv) goto done;
+    p = Am.m;
+    if (Am.n != p || pb != p || pc != p) {
+        PyErr_SetString(PyExc_ValueError, "A, B and C must be square, of one size");
+        goto done;
+    }
+    double *dense = (double *)malloc((size_t)(p * p > 0 ? p * p : 1) * sizeof(double));
+    if (!dense) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    for (Py_ssize_t i = 0; i < p; i++)
+        for (Py_ssize_t j = 0; j < p; j++) dense[i * p + j] = AT(Am, i, j);
+    double bound = loop_bound_c(dense, p, (int)products, Bv, Cv);
+    free(dense);
+    result = PyFloat_FromDouble(bound);
+done:
+    release(&A); release(&B); release(&C);
+    return result;
+}
+
+/* symmetric_eigen(A, V) -> None */
+static PyObject *py_symmetric_eigen(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (!nargs_ok(nargs, 2, "symmetric_eigen")) return NULL;
+    Arg A = {0}, V = {0};
+    PyObject *result = NULL;
+    Py_ssize_t p, pv;
+    if (acquire(args[0], &A, 1, 2, 0, "A") || acquire(args[1], &V, 1, 2, 0, "V")) goto done;
+    double *Av = square(&A, &p, "A"), *Vv = square(&V, &pv, "V");
+    if (!Av || !Vv) goto done;
+    if (pv != p) {
+        PyErr_SetString(PyExc_ValueError, "A and V must have one size");
+        goto done;
+    }
+    symmetric_eigen_c(Av, Vv, p);
+    result = Py_NewRef(Py_None);
+done:
+    release(&A); release(&V);
+    return result;
+}
+
+static int is_4x4(const Arg *a, const char *name)
+{
+    if (a->view.shape[0] == 4 && a->view.shape[1] == 4) return 1;
+    PyErr_Format(PyExc_ValueError, "%s must be a 4x4 matrix", name);
+    return 0;
+}
+
+/* frame_velocity(oMf, oMd, velocity, out) -> None */
+static PyObject *py_frame_velocity(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (!nargs_ok(nargs, 4, "frame_velocity")) return NULL;
+    Arg f = {0}, d = {0}, v = {0}, out = {0};
+    PyObject *result = NULL;
+    if (acquire(args[0], &f, 0, 2, 0, "oMf") || acquire(args[1], &d, 0, 2, 0, "oMd")
+        || acquire(args[2], &v, 0, 1, 0, "velocity") || acquire(args[3], &out, 1, 1, 0, "out"))
+        goto done;
+    if (!is_4x4(&f, "oMf") || !is_4x4(&d, "oMd")) goto done;
+    if (length(&v) != 6 || length(&out) != 6) {
+        PyErr_SetString(PyExc_ValueError, "velocity and out must have shape (6,)");
+        goto done;
+    }
+    double *vv = vec(&v, "velocity"), *ov = out_vec(&out, "out");
+    if (!vv || !ov) goto done;
+    frame_velocity_c(mat(&f), mat(&d), vv, ov);
+    result = Py_NewRef(Py_None);
+done:
+    release(&f); release(&d); release(&v); release(&out);
+    return result;
+}
+
+/* rotation_defect(M) -> float */
+static PyObject *py_rotation_defect(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (!nargs_ok(nargs, 1, "rotation_defect")) return NULL;
+    Arg M = {0};
+    PyObject *result = NULL;
+    if (acquire(args[0], &M, 0, 2, 0, "M")) goto done;
+    if (!is_4x4(&M, "M")) goto done;
+    result = PyFloat_FromDouble(rotation_defect_c(mat(&M)));
+done:
+    release(&M);
+    return result;
+}
+
+/* position_rows(J6, oMf, p_d, velocity, out) -> None */
+static PyObject *py_position_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (!nargs_ok(nargs, 5, "position_rows")) return NULL;
+    Arg J = {0}, f = {0}, p = {0}, v = {0}, out = {0};
+    PyObject *result = NULL;
+    if (acquire(args[0], &J, 0, 2, 0, "J6") || acquire(args[1], &f, 0, 2, 0, "oMf")
+        || acquire(args[2], &p, 0, 1, 0, "p_d") || acquire(args[3], &v, 0, 1, 0, "velocity")
+        || acquire(args[4], &out, 1, 1, 0, "out"))
+        goto done;
+    Mat Jm = mat(&J);
+    if (Jm.m != 6 || !is_4x4(&f, "oMf")) {
+        if (!PyErr_Occurred()) PyErr_SetString(PyExc_ValueError, "J6 must have 6 rows");
+        goto done;
+    }
+    Py_ssize_t size = length(&out), vs = length(&v);
+    Py_ssize_t d = size / (Jm.n + 3);
+    if (length(&p) != 3 || d < 1 || d > 3 || d * (Jm.n + 3) != size || (vs != 0 && vs < 3)) {
+        PyErr_SetString(PyExc_ValueError, "position_rows: p_d must have shape (3,), velocity "
+                        "(0,), (3,) or (6,), and out d (n + 3) entries for 1 to 3 axes");
+        goto done;
+    }
+    double *pv = vec(&p, "p_d"), *vv = vs ? vec(&v, "velocity") : (double *)v.view.buf;
+    double *ov = out_vec(&out, "out");
+    if (!pv || (vs && !vv) || !ov) goto done;
+    for (Py_ssize_t r = 0; r < d; r++)
+        if (!(ov[r] >= 0 && ov[r] <= 2)) {
+            PyErr_SetString(PyExc_ValueError, "position_rows: out must start with axes 0-2");
+            goto done;
+        }
+    position_rows_c(Jm, mat(&f), pv, vv, vs, ov, size);
+    result = Py_NewRef(Py_None);
+done:
+    release(&J); release(&f); release(&p); release(&v); release(&out);
+    return result;
+}
+
+/* search_iteration(J, e, q, J_cur, e_cur, q_cur, limits, work, state, step) -> int */
+static PyObject *py_search_iteration(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (!nargs_ok(nargs, 10, "search_iteration")) return NULL;
+    Arg J = {0}, e = {0}, q = {0}, Jc = {0}, ec = {0}, qc = {0}, lim = {0}, work = {0},
+        state = {0}, step = {0};
+    PyObject *result = NULL;
+    if (acquire(args[0], &J, 0, 2, 0, "J") || acquire(args[1], &e, 0, 1, 0, "e")
+        || acquire(args[2], &q, 0, 1, 0, "q") || acquire(args[3], &Jc, 1, 2, 0, "J_cur")
+        || acquire(args[4], &ec, 1, 1, 0, "e_cur") || acquire(args[5], &qc, 1, 1, 0, "q_cur")
+        || acquire(args[6], &lim, 0, 2, 0, "limits") || acquire(args[7], &work, 1, 1, 0, "work")
+        || acquire(args[8], &state, 1, 1, 0, "state") || acquire(args[9], &step, 1, 1, 0, "step"))
+        goto done;
+    Mat Jm = mat(&J);
+    double *Jcv = out_mat(&Jc, "J_cur"), *limv = out_mat(&lim, "limits");
+    double *ev = vec(&e, "e"), *qv = vec(&q, "q"), *ecv = out_vec(&ec, "e_cur");
+    double *qcv = out_vec(&qc, "q_cur"), *wv = out_vec(&work, "work");
+    double *sv = out_vec(&state, "state"), *stv = out_vec(&step, "step");
+    if (!Jcv || !limv || !ev || !qv || !ecv || !qcv || !wv || !sv || !stv) goto done;
+    if (Jc.view.shape[0] != Jm.m || Jc.view.shape[1] != Jm.n || length(&e) != Jm.m
+        || length(&ec) != Jm.m || length(&step) != Jm.n || length(&qc) != length(&q)
+        || lim.view.shape[0] != 4 || length(&state) < 8) {
+        PyErr_SetString(PyExc_ValueError, "search_iteration: the arrays do not fit J's shape");
+        goto done;
+    }
+    if (check_work(&work, Jm.m, Jm.n)) goto done;
+    int status = search_iteration_c(Jm, ev, qv, length(&q), Jcv, ecv, qcv, limv,
+                                    lim.view.shape[1], wv, sv, stv);
+    result = PyLong_FromLong(status);
+done:
+    release(&J); release(&e); release(&q); release(&Jc); release(&ec); release(&qc);
+    release(&lim); release(&work); release(&state); release(&step);
+    return result;
+}
+
+static PyMethodDef methods[] = {
+    {"transpose_step", (PyCFunction)(void (*)(void))py_transpose_step, METH_FASTCALL,
+     "transpose_step(J, e, ff, q, work, step) -> status: one step of a Jacobian-transpose-type "
+     "CLIK law (JT eq. 10, SJT eq. 21, the damped forms), then the limits."},
+    {"least_squares_step", (PyCFunction)(void (*)(void))py_least_squares_step, METH_FASTCALL,
+     "least_squares_step(J, e, ff, q, work, step) -> status: one step of the pseudoinverse "
+     "(eq. 8) or damped least-squares CLIK law, then the limits."},
+    {"clamp_pass", (PyCFunction)(void (*)(void))py_clamp_pass, METH_FASTCALL,
+     "clamp_pass(q, step, q_index, v_index, lower, upper, speeds, dt, fixed, fixed_step) -> "
+     "count: fix the joints that q + step takes out of their range."},
+    {"cholesky_solve", (PyCFunction)(void (*)(void))py_cholesky_solve, METH_FASTCALL,
+     "cholesky_solve(A, shift, rhs, out) -> bool: out = (A + shift I)^-1 rhs (A overwritten)."},
+    {"loop_bound", (PyCFunction)(void (*)(void))py_loop_bound, METH_FASTCALL,
+     "loop_bound(A, products, B, C) -> float: an upper bound of lambda_max of the PSD A."},
+    {"symmetric_eigen", (PyCFunction)(void (*)(void))py_symmetric_eigen, METH_FASTCALL,
+     "symmetric_eigen(A, V): Jacobi eigen-decomposition in place (diag A, columns of V)."},
+    {"frame_velocity", (PyCFunction)(void (*)(void))py_frame_velocity, METH_FASTCALL,
+     "frame_velocity(oMf, oMd, velocity, out): a desired twist seen from the frame (LOCAL)."},
+    {"rotation_defect", (PyCFunction)(void (*)(void))py_rotation_defect, METH_FASTCALL,
+     "rotation_defect(M) -> float: max |R^T R - I| of a 4x4 (inf: not rigid, nan: not finite)."},
+    {"position_rows", (PyCFunction)(void (*)(void))py_position_rows, METH_FASTCALL,
+     "position_rows(J6, oMf, p_d, velocity, out): a position task's rows into out."},
+    {"search_iteration", (PyCFunction)(void (*)(void))py_search_iteration, METH_FASTCALL,
+     "search_iteration(J, e, q, J_cur, e_cur, q_cur, limits, work, state, step) -> status: "
+     "one Levenberg-Marquardt iteration of solve()."},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef module = {
+    PyModuleDef_HEAD_INIT, "_kernels",
+    "The compiled inner loops of sjt-pin (see sjt_pin/kernels/__init__.py).", -1, methods,
+};
+
+PyMODINIT_FUNC PyInit__kernels(void)
+{
+    PyObject *m = PyModule_Create(&module);
+    if (!m) return NULL;
+    /* the layout this file was compiled for, checked against kernels/layout.py by a test */
+    if (PyModule_AddIntConstant(m, "PARAMETER_SLOTS", P_COUNT) < 0
+        || PyModule_AddIntConstant(m, "INFO", INFO) < 0
+        || PyModule_AddIntConstant(m, "INFO_SIZE", I_COUNT) < 0
+        || PyModule_AddIntConstant(m, "P_HAS_FF", P_HAS_FF) < 0
+        || PyModule_AddIntConstant(m, "P_SCRATCH", P_SCRATCH) < 0
+        || PyModule_AddIntConstant(m, "I_REGULAR", I_REGULAR) < 0) {
+        Py_DECREF(m);
+        return NULL;
+    }
+    return m;
+}
