@@ -45,19 +45,14 @@ def demo(args: argparse.Namespace) -> int:
         print(f"{time.perf_counter() - start:.1f} s", flush=True)
         runs[name] = (sc.robot, {})
         for method in args.method:
-            warm, solver = (make_solver(method, sc.robot, gain="auto", dt=DEMO_DT,
-                                        task=sc.task) for _ in range(2))
-            start = time.perf_counter()  # a throwaway step compiles the kernels (first run)
-            warm.step(sc.q0, *sc.trajectory.sample(0.0))
-            compiled = time.perf_counter() - start
+            solver = make_solver(method, sc.robot, gain="auto", dt=DEMO_DT, task=sc.task)
             start = time.perf_counter()
             log = track(solver, sc.trajectory, sc.q0)
             seconds = time.perf_counter() - start
             rows.append((name, method, log, seconds))
             runs[name][1][method] = log
-            note = f" (kernels compiled first: {compiled:.1f} s)" if compiled > 0.5 else ""
             print(f"  [{len(rows)}/{total}] {name} {method}: {len(log)} steps in "
-                  f"{seconds:.2f} s, max error {log.max_error:.2g}{note}", flush=True)
+                  f"{seconds:.2f} s, max error {log.max_error:.2g}", flush=True)
     print(f"\nErrors in m/rad, joint speeds in rad/s (gain = auto)\n{_table(rows)}", flush=True)
     if args.no_viewer:
         return 0

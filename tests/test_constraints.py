@@ -56,6 +56,25 @@ class Floor(Limit):
         return -J_z[None, :], np.array([self.gain * (z - self.z_min) / motion.dt])
 
 
+def pinv_solve(J, xdot):
+    """The pseudoinverse's re-solve on the free joints, the held ones at their velocities."""
+
+    def solve(free, held):
+        held = np.zeros(J.shape[1]) if held is None else held
+        out = np.zeros(J.shape[1])
+        out[free] = np.linalg.pinv(J[:, free]) @ (xdot - J @ held)
+        return out
+
+    return solve
+
+
+def qp(objective, gradient, x0, lower, upper, **constraint):
+    """scipy's SLSQP on a box and one block of constraints, to tight tolerance."""
+    return minimize(objective, x0, jac=gradient, method="SLSQP",
+                    bounds=list(zip(lower, upper, strict=True)), constraints=[constraint],
+                    options={"ftol": 1e-14, "maxiter": 500})
+
+
 def test_a_method_of_ones_own_keeps_the_urdf_limits(ur5):
     q = np.array([0.3, -1.2, 3.0, -1.8, -1.5, 0.2])
     target = ur5.fk(q) * pin.SE3(np.eye(3), np.array([0.0, 0.0, 0.08]))  # elbow outward
@@ -117,18 +136,10 @@ def test_the_stage_equals_a_reference_qp_where_one_joint_saturates():
         else:
             lower[k] = 0.5 * dq0[k]
 
-        def solve(free, held):
-            held = np.zeros(7) if held is None else held
-            out = np.zeros(7)
-            out[free] = np.linalg.pinv(J[:, free]) @ (xdot - J @ held)
-            return out
-
-        outcome = saturate(dq0, solve, lower, upper, np.ones(7, dtype=bool), lambda: J)
-        reference = minimize(lambda x: x @ x, dq0, jac=lambda x: 2 * x, method="SLSQP",
-                             bounds=list(zip(lower, upper, strict=True)),
-                             constraints=[{"type": "eq", "fun": lambda x: J @ x - xdot,
-                                           "jac": lambda x: J}],
-                             options={"ftol": 1e-14, "maxiter": 500})
+        outcome = saturate(dq0, pinv_solve(J, xdot), lower, upper, np.ones(7, dtype=bool),
+                           lambda J=J: J)
+        reference = qp(lambda x: x @ x, lambda x: 2 * x, dq0, lower, upper, type="eq",
+                       fun=lambda x, J=J, xdot=xdot: J @ x - xdot, jac=lambda x, J=J: J)
         if not (reference.success and np.all(np.abs(reference.x) < 9.9)):
             continue  # another bound became active: not the case under test
         assert outcome.scale == 1.0
@@ -146,13 +157,8 @@ def test_an_infeasible_task_is_scaled_along_its_direction():
         dq0 = np.linalg.pinv(J) @ xdot
         lower, upper = np.full(5, -1.0), np.full(5, 1.0)
 
-        def solve(free, held):
-            held = np.zeros(5) if held is None else held
-            out = np.zeros(5)
-            out[free] = np.linalg.pinv(J[:, free]) @ (xdot - J @ held)
-            return out
-
-        outcome = saturate(dq0, solve, lower, upper, np.ones(5, dtype=bool), lambda: J)
+        outcome = saturate(dq0, pinv_solve(J, xdot), lower, upper, np.ones(5, dtype=bool),
+                           lambda J=J: J)
         assert np.all(outcome.dq >= lower - 1e-12) and np.all(outcome.dq <= upper + 1e-12)
         made = J @ outcome.dq
         if outcome.scale < 1:
@@ -171,11 +177,9 @@ def test_the_row_projection_meets_every_row_at_least_cost():
         assert np.all(A @ out <= b + 1e-9) and np.all(np.abs(out) <= 2 + 1e-12)
         H = Jw.T @ Jw
         H += np.trace(H) / n * np.eye(n)
-        ref = minimize(lambda x: (x - dq) @ H @ (x - dq), np.zeros(n), method="SLSQP",
-                       jac=lambda x: 2 * H @ (x - dq),
-                       bounds=list(zip(lower, upper, strict=True)),
-                       constraints=[{"type": "ineq", "fun": lambda x: b - A @ x,
-                                     "jac": lambda x: -A}], options={"ftol": 1e-14})
+        ref = qp(lambda x, H=H, dq=dq: (x - dq) @ H @ (x - dq),
+                 lambda x, H=H, dq=dq: 2 * H @ (x - dq), np.zeros(n), lower, upper,
+                 type="ineq", fun=lambda x, A=A, b=b: b - A @ x, jac=lambda x, A=A: -A)
         cost = (out - dq) @ H @ (out - dq)
         assert cost <= (ref.x - dq) @ H @ (ref.x - dq) + 1e-7
 

@@ -9,7 +9,7 @@ A probe cell appended to the executed copy reports where ``sjt_pin`` came from a
 ``SJT_PIN_QUICK=1`` shortens the sweeps (same code).
 
 The same check runs on a small script, and on that script with a stale ``sjt_pin/`` folder
-(numba's cache files, no ``__init__.py``) on its path: such a namespace package shadows an
+(left-over cache files, no ``__init__.py``) on its path: such a namespace package shadows an
 editable install for every process outside the checkout, and the check must catch it.
 """
 
@@ -26,8 +26,8 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 NOTEBOOKS = sorted((ROOT / "notebooks").glob("*.ipynb"))
-CELL_TIMEOUT = 600  # s per cell: generous, a cold numba cache compiles the kernels first
-#: s per notebook under SJT_PIN_QUICK=1 with a warm numba cache: about 10-20 s on 2 cores;
+CELL_TIMEOUT = 600  # s per cell: generous, for a loaded machine
+#: s per notebook under SJT_PIN_QUICK=1: about 10-20 s on 2 cores;
 #: the first run on a machine also compiles the kernels (about 35 s more, in the first notebook)
 TIME_LIMIT = 120
 #: code that draws a matplotlib figure: a cell with it must show an image
@@ -196,7 +196,7 @@ def test_a_script_outside_the_checkout_uses_the_installed_package(tmp_path):
 
 
 def test_the_check_catches_a_namespace_leftover(tmp_path):
-    """A ``sjt_pin/`` folder of numba cache files (no ``__init__.py``) on the path shadows the
+    """A ``sjt_pin/`` folder of left-over cache files (no ``__init__.py``) on the path shadows the
     editable install: ``sjt_pin`` imports as an empty namespace package. The check fails."""
     site, work = tmp_path / "site", tmp_path / "work"
     cache = site / "sjt_pin" / "kernels" / "__pycache__"
