@@ -51,6 +51,9 @@ class SaddleEscape:
     DEFAULT_SPEED = 1.0  #: rad/s or m/s for joints without a URDF speed limit
     RAMP = 0.1  #: s to ramp the escape velocity up, and down
     MAX_TRAVEL = 0.5  #: rad: an escape ends after moving this far along its direction
+    #: an escape ramps down once |e| exceeds its value at the start by this fraction, and
+    #: stops at once past twice that: it never raises the error by more than about 10 %
+    GROWTH = 0.05
 
     def __init__(self, model: pin.Model, chain: np.ndarray, speed_limits: np.ndarray,
                  position_limit=None):
@@ -73,6 +76,7 @@ class SaddleEscape:
         self._top = 0.0
         self._travel = 0.0
         self._leaving = False
+        self._start_error: float | None = None
         #: escapes started since construction (or the last reset)
         self.escapes = 0
 
@@ -145,14 +149,25 @@ class SaddleEscape:
         self.speed = 0.0
         self._travel = 0.0
         self._leaving = False
+        self._start_error = None
         self.escapes += 1
         return True
 
-    def velocity(self, regular_speed: float, dt: float) -> np.ndarray | None:
+    def velocity(self, regular_speed: float, dt: float, e_sq: float = 0.0
+                 ) -> np.ndarray | None:
         """The escape's joint velocity for this step (rad/s, m/s), or ``None`` once it has
-        ramped down; ``regular_speed`` is the norm of the regular update's joint velocity."""
+        ramped down; ``regular_speed`` is the norm of the regular update's joint velocity and
+        ``e_sq`` the squared task error of the step (the escape yields if it grows)."""
         if self.direction is None:
             return None
+        if self._start_error is None:
+            self._start_error = e_sq
+        elif e_sq > (1.0 + 2.0 * self.GROWTH) ** 2 * self._start_error:
+            self.direction, self.speed = None, 0.0  # making things worse: stop now
+            self._count, self._wait = 0, self.WINDOW
+            return None
+        elif e_sq > (1.0 + self.GROWTH) ** 2 * self._start_error:
+            self._leaving = True
         accel = self._top / self.RAMP
         if not self._leaving and (regular_speed >= self.speed > 0.0
                                   or self._travel >= self.MAX_TRAVEL):

@@ -378,7 +378,8 @@ class Solver:
             if (status & K.STALLED and not escape.active
                     and escape.observe(self._count, self._info[K.I_E_SQ])):
                 escape.test(q, self._weighted_rows(targets))
-            velocity = escape.velocity(float(self._info[K.I_REGULAR]), dt)
+            velocity = escape.velocity(float(self._info[K.I_REGULAR]), dt,
+                                       float(self._info[K.I_E_SQ]))
             if velocity is None:
                 self._work[K.P_ESCAPING] = 0.0
                 self._escape_velocity[:] = 0.0

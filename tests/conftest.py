@@ -1,7 +1,16 @@
+import os
+
 import numpy as np
 import pytest
+from hypothesis import settings
 
 import sjt_pin as sjt
+
+# Property tests are derandomised by default, so a commit that changed nothing cannot fail CI;
+# `pytest --hypothesis-profile=fuzz` (or HYPOTHESIS_PROFILE=fuzz) draws new examples instead.
+settings.register_profile("ci", derandomize=True, print_blob=True)
+settings.register_profile("fuzz", derandomize=False, print_blob=True)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 
 
 @pytest.fixture(scope="session")

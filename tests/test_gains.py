@@ -3,7 +3,7 @@
 import numpy as np
 import pinocchio as pin
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 import sjt_pin as sjt
@@ -52,6 +52,7 @@ def test_auto_gain_stays_below_the_stability_bound(seed, joints, method, positio
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(seed=st.integers(0, 2**32 - 1), joints=st.integers(3, 8),
        method=st.sampled_from(["sjt", "sjt transpose", "jt"]))
+@example(seed=33554432, joints=3, method="sjt transpose")  # escapes that made it 60x worse
 def test_the_loop_with_the_auto_gain_is_stable(seed, joints, method):
     robot = random_chain(seed, joints)
     rng = np.random.default_rng(seed)
