@@ -42,7 +42,7 @@ from .methods import Method
 from .robot import Robot
 from .stack import TaskStack, normalise_tasks
 from .tasks import PostureTask, Task
-from .validation import positive, raise_non_finite_targets
+from .validation import period, raise_non_finite_targets
 
 _F64 = np.dtype(np.float64)
 _NONE_CLAMPED = np.zeros(0, dtype=np.int64)
@@ -175,7 +175,7 @@ class Solver:
         n = robot.nv
         self._model = robot.model
         self._q_shape = (robot.nq,)
-        self._dt = positive(dt, "dt", "s")
+        self._dt = period(dt)
         self._kernel = method.kernel if method.kernel is not None else method.python_step
         # the constraint stage: the URDF's position and speed limits, acceleration and jerk
         # limits when given, and the user's limits
@@ -269,7 +269,7 @@ class Solver:
 
     @dt.setter
     def dt(self, dt: float) -> None:
-        self._dt = positive(dt, "dt", "s")
+        self._dt = period(dt)
         self._configure()
 
     @property

@@ -101,6 +101,15 @@ def positive(value, name: str, unit: str = "") -> float:
     return number
 
 
+def period(value, name: str = "dt") -> float:
+    """A control period in s: a positive number of normal size (a subnormal ``dt`` makes
+    ``1 / dt`` overflow and the first step NaN)."""
+    number = positive(value, name, "s")
+    if number < 2.2250738585072014e-308:  # sys.float_info.min
+        raise ValueError(f"{name} must be a positive number of normal size in s, got {value!r}")
+    return number
+
+
 def real_number(value, name: str, unit: str = "") -> float:
     """``value`` as a float, or ``TypeError`` naming ``name`` (no bool, str, None or complex)."""
     if isinstance(value, (bool, np.bool_, str, bytes)) or value is None or np.iscomplexobj(value):

@@ -72,6 +72,7 @@ def test_missing_and_malformed_urdf_name_the_file(tmp_path):
     ({"dt": 0.0}, "dt must be a positive number in s"),
     ({"dt": -1e-3}, "dt must be a positive number"),
     ({"dt": np.nan}, "dt must be a positive number"),
+    ({"dt": 5e-324}, "dt must be a positive number of normal size"),  # subnormal: NaN steps
     ({"gain": -1.0}, "gain must be a finite number >= 0"),
     ({"gain": np.inf}, "gain must be a finite number >= 0"),
     ({"gain": "fast"}, "gain must be a number, a sequence or 'auto'"),
