@@ -80,6 +80,7 @@ class Search:
         self.layout = layout = K.Layout(m, n, 0)
         self.work = work = layout.allocate()
         layout.sqrt_weight(work)[:] = stack.sqrt_weight
+        work[K.P_IDENTITY_ROWS] = stack.identity_rows
         layout.joint_mask(work)[:] = stack.chain
         work[K.P_MU] = MU  # the search's own damping: DLS's tracking damping would stall it
         work[K.P_COL_TOL] = getattr(method, "column_tol", COLUMN_TOL)

@@ -220,6 +220,7 @@ class Solver:
         self._work = work = layout.allocate()
         self._info = layout.info(work)
         layout.sqrt_weight(work)[:] = stack.sqrt_weight
+        work[K.P_IDENTITY_ROWS] = stack.identity_rows  # a posture task's: solved linear in n
         self._mask = layout.joint_mask(work)
         self._mask[:] = stack.chain
         if box is not None:

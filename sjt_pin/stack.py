@@ -82,6 +82,10 @@ class TaskStack:
         #: rows of the tasks that take targets (a per-row gain has one entry for each)
         self.target_dim = sum(t.dim for t in self.targeted)
         self.posture_dim = self.dim - self.target_dim
+        #: trailing rows that are rows of the identity (a posture task's): the kernels solve
+        #: the stacked system as diagonal plus low rank, linear in nv
+        self.identity_rows = (nv if len(self.tasks) > len(self.targeted)
+                              and isinstance(self.tasks[-1], PostureTask) else 0)
         bounds = np.cumsum([0, *self.dims])
         self.slices = [slice(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
         self.J = np.zeros((self.dim, nv))

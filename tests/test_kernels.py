@@ -225,3 +225,43 @@ def test_strided_inputs_give_the_contiguous_results():
     strided, _ = run(K.least_squares_step, np.asfortranarray(J), np.c_[e, e][:, 0],
                      np.c_[ff, ff][:, 0], rows, mask, ff_mode=1.0)
     np.testing.assert_array_equal(strided, contiguous)
+
+
+@pytest.mark.parametrize("joints", [7, 30, 100])
+@pytest.mark.parametrize("method, options", [("sjt", {}), ("sjt", {"feedback": "transpose"}),
+                                             ("dls", {}), ("jp", {})])
+def test_posture_rows_solved_linear_in_n_give_the_dense_solution(joints, method, options):
+    """A posture task's identity rows make the normal matrix diagonal plus rank m_t: the
+    Woodbury solve equals the dense one (and the loop bound stays an upper bound)."""
+    import sjt_pin as sjt
+
+    from .test_pipeline import random_chain
+
+    robot = random_chain(joints, joints)
+    rng = np.random.default_rng(joints)
+    solver = sjt.make_solver(method, robot, posture=sjt.PostureTask(weight=1e-2),
+                             position_limits=False, velocity_limits=False, **options)
+    stack = solver.stack
+    assert stack.identity_rows == robot.nv
+    q = robot.random_configuration(rng)
+    target = robot.fk(robot.random_configuration(rng))
+    targets, velocities = stack.targets(target, rng.normal(size=6))
+    J, e, ff = (a.copy() for a in stack.evaluate(q, targets, velocities))
+    kernel = solver.method.kernel
+    work = solver._work.copy()  # noqa: SLF001 (the test compares two settings of one kernel)
+    work[K.P_HAS_FF] = 1.0
+    transpose_auto = options.get("feedback") == "transpose"
+    if transpose_auto:  # its auto gain divides by a bound that the block form computes anew
+        auto = work.copy()
+        kernel(J, e, ff, q, auto, np.zeros(robot.nv))
+        Jw = stack.sqrt_weight[:, None] * J
+        alpha = mappings.scaling_factors(Jw, length=solver.method.length)
+        lam = np.linalg.eigvalsh((Jw * alpha) @ Jw.T)[-1]
+        assert auto[K.INFO + K.I_LOOP] >= lam * (1 - 1e-9)  # still an upper bound
+        work[K.P_GAIN_MODE] = K.GAIN_FIXED  # the same fixed gain for both solves below
+    dense = work.copy()
+    dense[K.P_IDENTITY_ROWS] = 0.0
+    fast_step, dense_step = np.zeros(robot.nv), np.zeros(robot.nv)
+    assert kernel(J, e, ff, q, work, fast_step) == kernel(J, e, ff, q, dense, dense_step)
+    # both to rounding (the dense Cholesky of a 100 x 100 with weights 1e-2 is the worse)
+    np.testing.assert_allclose(fast_step, dense_step, atol=1e-8 * np.abs(dense_step).max())

@@ -23,9 +23,10 @@
 enum {
     P_DT, P_GAIN_MODE, P_GAIN_ARG, P_FF_MODE, P_MU, P_COL_TOL, P_SCALED, P_RCOND, P_LENGTH2,
     P_FB_MODE, P_LM, P_ERROR_ROWS, P_STALL_RATIO, P_STALL_ERROR, P_ROWS, P_MASK, P_BOX,
-    P_BOX_COUNT, P_SPEED, P_SCRATCH, P_EXTRA, P_CLAMPED, P_ESCAPING, P_HAS_FF, P_COUNT
+    P_BOX_COUNT, P_SPEED, P_SCRATCH, P_EXTRA, P_CLAMPED, P_ESCAPING, P_HAS_FF,
+    P_IDENTITY_ROWS, P_COUNT
 };
-#define INFO 24
+#define INFO 25
 enum { I_E_SQ, I_FF_SQ, I_GAIN, I_LOOP, I_STALL, I_TRACE, I_EW_SQ, I_SCALE, I_REGULAR, I_COUNT };
 #define GAIN_FIXED 0
 #define FF_TRANSPOSE 1
@@ -201,6 +202,47 @@ static double *matrices(double *work, Py_ssize_t m, Py_ssize_t n)
     return work + (Py_ssize_t)work[P_SCRATCH] + 4 * m + 6 * n;
 }
 
+/* Rows that end with n rows of the identity (a posture task, weighted by sw): the n x n normal
+ * matrix is diagonal plus rank m_t, Dg + U U^T with U (n x m_t), and the Woodbury identity
+ * (Dg + U U^T)^-1 = Dg^-1 - Dg^-1 U (I + U^T Dg^-1 U)^-1 U^T Dg^-1 solves it with an m_t x m_t
+ * Cholesky: linear in n. x = (Dg + U U^T)^-1 rhs; entries with Dg = 0 are left out (x = 0).
+ * U, Dg live in `space` (n m_t + m_t^2 + n + 2 m_t doubles). */
+static void woodbury(const double *U, const double *Dg, Py_ssize_t n, Py_ssize_t mt,
+                     const double *rhs, double *x, double *space)
+{
+    double *S = space, *t = space + mt * mt, *t2 = t + mt;
+    for (Py_ssize_t j = 0; j < n; j++) x[j] = Dg[j] > 0.0 ? rhs[j] / Dg[j] : 0.0;
+    for (Py_ssize_t a = 0; a < mt; a++) {
+        double acc = 0.0;
+        for (Py_ssize_t j = 0; j < n; j++) acc += U[j * mt + a] * x[j];
+        t[a] = acc;
+        for (Py_ssize_t b = 0; b <= a; b++) {
+            double g = a == b ? 1.0 : 0.0;
+            for (Py_ssize_t j = 0; j < n; j++)
+                if (Dg[j] > 0.0) g += U[j * mt + a] * U[j * mt + b] / Dg[j];
+            S[a * mt + b] = S[b * mt + a] = g;
+        }
+    }
+    cholesky_solve_c(S, mt, 0.0, t, t2);
+    for (Py_ssize_t j = 0; j < n; j++) {
+        if (!(Dg[j] > 0.0)) continue;
+        double acc = 0.0;
+        for (Py_ssize_t a = 0; a < mt; a++) acc += U[j * mt + a] * t2[a];
+        x[j] -= acc / Dg[j];
+    }
+}
+
+/* whether the rows end with n identity rows and the Woodbury scratch fits in the matrices'
+ * space (3 p^2 doubles, p = n here) */
+static Py_ssize_t identity_block(const double *work, Py_ssize_t m, Py_ssize_t n)
+{
+    Py_ssize_t ident = (Py_ssize_t)work[P_IDENTITY_ROWS];
+    if (ident != n || m <= n) return -1;
+    Py_ssize_t mt = m - n;
+    if (n * mt + mt * mt + 2 * mt + n > 3 * n * n) return -1;
+    return mt;
+}
+
 /* step += dt D J_w^T (J_w D J_w^T + (mu^2 + extra) I)^-1 (sw v) (m x m solve when m <= n), or
  * the same as dt sqrt(D) (G + (mu^2 + extra) I)^-1 sqrt(D) J_w^T (sw v) (n x n) */
 static void damped_solve(Mat J, const double *v, const double *sw, const double *alpha,
@@ -210,6 +252,24 @@ static void damped_solve(Mat J, const double *v, const double *sw, const double 
     double *A = matrices(work, m, n);
     double mu2 = work[P_MU] * work[P_MU] + extra;
     Py_ssize_t start = (Py_ssize_t)work[P_SCRATCH] + m + 3 * n;
+    Py_ssize_t mt = identity_block(work, m, n);
+    if (mt >= 0) {  /* task rows, then posture rows: diagonal plus rank m_t */
+        double *rhs = work + start, *x = work + start + n;
+        double *U = A, *Dg = A + n * mt, *space = Dg + n;
+        for (Py_ssize_t j = 0; j < n; j++) {
+            double root = sqrt(alpha[j]), acc = 0.0;
+            for (Py_ssize_t a = 0; a < mt; a++) {
+                U[j * mt + a] = root * sw[a] * AT(J, a, j);
+                acc += sw[a] * sw[a] * AT(J, a, j) * v[a];
+            }
+            double wp = sw[mt + j] * sw[mt + j];
+            Dg[j] = alpha[j] * wp + mu2;
+            rhs[j] = root * (acc + wp * v[mt + j]);
+        }
+        woodbury(U, Dg, n, mt, rhs, x, space);
+        for (Py_ssize_t j = 0; j < n; j++) step[j] += dt * sqrt(alpha[j]) * x[j];
+        return;
+    }
     gram(J, sw, alpha, m <= n, A);
     if (m <= n) {
         double *rhs = work + start, *y = work + start + m;
@@ -286,10 +346,23 @@ static Core transpose_core(Mat J, const double *e, const double *ff, int has_ff,
         gain = work[P_GAIN_ARG] / dt;
     } else {
         double *A = matrices(work, m, n);
-        Py_ssize_t p = m < n ? m : n;
-        gram(J, sw, s, m <= n, A);
-        bound = loop_bound_c(A, p, BOUND_PRODUCTS, A + p * p, A + 2 * p * p)
-                + sqrt(r.ew_sq) * curvature;
+        Py_ssize_t mt = (Py_ssize_t)work[P_IDENTITY_ROWS] == n && m > n ? m - n : -1;
+        if (mt >= 0) {
+            /* lambda_max of the stacked loop matrix <= the task block's + the posture block's
+             * (diagonal: s_j w_j), for PSD block matrices */
+            Mat task = {J.p, mt, n, J.s0, J.s1};
+            Py_ssize_t p = mt < n ? mt : n;
+            double posture = 0.0;
+            for (Py_ssize_t j = 0; j < n; j++)
+                posture = dmax(posture, s[j] * sw[mt + j] * sw[mt + j]);
+            gram(task, sw, s, mt <= n, A);
+            bound = loop_bound_c(A, p, BOUND_PRODUCTS, A + p * p, A + 2 * p * p) + posture;
+        } else {
+            Py_ssize_t p = m < n ? m : n;
+            gram(J, sw, s, m <= n, A);
+            bound = loop_bound_c(A, p, BOUND_PRODUCTS, A + p * p, A + 2 * p * p);
+        }
+        bound += sqrt(r.ew_sq) * curvature;
         gain = bound > 0.0 ? work[P_GAIN_ARG] / (dt * bound) : 0.0;
     }
     if (has_ff)
@@ -388,6 +461,26 @@ static Core least_squares_core(Mat J, const double *e, const double *ff, int has
             v[i] += sw[i] * ff[i];
             out.ff_sq += ff[i] * ff[i];
         }
+    }
+    Py_ssize_t mt = identity_block(work, m, n);
+    if (mt >= 0) {  /* task rows, then posture rows: diagonal plus rank m_t */
+        double damping = work[P_MU];
+        double *U = A, *Dg = A + n * mt, *space = Dg + n;
+        for (Py_ssize_t j = 0; j < n; j++) {
+            double acc = 0.0;
+            for (Py_ssize_t a = 0; a < mt; a++) {
+                U[j * mt + a] = mask[j] * sw[a] * AT(J, a, j);
+                acc += sw[a] * AT(J, a, j) * v[a];
+            }
+            Dg[j] = mask[j] * sw[mt + j] * sw[mt + j] + damping * damping;
+            r[j] = mask[j] * (acc + sw[mt + j] * v[mt + j]);
+        }
+        woodbury(U, Dg, n, mt, r, sol, space);
+        for (Py_ssize_t j = 0; j < n; j++) step[j] = dt * mask[j] * sol[j];
+        out.gain = gain;
+        out.bound = 1.0;
+        out.stall = 1.0;
+        return out;
     }
     gram(J, sw, mask, use_rows, A);
     if (!use_rows)

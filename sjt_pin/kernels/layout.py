@@ -13,9 +13,10 @@ import numpy as np
 # -- parameter slots (work[P_*]) ----------------------------------------------------------------
 (P_DT, P_GAIN_MODE, P_GAIN_ARG, P_FF_MODE, P_MU, P_COL_TOL, P_SCALED, P_RCOND, P_LENGTH2,
  P_FB_MODE, P_LM, P_ERROR_ROWS, P_STALL_RATIO, P_STALL_ERROR, P_ROWS, P_MASK, P_BOX,
- P_BOX_COUNT, P_SPEED, P_SCRATCH, P_EXTRA, P_CLAMPED, P_ESCAPING, P_HAS_FF) = range(24)
+ P_BOX_COUNT, P_SPEED, P_SCRATCH, P_EXTRA, P_CLAMPED, P_ESCAPING, P_HAS_FF,
+ P_IDENTITY_ROWS) = range(25)
 #: results (work[INFO + I_*])
-INFO = 24
+INFO = 25
 I_E_SQ, I_FF_SQ, I_GAIN, I_LOOP, I_STALL, I_TRACE, I_EW_SQ, I_SCALE, I_REGULAR = range(9)
 INFO_SIZE = 9
 HEADER = INFO + INFO_SIZE
