@@ -32,7 +32,7 @@ import numpy as np
 import pinocchio as pin
 
 from . import kernels as K
-from .constraints import ConstraintStage
+from .constraints import ConstraintStage, Outcome
 from .escape import SaddleEscape
 from .exceptions import GainWarning
 from .gains import Gain, as_gain
@@ -46,10 +46,9 @@ from .validation import period, raise_non_finite_targets
 
 _F64 = np.dtype(np.float64)
 _NONE_CLAMPED = np.zeros(0, dtype=np.int64)
-#: status bits that need Python: an error to raise, a stall for the escape to look at, a
-#: joint velocity outside the position or speed box (the constraint stage's work)
-_PYTHON = K.NON_FINITE | K.STALLED | K.CLAMPED | K.SCALED
-_BOXED = K.CLAMPED | K.SCALED
+#: status bits that need Python: an error to raise, a stall for the escape to look at (joints
+#: held at the position and speed bounds, a task scaled for them: the kernel's own work)
+_PYTHON = K.NON_FINITE | K.STALLED
 
 
 @dataclass(frozen=True)
@@ -356,7 +355,7 @@ class Solver:
         if status & _PYTHON or self._always:
             step = self._slow(status, q, J, e, ff, targets)
         # 4. integrate on the manifold; the record of the step (StepInfo) is built on demand
-        self._record, self._last = (J, e, step, status), None
+        self._record, self._last = (J, e, step, status, q), None
         if self._tracks_motion:
             motion, dt = self._motion, self._dt
             dq = step / dt
@@ -387,7 +386,7 @@ class Solver:
             else:  # the kernel adds it, within the limits, from the next step on
                 self._work[K.P_ESCAPING] = 1.0
                 self._escape_velocity[:] = velocity
-        if status & _BOXED or self._staged:
+        if self._staged:
             step = self._constrain(q, J, e, ff, status, step)
         self._update_slow()
         return step
@@ -422,10 +421,7 @@ class Solver:
             return out / dt
 
         everything = np.ones(chain.size, dtype=bool)
-        if status & _BOXED:
-            dq = solve(everything, None)
-        else:
-            dq = step / dt
+        dq = step / dt
         motion = self._motion
         motion.q = q
         if self.acceleration_limit is not None:
@@ -529,13 +525,15 @@ class Solver:
         """The :class:`StepInfo` of the last step (``None`` before the first)."""
         if self._last is None and self._record is not None:
             info, stack = self._info, self.stack
-            J, _, step, status = self._record
+            J, _, step, status, q = self._record
             gain = self._gain
             k = gain.value if gain.mode == K.GAIN_FIXED else float(info[K.I_GAIN])
             Jw = stack.sqrt_weight[:, None] * J * stack.chain
             alpha = self.method.scaling_factors(Jw)
             escaped = self._escaped[1] and self._escaped[0] == self._count
             outcome = self._outcome if self._outcome_count == self._count else None
+            if outcome is None and status & (K.CLAMPED | K.SCALED):
+                outcome = self._kernel_outcome(q, step, status)
             if outcome is None:
                 clamped, names, extras = _NONE_CLAMPED, (), {}
             else:
@@ -550,6 +548,28 @@ class Solver:
                 pose=stack.poses(), alpha=alpha, escaped=escaped,
                 clamped=clamped, clamped_joints=names, **extras)
         return self._last
+
+    def _kernel_outcome(self, q: np.ndarray, step: np.ndarray, status: int) -> Outcome:
+        """What the kernel's saturation on the position and speed bounds did (see
+        :func:`~sjt_pin.constraints.saturate`), in the stage's terms."""
+        dq = step / self._dt
+        scale = float(self._info[K.I_SCALE]) if status & K.SCALED else 1.0
+        pairs = []
+        position, velocity = self.position_limit, self.velocity_limit
+        at_position = np.zeros(dq.size, dtype=bool)
+        if position is not None:
+            x = q[position.q_index] + step[position.v_index]
+            edge = (np.abs(x - position.lower) <= 1e-12 * (1 + np.abs(position.lower)))
+            edge |= np.abs(x - position.upper) <= 1e-12 * (1 + np.abs(position.upper))
+            x0 = q[position.q_index]
+            outside = (x0 < position.lower) | (x0 > position.upper)
+            at_position[position.v_index[edge | outside]] = True
+        for j in range(dq.size):
+            if at_position[j]:
+                pairs.append(("position", self._v_names[j]))
+            elif velocity is not None and abs(dq[j]) >= velocity.limits[j] * (1 - 1e-12):
+                pairs.append(("velocity", self._v_names[j]))
+        return Outcome(dq, scale, self._clamped != 0.0, tuple(pairs))
 
     # -- safeguards ----------------------------------------------------------------------------
     def _check_gain(self, J: np.ndarray) -> None:

@@ -549,57 +549,201 @@ static int clamp_pass_c(const double *q, const double *step, const void *q_index
     return changed;
 }
 
-/* Fix the joints that q + step takes out of their range and solve again for the others;
- * returns CLAMPED or 0 */
-static int clamp_position(int kind, Mat J, const double *e, const double *ff, int has_ff,
-                          const double *q, const double *mask, double *work, double *step,
-                          int escaping)
+/* a bound counts as reached within this many rad/s (m/s) of it (sjt_pin/constraints.py) */
+#define BOUND_TOL 1e-12
+/* the free joints span the task space while the smallest singular value of their normalised
+ * task columns is above this fraction of the largest (Flacco's rank test) */
+#define RANK_TOL 1e-6
+
+/* The largest s in [0, 1] with lower <= b + s a <= upper on the free joints, and the joint
+ * that limits it (*k; -1 when s = 1 fits); -1 when no s fits (constraints.task_scale). */
+static double task_scale_c(const double *a, const double *b, const double *lo,
+                           const double *hi, const double *free_, Py_ssize_t n, Py_ssize_t *k)
+{
+    double s_max = INFINITY, s_min = -INFINITY;
+    Py_ssize_t arg = -1;
+    for (Py_ssize_t j = 0; j < n; j++) {
+        if (free_[j] == 0.0) continue;
+        double top, bottom;
+        if (a[j] > 0.0) {
+            top = (hi[j] - b[j]) / a[j];
+            bottom = (lo[j] - b[j]) / a[j];
+        } else if (a[j] < 0.0) {
+            top = (lo[j] - b[j]) / a[j];
+            bottom = (hi[j] - b[j]) / a[j];
+        } else {
+            top = b[j] < lo[j] - BOUND_TOL || b[j] > hi[j] + BOUND_TOL ? -INFINITY : INFINITY;
+            bottom = -INFINITY;
+        }
+        if (top < s_max) {
+            s_max = top;
+            arg = j;
+        }
+        s_min = dmax(s_min, bottom);
+    }
+    if (s_max >= 1.0 && s_min <= 1.0) {
+        *k = -1;
+        return 1.0;
+    }
+    *k = arg;
+    if (s_max < 0.0 || s_min > dmin(s_max, 1.0) + 1e-12) return -1.0;
+    return dmax(dmin(s_max, 1.0), 0.0);
+}
+
+/* whether the free joints' weighted task columns (the first error_rows rows), each scaled to
+ * unit norm, span R^rows; G and V are rows x rows scratch */
+static int spans_c(Mat J, const double *sw, Py_ssize_t rows, const double *free_, double *G,
+                   double *V, double *norm)
+{
+    Py_ssize_t n = J.n, count = 0;
+    for (Py_ssize_t j = 0; j < n; j++) {
+        double acc = 0.0;
+        if (free_[j] != 0.0)
+            for (Py_ssize_t i = 0; i < rows; i++) acc += (sw[i] * AT(J, i, j)) * (sw[i] * AT(J, i, j));
+        norm[j] = acc > 0.0 ? 1.0 / acc : 0.0;
+        if (acc > 0.0) count++;
+    }
+    if (count < rows) return 0;
+    for (Py_ssize_t a = 0; a < rows; a++)
+        for (Py_ssize_t b = 0; b <= a; b++) {
+            double acc = 0.0;
+            for (Py_ssize_t j = 0; j < n; j++)
+                acc += norm[j] * sw[a] * AT(J, a, j) * sw[b] * AT(J, b, j);
+            G[a * rows + b] = G[b * rows + a] = acc;
+        }
+    symmetric_eigen_c(G, V, rows);
+    double top = 0.0, bottom = INFINITY;
+    for (Py_ssize_t i = 0; i < rows; i++) {
+        top = dmax(top, G[i * rows + i]);
+        bottom = dmin(bottom, G[i * rows + i]);
+    }
+    return bottom > RANK_TOL * RANK_TOL * top;
+}
+
+/* a joint inside its range moves exactly onto a limit, never a rounding error past it */
+static void exact_position(const double *q, const double *work, double *step)
+{
+    Py_ssize_t box = (Py_ssize_t)work[P_BOX], count = (Py_ssize_t)work[P_BOX_COUNT];
+    for (Py_ssize_t c = 0; c < count; c++) {
+        Py_ssize_t v = (Py_ssize_t)work[box + count + c];
+        double x = q[(Py_ssize_t)work[box + c]];
+        double lower = work[box + 2 * count + c], upper = work[box + 3 * count + c];
+        if (lower <= x && x <= upper) step[v] = dmin(dmax(step[v], lower - x), upper - x);
+    }
+}
+
+/* The position (onto the range, or back into it at the recovery speed) and speed bounds of
+ * this step, then Saturation in the Null Space on them (sjt_pin/constraints.py, step 1): the
+ * joint that limits the task most is held at its bound and the method solved again on the
+ * others; when the free joints no longer span the task, the best candidate so far wins (the
+ * method's own velocity scaled down as a whole is the first). Writes step; returns CLAMPED
+ * when joints are held and SCALED when the task was scaled, 0 when nothing bounded it. */
+static int saturate_c(int kind, Mat J, const double *e, const double *ff, int has_ff,
+                      const double *q, const double *mask, double *work, double *step,
+                      int escaping)
 {
     Py_ssize_t m = J.m, n = J.n;
     double dt = work[P_DT];
     Py_ssize_t box = (Py_ssize_t)work[P_BOX], count = (Py_ssize_t)work[P_BOX_COUNT];
-    Py_ssize_t clamped = (Py_ssize_t)work[P_CLAMPED];
-    int outside = 0;
+    Py_ssize_t speed = (Py_ssize_t)work[P_SPEED], extra = (Py_ssize_t)work[P_EXTRA];
+    double *held = work + (Py_ssize_t)work[P_CLAMPED];
+    double *lo = held + n, *hi = lo + n, *a = hi + n, *b = a + n, *hv = b + n, *free_ = hv + n;
+    double *best_a = free_ + n, *best_b = best_a + n, *best_hv = best_b + n;
+    double *best_held = best_hv + n, *ff2 = best_held + n, *G = ff2 + m, *V = G + m * m;
+    double *norm = V + m * m;
+    const double *sw = work + (Py_ssize_t)work[P_ROWS];
+    Py_ssize_t rows = (Py_ssize_t)work[P_ERROR_ROWS];
+    for (Py_ssize_t j = 0; j < n; j++) {
+        double inv = work[speed + j], vmax = inv > 0.0 ? 1.0 / inv : INFINITY;
+        lo[j] = -vmax;
+        hi[j] = vmax;
+        held[j] = 0.0;
+    }
     for (Py_ssize_t c = 0; c < count; c++) {
-        double next = q[(Py_ssize_t)work[box + c]] + step[(Py_ssize_t)work[box + count + c]];
-        if (next > work[box + 3 * count + c] || next < work[box + 2 * count + c]) {
-            outside = 1;
-            break;
+        Py_ssize_t v = (Py_ssize_t)work[box + count + c];
+        double x = q[(Py_ssize_t)work[box + c]];
+        double lower = work[box + 2 * count + c], upper = work[box + 3 * count + c];
+        double back = work[box + 4 * count + c];
+        if (x > upper) {
+            lo[v] = hi[v] = -dmin(back, (x - upper) / dt);
+        } else if (x < lower) {
+            lo[v] = hi[v] = dmin(back, (lower - x) / dt);
+        } else {
+            lo[v] = dmax(lo[v], (lower - x) / dt);
+            hi[v] = dmin(hi[v], (upper - x) / dt);
         }
     }
-    if (!outside) {
-        for (Py_ssize_t j = 0; j < n; j++) work[clamped + j] = 0.0;
+    int inside = 1;
+    for (Py_ssize_t j = 0; j < n; j++) {
+        if (mask[j] == 0.0) {
+            lo[j] = dmin(lo[j], 0.0);
+            hi[j] = dmax(hi[j], 0.0);
+        }
+        a[j] = step[j] / dt;
+        b[j] = 0.0;
+        hv[j] = 0.0;
+        free_[j] = mask[j] != 0.0 ? mask[j] : 0.0;
+        if (a[j] < lo[j] - BOUND_TOL || a[j] > hi[j] + BOUND_TOL) inside = 0;
+    }
+    work[INFO + I_SCALE] = 1.0;
+    if (inside) {
+        exact_position(q, work, step);
         return 0;
     }
-    double *fixed = work + clamped, *fixed_step = work + clamped + n;
-    double *free_ = work + clamped + 2 * n, *ff2 = work + clamped + 3 * n;
-    Py_ssize_t extra = (Py_ssize_t)work[P_EXTRA];
-    for (Py_ssize_t j = 0; j < n; j++) {
-        fixed[j] = 0.0;
-        fixed_step[j] = 0.0;
-        free_[j] = mask[j];
-    }
-    for (Py_ssize_t round = 0; round < count; round++) {
-        if (!clamp_pass_c(q, step, work + box, work + box + count, float_at,
-                          work + box + 2 * count, work + box + 3 * count,
-                          work + box + 4 * count, count, dt, fixed, fixed_step))
-            break;
+    Py_ssize_t k;
+    double best = task_scale_c(a, b, lo, hi, free_, n, &k);
+    memcpy(best_a, a, (size_t)n * sizeof(double));
+    memcpy(best_b, b, (size_t)n * sizeof(double));
+    memcpy(best_hv, hv, (size_t)n * sizeof(double));
+    memcpy(best_held, held, (size_t)n * sizeof(double));
+    int any_held = 0;
+    for (Py_ssize_t round = 0; round < n; round++) {
+        double s = task_scale_c(a, b, lo, hi, free_, n, &k);
+        if (any_held && !spans_c(J, sw, rows, free_, G, V, norm)) break;
+        if (s > best) {
+            best = s;
+            memcpy(best_a, a, (size_t)n * sizeof(double));
+            memcpy(best_b, b, (size_t)n * sizeof(double));
+            memcpy(best_hv, hv, (size_t)n * sizeof(double));
+            memcpy(best_held, held, (size_t)n * sizeof(double));
+        }
+        if (s >= 1.0 || k < 0) break;
+        double direction = a[k] != 0.0 ? a[k] : (b[k] > hi[k] ? b[k] - hi[k] : b[k]);
+        held[k] = 1.0;
+        free_[k] = 0.0;
+        hv[k] = direction > 0.0 ? hi[k] : lo[k];
+        any_held = 1;
+        int left = 0;
+        for (Py_ssize_t j = 0; j < n; j++) left |= free_[j] != 0.0;
+        if (!left) break;
+        /* a = M_free(v); b = M_free(v - J hv) - a */
+        core(kind, J, e, ff, has_ff, free_, work, a);
         for (Py_ssize_t i = 0; i < m; i++) {
             double acc = has_ff ? ff[i] : 0.0;
-            for (Py_ssize_t j = 0; j < n; j++)
-                if (fixed[j] != 0.0) acc -= AT(J, i, j) * fixed_step[j] / dt;
+            for (Py_ssize_t j = 0; j < n; j++) acc -= AT(J, i, j) * hv[j];
             ff2[i] = acc;
         }
-        for (Py_ssize_t j = 0; j < n; j++) free_[j] = fixed[j] != 0.0 ? 0.0 : mask[j];
-        core(kind, J, e, ff2, 1, free_, work, step);
+        core(kind, J, e, ff2, 1, free_, work, b);
         for (Py_ssize_t j = 0; j < n; j++) {
-            if (fixed[j] != 0.0)
-                step[j] = fixed_step[j];
-            else if (escaping)
-                step[j] += dt * work[extra + j];
+            a[j] /= dt;
+            b[j] = b[j] / dt - a[j];
+            if (escaping) a[j] += work[extra + j];
         }
     }
-    return CLAMPED;
+    double scale = dmax(best, 0.0);
+    int status = 0;
+    for (Py_ssize_t j = 0; j < n; j++) {
+        double v = best_held[j] != 0.0 ? best_hv[j] : best_b[j] + scale * best_a[j];
+        if (mask[j] == 0.0) v = 0.0;
+        v = dmin(dmax(v, lo[j]), hi[j]);
+        step[j] = v * dt;
+        held[j] = best_held[j];
+        if (held[j] != 0.0) status |= CLAMPED;
+    }
+    exact_position(q, work, step);
+    work[INFO + I_SCALE] = best >= 0.0 ? scale : 0.0;
+    if (scale < 1.0) status |= SCALED;
+    return status;
 }
 
 /* the mapping, then the limits; returns the status bits */
@@ -629,25 +773,7 @@ static int step_c(int kind, Mat J, const double *e, const double *ff, const doub
     Py_ssize_t extra = (Py_ssize_t)work[P_EXTRA];
     if (escaping)
         for (Py_ssize_t j = 0; j < n; j++) step[j] += dt * work[extra + j];
-    status |= clamp_position(kind, J, e, ff, has_ff, q, mask, work, step, escaping);
-    Py_ssize_t speed = (Py_ssize_t)work[P_SPEED], clamped = (Py_ssize_t)work[P_CLAMPED];
-    double worst = 0.0;
-    for (Py_ssize_t j = 0; j < n; j++) {
-        if (work[clamped + j] != 0.0) {
-            double cap = work[speed + j] > 0.0 ? dt / work[speed + j] : INFINITY;
-            step[j] = dmin(dmax(step[j], -cap), cap);
-        } else {
-            worst = dmax(worst, fabs(step[j]) * work[speed + j]);
-        }
-    }
-    worst /= dt;
-    info[I_SCALE] = 1.0;
-    if (worst > 1.0) {
-        for (Py_ssize_t j = 0; j < n; j++)
-            if (work[clamped + j] == 0.0) step[j] /= worst;
-        info[I_SCALE] = 1.0 / worst;
-        status |= SCALED;
-    }
+    status |= saturate_c(kind, J, e, ff, has_ff, q, mask, work, step, escaping);
     return status;
 }
 

@@ -52,8 +52,10 @@ class Layout:
         self.box = self.mask + n
         self.speed = self.box + 5 * c
         self.extra = self.speed + n
-        self.clamped = self.extra + n  # then the clamping's scratch: 3 n + m
-        self.scratch = self.clamped + n + 3 * n + m
+        # the held joints of the last step, then the saturation's scratch (bounds, candidates,
+        # the re-solve's task velocity, the rank test's matrices)
+        self.clamped = self.extra + n
+        self.scratch = self.clamped + 12 * n + m + 2 * m * m
         p = min(m, n)
         self.size = self.scratch + 4 * m + 6 * n + 3 * p * p
 
