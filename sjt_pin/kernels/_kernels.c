@@ -718,15 +718,19 @@ static int saturate_c(int kind, Mat J, const double *e, const double *ff, int ha
         if (!left) break;
         /* a = M_free(v); b = M_free(v - J hv) - a */
         core(kind, J, e, ff, has_ff, free_, work, a);
-        for (Py_ssize_t i = 0; i < m; i++) {
-            double acc = has_ff ? ff[i] : 0.0;
-            for (Py_ssize_t j = 0; j < n; j++) acc -= AT(J, i, j) * hv[j];
-            ff2[i] = acc;
+        int moving = 0;  /* held joints at rest leave the others nothing to make up for */
+        for (Py_ssize_t j = 0; j < n; j++) moving |= hv[j] != 0.0;
+        if (moving) {
+            for (Py_ssize_t i = 0; i < m; i++) {
+                double acc = has_ff ? ff[i] : 0.0;
+                for (Py_ssize_t j = 0; j < n; j++) acc -= AT(J, i, j) * hv[j];
+                ff2[i] = acc;
+            }
+            core(kind, J, e, ff2, 1, free_, work, b);
         }
-        core(kind, J, e, ff2, 1, free_, work, b);
         for (Py_ssize_t j = 0; j < n; j++) {
             a[j] /= dt;
-            b[j] = b[j] / dt - a[j];
+            b[j] = moving ? b[j] / dt - a[j] : 0.0;
             if (escaping) a[j] += work[extra + j];
         }
     }
