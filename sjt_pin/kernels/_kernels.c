@@ -591,9 +591,10 @@ static double task_scale_c(const double *a, const double *b, const double *lo,
 }
 
 /* whether the free joints' weighted task columns (the first error_rows rows), each scaled to
- * unit norm, span R^rows; G and V are rows x rows scratch */
+ * unit norm, span R^rows: their Gram matrix G (rows x rows scratch) is positive
+ * definite with lambda_min above RANK_TOL^2 of its trace */
 static int spans_c(Mat J, const double *sw, Py_ssize_t rows, const double *free_, double *G,
-                   double *V, double *norm)
+                   double *norm)
 {
     Py_ssize_t n = J.n, count = 0;
     for (Py_ssize_t j = 0; j < n; j++) {
@@ -611,13 +612,11 @@ static int spans_c(Mat J, const double *sw, Py_ssize_t rows, const double *free_
                 acc += norm[j] * sw[a] * AT(J, a, j) * sw[b] * AT(J, b, j);
             G[a * rows + b] = G[b * rows + a] = acc;
         }
-    symmetric_eigen_c(G, V, rows);
-    double top = 0.0, bottom = INFINITY;
-    for (Py_ssize_t i = 0; i < rows; i++) {
-        top = dmax(top, G[i * rows + i]);
-        bottom = dmin(bottom, G[i * rows + i]);
-    }
-    return bottom > RANK_TOL * RANK_TOL * top;
+    /* lambda_min(G) > RANK_TOL^2 tr(G) (>= RANK_TOL^2 lambda_max): G - that I is positive
+     * definite, one Cholesky factorisation */
+    double trace = 0.0;
+    for (Py_ssize_t i = 0; i < rows; i++) trace += G[i * rows + i];
+    return cholesky_factor(G, rows, -RANK_TOL * RANK_TOL * trace);
 }
 
 /* a joint inside its range moves exactly onto a limit, never a rounding error past it */
@@ -649,8 +648,7 @@ static int saturate_c(int kind, Mat J, const double *e, const double *ff, int ha
     double *held = work + (Py_ssize_t)work[P_CLAMPED];
     double *lo = held + n, *hi = lo + n, *a = hi + n, *b = a + n, *hv = b + n, *free_ = hv + n;
     double *best_a = free_ + n, *best_b = best_a + n, *best_hv = best_b + n;
-    double *best_held = best_hv + n, *ff2 = best_held + n, *G = ff2 + m, *V = G + m * m;
-    double *norm = V + m * m;
+    double *best_held = best_hv + n, *ff2 = best_held + n, *G = ff2 + m, *norm = G + m * m;
     const double *sw = work + (Py_ssize_t)work[P_ROWS];
     Py_ssize_t rows = (Py_ssize_t)work[P_ERROR_ROWS];
     for (Py_ssize_t j = 0; j < n; j++) {
@@ -699,7 +697,7 @@ static int saturate_c(int kind, Mat J, const double *e, const double *ff, int ha
     int any_held = 0;
     for (Py_ssize_t round = 0; round < n; round++) {
         double s = task_scale_c(a, b, lo, hi, free_, n, &k);
-        if (any_held && !spans_c(J, sw, rows, free_, G, V, norm)) break;
+        if (any_held && !spans_c(J, sw, rows, free_, G, norm)) break;
         if (s > best) {
             best = s;
             memcpy(best_a, a, (size_t)n * sizeof(double));

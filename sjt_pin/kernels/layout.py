@@ -53,9 +53,9 @@ class Layout:
         self.speed = self.box + 5 * c
         self.extra = self.speed + n
         # the held joints of the last step, then the saturation's scratch (bounds, candidates,
-        # the re-solve's task velocity, the rank test's matrices)
+        # the re-solve's task velocity, the rank test's Gram matrix)
         self.clamped = self.extra + n
-        self.scratch = self.clamped + 12 * n + m + 2 * m * m
+        self.scratch = self.clamped + 12 * n + m + m * m
         p = min(m, n)
         self.size = self.scratch + 4 * m + 6 * n + 3 * p * p
 
