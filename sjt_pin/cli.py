@@ -126,11 +126,14 @@ def bench(args: argparse.Namespace) -> int:
             print(f"  {row.robot:6s} {row.path:44s} {row.step.median:7.2f} us  "
                   f"{row.ratio:5.2f} x floor  p90/median {row.step.jitter:4.2f}", flush=True)
 
+        cold = speed_bench.cold_start("ur5", peers=args.peers)
+        print("Cold start, fresh process (s): " + ", ".join(f"{k} {v:.3f}"
+                                                          for k, v in cold.items()), flush=True)
         report = speed_bench.speed(steps=args.steps, peers=args.peers, progress=show)
         print(speed_bench.speed_table(report))
         for robot, ratio in sorted(speed_bench.peer_ratios(report).items()):
             print(f"pink / SJT with a target velocity on {robot}: {ratio:.1f}x")
-        _write_json(args.json, report.to_dict())
+        _write_json(args.json, report.to_dict() | {"cold_start": cold})
     elif args.kind == "accuracy":
         from .bench import accuracy
 

@@ -25,7 +25,9 @@ from ..tasks import PoseTask, PositionTask, PostureTask
 from ..tracking import track
 from ..trajectories import Circle
 
-ROBOTS = ("ur5", "panda")
+ROBOTS = ("ur5", "panda", "kinova")
+#: serial chains (random axes, seeded) timed with a pose task plus a posture task
+CHAIN_JOINTS = (30, 100)
 #: Start configurations inside the limits and away from singularities.
 STARTS = {"ur5": np.array([0.3, -1.2, 1.5, -1.8, -1.5, 0.2])}
 
@@ -298,14 +300,101 @@ def speed(robots=ROBOTS, steps: int = 5000, warmup: int = 500, peers: bool = Fal
             add(time_path(robot, q0, Path(label, options=options, feedforward=ff), steps,
                           warmup, frames=TWO_FRAMES[name]))
         add(time_track(robot, q0, steps))
+        add(time_path(robot, q0, Path("SJT pose, acceleration limits (Python stage)",
+                                      options={"acceleration_limits": 10.0}),
+                      steps // 5, warmup // 5))
         if peers:
             add(time_pink(robot, q0, steps, warmup))
+    for joints in CHAIN_JOINTS:
+        robot = chain(joints)
+        add(time_path(robot, robot.q0.copy(), Path(f"SJT pose + posture, {joints} joints",
+                                                   posture=True), steps // 2, warmup // 2))
     if talos:
         robot = Robot.from_example("talos")
         for label, ff in [("SJT two hands", False), ("SJT two hands + target_velocity", True)]:
             add(time_path(robot, robot.q0.copy(), Path(label, feedforward=ff), steps // 2,
                           warmup // 2, frames=TWO_FRAMES["talos"]))
     return report
+
+
+def chain(joints: int) -> Robot:
+    """A serial chain of ``joints`` revolute joints with random axes (seeded), 0.05-0.6 m links
+    (the generator of ``robots/planar3.py``)."""
+    from ..robots.planar3 import serial_chain, to_xml
+
+    rng = np.random.default_rng(joints)
+    xml = to_xml(serial_chain(list(rng.uniform(0.05, 0.6, joints)),
+                              axes=rng.normal(size=(joints, 3)), gripper=0.1))
+    robot = Robot.from_urdf(xml, ee_frame="ee", load_visuals=False)
+    robot.name = f"chain{joints}"
+    return robot
+
+
+#: what a fresh process measures: import, first step, first track (JT), first solve (DLS)
+COLD_SCRIPT = """
+import time
+t0 = time.perf_counter()
+import numpy as np
+import sjt_pin as sjt
+t1 = time.perf_counter()
+robot = sjt.Robot.from_example({robot!r})
+t2 = time.perf_counter()
+q = robot.q0.copy()
+q = sjt.SJTSolver(robot).step(q, robot.fk(q))
+t3 = time.perf_counter()
+start = robot.fk(q)
+circle = sjt.Circle(start.translation - [0.05, 0, 0], 0.05, duration=0.2,
+                    rotation=start.rotation)
+sjt.track(sjt.JTSolver(robot), circle, q)
+t4 = time.perf_counter()
+sjt.DLSSolver(robot).solve(robot.fk(robot.random_configuration(np.random.default_rng(0))), q)
+t5 = time.perf_counter()
+print(t1 - t0, t2 - t1, t3 - t2, t4 - t3, t5 - t4)
+"""
+
+PINK_COLD_SCRIPT = """
+import time
+t0 = time.perf_counter()
+import pink
+from pink.tasks import FrameTask
+t1 = time.perf_counter()
+import example_robot_data as erd
+robot = erd.load({robot!r})
+t2 = time.perf_counter()
+configuration = pink.Configuration(robot.model, robot.data, robot.q0)
+task = FrameTask({frame!r}, position_cost=1.0, orientation_cost=1.0)
+task.set_target(configuration.get_transform_frame_to_world({frame!r}))
+import qpsolvers
+solver = "daqp" if "daqp" in qpsolvers.available_solvers else qpsolvers.available_solvers[0]
+pink.solve_ik(configuration, [task], 1e-3, solver=solver)
+t3 = time.perf_counter()
+print(t1 - t0, t2 - t1, t3 - t2)
+"""
+
+
+def cold_start(robot: str = "ur5", peers: bool = False) -> dict[str, float]:
+    """Seconds, in a fresh Python process: ``import sjt_pin``, loading ``robot``, the first
+    ``step``, the first ``track`` (JT) and the first ``solve`` (DLS); with ``peers``, pink's
+    import and first ``solve_ik`` on the same robot."""
+    import subprocess
+    import sys
+
+    from ..robot import DEFAULT_EE_FRAMES
+
+    def run(script):
+        done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                              timeout=600, check=True)
+        return [float(x) for x in done.stdout.split()]
+
+    names = ("import", "load robot", "first step", "first track", "first solve")
+    out = dict(zip(names, run(COLD_SCRIPT.format(robot=robot)), strict=True))
+    if peers:
+        try:
+            pink = run(PINK_COLD_SCRIPT.format(robot=robot, frame=DEFAULT_EE_FRAMES[robot]))
+        except (subprocess.CalledProcessError, KeyError):
+            return out
+        out.update({"pink import": pink[0], "pink first solve_ik": pink[2]})
+    return out
 
 
 def speed_table(report: SpeedReport) -> str:
