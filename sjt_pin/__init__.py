@@ -8,6 +8,7 @@ transpose baselines share the same interface.
 from .exceptions import FrameNotFound, GainWarning, URDFError
 from .gains import AutoGain, FixedGain, Gain
 from .kinematics import Kinematics
+from .limits import CollisionLimit
 from .robot import Robot
 from .solve import IKResult, solve_many
 from .solver import Solver, StepInfo
@@ -22,6 +23,7 @@ DifferentialIKSolver = Solver
 __all__ = [
     "AutoGain",
     "Circle",
+    "CollisionLimit",
     "DLSSolver",
     "DifferentialIKSolver",
     "FixedGain",

@@ -2,8 +2,10 @@
 
 from .acceleration import AccelerationLimit
 from .base import Limit, Motion
+from .collision import CollisionLimit
 from .jerk import JerkLimit
 from .position import PositionLimit
 from .velocity import VelocityLimit
 
-__all__ = ["AccelerationLimit", "JerkLimit", "Limit", "Motion", "PositionLimit", "VelocityLimit"]
+__all__ = ["AccelerationLimit", "CollisionLimit", "JerkLimit", "Limit", "Motion", "PositionLimit",
+           "VelocityLimit"]
