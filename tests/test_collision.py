@@ -1,7 +1,8 @@
-"""Collision avoidance: damper rows are the derivative of the distance, no geometry comes closer
-than the margin (checked independently with coal), SRDF pairs are skipped, obstacles move."""
+"""CollisionLimit: velocity-damper rows checked against finite differences of coal's distance,
+distances checked independently with pin.computeDistances, the broad phase against brute force,
+and a closed loop through the solver's constraint stage."""
 
-import re
+from __future__ import annotations
 
 import coal
 import numpy as np
@@ -10,7 +11,254 @@ import pytest
 
 import sjt_pin as sjt
 from sjt_pin.kinematics import Kinematics
-from sjt_pin.limits import Motion
+from sjt_pin.limits import CollisionLimit, Motion
+from sjt_pin.limits.collision import CollisionError
+
+
+def at(dt):
+    """The motion a limit's rows read here: only the period (s) matters to a collision."""
+    return Motion(np.zeros(0), np.zeros(0), np.zeros(0), dt)
+
+
+@pytest.fixture(scope="module")
+def panda():
+    return sjt.Robot.from_example("panda")
+
+
+@pytest.fixture(scope="module")
+def ur5():
+    return sjt.Robot.from_example("ur5")
+
+
+UR5_Q = np.array([0.3, -1.2, 1.5, -1.8, -1.5, 0.2])
+
+
+def _start(robot):
+    return robot.q0.copy() if robot.name == "panda" else UR5_Q.copy()
+
+
+def _independent_distances(robot, obstacles, q):
+    """Every robot-obstacle and robot-robot distance at q, from pin.computeDistances on a
+    geometry model built here (not the limit's): {(name_a, name_b): distance}."""
+    geom = robot.collision_model.copy()
+    for i, (shape, pose) in enumerate(obstacles):
+        geom.addGeometryObject(pin.GeometryObject(f"obstacle_{i}", 0, 0, pose, shape))
+    geom.addAllCollisionPairs()
+    gdata = geom.createData()
+    data = robot.model.createData()
+    pin.computeDistances(robot.model, data, geom, gdata, q)
+    names = [g.name for g in geom.geometryObjects]
+    out = {}
+    for pair, res in zip(geom.collisionPairs, gdata.distanceResults, strict=True):
+        a, b = names[pair.first], names[pair.second]
+        out[(a, b)] = out[(b, a)] = res.min_distance
+    return out
+
+
+def _pair_distance(limit, k, q):
+    """Exact distance of the limit's pair k at q, from coal directly on the two shapes."""
+    model, data = limit.model, limit.model.createData()
+    pin.framesForwardKinematics(model, data, q)
+    poses = []
+    for g in limit.pairs[k]:
+        obj = limit.geometry.geometryObjects[int(g)]
+        M = data.oMi[obj.parentJoint] * obj.placement
+        poses.append((obj.geometry, coal.Transform3s(M.rotation, M.translation)))
+    req, res = coal.DistanceRequest(), coal.DistanceResult()
+    req.enable_signed_distance = True
+    coal.distance(poses[0][0], poses[0][1], poses[1][0], poses[1][1], req, res)
+    return res.min_distance
+
+
+def _near_obstacles(robot, q):
+    """A sphere, a box and a capsule a few cm beside the arm's end at q."""
+    p = robot.fk(q).translation
+    R = pin.rpy.rpyToMatrix(0.3, -0.2, 0.5)
+    return [
+        (coal.Sphere(0.04), pin.SE3(np.eye(3), p + [0.0, 0.15, 0.0])),
+        (coal.Box(0.06, 0.08, 0.1), pin.SE3(R, p + [0.14, -0.02, 0.02])),
+        (coal.Capsule(0.03, 0.12), pin.SE3(R.T, p + [-0.02, -0.14, -0.05])),
+    ]
+
+
+# -- the rows -----------------------------------------------------------------------------
+@pytest.mark.parametrize("name", ["panda", "ur5"])
+def test_rows_match_finite_differences_of_the_distance(name, panda, ur5):
+    robot = {"panda": panda, "ur5": ur5}[name]
+    q = _start(robot)
+    limit = CollisionLimit(robot, _near_obstacles(robot, q), self_collision=True,
+                           influence=0.08, gain=0.5)
+    kin = Kinematics(robot.model)
+    kin.update(q)
+    dt = 1e-3
+    A, b = limit.rows(kin, at(dt))
+    assert A.shape == (len(limit.active), robot.model.nv) and b.shape == (len(limit.active),)
+    obstacle_rows = [i for i, k in enumerate(limit.active) if "obstacle" in limit.pair_names[k][1]]
+    assert len(obstacle_rows) >= 2, limit.pair_names  # the scene is near the arm
+    rng = np.random.default_rng(1)
+    h = 1e-6
+    for _ in range(3):
+        v = rng.normal(size=robot.model.nv)
+        for i, k in enumerate(limit.active):
+            d = _pair_distance(limit, k, q)
+            assert d < limit.influence
+            assert b[i] == pytest.approx(limit.gain * (d - limit.margin) / dt, rel=1e-9)
+            fd = (_pair_distance(limit, k, pin.integrate(robot.model, q, h * v))
+                  - _pair_distance(limit, k, pin.integrate(robot.model, q, -h * v))) / (2 * h)
+            # the row is -d_dot: A q_dot <= b is d_dot >= -gain (d - margin) / dt
+            assert -A[i] @ v == pytest.approx(fd, rel=1e-4, abs=1e-6), limit.pair_names[k]
+
+
+def test_penetration_row_still_pushes_apart(panda):
+    q = panda.q0.copy()
+    p = panda.fk(q).translation
+    limit = CollisionLimit(panda, [(coal.Sphere(0.04), pin.SE3(np.eye(3), p + [0, 0.2, 0]))])
+    kin = Kinematics(panda.model)
+    kin.update(q)
+    limit.rows(kin, at(1e-3))  # the start check passes; now drive the sphere into the hand
+    limit.move(0, pin.SE3(np.eye(3), p + [0.0, 0.125, 0.0]))
+    d = {(x.a, x.b): x.distance for x in limit.distances(q)}[("panda_hand_0", "obstacle_0")]
+    assert d < 0
+    A, b = limit.rows(kin, at(1e-3))
+    i = [limit.pair_names[k] for k in limit.active].index(("panda_hand_0", "obstacle_0"))
+    assert b[i] < 0  # the distance must grow
+    # the least-norm velocity meeting the row increases the distance (finite differences)
+    v = A[i] * b[i] / (A[i] @ A[i])
+    k = limit.active[i]
+    h = 1e-6
+    fd = (_pair_distance(limit, k, pin.integrate(panda.model, q, h * v)) - d) / h
+    assert fd == pytest.approx(-b[i], rel=1e-3)
+
+
+def test_no_rows_when_nothing_is_within_influence(panda):
+    far = [(coal.Sphere(0.05), pin.SE3(np.eye(3), np.array([3.0, 0.0, 0.0])))]
+    limit = CollisionLimit(panda, far)
+    kin = Kinematics(panda.model)
+    kin.update(panda.q0)
+    assert limit.rows(kin, at(1e-3)) is None
+
+
+# -- distances, move ----------------------------------------------------------------------
+def test_distances_match_coal_independently(panda):
+    q = panda.q0.copy()
+    obstacles = _near_obstacles(panda, q)
+    limit = CollisionLimit(panda, obstacles, self_collision=True)
+    reference = _independent_distances(panda, obstacles, q)
+    report = limit.distances(q)
+    assert len(report) == len(limit.pairs)
+    assert [x.distance for x in report] == sorted(x.distance for x in report)
+    for x in report:
+        assert x.distance == pytest.approx(reference[(x.a, x.b)], abs=1e-9)
+    assert report[0].link_b == "world" and report[0].distance < 0.05
+
+
+def test_move_between_calls(panda):
+    q = panda.q0.copy()
+    p = panda.fk(q).translation
+    sphere = coal.Sphere(0.04)
+    limit = CollisionLimit(panda, [(sphere, pin.SE3(np.eye(3), p + [0, 0.5, 0]))])
+    kin = Kinematics(panda.model)
+    kin.update(q)
+    assert limit.rows(kin, at(1e-3)) is None
+    pose = pin.SE3(np.eye(3), p + [0, 0.15, 0])
+    limit.move(0, pose)
+    A, b = limit.rows(kin, at(1e-3))
+    reference = _independent_distances(panda, [(sphere, pose)], q)
+    for i, k in enumerate(limit.active):
+        d = reference[limit.pair_names[k]]
+        assert b[i] == pytest.approx(limit.gain * (d - limit.margin) / 1e-3)
+    assert min(x.distance for x in limit.distances(q)) == pytest.approx(
+        min(reference[(g.name, "obstacle_0")] for g in panda.collision_model.geometryObjects
+            if g.parentJoint != 0))
+    limit.move(0, pin.SE3(np.eye(3), p + [0, 0.5, 0]))
+    assert limit.rows(kin, at(1e-3)) is None
+    with pytest.raises(IndexError):
+        limit.move(1, pose)
+
+
+# -- pairs --------------------------------------------------------------------------------
+def test_srdf_disabled_and_adjacent_pairs_are_skipped(panda):
+    limit = CollisionLimit(panda, self_collision=True)
+    geom = panda.collision_model.copy()
+    geom.addAllCollisionPairs()
+    every = {(p.first, p.second) for p in geom.collisionPairs}
+    from sjt_pin.limits.collision import _srdf_of
+    pin.removeCollisionPairs(panda.model, geom, _srdf_of(panda))
+    disabled = every - {(p.first, p.second) for p in geom.collisionPairs}
+    names = [g.name for g in geom.geometryObjects]
+    disabled = {(names[a], names[b]) for a, b in disabled}
+    chosen = set(limit.pair_names)
+    assert ("panda_hand_0", "panda_leftfinger_0") in disabled
+    assert not chosen & disabled
+    joint = {g.name: g.parentJoint for g in geom.geometryObjects}
+    parents = panda.model.parents
+    for a, b in chosen:
+        ja, jb = joint[a], joint[b]
+        assert ja != jb and parents[ja] != jb and parents[jb] != ja
+    # a non-adjacent pair the SRDF disables: present without the SRDF rules
+    non_adjacent = {(a, b) for a, b in disabled if joint[a] != joint[b]
+                    and parents[joint[a]] != joint[b] and parents[joint[b]] != joint[a]}
+    assert non_adjacent
+    a, b = sorted(non_adjacent)[0]
+    link = {g.name: panda.model.frames[g.parentFrame].name for g in geom.geometryObjects}
+    added = CollisionLimit(panda, self_collision=True, pairs=[(link[a], link[b])])
+    assert (a, b) in added.pair_names
+    ignored = CollisionLimit(panda, self_collision=True, ignore=[("panda_link5", "panda_link0")])
+    assert ("panda_link0_0", "panda_link5_0") in chosen
+    assert ("panda_link0_0", "panda_link5_0") not in ignored.pair_names
+    with pytest.raises(ValueError, match="names no known link"):
+        CollisionLimit(panda, self_collision=True, ignore=[("panda_link1", "no_such_link")])
+
+
+# -- errors -------------------------------------------------------------------------------
+def test_loading_errors(panda):
+    with pytest.raises(CollisionError, match="no <collision>"):
+        CollisionLimit(sjt.Robot.planar3())
+    with pytest.raises(CollisionError, match="unknown shape"):
+        CollisionLimit(panda, [("sphere", pin.SE3.Identity())])
+    with pytest.raises(TypeError, match="pin.SE3"):
+        CollisionLimit(panda, [(coal.Sphere(0.1), np.eye(4))])
+    p = panda.fk(panda.q0).translation
+    inside = [(coal.Sphere(0.05), pin.SE3(np.eye(3), p))]
+    limit = CollisionLimit(panda, inside)
+    with pytest.raises(CollisionError, match="obstacle_0 overlaps panda_"):
+        limit.check(panda.q0)
+    kin = Kinematics(panda.model)
+    kin.update(panda.q0)
+    with pytest.raises(CollisionError, match="at the start"):
+        limit.rows(kin, at(1e-3))
+    with pytest.raises(ValueError, match="dt must be"):
+        CollisionLimit(panda).rows(kin, at(0.0))
+    with pytest.raises(ValueError, match="influence"):
+        CollisionLimit(panda, margin=0.05, influence=0.02)
+
+
+# -- broad phase --------------------------------------------------------------------------
+@pytest.mark.parametrize("name", ["panda", "ur5"])
+def test_broad_phase_never_drops_a_pair_within_influence(name, panda, ur5):
+    robot = {"panda": panda, "ur5": ur5}[name]
+    rng = np.random.default_rng(7)
+    q = _start(robot)
+    obstacles = _near_obstacles(robot, q) + [
+        (coal.Sphere(0.03), pin.SE3(np.eye(3), rng.uniform(-0.6, 0.6, 3) + [0, 0, 0.4]))
+        for _ in range(10)]
+    limit = CollisionLimit(robot, obstacles, self_collision=True, influence=0.05)
+    kin = Kinematics(robot.model)
+    checked = 0
+    for _ in range(20):
+        q = pin.randomConfiguration(robot.model)
+        kin.update(q)
+        limit._update(robot.model, kin.data)
+        candidates = set(limit._candidates().tolist())
+        reference = _independent_distances(robot, obstacles, q)
+        for k, pair in enumerate(limit.pair_names):
+            if reference[pair] < limit.influence:
+                checked += 1
+                assert k in candidates, (pair, reference[pair])
+    assert checked > 20
+
+
+# -- closed loop --------------------------------------------------------------------------
 
 
 def independent_distance(robot, q, shape, pose) -> float:
@@ -24,35 +272,6 @@ def independent_distance(robot, q, shape, pose) -> float:
     data = model.createData()
     pin.computeDistances(robot.model, robot.model.createData(), model, data, q)
     return min(r.min_distance for r in data.distanceResults)
-
-
-def rows_at(limit, robot, q, dt=1e-3):
-    kinematics = Kinematics(robot.model)
-    kinematics.update(q)
-    return limit.rows(kinematics, Motion(q, np.zeros(robot.nv), np.zeros(robot.nv), dt))
-
-
-def test_damper_rows_are_the_derivative_of_the_distance(panda, rng):
-    """Against finite differences of the distance along random joint velocities (smooth
-    obstacles: a box's distance to a mesh has ties between features, where only one-sided
-    derivatives exist; its rows hold the derivative of one of them)."""
-    hand = panda.fk(panda.q0)
-    for shape in [coal.Sphere(0.05), coal.Capsule(0.03, 0.1), coal.Sphere(0.02)]:
-        pose = pin.SE3(pin.exp3(rng.normal(size=3)), hand.translation + [0.0, 0.0, -0.25])
-        limit = sjt.CollisionLimit(panda, obstacles=[(shape, pose)], influence=0.2)
-        A, b = rows_at(limit, panda, panda.q0)
-        assert A.shape[0] == len(limit.active) > 0
-        for row, (name_a, name_b, _, _, _) in zip(A, limit.active, strict=True):
-            u = rng.normal(size=panda.nv)
-            u[7:] = 0.0  # fingers: prismatic, fine too, but keep the arm's motion
-            h = 1e-6
-
-            def distance(q, a=name_a, b=name_b, limit=limit):
-                return next(x[2] for x in limit.distances(q) if x[:2] == (a, b))
-
-            plus = distance(pin.integrate(panda.model, panda.q0, h * u))
-            minus = distance(pin.integrate(panda.model, panda.q0, -h * u))
-            assert (plus - minus) / (2 * h) == pytest.approx(-row @ u, rel=1e-3, abs=1e-6)
 
 
 def test_a_line_past_a_sphere_keeps_the_margin_and_recovers(panda):
@@ -73,49 +292,3 @@ def test_a_line_past_a_sphere_keeps_the_margin_and_recovers(panda):
     assert min(independent_distance(panda, q, sphere, pose) for q in free.q[::10]) < 0
     assert closest >= margin - 1e-3
     assert log.error_norm[-1] < 1e-3  # the end is reachable without touching: reached
-
-
-def test_srdf_disabled_and_adjacent_pairs_are_skipped(panda):
-    limit = sjt.CollisionLimit(panda, self_collision=True)
-    names = [g.name for g in limit.geometry.geometryObjects]
-    links = {(names[a], names[b]) for a, b in limit.pairs}
-    from sjt_pin.limits.collision import _example_srdf
-
-    srdf = open(_example_srdf(panda)).read()
-    disabled = re.findall(r'link1="([^"]+)" link2="([^"]+)"', srdf)
-    assert disabled
-    link_of = {g.name: panda.model.frames[g.parentFrame].name
-               for g in limit.geometry.geometryObjects}
-    for a, b in links:
-        assert (link_of[a], link_of[b]) not in disabled and (link_of[b], link_of[a]) not in disabled
-    model = panda.model
-    for a, b in limit.pairs:
-        ja = limit.geometry.geometryObjects[int(a)].parentJoint
-        jb = limit.geometry.geometryObjects[int(b)].parentJoint
-        assert ja != jb and model.parents[ja] != jb and model.parents[jb] != ja
-
-
-def test_obstacles_move_between_steps(panda):
-    hand = panda.fk(panda.q0)
-    near = pin.SE3(np.eye(3), hand.translation + [0.0, 0.0, -0.25])
-    limit = sjt.CollisionLimit(panda, obstacles=[(coal.Sphere(0.05), near)], influence=0.2)
-    assert rows_at(limit, panda, panda.q0) is not None
-    limit.move(0, pin.SE3(np.eye(3), np.array([3.0, 3.0, 3.0])))
-    assert rows_at(limit, panda, panda.q0) is None
-    assert limit.distances(panda.q0)[0][2] > 2.0
-
-
-def test_bad_obstacles_and_missing_geometry_are_refused(panda, planar3):
-    pose = pin.SE3.Identity()
-    with pytest.raises(TypeError, match="not a coal shape"):
-        sjt.CollisionLimit(panda, obstacles=[("sphere", pose)])
-    with pytest.raises(TypeError, match="pin.SE3"):
-        sjt.CollisionLimit(panda, obstacles=[(coal.Sphere(0.1), np.eye(4))])
-    with pytest.raises(TypeError, match="pair"):
-        sjt.CollisionLimit(panda, obstacles=[coal.Sphere(0.1)])
-    with pytest.raises(ValueError, match="margin < influence"):
-        sjt.CollisionLimit(panda, obstacles=[(coal.Sphere(0.1), pose)], margin=0.1)
-    inside = pin.SE3(np.eye(3), panda.fk(panda.q0).translation)
-    limit = sjt.CollisionLimit(panda, obstacles=[(coal.Sphere(0.05), inside)])
-    with pytest.raises(ValueError, match="at the start"):
-        sjt.SJTSolver(panda, limits=[limit]).step(panda.q0, panda.fk(panda.q0))

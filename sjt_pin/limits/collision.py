@@ -1,279 +1,388 @@
-"""Collision avoidance: world obstacles and self-collision as velocity-damper rows.
+"""Collision avoidance as linear inequalities on the joint velocity: velocity dampers.
 
-For every pair of geometries closer than ``influence``, one row on the relative normal velocity
-of their closest points (the velocity damper of Faverjon and Tournassoud, "A local based
-approach for path planning of manipulators with a high number of degrees of freedom", ICRA
-1987; Kanoun, Lamiraux and Wieber, IEEE T-RO 27(4), 2011): the distance ``d`` may shrink at a
-rate proportional to its excess over ``margin``,
+Each pair of geometries (robot link / world obstacle, or two robot links) closer than
+``influence`` contributes one row on the relative normal velocity of its closest points, the
+velocity damper of Faverjon and Tournassoud (ICRA 1987) in the form of Kanoun, Lamiraux and
+Wieber (IEEE T-RO 2011, eq. 14):
 
-    d_dot = n^T (J_a(p_a) - J_b(p_b)) q_dot >= -gain (d - margin) / dt,
+    d_dot >= -gain (d - margin) / dt,    d_dot = n^T (J_a(p_a) - J_b(p_b)) q_dot
 
-with ``p_a``, ``p_b`` the closest points, ``n`` the unit vector from ``p_b`` to ``p_a`` and
-``J_x(p)`` the world-aligned linear Jacobian of point ``p`` on geometry x's joint (zero for an
-obstacle). With ``0 < gain <= 1`` a step never takes ``d`` below ``margin`` to first order.
+with ``p_a``, ``p_b`` the closest points, ``n`` the unit normal from ``b`` to ``a`` and
+``J_x(p)`` the world-aligned linear Jacobian of the point ``p`` fixed to geometry ``x``'s parent
+joint (zero for an obstacle). Over one period ``dt`` the distance then changes to first order
+by ``d_dot dt >= -gain (d - margin)``: with ``gain`` in (0, 1] it never crosses ``margin``,
+and below ``margin`` (or in penetration) the row pushes the pair apart.
 
-The robot's geometry is its URDF's collision geometry (Pinocchio's ``GeometryModel``; coal, the
-successor of hpp-fcl, computes the distances). Obstacles join it as geometries of the world.
-A broad phase keeps the exact distance for the pairs whose bounding spheres come within
-``influence``.
+Distances and closest points come from coal (through Pinocchio's ``GeometryModel``); only the
+pairs whose bounding spheres come within ``influence`` pay for an exact distance query.
 """
 
 from __future__ import annotations
 
 import os
 from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
 
+try:
+    import coal
+except ImportError:  # pragma: no cover - the pin wheel ships coal
+    coal = None
+
+from ..exceptions import SJTError
 from .base import Limit, Motion
 
-try:  # coal ships with the pin wheel (hpp-fcl before it)
-    import coal
-except ImportError:  # pragma: no cover - older Pinocchio builds
-    import hppfcl as coal  # type: ignore[no-redef]
-
-#: the obstacle shapes accepted (coal's)
-SHAPES = tuple(getattr(coal, name) for name in
-               ("Sphere", "Box", "Capsule", "Cylinder", "Cone", "Convex", "ConvexBase",
-                "BVHModelOBBRSS", "BVHModelBase", "Halfspace", "Plane", "Ellipsoid")
-               if hasattr(coal, name))
+__all__ = ["CollisionLimit", "CollisionError", "PairDistance"]
 
 
-class CollisionLimit(Limit):
-    """Keep the robot ``margin`` away from ``obstacles`` (and from itself).
+class CollisionError(SJTError, ValueError):
+    """Collision geometry that cannot be used: missing, of an unknown shape, or an obstacle
+    that overlaps the robot where the limit starts."""
 
-    Args:
-        robot: the :class:`~sjt_pin.Robot`; its collision geometry comes from its URDF.
-        obstacles: ``(coal shape, pin.SE3)`` pairs in world axes (``coal.Sphere(r)``,
-            ``coal.Box(x, y, z)``, ``coal.Capsule(r, h)``, ``coal.Cylinder(r, h)``, convex
-            meshes and meshes); :meth:`move` moves one between steps.
-        self_collision: also keep the robot's links apart: every pair of links except
-            adjacent ones (a joint between them) and those the SRDF disables.
-        margin: the closest any two geometries may come (m).
-        influence: pairs farther than this (m) contribute no row.
-        gain: the damper's gain in (0, 1]: the share of the excess over ``margin`` that one
-            period may close.
-        srdf: the SRDF whose ``disable_collisions`` pairs are skipped (default: the robot's
-            own for an example-robot-data robot; ``None`` elsewhere).
-        ignore: further ``(geometry or link name, geometry or link name)`` pairs to skip.
-    """
 
-    name = "collision"
+@dataclass(frozen=True)
+class PairDistance:
+    """One pair of :meth:`CollisionLimit.distances`: geometry names, their links (``"world"``
+    for an obstacle) and the signed distance in m (negative in penetration)."""
 
-    def __init__(self, robot, obstacles: Sequence[tuple] = (), self_collision: bool = False,
-                 margin: float = 0.01, influence: float = 0.05, gain: float = 0.5,
-                 srdf: str | None = "auto", ignore: Iterable[tuple[str, str]] = ()):
-        if not 0.0 <= margin < influence:
-            raise ValueError(f"need 0 <= margin < influence (m), got margin={margin!r}, "
-                             f"influence={influence!r}")
-        if not 0.0 < gain <= 1.0:
-            raise ValueError(f"gain must be in (0, 1], got {gain!r}")
-        self.robot = robot
-        self.model = robot.model
-        self.margin, self.influence, self.gain = float(margin), float(influence), float(gain)
-        self.geometry = _collision_model(robot)
-        self.geometry.removeAllCollisionPairs()  # ours only (a loader may have added them all)
-        self.robot_geometries = self.geometry.ngeoms
-        if self.robot_geometries == 0 and self_collision:
-            raise ValueError(f"{robot.name}: its URDF has no <collision> geometry")
-        self.obstacles: list[int] = []
-        for k, item in enumerate(obstacles):
-            self._add_obstacle(k, item)
-        pairs = [(i, o) for o in self.obstacles for i in range(self.robot_geometries)]
-        if self_collision:
-            pairs += self._self_pairs(srdf, ignore)
-        skip = {frozenset(p) for p in ignore}
-        names = [g.name for g in self.geometry.geometryObjects]
-        links = [self.model.frames[g.parentFrame].name for g in self.geometry.geometryObjects]
-        pairs = [(a, b) for a, b in pairs
-                 if frozenset((names[a], names[b])) not in skip
-                 and frozenset((links[a], links[b])) not in skip]
-        if not pairs:
-            raise ValueError("no geometry pair to keep apart: give obstacles, or "
-                             "self_collision=True")
-        for a, b in pairs:
-            self.geometry.addCollisionPair(pin.CollisionPair(a, b))
-        self.pairs = np.array(pairs, dtype=np.int64).reshape(-1, 2)
-        self.data = self.geometry.createData()
-        self._radius, self._center = _bounding_spheres(self.geometry)
-        self._checked = False
-        #: the pairs of the last ``rows()``, one per row: (geometry a, geometry b, d (m),
-        #: closest point on a, closest point on b; world axes)
-        self.active: list[tuple[str, str, float, np.ndarray, np.ndarray]] = []
+    a: str
+    b: str
+    link_a: str
+    link_b: str
+    distance: float
 
-    # -- setup -------------------------------------------------------------------------------
-    def _add_obstacle(self, k: int, item) -> None:
-        try:
-            shape, pose = item
-        except (TypeError, ValueError):
-            raise TypeError(f"obstacles[{k}] must be a (coal shape, pin.SE3) pair, "
-                            f"got {item!r}") from None
-        if not isinstance(shape, SHAPES):
-            raise TypeError(f"obstacles[{k}]: {type(shape).__name__} is not a coal shape "
-                            f"(Sphere, Box, Capsule, Cylinder, Convex, BVHModel, ...)")
-        if not isinstance(pose, pin.SE3):
-            raise TypeError(f"obstacles[{k}]: the pose must be a pin.SE3, got "
-                            f"{type(pose).__name__}")
-        obstacle = pin.GeometryObject(f"obstacle_{k}", 0, 0, pose, shape)
-        self.obstacles.append(self.geometry.addGeometryObject(obstacle))
 
-    def _self_pairs(self, srdf, ignore) -> list[tuple[int, int]]:
-        """Every pair of the robot's geometries on different, non-adjacent joints, less the
-        SRDF's disabled pairs."""
-        model, objects = self.model, self.geometry.geometryObjects
-        candidates = []
-        for a in range(self.robot_geometries):
-            for b in range(a + 1, self.robot_geometries):
-                ja, jb = objects[a].parentJoint, objects[b].parentJoint
-                if ja == jb or model.parents[ja] == jb or model.parents[jb] == ja:
-                    continue
-                candidates.append((a, b))
-        if srdf == "auto":
-            srdf = _example_srdf(self.robot)
-        if srdf is not None:
-            probe = self.geometry.copy()
-            probe.removeAllCollisionPairs()
-            for a, b in candidates:
-                probe.addCollisionPair(pin.CollisionPair(a, b))
-            pin.removeCollisionPairs(model, probe, str(srdf))
-            kept = {(p.first, p.second) for p in probe.collisionPairs}
-            candidates = [p for p in candidates if p in kept]
-        return candidates
+def _supported(shape) -> bool:
+    if coal is None:
+        return False
+    kinds = [coal.ShapeBase, coal.BVHModelBase]
+    return isinstance(shape, tuple(kinds))
 
-    def move(self, i: int, pose: pin.SE3) -> None:
-        """Move obstacle ``i`` to ``pose`` (world axes), for the next step."""
-        if not isinstance(pose, pin.SE3):
-            raise TypeError(f"pose must be a pin.SE3, got {type(pose).__name__}")
-        if not 0 <= i < len(self.obstacles):
-            raise IndexError(f"obstacle {i} does not exist (there are {len(self.obstacles)})")
-        self.geometry.geometryObjects[self.obstacles[i]].placement = pose
 
-    # -- distances ---------------------------------------------------------------------------
-    def _update(self, kinematics) -> None:
-        pin.updateGeometryPlacements(self.model, kinematics.data, self.geometry, self.data)
-
-    def _near_pairs(self) -> np.ndarray:
-        """Indices (into ``pairs``) whose bounding spheres come within ``influence``: the
-        broad phase."""
-        oMg = self.data.oMg
-        centers = np.array([oMg[g].act(self._center[g]) for g in range(len(oMg))])
-        a, b = self.pairs[:, 0], self.pairs[:, 1]
-        gap = (np.linalg.norm(centers[a] - centers[b], axis=1) - self._radius[a]
-               - self._radius[b])
-        return np.flatnonzero(gap < self.influence)
-
-    def _distance(self, k: int) -> coal.DistanceResult:
-        return pin.computeDistance(self.geometry, self.data, int(k))
-
-    def distances(self, q) -> list[tuple[str, str, float]]:
-        """The distance (m) of every pair at configuration ``q``, closest first:
-        ``(geometry a, geometry b, d)``; negative when they overlap."""
-        from ..kinematics import Kinematics
-
-        kinematics = Kinematics(self.model)
-        kinematics.update(self.robot.check_q(q))
-        self._update(kinematics)
-        names = [g.name for g in self.geometry.geometryObjects]
-        out = [(names[a], names[b], float(self._distance(k).min_distance))
-               for k, (a, b) in enumerate(self.pairs)]
-        return sorted(out, key=lambda item: item[2])
-
-    # -- the limit ---------------------------------------------------------------------------
-    def rows(self, kinematics, motion: Motion):
-        self._update(kinematics)
-        near = self._near_pairs()
-        rows, bounds = [], []
-        self.active = []
-        objects = self.geometry.geometryObjects
-        for k in near:
-            result = self._distance(k)
-            d = float(result.min_distance)
-            if not self._checked and d < self.margin:
-                a, b = (int(x) for x in self.pairs[k])
-                raise ValueError(f"{objects[a].name} and {objects[b].name} are {d:.4f} m apart "
-                                 f"at the start, closer than the margin {self.margin} m "
-                                 "(an obstacle overlapping the robot?)")
-            if d >= self.influence:
-                continue
-            a, b = (int(x) for x in self.pairs[k])
-            p_a, p_b = np.array(result.getNearestPoint1()), np.array(result.getNearestPoint2())
-            normal = p_a - p_b
-            length = np.linalg.norm(normal)
-            if length > 1e-9 and d > 0:
-                normal /= length
-            else:  # touching or overlapping: coal's normal (from a to b) reversed
-                normal = -np.array(result.normal)
-            row = normal @ (self._point_jacobian(kinematics, objects[a].parentJoint, p_a)
-                            - self._point_jacobian(kinematics, objects[b].parentJoint, p_b))
-            rows.append(-row)
-            self.active.append((objects[a].name, objects[b].name, d, p_a, p_b))
-            bounds.append(self.gain * (d - self.margin) / motion.dt)
-        self._checked = True
-        if not rows:
-            return None
-        return np.array(rows), np.array(bounds)
-
-    def _point_jacobian(self, kinematics, joint: int, point: np.ndarray) -> np.ndarray:
-        """The world-aligned linear Jacobian (3, nv) of ``point`` (world) moving with
-        ``joint``; zero for the world."""
-        if joint == 0:
-            return np.zeros((3, self.model.nv))
-        J = pin.getJointJacobian(self.model, kinematics.data, joint, pin.LOCAL_WORLD_ALIGNED)
-        lever = point - kinematics.data.oMi[joint].translation
-        return J[:3] - pin.skew(lever) @ J[3:]
-
-    def __repr__(self) -> str:
-        return (f"CollisionLimit({self.robot.name!r}, obstacles={len(self.obstacles)}, "
-                f"pairs={len(self.pairs)}, margin={self.margin}, influence={self.influence})")
+def _srdf_of(robot) -> str | None:
+    """The SRDF of an example-robot-data robot, or None."""
+    path = getattr(robot, "srdf", None)
+    if path:
+        return str(path)
+    name = getattr(robot, "name", None)
+    try:
+        from example_robot_data.robots_loader import ROBOTS, getModelPath
+    except ImportError:  # pragma: no cover
+        return None
+    loader = ROBOTS.get(name) if isinstance(name, str) else None
+    if loader is None or not getattr(loader, "srdf_filename", None):
+        return None
+    urdf = os.path.join(loader.path, loader.urdf_subpath, loader.urdf_filename or "")
+    try:
+        model_path = getModelPath(urdf)
+    except Exception:  # noqa: BLE001 - no installed data: no SRDF
+        return None
+    srdf = os.path.join(model_path, loader.path, loader.srdf_subpath, loader.srdf_filename)
+    return srdf if os.path.isfile(srdf) else None
 
 
 def _collision_model(robot) -> pin.GeometryModel:
-    """A copy of the robot's collision geometry (from its URDF when it was not loaded)."""
-    if robot.collision_model is not None:
-        return robot.collision_model.copy()
-    if robot.urdf is None:
-        raise ValueError(f"{robot.name}: no URDF to read the collision geometry from")
-    try:
-        if os.path.exists(str(robot.urdf)):
-            return pin.buildGeomFromUrdf(robot.model, str(robot.urdf), pin.COLLISION,
-                                         package_dirs=robot.package_dirs)
-        return pin.buildGeomFromUrdfString(robot.model, robot.urdf, pin.COLLISION,
-                                           package_dirs=robot.package_dirs)
-    except (ValueError, RuntimeError) as exc:
-        raise ValueError(f"{robot.name}: cannot load the collision geometry of its URDF "
-                         f"(package_dirs={robot.package_dirs}): {exc}") from exc
+    geom = getattr(robot, "collision_model", None)
+    if geom is None:
+        urdf = getattr(robot, "urdf", None)
+        if urdf is None:
+            raise CollisionError(f"{getattr(robot, 'name', 'robot')}: no collision model and no "
+                                 "URDF to load one from (robot.urdf is None)")
+        dirs = [str(d) for d in getattr(robot, "package_dirs", ()) or ()]
+        text = str(urdf)
+        try:
+            if text.lstrip().startswith("<"):
+                geom = pin.buildGeomFromUrdfString(robot.model, text, pin.COLLISION,
+                                                   package_dirs=dirs)
+            else:
+                geom = pin.buildGeomFromUrdf(robot.model, text, pin.COLLISION,
+                                             package_dirs=dirs)
+        except (ValueError, RuntimeError) as exc:
+            raise CollisionError(f"cannot load the collision geometry of "
+                                 f"{getattr(robot, 'name', 'robot')} (package_dirs={dirs}): "
+                                 f"{exc}") from exc
+    geom = geom.copy()
+    if geom.ngeoms == 0:
+        raise CollisionError(f"{getattr(robot, 'name', 'robot')}: its URDF has no <collision> "
+                             "geometry; a CollisionLimit needs one per link to check")
+    for g in geom.geometryObjects:
+        if not _supported(g.geometry):
+            raise CollisionError(f"collision geometry {g.name!r} has a shape coal cannot "
+                                 f"measure distances to: {type(g.geometry).__name__}")
+    return geom
 
 
-def _bounding_spheres(geometry: pin.GeometryModel) -> tuple[np.ndarray, list[np.ndarray]]:
-    """Per geometry, the radius and centre (in its own frame) of a sphere around its local
-    bounding box (infinite for unbounded shapes: halfspaces, planes)."""
-    radius, center = np.empty(geometry.ngeoms), []
-    for g, obj in enumerate(geometry.geometryObjects):
-        shape = obj.geometry
-        shape.computeLocalAABB()
-        box = shape.aabb_local
-        lo, hi = np.array(box.min_), np.array(box.max_)
-        if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
-            radius[g], middle = np.inf, np.zeros(3)
-        else:
-            middle = 0.5 * (lo + hi)
-            radius[g] = 0.5 * float(np.linalg.norm(hi - lo))
-        center.append(middle)
-    return radius, center
+class CollisionLimit(Limit):
+    """Keep the robot ``margin`` away from ``obstacles`` and (``self_collision=True``) from
+    itself, as one velocity-damper row per pair closer than ``influence``.
 
+    Args:
+        robot: a :class:`sjt_pin.Robot` (its ``collision_model``, else the ``<collision>``
+            geometry of ``robot.urdf`` with ``robot.package_dirs``).
+        obstacles: ``(coal shape, pin.SE3)`` pairs fixed in the world: ``coal.Sphere``, ``Box``,
+            ``Capsule``, ``Cylinder``, ``Convex`` or a mesh (``BVHModel``). Move them with
+            :meth:`move`.
+        self_collision: also check the robot's link pairs, except adjacent links (geometries on
+            the same joint or on a joint and its parent) and the pairs the SRDF disables.
+        margin: distance to keep, m.
+        influence: pairs farther than this (m) contribute no row.
+        gain: the damper's gain in (0, 1]: per period the excess ``d - margin`` may shrink by
+            at most this fraction.
+        pairs: extra ``(link_a, link_b)`` (or geometry names) to check although the rules above
+            skip them (e.g. an adjacent pair).
+        ignore: ``(link_a, link_b)`` (or geometry names; ``"world"`` for every obstacle) never
+            to check.
+        srdf: an SRDF path whose ``disable_collisions`` apply; by default the SRDF of an
+            example-robot-data robot.
+    """
 
-def _example_srdf(robot) -> str | None:
-    """The SRDF of an example-robot-data robot, if the robot is one."""
-    try:
-        from example_robot_data.robots_loader import ROBOTS
-    except ImportError:  # pragma: no cover
-        return None
-    loader = ROBOTS.get(robot.name)
-    if loader is None or not getattr(loader, "srdf_filename", ""):
-        return None
-    try:
-        path = loader().srdf_path
-    except Exception:  # noqa: BLE001 - a loader that cannot load: no SRDF to use
-        return None
-    return path if path and os.path.exists(path) else None
+    name: str = "collision"
+
+    def __init__(self, robot, obstacles: Sequence = (), self_collision: bool = False,
+                 margin: float = 0.01, influence: float = 0.05, gain: float = 0.5,
+                 pairs: Iterable[tuple[str, str]] = (), ignore: Iterable[tuple[str, str]] = (),
+                 srdf: str | None = None):
+        if coal is None:  # pragma: no cover
+            raise CollisionError("CollisionLimit needs coal (shipped with the pin wheel)")
+        if not (np.isfinite(margin) and margin >= 0):
+            raise ValueError(f"margin must be a finite distance >= 0 (m), got {margin!r}")
+        if not (np.isfinite(influence) and influence > margin):
+            raise ValueError(f"influence must be finite and > margin={margin} (m), "
+                             f"got {influence!r}")
+        if not (0 < gain <= 1):
+            raise ValueError(f"gain must be in (0, 1], got {gain!r}")
+        self.margin, self.influence, self.gain = float(margin), float(influence), float(gain)
+        self.model: pin.Model = robot.model
+        self.geometry = _collision_model(robot)
+        self.n_robot = self.geometry.ngeoms
+        self._obstacle_ids: list[int] = []
+        for i, item in enumerate(obstacles):
+            self._add_obstacle(i, item)
+        self._choose_pairs(self_collision, list(pairs), list(ignore),
+                           srdf if srdf is not None else (_srdf_of(robot) if self_collision
+                                                          else None))
+        self.geometry_data = self.geometry.createData()
+        for req in self.geometry_data.distanceRequests:
+            req.enable_signed_distance = True
+        self._data = self.model.createData()
+        self._checked = False
+        self.active: list[int] = []
+        self._prepare_broad_phase()
+
+    # -- construction ------------------------------------------------------------------------
+    def _add_obstacle(self, i: int, item) -> None:
+        try:
+            shape, pose = item
+        except (TypeError, ValueError):
+            raise TypeError(f"obstacle {i} must be a (coal shape, pin.SE3) pair, got "
+                            f"{type(item).__name__}") from None
+        if not _supported(shape):
+            raise CollisionError(f"obstacle {i}: unknown shape {type(shape).__name__}; use a "
+                                 "coal Sphere, Box, Capsule, Cylinder, Convex or BVHModel")
+        if not isinstance(pose, pin.SE3):
+            raise TypeError(f"obstacle {i}: pose must be a pin.SE3, got {type(pose).__name__}")
+        obj = pin.GeometryObject(f"obstacle_{i}", 0, 0, pose, shape)
+        self._obstacle_ids.append(self.geometry.addGeometryObject(obj))
+
+    def _link(self, g: int) -> str:
+        g = int(g)
+        if g >= self.n_robot:
+            return "world"
+        return self.model.frames[self.geometry.geometryObjects[g].parentFrame].name
+
+    def _matches(self, rules, a: int, b: int) -> bool:
+        na, nb = self.geometry.geometryObjects[a].name, self.geometry.geometryObjects[b].name
+        la, lb = self._link(a), self._link(b)
+        for x, y in rules:
+            if (x in (na, la) and y in (nb, lb)) or (y in (na, la) and x in (nb, lb)):
+                return True
+        return False
+
+    def _choose_pairs(self, self_collision, extra, ignore, srdf) -> None:
+        geoms = self.geometry.geometryObjects
+        names = {g.name for g in geoms} | {self._link(i) for i in range(len(geoms))}
+        for rule in extra + ignore:
+            if len(rule) != 2 or any(n not in names for n in rule):
+                raise ValueError(f"pair {rule!r} names no known link or geometry; known links: "
+                                 f"{sorted({self._link(i) for i in range(self.n_robot)})}")
+        disabled = set()
+        if self_collision and srdf is not None:
+            probe = self.geometry.copy()
+            probe.addAllCollisionPairs()
+            every = {(p.first, p.second) for p in probe.collisionPairs}
+            pin.removeCollisionPairs(self.model, probe, str(srdf))
+            disabled = every - {(p.first, p.second) for p in probe.collisionPairs}
+        parents = self.model.parents
+        chosen = []
+        n = len(geoms)
+        for a in range(n):
+            for b in range(a + 1, n):
+                ja, jb = geoms[a].parentJoint, geoms[b].parentJoint
+                obstacle_a, obstacle_b = a >= self.n_robot, b >= self.n_robot
+                if obstacle_a and obstacle_b:
+                    continue
+                if obstacle_a or obstacle_b:
+                    keep = (jb if obstacle_a else ja) != 0  # a link fixed to the world: skip
+                else:
+                    keep = (self_collision and ja != jb and parents[ja] != jb
+                            and parents[jb] != ja and (a, b) not in disabled)
+                if not keep and extra and self._matches(extra, a, b):
+                    keep = True
+                if keep and ignore and self._matches(ignore, a, b):
+                    keep = False
+                if keep:
+                    chosen.append((a, b))
+        self.geometry.removeAllCollisionPairs()
+        for a, b in chosen:
+            self.geometry.addCollisionPair(pin.CollisionPair(a, b))
+        self.pairs = np.array(chosen, dtype=int).reshape(-1, 2)
+        self.pair_names = [(geoms[a].name, geoms[b].name) for a, b in chosen]
+
+    def _prepare_broad_phase(self) -> None:
+        geoms = self.geometry.geometryObjects
+        n = len(geoms)
+        self._joint = np.array([g.parentJoint for g in geoms], dtype=int)
+        self._box_center = np.zeros((n, 3))  # coal's local AABB, in the geometry's frame
+        self._box_half = np.zeros((n, 3))
+        self._radius = np.zeros(n)  # the sphere around that box
+        self._placement = np.zeros((n, 4, 4))  # geometry in its parent joint's frame
+        for i, g in enumerate(geoms):
+            g.geometry.computeLocalAABB()
+            box = g.geometry.aabb_local
+            lo, hi = np.array(box.min_), np.array(box.max_)
+            self._box_center[i], self._box_half[i] = (lo + hi) / 2, (hi - lo) / 2
+            self._radius[i] = float(np.linalg.norm(hi - lo) / 2)
+            self._placement[i] = g.placement.homogeneous
+        self._pa, self._pb = self.pairs[:, 0].copy(), self.pairs[:, 1].copy()
+        self._pose = self._placement.copy()  # world poses (those on the world joint stay valid)
+        self._moving = np.flatnonzero(self._joint != 0)
+        self._moving_joints = [int(j) for j in np.unique(self._joint[self._moving])]
+        self._slot = np.searchsorted(self._moving_joints, self._joint[self._moving])
+        self._moving_placement = self._placement[self._moving]
+        self._reach2 = (self._radius[self._pa] + self._radius[self._pb] + self.influence) ** 2
+
+    # -- obstacles ---------------------------------------------------------------------------
+    def move(self, i: int, pose: pin.SE3) -> None:
+        """Move obstacle ``i`` (its index in ``obstacles``) to ``pose`` before the next step."""
+        if not 0 <= i < len(self._obstacle_ids):
+            raise IndexError(f"obstacle {i} does not exist ({len(self._obstacle_ids)} obstacles)")
+        if not isinstance(pose, pin.SE3):
+            raise TypeError(f"pose must be a pin.SE3, got {type(pose).__name__}")
+        g = self._obstacle_ids[i]
+        obj = self.geometry.geometryObjects[g]
+        obj.placement = pose
+        self._placement[g] = self._pose[g] = pose.homogeneous
+
+    # -- queries -----------------------------------------------------------------------------
+    def _update(self, model, data) -> None:
+        """Geometry placements (coal's) and every geometry's world pose (broad phase)."""
+        pin.updateGeometryPlacements(model, data, self.geometry, self.geometry_data)
+        oMi = data.oMi
+        H = np.array([oMi[j].homogeneous for j in self._moving_joints])
+        self._pose[self._moving] = H[self._slot] @ self._moving_placement
+
+    def _candidates(self) -> np.ndarray:
+        """The pairs whose bounding volumes come within ``influence`` (indices into pairs).
+
+        Each geometry has a box in its own frame (coal's local AABB) and the sphere around it.
+        First the spheres of both (for every pair), then, for the few pairs left, the sphere of
+        either one against the other's box: volumes contain their geometry, so neither test
+        drops a pair within ``influence``."""
+        pose = self._pose
+        center = pose[:, :3, 3] + (pose[:, :3, :3] @ self._box_center[:, :, None])[:, :, 0]
+        diff = center[self._pa] - center[self._pb]
+        near = np.flatnonzero(np.einsum("ij,ij->i", diff, diff) < self._reach2)
+        if near.size == 0:
+            return near
+        # both directions at once: the sphere of a against b's box, and of b against a's box
+        one = np.concatenate((self._pa[near], self._pb[near]))
+        other = np.concatenate((self._pb[near], self._pa[near]))
+        gap = (self._sphere_box(center[one], pose[other], other)
+               - self._radius[one]).reshape(2, -1)
+        return near[np.maximum(gap[0], gap[1]) < self.influence]
+
+    def _sphere_box(self, points, poses, g) -> np.ndarray:
+        """Distance of world ``points`` (k, 3) to the local boxes of geometries ``g``."""
+        local = np.einsum("kji,kj->ki", poses[:, :3, :3], points - poses[:, :3, 3])
+        outside = np.maximum(np.abs(local - self._box_center[g]) - self._box_half[g], 0.0)
+        return np.sqrt(np.einsum("ki,ki->k", outside, outside))
+
+    def _distance(self, k: int):
+        return pin.computeDistance(self.geometry, self.geometry_data, int(k))
+
+    def check(self, q: np.ndarray) -> None:
+        """Raise :class:`CollisionError` if an obstacle overlaps the robot at ``q``."""
+        pin.framesForwardKinematics(self.model, self._data, np.asarray(q, dtype=float))
+        self._check(self.model, self._data)
+
+    def _check(self, model, data) -> None:
+        pin.updateGeometryPlacements(model, data, self.geometry, self.geometry_data)
+        for k, (a, b) in enumerate(self.pairs):
+            if b < self.n_robot and a < self.n_robot:
+                continue
+            d = self._distance(k).min_distance
+            if d <= 0:
+                na, nb = self.pair_names[k]
+                raise CollisionError(f"{nb if b >= self.n_robot else na} overlaps "
+                                     f"{na if b >= self.n_robot else nb} at the start "
+                                     f"(distance {d * 1e3:.1f} mm); move the obstacle or the "
+                                     "start configuration")
+        self._checked = True
+
+    def distances(self, q: np.ndarray) -> list[PairDistance]:
+        """Every checked pair at ``q`` with its exact distance (m), closest first."""
+        pin.framesForwardKinematics(self.model, self._data, np.asarray(q, dtype=float))
+        pin.updateGeometryPlacements(self.model, self._data, self.geometry, self.geometry_data)
+        out = []
+        for k, (a, b) in enumerate(self.pairs):
+            d = self._distance(k).min_distance
+            na, nb = self.pair_names[k]
+            out.append(PairDistance(na, nb, self._link(a), self._link(b), float(d)))
+        out.sort(key=lambda p: p.distance)
+        return out
+
+    def rows(self, kinematics, motion: Motion) -> tuple[np.ndarray, np.ndarray] | None:
+        """Rows ``A q_dot <= b`` (A: (k, nv) in m per unit of q_dot, b: (k,) in m/s) at the
+        configuration of ``kinematics`` (after ``update(q)``); None when no pair is within
+        ``influence``."""
+        dt = motion.dt
+        if not dt > 0:
+            raise ValueError(f"dt must be a period > 0 (s), got {dt!r}")
+        model, data = kinematics.model, kinematics.data
+        if not self._checked:
+            self._check(model, data)
+        self._update(model, data)
+        near = self._candidates()
+        self.active = []  # indices into self.pairs / self.pair_names of the rows returned
+        if near.size == 0:
+            return None
+        rows, bounds = [], []
+        geoms = self.geometry.geometryObjects
+        jacobians = {}
+        for k in near:
+            res = self._distance(k)
+            d = res.min_distance
+            if d >= self.influence:
+                continue
+            a, b = self._pa[k], self._pb[k]
+            n = -np.asarray(res.normal)  # coal: from the first object to the second; want b->a
+            row = np.zeros(model.nv)
+            for g, p, sign in ((a, res.getNearestPoint1(), 1.0), (b, res.getNearestPoint2(), -1.0)):
+                j = geoms[int(g)].parentJoint
+                if j == 0:
+                    continue
+                J = jacobians.get(j)
+                if J is None:
+                    J = jacobians[j] = pin.getJointJacobian(model, data, j, pin.WORLD)
+                # WORLD Jacobian: velocity of p is v_O + w x p, so n.v(p) = n.v_O + (p x n).w
+                pxn = (p[1] * n[2] - p[2] * n[1], p[2] * n[0] - p[0] * n[2],
+                       p[0] * n[1] - p[1] * n[0])
+                row += sign * (n @ J[:3] + pxn @ J[3:])
+            rows.append(-row)
+            self.active.append(int(k))
+            bounds.append(self.gain * (d - self.margin) / dt)
+        if not rows:
+            return None
+        return np.array(rows), np.array(bounds)
