@@ -146,6 +146,7 @@ PATHS = [
 ]
 #: Two frames per robot (the end effector and a link up the arm), and Talos' two hands.
 TWO_FRAMES = {"ur5": ("tool0", "forearm_link"), "panda": ("panda_hand", "panda_link4"),
+              "kinova": ("j2s6s200_end_effector", "j2s6s200_link_3"),
               "talos": ("gripper_left_joint", "gripper_right_joint")}
 
 
