@@ -8,14 +8,10 @@ import pytest
 from scipy.optimize import minimize
 
 import sjt_pin as sjt
+from sjt_pin.bench.limits import PANDA_ACCELERATION, PANDA_JERK  # Franka's published limits
 from sjt_pin.constraints import project, saturate
 from sjt_pin.limits import Limit
 from sjt_pin.methods import Method
-
-# Franka Panda's published joint limits (its control interface's "necessary conditions"); the
-# fingers get small ones of their own
-PANDA_ACCELERATION = np.array([15, 7.5, 10, 12.5, 15, 20, 20, 1.0, 1.0])  # rad/s^2, m/s^2
-PANDA_JERK = np.array([7500, 3750, 5000, 6250, 7500, 10000, 10000, 500, 500])  # rad/s^3
 
 
 class Pinv(Method):
