@@ -160,6 +160,11 @@ class Solver:
         jerk_limits=None,
         limits: Sequence[Limit] = (),
     ):
+        #: what the solver was made from: a copy is made anew from it (see __reduce__)
+        self._arguments = dict(
+            gain=gain, dt=dt, task=task, posture=posture, position_limits=position_limits,
+            velocity_limits=velocity_limits, escape=escape, check_stability=check_stability,
+            acceleration_limits=acceleration_limits, jerk_limits=jerk_limits, limits=limits)
         if not isinstance(robot, Robot):
             raise TypeError(f"robot must be a sjt_pin.Robot, got {type(robot).__name__}")
         if not isinstance(method, Method):
@@ -616,10 +621,40 @@ class Solver:
             self._search = Search(self)
         return self._search
 
+    # -- copies ----------------------------------------------------------------------------
+    def __reduce__(self):
+        """A copy (``pickle``, ``copy.deepcopy``, another process) is the same solver made anew
+        — buffers of its own, bound to its own arrays — carrying this one's state: the gain and
+        period as set now, the commanded velocity and acceleration, the saddle escape (also
+        mid-escape) and the stability warning. Its next steps are this one's, bitwise; it has
+        no :attr:`last` step until it makes one."""
+        arguments = dict(self._arguments, gain=self._gain, dt=self._dt,
+                         check_stability=self._check_stability)
+        state = {"motion": (self._motion.dq.copy(), self._motion.ddq.copy()),
+                 "escape": self.escape, "escaping": float(self._work[K.P_ESCAPING]),
+                 "escape_velocity": self._escape_velocity.copy(), "warned": self._warned,
+                 "count": self._count}
+        return (_rebuild, (type(self), self.robot, self.method, arguments), state)
+
+    def __setstate__(self, state: dict) -> None:
+        self._motion.dq[:], self._motion.ddq[:] = state["motion"]
+        self.escape = state["escape"]
+        self._work[K.P_ESCAPING] = state["escaping"]
+        self._escape_velocity[:] = state["escape_velocity"]
+        self._warned, self._count = state["warned"], state["count"]
+        self._configure()
+
     def __repr__(self) -> str:
         tasks = self.stack.tasks[0] if len(self.stack.tasks) == 1 else self.stack.tasks
         return (f"{type(self).__name__}({self.robot.name!r}, gain={self.gain!r}, "
                 f"dt={self._dt:g}, task={tasks!r})")
+
+
+def _rebuild(cls, robot: Robot, method: Method, arguments: dict) -> Solver:
+    """A solver of class ``cls`` made anew (the unpickling half of ``Solver.__reduce__``)."""
+    solver = Solver.__new__(cls)
+    Solver.__init__(solver, robot, method, **arguments)
+    return solver
 
 
 def _speed_limits(velocity_limits, urdf: np.ndarray, nv: int) -> np.ndarray:
