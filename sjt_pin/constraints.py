@@ -199,6 +199,15 @@ class ConstraintStage:
             return None
         return ConstraintStage(user, self.moving, self.names, self.task_rows)
 
+    def admits(self, dq: np.ndarray, kinematics, motion: Motion) -> bool:
+        """Whether ``dq`` meets every limit's bounds and rows."""
+        box = self.box(kinematics, motion)
+        if box is not None and not _inside(dq, box.lower, box.upper):
+            return False
+        rows = self.general_rows(kinematics, motion)
+        return rows is None or bool(np.all(rows[0] @ dq <= rows[1] + TOLERANCE
+                                           * (1.0 + np.abs(rows[1]))))
+
     def admits_rest(self, kinematics, motion: Motion, tol: float = 1e-9) -> bool:
         """Whether standing still (``q_dot = 0``) meets every limit: the configuration is
         within them."""

@@ -211,6 +211,11 @@ class Solver:
              if x is not None], moving, robot.velocity_names, stack.target_dim)
         #: limits the kernel cannot test for the stage: every step goes through it
         self._staged = bool(extra) or accel is not None or method.kernel is None
+        #: the compiled kernel holds the position and speed bounds itself (no acceleration
+        #: limits, a built-in method): the stage then only checks the user's limits first
+        self._kernel_bounds = accel is None and method.kernel is not None
+        self._user_stage = (ConstraintStage(extra, moving, robot.velocity_names, stack.target_dim)
+                            if extra else None)
         #: the commanded velocity and acceleration of the last step (the stage's state)
         self._motion = Motion(np.zeros(robot.nq), np.zeros(n), np.zeros(n), 1.0)
         self._tracks_motion = accel is not None or bool(extra)
@@ -219,7 +224,7 @@ class Solver:
         # the kernel's work vector: parameters, weights, gains, mask, box, speeds, scratch
         # the kernel tests the position and speed box, so that a step within them costs nothing
         # more; beyond them (or with limits it cannot test) the stage takes over
-        box = None if self._staged else self.position_limit
+        box = self.position_limit if self._kernel_bounds else None
         self._layout = layout = K.Layout(stack.dim, n, 0 if box is None else box.q_index.size)
         self._work = work = layout.allocate()
         self._info = layout.info(work)
@@ -233,7 +238,7 @@ class Solver:
                 layout.box_part(work, part)[:] = values
         self._escape_velocity = layout.extra_velocity(work)
         self._clamped = layout.clamped_joints(work)
-        if not self._staged:
+        if self._kernel_bounds:
             layout.inverse_speeds(work)[:] = np.where(np.isfinite(speeds), 1.0 / speeds, 0.0)
         self._raw_work = work.copy()  # the method alone, for the stage's solves
         self._outcome, self._outcome_count = None, -1
@@ -400,10 +405,14 @@ class Solver:
     def _constrain(self, q, J, e, ff, status, step) -> np.ndarray:
         """Run the constraint stage on the method's step (see :mod:`sjt_pin.constraints`)."""
         dt, layout, raw = self._dt, self._layout, self._raw_work
+        motion, stack = self._motion, self.stack
+        motion.q = q
+        if (self._user_stage is not None and self._kernel_bounds
+                and self._user_stage.admits(step / dt, stack.kinematics, motion)):
+            return step  # the kernel kept the position and speed bounds; the user's hold too
         np.copyto(raw, self._work)
         raw[K.P_BOX_COUNT] = 0.0
         layout.inverse_speeds(raw)[:] = 0.0
-        stack = self.stack
         chain = stack.chain
         ff_in = ff if self._ff_on else np.zeros(stack.dim)
         out = np.empty_like(self._step)
@@ -427,8 +436,9 @@ class Solver:
 
         everything = np.ones(chain.size, dtype=bool)
         dq = step / dt
-        motion = self._motion
-        motion.q = q
+        if self._user_stage is not None and self._kernel_bounds:
+            dq = solve(everything, None)  # a user's limit is broken: the method alone, then
+            # the whole stage
         if self.acceleration_limit is not None:
             dq, feedback[0] = self._brake_feedback(dq, solve(everything, None, 0.0), J, e)
         outcome = self.stage.enforce(dq, solve, stack.kinematics, motion,
