@@ -34,4 +34,10 @@ class SJT(TransposeMethod):
         return mappings.scaling_factors(J, self.column_tol, self.length)
 
     def matrix(self, J):
+        """``D J^T`` (eq. 20), or with the damped feedback ``D J^T (J D J^T + mu^2 I)^-1`` at
+        its least damping mu^2 (the error's Levenberg-Marquardt term only adds to it): the
+        mapping whose loop eigenvalues the stability check bounds."""
+        if self.feedback == "damped":
+            return mappings.damped_sjt_matrix(J, self.ff_damping ** 2, self.column_tol,
+                                              self.length)
         return mappings.sjt_matrix(J, self.column_tol, self.length)
