@@ -1,7 +1,6 @@
 """``sjt-pin bench ik`` on a few poses: the rows, the table, the check and the peers' joint
 values (Kinova's continuous joints)."""
 
-import importlib.util
 
 import numpy as np
 import pytest
@@ -61,7 +60,7 @@ def test_chain_values_round_trip(kinova):
                                atol=1e-12)
 
 
-@pytest.mark.skipif(importlib.util.find_spec("pytracik") is None, reason="needs pytracik")
+@pytest.mark.bench  # needs pytracik, from the bench extra: pytest -m bench
 def test_tracik_sees_the_same_kinova(kinova):
     import pytracik
 
