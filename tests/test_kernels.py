@@ -174,18 +174,6 @@ def test_position_rows(rng):
     np.testing.assert_array_equal(ff_out, velocity[[2, 0]])
 
 
-def test_clamp_pass():
-    q = np.array([0.0, 0.9, 1.5, -1.5])  # joints 3 and 4 start outside [-1, 1]
-    index = np.arange(4)
-    lower, upper = -np.ones(4), np.ones(4)
-    step = np.array([0.1, 0.3, 0.2, -0.1])
-    fixed, fixed_step = np.zeros(4), np.zeros(4)
-    speeds = np.full(4, 50.0)  # rad/s: 0.05 rad in a step of 1 ms
-    count = K.clamp_pass(q, step, index, index, lower, upper, speeds, 1e-3, fixed, fixed_step)
-    assert count == 3 and list(fixed) == [0.0, 1.0, 1.0, 1.0]
-    np.testing.assert_allclose(fixed_step[1:], [0.1, -0.05, 0.05])  # onto the limit; back
-
-
 def test_the_compiled_layout_is_the_python_one():
     """The C kernels were compiled for the slots of kernels/layout.py."""
     from sjt_pin.kernels import _kernels, layout

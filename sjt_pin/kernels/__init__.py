@@ -15,13 +15,12 @@ against the numpy reference formulas of :mod:`sjt_pin.mappings` and against Pino
 - ``search_iteration(...)``: one Levenberg-Marquardt iteration of ``solve()`` on SJT's
   normalised columns, within the joint limits;
 - ``frame_velocity``, ``position_rows``, ``rotation_defect``: the tasks' small transforms;
-- ``cholesky_solve``, ``loop_bound``, ``symmetric_eigen``, ``clamp_pass``: the small dense
-  linear algebra and the clamping pass, exposed for the tests.
+- ``cholesky_solve``, ``loop_bound``, ``symmetric_eigen``: the small dense linear algebra,
+  exposed for the tests.
 """
 
 from ._kernels import (  # noqa: F401
     cholesky_solve,
-    clamp_pass,
     frame_velocity,
     least_squares_step,
     loop_bound,

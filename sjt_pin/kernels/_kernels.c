@@ -518,37 +518,6 @@ static Core core(int kind, Mat J, const double *e, const double *ff, int has_ff,
     return least_squares_core(J, e, ff, has_ff, mask, work, step);
 }
 
-/* Fix the joints that q + step takes out of [lower, upper]; returns how many (see
- * clamp_pass in sjt_pin/kernels/__init__.py). Indices are read through `index_at`. */
-typedef double (*IndexAt)(const void *, Py_ssize_t);
-static double float_at(const void *p, Py_ssize_t i) { return ((const double *)p)[i]; }
-static double int_at(const void *p, Py_ssize_t i) { return (double)((const long long *)p)[i]; }
-
-static int clamp_pass_c(const double *q, const double *step, const void *q_index,
-                        const void *v_index, IndexAt at, const double *lower,
-                        const double *upper, const double *speeds, Py_ssize_t count, double dt,
-                        double *fixed, double *fixed_step)
-{
-    int changed = 0;
-    for (Py_ssize_t c = 0; c < count; c++) {
-        Py_ssize_t v = (Py_ssize_t)at(v_index, c);
-        if (fixed[v] != 0.0) continue;
-        double qc = q[(Py_ssize_t)at(q_index, c)], lo = lower[c], hi = upper[c];
-        double next = qc + step[v];
-        if (lo <= qc && qc <= hi) {
-            if (lo <= next && next <= hi) continue;
-            fixed_step[v] = dmin(dmax(next, lo), hi) - qc;
-        } else if (qc > hi) {
-            fixed_step[v] = -dmin(speeds[c] * dt, qc - hi);
-        } else {
-            fixed_step[v] = dmin(speeds[c] * dt, lo - qc);
-        }
-        fixed[v] = 1.0;
-        changed++;
-    }
-    return changed;
-}
-
 /* a bound counts as reached within this many rad/s (m/s) of it (sjt_pin/constraints.py) */
 #define BOUND_TOL 1e-12
 /* the free joints span the task space while the smallest singular value of their normalised
@@ -955,12 +924,12 @@ typedef struct {
     double *copy; /* a contiguous copy of a strided 1-D input */
 } Arg;
 
-static int format_ok(const Py_buffer *b, int integer)
+static int format_ok(const Py_buffer *b)
 {
     const char *f = b->format ? b->format : "B";
     if (*f == '<' || *f == '=' || *f == '@') f++;
     if (b->itemsize != 8 || f[1] != '\0') return 0;
-    return integer ? (*f == 'q' || *f == 'l' || *f == 'd') : *f == 'd';
+    return *f == 'd';
 }
 
 static void release(Arg *a)
@@ -971,8 +940,8 @@ static void release(Arg *a)
     a->copy = NULL;
 }
 
-/* a float64 buffer (int64 accepted when `integer`) of `ndim` dimensions (-1: any) */
-static int acquire(PyObject *obj, Arg *a, int writable, int ndim, int integer, const char *name)
+/* a float64 buffer of `ndim` dimensions (-1: any) */
+static int acquire(PyObject *obj, Arg *a, int writable, int ndim, const char *name)
 {
     a->held = 0;
     a->copy = NULL;
@@ -984,7 +953,7 @@ static int acquire(PyObject *obj, Arg *a, int writable, int ndim, int integer, c
         return -1;
     }
     a->held = 1;
-    if (!format_ok(&a->view, integer)) {
+    if (!format_ok(&a->view)) {
         PyErr_Format(PyExc_TypeError, "%s must hold float64 numbers", name);
         release(a);
         return -1;
@@ -1071,9 +1040,9 @@ static PyObject *step_wrapper(int kind, PyObject *const *args, Py_ssize_t nargs,
     if (!nargs_ok(nargs, 6, fn)) return NULL;
     Arg J = {0}, e = {0}, ff = {0}, q = {0}, work = {0}, step = {0};
     PyObject *result = NULL;
-    if (acquire(args[0], &J, 0, 2, 0, "J") || acquire(args[1], &e, 0, 1, 0, "e")
-        || acquire(args[2], &ff, 0, 1, 0, "ff") || acquire(args[3], &q, 0, 1, 0, "q")
-        || acquire(args[4], &work, 1, 1, 0, "work") || acquire(args[5], &step, 1, 1, 0, "step"))
+    if (acquire(args[0], &J, 0, 2, "J") || acquire(args[1], &e, 0, 1, "e")
+        || acquire(args[2], &ff, 0, 1, "ff") || acquire(args[3], &q, 0, 1, "q")
+        || acquire(args[4], &work, 1, 1, "work") || acquire(args[5], &step, 1, 1, "step"))
         goto done;
     Mat Jm = mat(&J);
     if (length(&e) != Jm.m || length(&step) != Jm.n
@@ -1106,55 +1075,6 @@ static PyObject *py_least_squares_step(PyObject *self, PyObject *const *args, Py
     return step_wrapper(LEAST_SQUARES, args, nargs, "least_squares_step");
 }
 
-/* clamp_pass(q, step, q_index, v_index, lower, upper, speeds, dt, fixed, fixed_step) -> int */
-static PyObject *py_clamp_pass(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
-{
-    if (!nargs_ok(nargs, 10, "clamp_pass")) return NULL;
-    Arg q = {0}, step = {0}, qi = {0}, vi = {0}, lo = {0}, hi = {0}, sp = {0}, fx = {0}, fs = {0};
-    PyObject *result = NULL;
-    double dt = PyFloat_AsDouble(args[7]);
-    if (dt == -1.0 && PyErr_Occurred()) return NULL;
-    if (acquire(args[0], &q, 0, 1, 0, "q") || acquire(args[1], &step, 0, 1, 0, "step")
-        || acquire(args[2], &qi, 0, 1, 1, "q_index") || acquire(args[3], &vi, 0, 1, 1, "v_index")
-        || acquire(args[4], &lo, 0, 1, 0, "lower") || acquire(args[5], &hi, 0, 1, 0, "upper")
-        || acquire(args[6], &sp, 0, 1, 0, "speeds") || acquire(args[8], &fx, 1, 1, 0, "fixed")
-        || acquire(args[9], &fs, 1, 1, 0, "fixed_step"))
-        goto done;
-    Py_ssize_t count = length(&qi);
-    if (length(&vi) != count || length(&lo) != count || length(&hi) != count
-        || length(&sp) != count || length(&fx) != length(&step) || length(&fs) != length(&step)) {
-        PyErr_SetString(PyExc_ValueError, "clamp_pass: the index, limit and speed arrays must "
-                        "have one entry per limited joint, fixed and fixed_step one per "
-                        "velocity coordinate");
-        goto done;
-    }
-    int integer = qi.view.format && strchr(qi.view.format, 'd') == NULL;
-    double *qv = vec(&q, "q"), *sv = vec(&step, "step"), *lov = vec(&lo, "lower");
-    double *hiv = vec(&hi, "upper"), *spv = vec(&sp, "speeds");
-    double *fxv = out_vec(&fx, "fixed"), *fsv = out_vec(&fs, "fixed_step");
-    if (!qv || !sv || !lov || !hiv || !spv || !fxv || !fsv) goto done;
-    if (qi.view.strides[0] != 8 || vi.view.strides[0] != 8) {
-        PyErr_SetString(PyExc_ValueError, "q_index and v_index must be contiguous");
-        goto done;
-    }
-    Py_ssize_t nq = length(&q), nv = length(&step);
-    IndexAt at = integer ? int_at : float_at;
-    for (Py_ssize_t c = 0; c < count; c++) {
-        double a = at(qi.view.buf, c), b = at(vi.view.buf, c);
-        if (!(a >= 0 && a < nq && b >= 0 && b < nv)) {
-            PyErr_SetString(PyExc_IndexError, "clamp_pass: an index is out of range");
-            goto done;
-        }
-    }
-    int changed = clamp_pass_c(qv, sv, qi.view.buf, vi.view.buf, at, lov, hiv, spv, count, dt,
-                               fxv, fsv);
-    result = PyLong_FromLong(changed);
-done:
-    release(&q); release(&step); release(&qi); release(&vi); release(&lo); release(&hi);
-    release(&sp); release(&fx); release(&fs);
-    return result;
-}
-
 static double *square(Arg *a, Py_ssize_t *p, const char *name)
 {
     double *buf = out_mat(a, name);
@@ -1176,8 +1096,8 @@ static PyObject *py_cholesky_solve(PyObject *self, PyObject *const *args, Py_ssi
     Arg A = {0}, rhs = {0}, out = {0};
     PyObject *result = NULL;
     Py_ssize_t p;
-    if (acquire(args[0], &A, 1, 2, 0, "A") || acquire(args[2], &rhs, 0, 1, 0, "rhs")
-        || acquire(args[3], &out, 1, 1, 0, "out"))
+    if (acquire(args[0], &A, 1, 2, "A") || acquire(args[2], &rhs, 0, 1, "rhs")
+        || acquire(args[3], &out, 1, 1, "out"))
         goto done;
     double *Av = square(&A, &p, "A"), *rv = vec(&rhs, "rhs"), *ov = out_vec(&out, "out");
     if (!Av || !rv || !ov) goto done;
@@ -1200,8 +1120,8 @@ static PyObject *py_loop_bound(PyObject *self, PyObject *const *args, Py_ssize_t
     Arg A = {0}, B = {0}, C = {0};
     PyObject *result = NULL;
     Py_ssize_t p, pb, pc;
-    if (acquire(args[0], &A, 0, 2, 0, "A") || acquire(args[2], &B, 1, 2, 0, "B")
-        || acquire(args[3], &C, 1, 2, 0, "C"))
+    if (acquire(args[0], &A, 0, 2, "A") || acquire(args[2], &B, 1, 2, "B")
+        || acquire(args[3], &C, 1, 2, "C"))
         goto done;
     Mat Am = mat(&A);
     double *Bv = square(&B, &pb, "B"), *Cv = square(&C, &pc, "C");
@@ -1233,7 +1153,7 @@ static PyObject *py_symmetric_eigen(PyObject *self, PyObject *const *args, Py_ss
     Arg A = {0}, V = {0};
     PyObject *result = NULL;
     Py_ssize_t p, pv;
-    if (acquire(args[0], &A, 1, 2, 0, "A") || acquire(args[1], &V, 1, 2, 0, "V")) goto done;
+    if (acquire(args[0], &A, 1, 2, "A") || acquire(args[1], &V, 1, 2, "V")) goto done;
     double *Av = square(&A, &p, "A"), *Vv = square(&V, &pv, "V");
     if (!Av || !Vv) goto done;
     if (pv != p) {
@@ -1260,8 +1180,8 @@ static PyObject *py_frame_velocity(PyObject *self, PyObject *const *args, Py_ssi
     if (!nargs_ok(nargs, 4, "frame_velocity")) return NULL;
     Arg f = {0}, d = {0}, v = {0}, out = {0};
     PyObject *result = NULL;
-    if (acquire(args[0], &f, 0, 2, 0, "oMf") || acquire(args[1], &d, 0, 2, 0, "oMd")
-        || acquire(args[2], &v, 0, 1, 0, "velocity") || acquire(args[3], &out, 1, 1, 0, "out"))
+    if (acquire(args[0], &f, 0, 2, "oMf") || acquire(args[1], &d, 0, 2, "oMd")
+        || acquire(args[2], &v, 0, 1, "velocity") || acquire(args[3], &out, 1, 1, "out"))
         goto done;
     if (!is_4x4(&f, "oMf") || !is_4x4(&d, "oMd")) goto done;
     if (length(&v) != 6 || length(&out) != 6) {
@@ -1283,7 +1203,7 @@ static PyObject *py_rotation_defect(PyObject *self, PyObject *const *args, Py_ss
     if (!nargs_ok(nargs, 1, "rotation_defect")) return NULL;
     Arg M = {0};
     PyObject *result = NULL;
-    if (acquire(args[0], &M, 0, 2, 0, "M")) goto done;
+    if (acquire(args[0], &M, 0, 2, "M")) goto done;
     if (!is_4x4(&M, "M")) goto done;
     result = PyFloat_FromDouble(rotation_defect_c(mat(&M)));
 done:
@@ -1297,9 +1217,9 @@ static PyObject *py_position_rows(PyObject *self, PyObject *const *args, Py_ssiz
     if (!nargs_ok(nargs, 5, "position_rows")) return NULL;
     Arg J = {0}, f = {0}, p = {0}, v = {0}, out = {0};
     PyObject *result = NULL;
-    if (acquire(args[0], &J, 0, 2, 0, "J6") || acquire(args[1], &f, 0, 2, 0, "oMf")
-        || acquire(args[2], &p, 0, 1, 0, "p_d") || acquire(args[3], &v, 0, 1, 0, "velocity")
-        || acquire(args[4], &out, 1, 1, 0, "out"))
+    if (acquire(args[0], &J, 0, 2, "J6") || acquire(args[1], &f, 0, 2, "oMf")
+        || acquire(args[2], &p, 0, 1, "p_d") || acquire(args[3], &v, 0, 1, "velocity")
+        || acquire(args[4], &out, 1, 1, "out"))
         goto done;
     Mat Jm = mat(&J);
     if (Jm.m != 6 || !is_4x4(&f, "oMf")) {
@@ -1335,11 +1255,11 @@ static PyObject *py_search_iteration(PyObject *self, PyObject *const *args, Py_s
     Arg J = {0}, e = {0}, q = {0}, Jc = {0}, ec = {0}, qc = {0}, lim = {0}, work = {0},
         state = {0}, step = {0};
     PyObject *result = NULL;
-    if (acquire(args[0], &J, 0, 2, 0, "J") || acquire(args[1], &e, 0, 1, 0, "e")
-        || acquire(args[2], &q, 0, 1, 0, "q") || acquire(args[3], &Jc, 1, 2, 0, "J_cur")
-        || acquire(args[4], &ec, 1, 1, 0, "e_cur") || acquire(args[5], &qc, 1, 1, 0, "q_cur")
-        || acquire(args[6], &lim, 0, 2, 0, "limits") || acquire(args[7], &work, 1, 1, 0, "work")
-        || acquire(args[8], &state, 1, 1, 0, "state") || acquire(args[9], &step, 1, 1, 0, "step"))
+    if (acquire(args[0], &J, 0, 2, "J") || acquire(args[1], &e, 0, 1, "e")
+        || acquire(args[2], &q, 0, 1, "q") || acquire(args[3], &Jc, 1, 2, "J_cur")
+        || acquire(args[4], &ec, 1, 1, "e_cur") || acquire(args[5], &qc, 1, 1, "q_cur")
+        || acquire(args[6], &lim, 0, 2, "limits") || acquire(args[7], &work, 1, 1, "work")
+        || acquire(args[8], &state, 1, 1, "state") || acquire(args[9], &step, 1, 1, "step"))
         goto done;
     Mat Jm = mat(&J);
     double *Jcv = out_mat(&Jc, "J_cur"), *limv = out_mat(&lim, "limits");
@@ -1370,9 +1290,6 @@ static PyMethodDef methods[] = {
     {"least_squares_step", (PyCFunction)(void (*)(void))py_least_squares_step, METH_FASTCALL,
      "least_squares_step(J, e, ff, q, work, step) -> status: one step of the pseudoinverse "
      "(eq. 8) or damped least-squares CLIK law, then the limits."},
-    {"clamp_pass", (PyCFunction)(void (*)(void))py_clamp_pass, METH_FASTCALL,
-     "clamp_pass(q, step, q_index, v_index, lower, upper, speeds, dt, fixed, fixed_step) -> "
-     "count: fix the joints that q + step takes out of their range."},
     {"cholesky_solve", (PyCFunction)(void (*)(void))py_cholesky_solve, METH_FASTCALL,
      "cholesky_solve(A, shift, rhs, out) -> bool: out = (A + shift I)^-1 rhs (A overwritten)."},
     {"loop_bound", (PyCFunction)(void (*)(void))py_loop_bound, METH_FASTCALL,

@@ -94,7 +94,7 @@ class Layout:
         return work[self.extra:self.extra + self.n]
 
     def clamped_joints(self, work: np.ndarray) -> np.ndarray:
-        """1 for the joints the last step held at a position limit."""
+        """1 for the joints the last step held at a position or speed bound."""
         return work[self.clamped:self.clamped + self.n]
 
 # -- the set-point search's state vector (search_iteration) -------------------------------------
