@@ -44,19 +44,31 @@ TOLERANCE = 1e-12
 
 
 @dataclass
-class Box:
-    """The per-joint bounds of one step: the hard limits' (positions, speeds, ...) and the
-    smoothness limits' (acceleration, jerk; ``None`` when the solver has none), and for each
-    bound the index of the limit that set it (-1: none)."""
+class Bounds:
+    """Per-joint bounds on q_dot (rad/s, m/s) and, for each, the index of the limit that set
+    it (-1: none)."""
 
     lower: np.ndarray
     upper: np.ndarray
     lower_by: np.ndarray
     upper_by: np.ndarray
-    smooth_lower: np.ndarray | None = None
-    smooth_upper: np.ndarray | None = None
-    smooth_lower_by: np.ndarray | None = None
-    smooth_upper_by: np.ndarray | None = None
+
+
+@dataclass
+class Box:
+    """The bounds of one step: the hard limits' (positions, speeds, ...) and the smoothness
+    limits' (acceleration, jerk; ``None`` when the solver has none)."""
+
+    hard: Bounds
+    smooth: Bounds | None = None
+
+    @property
+    def lower(self) -> np.ndarray:
+        return self.hard.lower
+
+    @property
+    def upper(self) -> np.ndarray:
+        return self.hard.upper
 
 
 @dataclass
@@ -116,14 +128,13 @@ class ConstraintStage:
         # joints the solver does not move stay at rest
         still = ~self.moving
         lower[still], upper[still] = np.minimum(lower[still], 0.0), np.maximum(upper[still], 0.0)
-        box = Box(lower, upper, lower_by, upper_by)
+        box = Box(Bounds(lower, upper, lower_by, upper_by))
         if False in parts:
-            box.smooth_lower, box.smooth_upper, box.smooth_lower_by, box.smooth_upper_by = \
-                parts[False]
+            smooth_box = box.smooth = Bounds(*parts[False])
             # smoothness limits that contradict each other: the middle of their bounds
-            torn = box.smooth_lower > box.smooth_upper
-            middle = 0.5 * (box.smooth_lower + box.smooth_upper)
-            box.smooth_lower[torn] = box.smooth_upper[torn] = middle[torn]
+            torn = smooth_box.lower > smooth_box.upper
+            middle = 0.5 * (smooth_box.lower + smooth_box.upper)
+            smooth_box.lower[torn] = smooth_box.upper[torn] = middle[torn]
         return box
 
     def general_rows(self, kinematics, motion: Motion):
@@ -152,7 +163,7 @@ class ConstraintStage:
         ``J_w`` (m, nv) for the general rows' correction (only called when a row is broken)."""
         box = self.box(kinematics, motion)
         rows = self.general_rows(kinematics, motion)
-        rows_w = []
+        rows_w: list[np.ndarray] = []
 
         def weighted():
             if not rows_w:
@@ -163,16 +174,15 @@ class ConstraintStage:
         if box is not None and not _inside(dq, box.lower, box.upper):
             outcome = saturate(dq, solve, box.lower, box.upper, self.moving,
                                lambda: weighted()[:self.task_rows])
-        if box is not None and box.smooth_lower is not None:
+        if box is not None and box.smooth is not None:
+            soft = box.smooth
             for limit in self.limits:  # reach the wanted velocity without overshooting it
                 approach = getattr(limit, "approach", None)
                 if approach is not None:
                     lo, hi = approach(outcome.dq, motion)
-                    np.maximum(box.smooth_lower, np.minimum(lo, box.smooth_upper),
-                               out=box.smooth_lower)
-                    np.minimum(box.smooth_upper, np.maximum(hi, box.smooth_lower),
-                               out=box.smooth_upper)
-            outcome.dq, torn = smooth(outcome.dq, box)
+                    np.maximum(soft.lower, np.minimum(lo, soft.upper), out=soft.lower)
+                    np.minimum(soft.upper, np.maximum(hi, soft.lower), out=soft.upper)
+            outcome.dq, torn = smooth(outcome.dq, box.hard, soft)
             outcome.conflict = tuple(self.names[j] for j in np.flatnonzero(torn))
         if rows is not None:
             A, b, owners = rows
@@ -232,11 +242,11 @@ class ConstraintStage:
     def _active(self, dq: np.ndarray, box: Box) -> tuple[tuple[str, str], ...]:
         """(limit name, joint name) for each joint at one of its bounds."""
         pairs = []
-        for lower, upper, lower_by, upper_by in (
-                (box.lower, box.upper, box.lower_by, box.upper_by),
-                (box.smooth_lower, box.smooth_upper, box.smooth_lower_by, box.smooth_upper_by)):
-            if lower is None:
+        for bounds in (box.hard, box.smooth):
+            if bounds is None:
                 continue
+            lower, upper, lower_by, upper_by = (bounds.lower, bounds.upper, bounds.lower_by,
+                                                bounds.upper_by)
             at_lower = (dq <= lower + TOLERANCE) & (lower_by >= 0)
             at_upper = (dq >= upper - TOLERANCE) & (upper_by >= 0)
             for j in np.flatnonzero(at_lower | at_upper):
@@ -335,19 +345,19 @@ def _spans(J: np.ndarray) -> bool:
     return bool(sv[m - 1] > RANK_TOL * sv[0])
 
 
-def smooth(dq: np.ndarray, box: Box) -> tuple[np.ndarray, np.ndarray]:
+def smooth(dq: np.ndarray, hard: Bounds, soft: Bounds) -> tuple[np.ndarray, np.ndarray]:
     """Step 3: the joint velocity moves from where the smoothness limits are centred (the
     previous velocity, carried on at the previous acceleration under a jerk limit) toward
     ``dq`` as far as they allow, along a straight line: ``u + tau (dq - u)`` with the largest
     ``tau`` in [0, 1]. A joint that this leaves outside its hard bounds is put on them (the
     hard limit wins); returns the velocity and those joints."""
-    lower, upper = box.smooth_lower, box.smooth_upper
+    lower, upper = soft.lower, soft.upper
     base = 0.5 * (np.where(np.isfinite(lower), lower, upper) + np.where(np.isfinite(upper),
                                                                           upper, lower))
     base = np.where(np.isfinite(base), base, dq)
     # a joint whose carried-on motion breaks a hard bound (braking before a position limit)
     # starts from the point of both boxes nearest to it
-    both_lo, both_hi = np.maximum(lower, box.lower), np.minimum(upper, box.upper)
+    both_lo, both_hi = np.maximum(lower, hard.lower), np.minimum(upper, hard.upper)
     fits = both_lo <= both_hi
     base = np.where(fits, np.clip(base, both_lo, both_hi), base)
     change = dq - base
@@ -356,8 +366,8 @@ def smooth(dq: np.ndarray, box: Box) -> tuple[np.ndarray, np.ndarray]:
                         np.where(change < 0, (lower - base) / change, np.inf))
     tau = float(np.clip(np.min(room, initial=1.0), 0.0, 1.0))
     out = base + tau * change
-    torn = (out < box.lower) | (out > box.upper)
-    return np.clip(out, box.lower, box.upper), torn
+    torn = (out < hard.lower) | (out > hard.upper)
+    return np.clip(out, hard.lower, hard.upper), torn
 
 
 def project(dq: np.ndarray, Jw: np.ndarray, A: np.ndarray, b: np.ndarray, lower: np.ndarray,
