@@ -35,7 +35,7 @@ from . import kernels as K
 from .constraints import ConstraintStage, Outcome
 from .escape import SaddleEscape
 from .exceptions import GainWarning
-from .gains import Gain, as_gain
+from .gains import FixedGain, Gain, as_gain
 from .limits import AccelerationLimit, JerkLimit, Limit, Motion, PositionLimit, VelocityLimit
 from .limits.position import braking_speed
 from .methods import Method
@@ -45,7 +45,6 @@ from .tasks import PostureTask, Task
 from .validation import period, raise_non_finite_targets
 
 _F64 = np.dtype(np.float64)
-_NONE_CLAMPED = np.zeros(0, dtype=np.int64)
 #: status bits that need Python: an error to raise, a stall for the escape to look at (joints
 #: held at the position and speed bounds, a task scaled for them: the kernel's own work)
 _PYTHON = K.NON_FINITE | K.STALLED
@@ -241,7 +240,8 @@ class Solver:
         if self._kernel_bounds:
             layout.inverse_speeds(work)[:] = np.where(np.isfinite(speeds), 1.0 / speeds, 0.0)
         self._raw_work = work.copy()  # the method alone, for the stage's solves
-        self._outcome, self._outcome_count = None, -1
+        self._outcome: Outcome | None = None
+        self._outcome_count = -1
         work[K.P_ERROR_ROWS] = stack.target_dim
         work[K.P_STALL_RATIO] = -1.0 if self.escape is None else SaddleEscape.STALL_RATIO
         work[K.P_STALL_ERROR] = SaddleEscape.ERROR_FLOOR ** 2
@@ -347,7 +347,7 @@ class Solver:
             kinematics = stack.kinematics
             kinematics.update(q)
             J, e, ff = task.compute(kinematics, target, velocity)
-            targets = (target,)
+            targets = [target]
         else:
             targets, velocities = stack.targets(target, target_velocity)
             J, e, ff = stack.evaluate(q, targets, velocities)
@@ -479,6 +479,7 @@ class Solver:
         moving = span > 0.0
         motion = self._motion
         # (the jerk limit is the smoothing's: a jerk-aware braking here lags behind a path)
+        assert self.acceleration_limit is not None  # braking is for acceleration limits
         allowed = braking_speed(np.array([1.0]), np.array([float(motion.dq @ delta) / size]),
                                 np.zeros(1), self._dt,
                                 np.array([np.min(self.acceleration_limit.limits[moving]
@@ -542,7 +543,7 @@ class Solver:
             info, stack = self._info, self.stack
             J, _, step, status, q = self._record
             gain = self._gain
-            k = gain.value if gain.mode == K.GAIN_FIXED else float(info[K.I_GAIN])
+            k = gain.argument if isinstance(gain, FixedGain) else float(info[K.I_GAIN])
             Jw = stack.sqrt_weight[:, None] * J * stack.chain
             alpha = self.method.scaling_factors(Jw)
             escaped = self._escaped[1] and self._escaped[0] == self._count
@@ -550,18 +551,17 @@ class Solver:
             if outcome is None and status & (K.CLAMPED | K.SCALED):
                 outcome = self._kernel_outcome(q, step, status)
             if outcome is None:
-                clamped, names, extras = _NONE_CLAMPED, (), {}
-            else:
-                names = tuple(dict.fromkeys(joint for _, joint in outcome.active))
-                index = {name: i for i, name in enumerate(self._v_names)}
-                clamped = np.array([index[name] for name in names], dtype=np.int64)
-                extras = dict(task_scale=float(outcome.scale), active_limits=outcome.active,
-                              active_rows=outcome.rows, limit_conflicts=outcome.conflict)
+                outcome = Outcome(step / self._dt)
+            names: tuple[str, ...] = tuple(dict.fromkeys(joint for _, joint in outcome.active))
+            index = {name: i for i, name in enumerate(self._v_names)}
+            clamped = np.array([index[name] for name in names], dtype=np.int64)
             self._last = StepInfo(
                 error=np.array(self.error, dtype=float), error_norm=math.sqrt(info[K.I_E_SQ]),
                 dq=step / self._dt, gain=k, loop_bound=float(info[K.I_LOOP]),
                 pose=stack.poses(), alpha=alpha, escaped=escaped,
-                clamped=clamped, clamped_joints=names, **extras)
+                clamped=clamped, clamped_joints=names, task_scale=float(outcome.scale),
+                active_limits=outcome.active, active_rows=outcome.rows,
+                limit_conflicts=outcome.conflict)
         return self._last
 
     def _kernel_outcome(self, q: np.ndarray, step: np.ndarray, status: int) -> Outcome:
