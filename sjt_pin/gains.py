@@ -50,6 +50,8 @@ class Gain:
 class FixedGain(Gain):
     """K as given: a number (K = k I) or one number per task row, in 1/s, >= 0."""
 
+    value: float | np.ndarray  #: K: one number, or one per task row (1/s)
+
     def __init__(self, value: float | Sequence[float], dim: int | None = None):
         if np.ndim(value) == 0:
             k = real_number(value, "gain", "1/s")
@@ -108,7 +110,8 @@ class AutoGain(Gain):
 def as_gain(value, dim: int) -> Gain:
     """``value`` (a :class:`Gain`, ``"auto"``, a number or a sequence of ``dim`` numbers) as a
     :class:`Gain`."""
-    if isinstance(value, FixedGain) and np.ndim(value.value) == 1 and value.value.size != dim:
+    if (isinstance(value, FixedGain) and isinstance(value.value, np.ndarray)
+            and value.value.size != dim):
         raise ValueError(f"gain has {value.value.size} rows, the tasks have {dim}")
     if isinstance(value, Gain):
         return value

@@ -7,6 +7,7 @@ only in the mapping M(J): SJT eq. (21), JT eq. (10), JP eq. (8), DLS (introducti
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from typing import cast
 
 from .gains import Gain
 from .mappings import COLUMN_TOL, JP_RCOND
@@ -157,7 +158,7 @@ class JPSolver(Solver):
 
     @property
     def rcond(self) -> float:
-        return self.method.rcond
+        return cast(JP, self.method).rcond
 
 
 class DLSSolver(Solver):
@@ -183,7 +184,7 @@ class DLSSolver(Solver):
 
     @property
     def damping(self) -> float:
-        return self.method.damping
+        return cast(DLS, self.method).damping
 
 
 SOLVERS: dict[str, type[Solver]] = {

@@ -17,6 +17,7 @@ _NOT_MAPPINGS = (pin.SE3, np.ndarray, list, tuple)
 def normalise_tasks(task, posture) -> list[Task]:
     """The task argument of a solver (a task, a list, a ``{frame: task}`` mapping or ``None``
     for a pose task on the end effector), with ``posture`` appended."""
+    tasks: list[Task]
     if task is None:
         tasks = [PoseTask()]
     elif isinstance(task, Task):
@@ -143,10 +144,10 @@ class TaskStack:
         try:
             targets = [task.target(target[task.frame]) for task in targeted]
         except KeyError:
-            targets = None
-        if targets is None or len(target) != len(targeted):
+            targets = []
+        if len(targets) != len(targeted) or len(target) != len(targeted):
             unknown = sorted(map(str, set(target) - set(self.frames)))
-            missing = sorted(set(self.frames) - set(target))
+            missing = sorted(str(f) for f in set(self.frames) - set(target))
             raise ValueError(f"target must have exactly the frames {self.frames}; "
                              f"missing {missing}, unknown {unknown}")
         targets += tail
@@ -157,17 +158,17 @@ class TaskStack:
                              f"{self.frames}")
         if len(target_velocity) == len(targeted):  # the usual case: a velocity for every frame
             try:
-                velocities = [task.velocity(target_velocity[task.frame]) for task in targeted]
+                every = [task.velocity(target_velocity[task.frame]) for task in targeted]
             except KeyError:
-                velocities = None
-            if velocities is not None:
-                return targets, velocities + tail
+                every = []
+            if every:
+                return targets, every + tail
         if not target_velocity.keys() <= self._frame_set:
             unknown = sorted(map(str, set(target_velocity) - self._frame_set))
             raise ValueError(f"target_velocity has frames {unknown} that are not task frames "
                              f"{self.frames}")
-        velocities = [task.velocity(target_velocity[task.frame])
-                      if task.frame in target_velocity else None for task in targeted]
+        velocities: list = [task.velocity(target_velocity[task.frame])
+                            if task.frame in target_velocity else None for task in targeted]
         return targets, velocities + tail
 
     # -- rows --------------------------------------------------------------------------------
@@ -188,7 +189,7 @@ class TaskStack:
                 e[rows] = et
             if not constant and Jt.base is not J:
                 J[rows] = Jt
-            if velocity is not None:
+            if velocity is not None and fft is not None:
                 if fft.base is not ff:
                     ff[rows] = fft
             elif velocities is not None and not constant:

@@ -49,7 +49,7 @@ class TrackingLog:
     reason: str = ""
     method: str = ""
     dt: float = 0.0
-    gain: float | np.ndarray | str = "auto"
+    gain: object = "auto"  #: the solver's gain setting: a number, per row, "auto" or a Gain
 
     @property
     def max_error(self) -> float:
@@ -132,7 +132,7 @@ def track(
             qs[k], steps[k], errors[k] = q, solver.displacement, solver.error
             norms[k] = norm = solver.error_norm
             scales[k] = solver.task_scale
-            positions[k] = task.placement.translation
+            positions[k] = task.placement.translation  # type: ignore[union-attr]
             if not norm < max_error:
                 diverged, reason = True, (f"error above {max_error:g} at t = {times[k]:.4g} s"
                                           if np.isfinite(norm) else

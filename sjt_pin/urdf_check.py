@@ -141,7 +141,7 @@ def check_urdf(source: URDFSource) -> None:
         raise source.error("<robot> has no <link>")
     for link in links:
         _check_link(link, source)
-    parents = {}
+    parents: dict = {}  # child link -> its joint element
     for joint in joints:
         _check_joint(joint, set(link_names), source)
         child = _link_of(joint, "child")
@@ -293,7 +293,7 @@ def _check_tree(links: list[str], parents: dict[str, etree._Element],
     done: set[str] = set()
     for start in links:
         path: list[str] = []
-        link = start
+        link: str | None = start
         while link in parents and link not in done and link not in path:
             path.append(link)
             link = _link_of(parents[link], "parent")

@@ -57,3 +57,13 @@ def test_the_version_is_one():
     root = Path(__file__).resolve().parents[1]
     assert tomllib.loads((root / "pyproject.toml").read_text())["project"]["version"] == \
         sjt_pin.__version__
+
+
+def test_the_core_is_type_clean():
+    """mypy on the core (pyproject.toml's [tool.mypy]): no error."""
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    done = subprocess.run([sys.executable, "-m", "mypy"], cwd=root, capture_output=True,
+                          text=True, timeout=600)
+    assert done.returncode == 0, done.stdout[-3000:]

@@ -360,7 +360,7 @@ class CollisionLimit(Limit):
             return None
         rows, bounds = [], []
         geoms = self.geometry.geometryObjects
-        jacobians = {}
+        jacobians: dict[int, np.ndarray] = {}
         for k in near:
             res = self._distance(k)
             d = res.min_distance

@@ -12,6 +12,7 @@ joints.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Callable
 from typing import ClassVar
 
 import numpy as np
@@ -28,7 +29,7 @@ class Method(ABC):
     stalls: ClassVar[bool] = False
     #: the compiled step ``(J, e, ff, q, work, step) -> status`` of a built-in method; ``None``
     #: for a method of your own, whose step :meth:`python_step` computes from :meth:`matrix`
-    kernel: ClassVar = None
+    kernel: ClassVar[Callable[..., int] | None] = None
 
     def configure(self, work: np.ndarray, gain: Gain, dt: float, n_chain: int) -> None:
         """Write the kernel's parameters into ``work`` (its ``P_*`` slots)."""
