@@ -13,7 +13,14 @@ from .robot import Robot
 from .solve import IKResult, solve_many
 from .solver import Solver, StepInfo
 from .solvers import DLSSolver, JPSolver, JTSolver, SJTSolver, make_solver
-from .tasks import OrientationTask, PoseTask, PositionTask, PostureTask, Task
+from .tasks import (
+    OrientationTask,
+    PoseTask,
+    PositionTask,
+    PostureTask,
+    RelativePoseTask,
+    Task,
+)
 from .tracking import TrackingLog, track
 from .trajectories import Circle, Line, PoseInterpolation, Trajectory
 
@@ -40,6 +47,7 @@ __all__ = [
     "PoseTask",
     "PositionTask",
     "PostureTask",
+    "RelativePoseTask",
     "Robot",
     "SJTSolver",
     "Solver",
