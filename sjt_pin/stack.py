@@ -61,8 +61,8 @@ class TaskStack:
 
     ``J`` (m, nv), ``e`` (m,) and ``ff`` (m,) hold every task's rows in order; ``sqrt_weight``
     (m,) the weights' square roots; ``chain`` (nv,) is 1 for the joints that move at least one
-    task (:meth:`Task.joints <sjt_pin.tasks.Task.joints>`; a posture task moves all). With a single task, :meth:`evaluate` returns that task's
-    own arrays without copying.
+    task (``Task.joints``; a posture task moves all). With a single task, :meth:`evaluate`
+    returns that task's own arrays without copying.
     """
 
     def __init__(self, robot, tasks: list[Task]):
