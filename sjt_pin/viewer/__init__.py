@@ -1,6 +1,10 @@
-"""The meshcat viewer: robots, animated tracking runs, the demo page (imports meshcat)."""
+"""The meshcat viewer: robots, animated tracking runs, the demo page (needs the viewer extra)."""
 
-from .style import METHOD_COLORS
-from .viewer import Viewer
+from ..extras import require
+
+require("meshcat", "trimesh", "fast_simplification")
+
+from .style import METHOD_COLORS  # noqa: E402
+from .viewer import Viewer  # noqa: E402
 
 __all__ = ["METHOD_COLORS", "Viewer"]
