@@ -5,7 +5,7 @@ with ``D = diag(1 / (J_i^T J_i))``; the pseudoinverse, damped least-squares and 
 transpose baselines share the same interface.
 """
 
-from .exceptions import FrameNotFound, GainWarning, URDFError
+from .exceptions import ConcurrentStepError, FrameNotFound, GainWarning, URDFError
 from .gains import AutoGain, FixedGain, Gain
 from .kinematics import Kinematics
 from .limits import CollisionLimit
@@ -36,6 +36,7 @@ __all__ = [
     "FixedGain",
     "FrameNotFound",
     "Gain",
+    "ConcurrentStepError",
     "GainWarning",
     "IKResult",
     "JPSolver",

@@ -30,5 +30,10 @@ class URDFError(SJTError, ValueError):
     file (or ``<URDF string>``) and the joint or link at fault."""
 
 
+class ConcurrentStepError(SJTError, RuntimeError):
+    """A solver stepped by a second thread while a step of it is running: its buffers and its
+    ``pin.Data`` are one thread's. Give each thread its own solver (or a copy)."""
+
+
 class GainWarning(UserWarning):
     """A fixed gain above the discrete-time stability bound at the current configuration."""

@@ -34,7 +34,7 @@ import pinocchio as pin
 from . import kernels as K
 from .constraints import ConstraintStage, Outcome
 from .escape import SaddleEscape
-from .exceptions import GainWarning
+from .exceptions import ConcurrentStepError, GainWarning
 from .gains import FixedGain, Gain, as_gain
 from .limits import AccelerationLimit, JerkLimit, Limit, Motion, PositionLimit, VelocityLimit
 from .limits.position import braking_speed
@@ -257,6 +257,7 @@ class Solver:
         self._gain = as_gain(gain, stack.target_dim)
         self._configure()
         self._count = 0
+        self._stepping = False  # a step runs (ConcurrentStepError for a second thread)
         self._last: StepInfo | None = None
         #: the last step's rows, error, displacement and status (None before the first)
         self._record: tuple | None = None
@@ -335,7 +336,23 @@ class Solver:
                 [linear (m/s), angular (rad/s)], world axes at the desired origin (``None``:
                 no feed-forward); with several tasks a ``{frame: velocity}`` mapping (missing
                 frames: 0).
+
+        A second thread that steps this solver while a step runs gets
+        :class:`~sjt_pin.exceptions.ConcurrentStepError`: a solver's buffers are one thread's.
         """
+        if self._stepping:
+            raise ConcurrentStepError(
+                f"{type(self).__name__} is being stepped by another thread: a solver's buffers "
+                "and pin.Data are one thread's; give each thread its own solver "
+                "(copy.deepcopy(solver) makes one in the same state)")
+        self._stepping = True
+        try:
+            return self._control(q, target, target_velocity)
+        finally:
+            self._stepping = False
+
+    def _control(self, q, target, target_velocity=None) -> np.ndarray:
+        """:meth:`step` itself."""
         if not (type(q) is np.ndarray and q.shape == self._q_shape and q.dtype == _F64):
             q = self.robot.check_q(q)
         # 1. the task rows at q
