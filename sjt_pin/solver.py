@@ -621,7 +621,7 @@ class Solver:
             f"{self.method.name.upper()} gain {self._gain.largest:g} 1/s exceeds the stability "
             f"bound 2 / (dt lambda_max(J M)) = {2.0 / (self._dt * lam):.4g} 1/s at the current "
             f"configuration (dt = {self._dt:g} s); the closed loop will oscillate or diverge",
-            GainWarning, stacklevel=4)
+            GainWarning, stacklevel=5)
 
     def _raise_non_finite(self, q: np.ndarray, targets) -> None:
         self.robot.check_q(q)  # names q if it holds NaN or inf
