@@ -322,6 +322,7 @@ class Solver:
         if self.escape is not None:
             self.escape.reset()
         self._work[K.P_ESCAPING] = 0.0
+        self._work[K.P_STALL_RUN], self._work[K.P_STALL_WAIT] = -1.0, np.inf
         self._escape_velocity[:] = 0.0
 
     # -- one control period --------------------------------------------------------------------
@@ -402,13 +403,20 @@ class Solver:
         escape = self.escape
         self._escaped = (self._count, escape is not None and escape.active)
         if escape is not None:
-            if (status & K.STALLED and not escape.active
-                    and escape.observe(self._count, self._info[K.I_E_SQ])):
-                escape.test(q, self._weighted_rows(targets))
+            work = self._work
+            if status & K.STALLED and not escape.active:
+                run = float(work[K.P_STALL_RUN])
+                if escape.observe(run, float(self._info[K.I_E_SQ])):
+                    escape.test(q, self._weighted_rows(targets))
+                if run > 1.0:  # a window ended: the kernel counts the next one
+                    work[K.P_STALL_RUN] = 0.0
+                work[K.P_STALL_WAIT] = escape.wait
             velocity = escape.velocity(float(self._info[K.I_REGULAR]), dt,
                                        float(self._info[K.I_E_SQ]))
             if velocity is None:
-                self._work[K.P_ESCAPING] = 0.0
+                if work[K.P_ESCAPING]:  # an escape ended: a stall after it is a new run
+                    work[K.P_STALL_RUN] = -1.0
+                work[K.P_ESCAPING] = 0.0
                 self._escape_velocity[:] = 0.0
             else:  # the kernel adds it, within the limits, from the next step on
                 self._work[K.P_ESCAPING] = 1.0
@@ -660,7 +668,8 @@ class Solver:
         state = {"motion": (self._motion.dq.copy(), self._motion.ddq.copy()),
                  "escape": self.escape, "escaping": float(self._work[K.P_ESCAPING]),
                  "escape_velocity": self._escape_velocity.copy(), "warned": self._warned,
-                 "count": self._count}
+                 "count": self._count, "stall": (float(self._work[K.P_STALL_RUN]),
+                                                  float(self._work[K.P_STALL_WAIT]))}
         return (_rebuild, (type(self), self.robot, self.method, arguments), state)
 
     def __setstate__(self, state: dict) -> None:
@@ -669,6 +678,7 @@ class Solver:
         self._work[K.P_ESCAPING] = state["escaping"]
         self._escape_velocity[:] = state["escape_velocity"]
         self._warned, self._count = state["warned"], state["count"]
+        self._work[K.P_STALL_RUN], self._work[K.P_STALL_WAIT] = state["stall"]
         self._configure()
 
     def __repr__(self) -> str:
