@@ -80,3 +80,14 @@ def test_solve_many_throughput_row():
     row = ik.many_throughput("ur5", poses=40)
     assert row.poses == 40 and row.processes == 2
     assert row.single > 0 and row.parallel > 0 and row.speedup == row.parallel / row.single
+
+
+@pytest.mark.bench  # needs roboticstoolbox-python, from the bench extra: pytest -m bench
+def test_rtb_solves_a_sub_chain_of_a_larger_robot():
+    """Baxter's right arm is joints 1..7 of a 19-joint robot: robotics-toolbox's runner numbers
+    the chain's joints as its own (it solved 0 % when it kept the robot's numbering)."""
+    robot = sjt.Robot.from_example("baxter", ee_frame=ik.EE_FRAMES["baxter"])
+    run = ik._rtb(robot)
+    pairs = ik.problems(robot, 20)
+    solved = sum(ik.solved(robot, run(target, seed).q, target) for target, seed in pairs)
+    assert solved >= 19
