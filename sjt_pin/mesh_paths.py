@@ -50,7 +50,7 @@ def package_of(filename: str) -> str | None:
     """The package a ``package://pkg/...`` reference names (None for other references)."""
     if not filename.startswith(PACKAGE):
         return None
-    return filename[len(PACKAGE):].split("/", 1)[0]
+    return filename[len(PACKAGE):].lstrip("/").split("/", 1)[0]
 
 
 def guess_package_dirs(urdf: Path, references: Iterable[tuple[str, str]],
@@ -84,7 +84,7 @@ def resolve(filename: str, dirs: Sequence[str]) -> tuple[str | None, Path | None
     package = package_of(filename)
     rest = filename[len(PACKAGE):] if package is not None else filename
     for folder in dirs:
-        candidate = os.path.join(folder, rest)
+        candidate = folder.rstrip("/") + "/" + rest  # as Pinocchio joins them
         if os.path.exists(candidate):
             within = None if package is None else Path(os.path.realpath(os.path.join(folder,
                                                                                       package)))

@@ -435,8 +435,9 @@ class Robot:
             data = self._local.data = self.model.createData()
         return data
 
-    def fk(self, q, frame: str | None = None) -> pin.SE3:
-        """World pose of ``frame`` (default: the end effector) at configuration ``q``.
+    def fk(self, q, frame: str | int | None = None) -> pin.SE3:
+        """World pose of ``frame`` (a name or id, as :meth:`frame_id` takes it; default: the
+        end effector) at configuration ``q``.
 
         Safe to call from several threads (each has its own ``pin.Data``).
         """
@@ -446,7 +447,7 @@ class Robot:
         pin.forwardKinematics(self.model, data, q)
         return pin.updateFramePlacement(self.model, data, fid)
 
-    def jacobian(self, q, frame: str | None = None,
+    def jacobian(self, q, frame: str | int | None = None,
                  reference: pin.ReferenceFrame = pin.LOCAL) -> np.ndarray:
         """Frame Jacobian (6, nv), rows [linear; angular], in ``reference`` axes (LOCAL default);
         always 2-D, also for a robot with one joint."""

@@ -69,6 +69,8 @@ class Trajectory(ABC):
     duration: float
     #: True when the trajectory prescribes a position only (no ``rotation=``): see the module
     position_only: bool = False
+    #: the orientation held (3x3), for trajectories that hold one; None when position-only
+    rotation: np.ndarray | None = None
 
     def holding(self, rotation) -> Trajectory:
         """A copy that holds the orientation ``rotation`` (3x3) throughout (no longer

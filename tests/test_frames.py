@@ -77,7 +77,7 @@ def test_a_random_urdf_with_a_joint_named_like_a_link():
 def test_frames_lists_name_type_and_parent_joint(z1):
     frames = z1.frames()
     assert len(frames) == len(z1.model.frames)
-    for info, frame in zip(frames, z1.model.frames):
+    for info, frame in zip(frames, z1.model.frames, strict=True):
         assert info.name == frame.name
         assert info.type == str(frame.type).rsplit(".", 1)[-1]
         assert info.parent_joint == z1.model.names[frame.parentJoint]
