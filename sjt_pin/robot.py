@@ -587,10 +587,10 @@ def _reach(model: pin.Model) -> float:
 
 
 def _data_bytes(model: pin.Model) -> int:
-    """Estimated bytes of one ``pin.Data``: about 32 nv³ + 1250 nv² (measured with Pinocchio
-    3: 41 MB at nv = 100, 279 MB at 200, 901 MB at 300)."""
+    """Estimated bytes of one ``pin.Data``: 30 nv³ + 1100 nv², fitted to Pinocchio 3 on
+    serial chains (measured 41 MB at nv = 100, 279 MB at 200, 901 MB at 300)."""
     nv = model.nv
-    return int(32 * nv**3 + 1250 * nv**2 + 4000 * model.njoints)
+    return int(30 * nv**3 + 1100 * nv**2)
 
 
 def _check_memory(model: pin.Model, label: str, budget: float) -> None:

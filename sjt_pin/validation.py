@@ -104,8 +104,8 @@ class UnitBlocks:
             joint, kind, first, size = self.blocks[k]
             raise ValueError(
                 f"{name}[{first}:{first + size}] = {np.round(q[first:first + size], 6).tolist()} "
-                f"is joint {joint!r}'s {kind}: it must have unit norm (within {UNIT_TOL:g}), "
-                f"its norm is {norms[k]:.6g}")
+                f"is the {kind} of joint {joint!r}: it must have unit norm (within "
+                f"{UNIT_TOL:g}), its norm is {norms[k]:.6g}")
         if np.all(defect <= 1e-14):
             return q
         q = q.copy()
