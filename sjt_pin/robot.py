@@ -90,6 +90,13 @@ class Robot:
     Build one with :meth:`from_example`, :meth:`from_urdf` or :meth:`planar3`. ``model``, ``data``,
     ``visual_model`` and ``collision_model`` are Pinocchio's own objects; ``data`` is this robot's
     scratch space, overwritten by every kinematic call.
+
+    ``ee_frame`` is a frame name or id, ``frame_type`` picks among frames sharing the name (see
+    :meth:`frame_id`). Geometry handed in is checked against the folders its meshes may come
+    from (``package_dirs`` and the folder of the ``urdf`` file, :mod:`sjt_pin.mesh_paths`)
+    unless ``allow_outside_meshes``; with neither named, it is the caller's own and not checked.
+    A model whose ``pin.Data`` would take more than ``memory_budget`` bytes is refused
+    (:data:`MEMORY_BUDGET`).
     """
 
     def __init__(
@@ -164,8 +171,9 @@ class Robot:
         """Load ``name`` from example-robot-data (``"panda"``, ``"ur5"``, ``"talos_full"``, ...;
         ``example_robot_data.robots_loader.ROBOTS`` lists every name).
 
-        ``ee_frame`` (a frame name or id; ``frame_type`` picks among frames sharing the name,
-        see :meth:`frame_id`) defaults to :data:`DEFAULT_EE_FRAMES` for the robots listed there.
+        ``ee_frame`` (a frame name, or an id of the model as loaded, before joints are locked;
+        ``frame_type`` picks among frames sharing the name, see :meth:`frame_id`) defaults to
+        :data:`DEFAULT_EE_FRAMES` for the robots listed there.
         ``locked_joints`` (joint names) are removed from the model at the reference
         configuration (see :meth:`reduced`); by default the gripper joints of
         :data:`DEFAULT_LOCKED_JOINTS`, ``()`` for none. ``q0`` is the robot's reference
@@ -382,9 +390,10 @@ class Robot:
         q0 = np.concatenate([np.zeros(0)] + [
             self.q0[model.idx_qs[model.getJointId(reduced.names[j])]:][
                 :reduced.joints[j].nq] for j in range(1, reduced.njoints)])
-        robot = Robot.__new__(Robot)
+        robot = type(self).__new__(type(self))
         robot.__dict__.update(self.__dict__)
         robot._local = threading.local()
+        robot.package_dirs = list(self.package_dirs)
         robot.model, robot.visual_model, robot.collision_model = reduced, visual, collision
         kind = model.frames[self.ee_frame_id].type  # the same frame: same name, same type
         same = [i for i, f in enumerate(reduced.frames) if f.name == self.ee_frame
