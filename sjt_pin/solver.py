@@ -178,6 +178,11 @@ class Solver:
         n = robot.nv
         self._model = robot.model
         self._q_shape = (robot.nq,)
+        #: a q with quaternions or (cos, sin) pairs is checked on its manifold unless it is the
+        #: array the last step returned (pin.integrate keeps it there): no cost in a loop
+        self._units = robot.unit_coordinates
+        self._returned: np.ndarray | None = None
+        self._first = True  # the first step checks the targets' distance (units)
         self._dt = period(dt)
         self._kernel = method.kernel if method.kernel is not None else method.python_step
         # the constraint stage: the URDF's position and speed limits, acceleration and jerk
@@ -311,7 +316,7 @@ class Solver:
     def _update_slow(self) -> None:
         """Whether every step must take the slow path (an escape in progress, a pending
         stability check, limits outside the kernel's box)."""
-        self._always = (self._gain_check or self._staged
+        self._always = (self._first or self._gain_check or self._staged
                         or (self.escape is not None and self.escape.active))
 
     def reset(self) -> None:
@@ -354,7 +359,8 @@ class Solver:
 
     def _control(self, q, target, target_velocity=None) -> np.ndarray:
         """:meth:`step` itself."""
-        if not (type(q) is np.ndarray and q.shape == self._q_shape and q.dtype == _F64):
+        if not (type(q) is np.ndarray and q.shape == self._q_shape and q.dtype == _F64) or (
+                self._units and q is not self._returned):
             q = self.robot.check_q(q)
         # 1. the task rows at q
         stack = self.stack
@@ -390,13 +396,20 @@ class Solver:
             np.subtract(dq, motion.dq, out=motion.ddq)
             motion.ddq /= dt
             motion.dq[:] = dq
-        return pin.integrate(self._model, q, step)
+        self._returned = q_next = pin.integrate(self._model, q, step)
+        return q_next
 
     def _slow(self, status, q, J, e, ff, targets) -> np.ndarray:
         """What the fast path skips: errors, the stability check, the escape's state (its
         velocity for the next step), limits beyond the built-in ones."""
         if status & K.NON_FINITE:
             self._raise_non_finite(q, targets)
+        if self._first:
+            self._first = False
+            for target in targets:
+                position = target.translation if isinstance(target, pin.SE3) else target
+                if isinstance(position, np.ndarray) and position.shape == (3,):
+                    self.robot.check_reach(position)
         if self._gain_check:
             self._check_gain(J)
         step, dt = self._step, self._dt

@@ -27,6 +27,7 @@ import pinocchio as pin
 from lxml import etree
 
 from .exceptions import URDFError
+from .validation import name_list
 
 #: The joint types of the URDF specification.
 JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", "planar")
@@ -142,8 +143,9 @@ def check_urdf(source: URDFSource) -> None:
     for link in links:
         _check_link(link, source)
     parents: dict = {}  # child link -> its joint element
+    known_links = set(link_names)  # once: the checks stay linear in the URDF's size
     for joint in joints:
-        _check_joint(joint, set(link_names), source)
+        _check_joint(joint, known_links, source)
         child = _link_of(joint, "child")
         if child in parents:
             raise source.error(
@@ -178,13 +180,15 @@ def _children(element: etree._Element, tag: str) -> list[etree._Element]:
 
 def _names(elements: list[etree._Element], kind: str, source: URDFSource) -> list[str]:
     """The ``name`` of each element; :class:`URDFError` if one is missing or repeated."""
-    names = []
+    names: list[str] = []
+    seen: set[str] = set()
     for element in elements:
         name = element.get("name")
         if not name:
             raise source.error(f"a <{kind}> without a name (line {element.sourceline})")
-        if name in names:
+        if name in seen:
             raise source.error(f"two {kind}s named {name!r} (line {element.sourceline})")
+        seen.add(name)
         names.append(name)
     return names
 
@@ -293,9 +297,11 @@ def _check_tree(links: list[str], parents: dict[str, etree._Element],
     done: set[str] = set()
     for start in links:
         path: list[str] = []
+        on_path: set[str] = set()  # path as a set: the walk stays linear in the chain's length
         link: str | None = start
-        while link in parents and link not in done and link not in path:
+        while link in parents and link not in done and link not in on_path:
             path.append(link)
+            on_path.add(link)
             link = _link_of(parents[link], "parent")
         if link in path:
             cycle = (path[path.index(link):] + [link])[::-1]  # parent -> child order
@@ -305,8 +311,8 @@ def _check_tree(links: list[str], parents: dict[str, etree._Element],
         done.update(path)
     roots = [link for link in links if link not in parents]
     if len(roots) > 1:
-        raise source.error(f"several root links {roots} (links that are no joint's child); a "
-                           "URDF robot is one tree")
+        raise source.error(f"several root links {name_list(roots)} (links that are no joint's "
+                           "child); a URDF robot is one tree")
 
 
 # -- Pinocchio ---------------------------------------------------------------------------------

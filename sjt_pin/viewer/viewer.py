@@ -79,7 +79,7 @@ class _Rig:
         self.nodes: list[str] = []
         self.geometries: list[int] = []
         for index, geometry in enumerate(robot.visual_model.geometryObjects):
-            parts = visual_parts(geometry)
+            parts = visual_parts(geometry, folders=robot.mesh_roots)
             if not parts:
                 continue
             node = f"{name}/visuals/{geometry.name}"
