@@ -104,14 +104,17 @@ svg.error-plot .cursor { stroke-width: 1.5; stroke-dasharray: 3 2; }
 
 
 def page_html(commands: Sequence[bytes], robots: Sequence[RobotEntry], title: str,
-              description: str, view: Sequence[float] | None) -> str:
+              description: str, view: Sequence[float] | None,
+              dots: Sequence[str] = ()) -> str:
     """The page of a scene rebuilt by ``commands`` (packed meshcat commands) with ``robots``.
 
     ``description`` is a paragraph of text under the title. ``view`` is the direction (world)
-    the camera frames the scene from; None keeps the camera the scene sets.
+    the camera frames the scene from; None keeps the camera the scene sets. ``dots`` are the
+    nodes of desired paths' dots, sized in pixels once the view is framed.
     """
     meta = {
         "view": None if view is None else [float(v) for v in view],
+        "dots": list(dots),
         "robots": [{"node": r.node, "label": r.label,
                     "runs": [{"method": run.label, "color": css(run.color), "start": run.start,
                               "end": run.end} for run in r.runs]} for r in robots],

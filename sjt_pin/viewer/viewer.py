@@ -38,8 +38,12 @@ from .style import DESIRED_COLOR, EXTRA_COLORS, METHOD_COLORS, OTHER_COLOR, to_i
 VIEW_DIRECTION = (1.0, 0.3, 0.4)
 #: Points drawn of a run's paths (a 0.2 m circle with 500 points is off by 3 um).
 PATH_POINTS = 500
-#: Dots drawn of a run's desired path.
+#: Dots drawn of a run's desired path, at most.
 DESIRED_DOTS = 60
+#: Least spacing of those dots along the path, as a fraction of the robot's size (its largest
+#: frame distance from its base): a short path gets few dots, far enough apart that the path
+#: followed shows between them. On the page they are :data:`.page_script.DOT_PIXELS` wide.
+DOT_SPACING = 0.02
 _NOT_LIVE = "this viewer has no live server (it was made with live=False)"
 _GRID_SCALE = 0.25
 _BACKGROUND = ([0.97, 0.97, 0.98], [0.80, 0.83, 0.87])  # top and bottom colours, RGB in [0, 1]
@@ -94,6 +98,9 @@ class _Rig:
         scene[name].set_transform(placement)
         self.data = robot.model.createData()
         self.geometry_data = pin.GeometryData(robot.visual_model)
+        pin.framesForwardKinematics(robot.model, self.data, robot.q0)
+        #: The robot's size (m): its farthest frame from its base at ``q0``, at least 5 cm.
+        self.size = max(0.05, max(float(np.linalg.norm(f.translation)) for f in self.data.oMf))
 
     def placements(self, q: np.ndarray) -> list[np.ndarray]:
         """4x4 placements of the drawn geometries at ``q``, in the frame of the robot's base."""
@@ -294,8 +301,8 @@ class Viewer:
         safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in label)
         run_node, target_node = f"{rig.name}/runs/{safe}", f"{rig.name}/markers/target"
         every = -(-len(log) // PATH_POINTS)  # a path of at most PATH_POINTS points
-        self.draw_points(log.target[:: max(1, len(log) // DESIRED_DOTS)], DESIRED_COLOR,
-                         "desired", robot=rig.name)
+        self.draw_points(_dots(log.target, DOT_SPACING * rig.size), DESIRED_COLOR, "desired",
+                         robot=rig.name, size=1.5 * DOT_SPACING * rig.size)
         self.meshcat[f"{run_node}/path"].set_object(mg.Line(
             mg.PointsGeometry(_points(log.position[::every]).T),
             mg.LineBasicMaterial(color=color, linewidth=2.0)))
@@ -345,7 +352,8 @@ class Viewer:
         """
         robots = [RobotEntry(rig.name, rig.label, tuple(rig.runs)) for rig in self._rigs.values()]
         view = None if self._camera is not None else VIEW_DIRECTION
-        return page_html(self._record.commands(), robots, title, description, view)
+        dots = [f"{rig.name}/paths/desired" for rig in self._rigs.values() if rig.runs]
+        return page_html(self._record.commands(), robots, title, description, view, dots)
 
     def save_html(self, path: str | Path, title: str = "sjt-pin viewer",
                   description: str = "") -> Path:
@@ -374,6 +382,16 @@ class Viewer:
     def __repr__(self) -> str:
         url = self._server.web_url if self._server is not None else None
         return f"Viewer({list(self._rigs)}, url={url!r})"
+
+
+def _dots(path: np.ndarray, spacing: float) -> np.ndarray:
+    """Points of ``path`` (N, 3) at least ``spacing`` m apart along it, at most DESIRED_DOTS
+    of them evenly spread, the first and the last included (two, for a path that stands still).
+    """
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))])
+    count = int(min(DESIRED_DOTS, arc[-1] / max(spacing, 1e-12))) + 1
+    indices = np.searchsorted(arc, np.linspace(0.0, arc[-1], max(count, 2)))
+    return path[np.minimum(indices, len(path) - 1)]
 
 
 def _translation(p) -> np.ndarray:
