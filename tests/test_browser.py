@@ -253,3 +253,39 @@ def test_desired_dots_leave_the_path_followed_visible_on_a_short_line(chromium, 
     assert seen[True] >= 0.6 * seen[False], seen  # the dots hide at most 40 % of it
     # dots, not a bar: they cover less than 3 pixels per pixel of the line's length
     assert dark[True] - dark[False] < 3 * seen[False], (dark, seen)
+
+
+EVIL = "<!--<script>"  # opens an HTML comment, then a script, inside a <script> element
+
+
+def test_page_of_names_that_open_comments_and_scripts_still_shows_its_view(chromium, tmp_path):
+    x = EVIL.replace("<", "&lt;").replace(">", "&gt;")  # the same names, written in XML
+    robot = sjt.Robot.from_urdf(f"""<robot name="{x}">
+      <link name="base"><visual><geometry><box size="0.1 0.1 0.1"/></geometry></visual></link>
+      <link name="{x}"><visual><origin xyz="0.25 0 0"/>
+        <geometry><box size="0.5 0.05 0.05"/></geometry></visual></link>
+      <link name="tip"/>
+      <joint name="j{x}" type="revolute"><parent link="base"/><child link="{x}"/>
+        <axis xyz="0 0 1"/><limit lower="-3" upper="3" velocity="2" effort="1"/></joint>
+      <joint name="fixed" type="fixed"><parent link="{x}"/><child link="tip"/>
+        <origin xyz="0.5 0 0"/></joint>
+    </robot>""", ee_frame="tip")
+    assert robot.name == EVIL
+    start = robot.fk(np.zeros(1)).translation
+    circle = sjt.Circle(start - [0.1, 0, 0], 0.1, duration=1.0)
+    log = sjt.track(sjt.SJTSolver(robot, task=sjt.PositionTask("xy")), circle, np.zeros(1))
+    with Viewer(robot, live=False, name=EVIL, label=EVIL + "</script>") as viewer:
+        viewer.compare({EVIL + '"</script>': log})
+        path = viewer.save_html(tmp_path / "evil.html", title=EVIL, description=EVIL)
+    page = chromium.open(path.as_uri(), meshes=2)  # waits for the robot's two meshes
+    try:
+        assert page.errors == []
+        assert page.page.locator("h1").inner_text() == EVIL
+        assert page.page.locator("section.robot h2").inner_text() == EVIL + "</script>"
+        assert page.page.locator(".tag b").inner_text() == EVIL + "</script>"
+        assert page.page.locator("section.robot li b").inner_text() == (EVIL + '"</script>').upper()
+        shown = page.screenshot(time=0.2)
+        hidden = page.screenshot(time=0.2, hide=EVIL)
+        assert changed_fraction(shown, hidden) > 0.002  # the robot is drawn
+    finally:
+        page.close()

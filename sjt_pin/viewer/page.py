@@ -150,9 +150,16 @@ def page_html(commands: Sequence[bytes], robots: Sequence[RobotEntry], title: st
 """
 
 
+#: Characters written as JSON escapes inside a ``<script>`` element: with ``<`` and ``>`` as
+#: ``\u003c`` and ``\u003e``, no ``</script``, ``<script`` or ``<!--`` in a name can end the
+#: element or switch the HTML parser into a state that swallows the scripts after it.
+_SCRIPT_ESCAPES = str.maketrans({"<": "\\u003c", ">": "\\u003e", "&": "\\u0026",
+                                 "\u2028": "\\u2028", "\u2029": "\\u2029"})
+
+
 def _json(value) -> str:
-    """JSON that is safe inside a ``<script>`` element."""
-    return json.dumps(value, separators=(",", ":")).replace("</", "<\\/")
+    """JSON that is safe inside a ``<script>`` element, whatever strings ``value`` holds."""
+    return json.dumps(value, separators=(",", ":")).translate(_SCRIPT_ESCAPES)
 
 
 def _controls(duration: float, reset: bool) -> str:

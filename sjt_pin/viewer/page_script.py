@@ -178,7 +178,7 @@ SCRIPT_TEMPLATE = r"""
     tag.append(name, " ", dot, " ", method);
     view.appendChild(tag);
     const visuals = viewer.scene_tree.find(["meshcat", robot.node, "visuals"]).object;
-    const section = document.querySelector(`section.robot[data-robot="${robot.node}"]`);
+    const section = document.querySelector(`section.robot[data-robot="${CSS.escape(robot.node)}"]`);
     return {robot, tag, dot, method, visuals,
             items: section ? Array.from(section.querySelectorAll("li[data-method]")) : [],
             plot: section ? section.querySelector("svg.error-plot") : null};

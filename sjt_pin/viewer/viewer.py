@@ -160,6 +160,9 @@ class Viewer:
         ``pin.SE3`` (e.g. to stand a planar arm up). ``color`` (RGBA in [0, 1]) overrides the
         meshes' colours, e.g. for a ghost.
         """
+        if not isinstance(name, str) or not name or "/" in name:
+            raise ValueError(f"name must be a non-empty string without '/' (a meshcat node), "
+                             f"got {name!r}")
         if name in self._rigs:
             raise ValueError(f"name {name!r} is already in the scene")
         self._rigs[name] = _Rig(self.meshcat, robot, name, label or name, _placement(offset),
