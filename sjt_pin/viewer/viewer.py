@@ -5,7 +5,9 @@ The scene is kept in this process (:mod:`.scene`). :meth:`Viewer.save_html` writ
 self-contained page, with a legend, error plots and play controls (:mod:`.page`). With
 ``live=True`` (the default) each change also goes to a meshcat server, whose page shows the
 scene as it is built. That server listens on 127.0.0.1 only and stops when the viewer is closed,
-when the program exits, or when the program is killed (see :mod:`.server`).
+when the program exits, or when the program is killed (see :mod:`.server`). Each request to it
+waits at most ``timeout`` s: a server that died raises :class:`.ServerTimeout`, and
+:meth:`Viewer.restart` starts a new one with the scene so far.
 
 Several robots can share one scene (``add_robot`` with an ``offset``); every drawing method takes
 ``robot=`` to pick one (default: the first). Animations of all robots share one timeline.
@@ -13,8 +15,6 @@ Several robots can share one scene (``add_robot`` with an ``offset``); every dra
 
 from __future__ import annotations
 
-import contextlib
-import io
 import webbrowser
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -24,14 +24,13 @@ import meshcat.geometry as mg
 import numpy as np
 import pinocchio as pin
 from meshcat.animation import Animation, AnimationClip, AnimationTrack
-from meshcat.visualizer import ViewerWindow
 
 from ..robot import Robot
 from ..tracking import TrackingLog
 from .meshes import visual_parts
 from .page import RobotEntry, Run, page_html
 from .scene import SceneRecord
-from .server import LoopbackServer
+from .server import LiveWindow, LoopbackServer
 from .style import DESIRED_COLOR, EXTRA_COLORS, METHOD_COLORS, OTHER_COLOR, to_int
 
 #: Direction (world, from the scene's centre) the page's camera looks from unless it is set.
@@ -44,7 +43,8 @@ DESIRED_DOTS = 60
 #: frame distance from its base): a short path gets few dots, far enough apart that the path
 #: followed shows between them. On the page they are :data:`.page_script.DOT_PIXELS` wide.
 DOT_SPACING = 0.02
-_NOT_LIVE = "this viewer has no live server (it was made with live=False)"
+_NOT_LIVE = ("this viewer has no live server (it was made with live=False, or closed); "
+             "restart() starts one")
 _GRID_SCALE = 0.25
 _BACKGROUND = ([0.97, 0.97, 0.98], [0.80, 0.83, 0.87])  # top and bottom colours, RGB in [0, 1]
 
@@ -119,17 +119,23 @@ class Viewer:
         open: open the live scene in the default web browser.
         live: start a meshcat server that shows the scene as it is built (:attr:`url`);
             without it the scene only goes to :meth:`save_html`.
-    Use as a context manager (or call :meth:`close`) to stop the server.
+        timeout: the longest wait (s) for the server's answer to one request; a server that
+            died or hangs raises :class:`~sjt_pin.viewer.server.ServerTimeout` (then
+            :meth:`restart`).
+    Use as a context manager (or call :meth:`close`) to stop the server. The server lives as
+    long as this process (whichever thread made the viewer) or until :meth:`close`.
     """
 
     def __init__(self, robot: Robot, open: bool = False, *, name: str = "robot",
-                 offset=(0.0, 0.0, 0.0), label: str | None = None, live: bool = True):
-        self._server = LoopbackServer() if live else None
-        window = None
-        if self._server is not None:
-            with contextlib.redirect_stdout(io.StringIO()):  # meshcat prints its URL
-                window = ViewerWindow(self._server.zmq_url, start_server=False, server_args=[])
-        self._record = SceneRecord(window)
+                 offset=(0.0, 0.0, 0.0), label: str | None = None, live: bool = True,
+                 timeout: float = 10.0):
+        if not isinstance(timeout, (int, float)) or not 0 < timeout < float("inf"):
+            raise ValueError(f"timeout must be a positive number of seconds, got {timeout!r}")
+        self.timeout = float(timeout)
+        self._server: LoopbackServer | None = None
+        self._record = SceneRecord(None)
+        if live:
+            self._record.live = self._start_server()
         self.meshcat = meshcat.Visualizer(window=self._record)
         self._rigs: dict[str, _Rig] = {}
         self._animation = Animation()
@@ -143,6 +149,22 @@ class Viewer:
         self._send_camera([1.8, 1.1, 0.9])
         if open:
             webbrowser.open(self.url, new=2)
+
+    def _start_server(self) -> LiveWindow:
+        self._server = LoopbackServer()
+        server = self._server
+        return LiveWindow(server.zmq_url, server.web_url, self.timeout,
+                          alive=lambda: server.running)
+
+    def restart(self) -> str:
+        """Start a new meshcat server (after a :class:`ServerTimeout`, or to go live), send it
+        the scene so far, and return its page's address (a new :attr:`url`)."""
+        self.close()
+        window = self._start_server()
+        for command in self._record.lowered():
+            window.send_lowered(command)
+        self._record.live = window
+        return self.url
 
     # -- scene -----------------------------------------------------------------------------------
     @property
@@ -372,9 +394,14 @@ class Viewer:
         return self.meshcat.jupyter_cell(height=height)
 
     def close(self) -> None:
-        """Stop the meshcat server, if any (idempotent)."""
+        """Stop the meshcat server, if any (idempotent); the scene stays for :meth:`save_html`
+        and :meth:`restart`."""
+        if isinstance(self._record.live, LiveWindow):
+            self._record.live.close()
+        self._record.live = None
         if self._server is not None:
             self._server.close()
+        self._server = None
 
     def __enter__(self) -> Viewer:
         return self
