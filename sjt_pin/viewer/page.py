@@ -104,14 +104,17 @@ svg.error-plot .cursor { stroke-width: 1.5; stroke-dasharray: 3 2; }
 
 
 def page_html(commands: Sequence[bytes], robots: Sequence[RobotEntry], title: str,
-              description: str, view: Sequence[float] | None) -> str:
+              description: str, view: Sequence[float] | None,
+              dots: Sequence[str] = ()) -> str:
     """The page of a scene rebuilt by ``commands`` (packed meshcat commands) with ``robots``.
 
     ``description`` is a paragraph of text under the title. ``view`` is the direction (world)
-    the camera frames the scene from; None keeps the camera the scene sets.
+    the camera frames the scene from; None keeps the camera the scene sets. ``dots`` are the
+    nodes of desired paths' dots, sized in pixels once the view is framed.
     """
     meta = {
         "view": None if view is None else [float(v) for v in view],
+        "dots": list(dots),
         "robots": [{"node": r.node, "label": r.label,
                     "runs": [{"method": run.label, "color": css(run.color), "start": run.start,
                               "end": run.end} for run in r.runs]} for r in robots],
@@ -147,9 +150,16 @@ def page_html(commands: Sequence[bytes], robots: Sequence[RobotEntry], title: st
 """
 
 
+#: Characters written as JSON escapes inside a ``<script>`` element: with ``<`` and ``>`` as
+#: ``\u003c`` and ``\u003e``, no ``</script``, ``<script`` or ``<!--`` in a name can end the
+#: element or switch the HTML parser into a state that swallows the scripts after it.
+_SCRIPT_ESCAPES = str.maketrans({"<": "\\u003c", ">": "\\u003e", "&": "\\u0026",
+                                 "\u2028": "\\u2028", "\u2029": "\\u2029"})
+
+
 def _json(value) -> str:
-    """JSON that is safe inside a ``<script>`` element."""
-    return json.dumps(value, separators=(",", ":")).replace("</", "<\\/")
+    """JSON that is safe inside a ``<script>`` element, whatever strings ``value`` holds."""
+    return json.dumps(value, separators=(",", ":")).translate(_SCRIPT_ESCAPES)
 
 
 def _controls(duration: float, reset: bool) -> str:
