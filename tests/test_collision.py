@@ -66,6 +66,7 @@ def _pair_distance(limit, k, q):
         poses.append((obj.geometry, coal.Transform3s(M.rotation, M.translation)))
     req, res = coal.DistanceRequest(), coal.DistanceResult()
     req.enable_signed_distance = True
+    req.gjk_tolerance = req.epa_tolerance = 1e-9
     coal.distance(poses[0][0], poses[0][1], poses[1][0], poses[1][1], req, res)
     return res.min_distance
 
@@ -96,13 +97,14 @@ def test_rows_match_finite_differences_of_the_distance(name, panda, ur5):
     obstacle_rows = [i for i, k in enumerate(limit.active) if "obstacle" in limit.pair_names[k][1]]
     assert len(obstacle_rows) >= 2, limit.pair_names  # the scene is near the arm
     rng = np.random.default_rng(1)
-    h = 1e-6
+    h = 1e-5
     for _ in range(3):
         v = rng.normal(size=robot.model.nv)
         for i, k in enumerate(limit.active):
             d = _pair_distance(limit, k, q)
             assert d < limit.influence
-            assert b[i] == pytest.approx(limit.gain * (d - limit.margin) / dt, rel=1e-9)
+            # the distance of the row (GJK on convex hulls: to its tolerance, about 1e-9 m)
+            assert b[i] * dt / limit.gain + limit.margin == pytest.approx(d, abs=1e-8)
             fd = (_pair_distance(limit, k, pin.integrate(robot.model, q, h * v))
                   - _pair_distance(limit, k, pin.integrate(robot.model, q, -h * v))) / (2 * h)
             # the row is -d_dot: A q_dot <= b is d_dot >= -gain (d - margin) / dt
@@ -142,7 +144,7 @@ def test_no_rows_when_nothing_is_within_influence(panda):
 def test_distances_match_coal_independently(panda):
     q = panda.q0.copy()
     obstacles = _near_obstacles(panda, q)
-    limit = CollisionLimit(panda, obstacles, self_collision=True)
+    limit = CollisionLimit(panda, obstacles, self_collision=True, convex=False)
     reference = _independent_distances(panda, obstacles, q)
     report = limit.distances(q)
     assert len(report) == len(limit.pairs)
@@ -150,6 +152,12 @@ def test_distances_match_coal_independently(panda):
     for x in report:
         assert x.distance == pytest.approx(reference[(x.a, x.b)], abs=1e-9)
     assert report[0].link_b == "world" and report[0].distance < 0.05
+    # convex hulls (the default) contain the meshes: never farther, and close on Panda
+    hulls = {(x.a, x.b): x.distance for x in
+             CollisionLimit(panda, obstacles, self_collision=True).distances(q)}
+    assert hulls.keys() == {(x.a, x.b) for x in report}
+    gaps = [reference[pair] - d for pair, d in hulls.items()]
+    assert min(gaps) > -1e-6 and max(gaps) < 0.04
 
 
 def test_move_between_calls(panda):
@@ -248,8 +256,7 @@ def test_broad_phase_never_drops_a_pair_within_influence(name, panda, ur5):
     for _ in range(20):
         q = pin.randomConfiguration(robot.model)
         kin.update(q)
-        limit._update(robot.model, kin.data)
-        candidates = set(limit._candidates().tolist())
+        candidates = set(limit._candidates(kin.data).tolist())
         reference = _independent_distances(robot, obstacles, q)
         for k, pair in enumerate(limit.pair_names):
             if reference[pair] < limit.influence:
