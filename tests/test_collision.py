@@ -299,3 +299,31 @@ def test_a_line_past_a_sphere_keeps_the_margin_and_recovers(panda):
     assert min(independent_distance(panda, q, sphere, pose) for q in free.q[::10]) < 0
     assert closest >= margin - 1e-3
     assert log.error_norm[-1] < 1e-3  # the end is reachable without touching: reached
+
+
+# -- solve() ------------------------------------------------------------------------------
+def test_solve_returns_a_collision_free_configuration_or_says_it_found_none(panda):
+    """A sphere where the elbow of the unconstrained solution lies: with the limit, solve()
+    finds another configuration that keeps the margin (checked independently); with the
+    target inside a sphere, it reports no success."""
+    q0 = panda.q0.copy()
+    start = panda.fk(q0)
+    target = pin.SE3(start.rotation, start.translation + [0.0, 0.3, -0.1])
+    free = sjt.SJTSolver(panda).solve(target, q0, timeout=None)
+    assert free.success
+    data = panda.model.createData()
+    pin.framesForwardKinematics(panda.model, data, free.q)
+    sphere = coal.Sphere(0.05)
+    pose = pin.SE3(np.eye(3), data.oMi[5].translation + [-0.083, 0.067, 0.057])
+    assert independent_distance(panda, free.q, sphere, pose) < -0.04  # it would collide
+    assert independent_distance(panda, q0, sphere, pose) > 0.1
+    margin = 0.01
+    limit = sjt.CollisionLimit(panda, [(sphere, pose)], margin=margin)
+    found = sjt.SJTSolver(panda, limits=[limit]).solve(target, q0, timeout=None)
+    assert found.success and found.error < 1e-6
+    assert independent_distance(panda, found.q, sphere, pose) >= margin - 1e-6
+    # no configuration reaches a target inside an obstacle: no success
+    ball = (coal.Sphere(0.05), pin.SE3(np.eye(3), target.translation))
+    inside = sjt.CollisionLimit(panda, [ball], margin=margin)
+    none = sjt.SJTSolver(panda, limits=[inside]).solve(target, q0, timeout=None, budget=400)
+    assert not none.success and none.error > 0.04
