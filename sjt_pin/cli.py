@@ -122,7 +122,8 @@ def _write_json(path: str | None, payload) -> None:
 
 
 def bench(args: argparse.Namespace) -> int:
-    """``sjt-pin bench speed|accuracy|ik``: the tables of the README's Benchmarks section."""
+    """``sjt-pin bench speed|accuracy|ik|collision``: the tables of the README's Benchmarks
+    section (collision: its Collision avoidance section)."""
     from dataclasses import asdict
 
     from .bench import speed as speed_bench
@@ -143,6 +144,14 @@ def bench(args: argparse.Namespace) -> int:
         for robot, ratio in sorted(speed_bench.peer_ratios(report).items()):
             print(f"pink / SJT with a target velocity on {robot}: {ratio:.1f}x")
         _write_json(args.json, report.to_dict() | {"cold_start": cold})
+    elif args.kind == "collision":
+        from .bench import collision
+
+        rows = collision.collision(peers=not args.no_peers, progress=lambda r: print(
+            f"  {r.scene}, {r.method}, limit {'on' if r.limit else 'off'}", flush=True))
+        print("\nCollision avoidance (margin 10 mm; distances checked with coal on the meshes):\n"
+              + collision.collision_table(rows))
+        _write_json(args.json, {"machine": machine, "rows": [asdict(r) for r in rows]})
     elif args.kind == "accuracy":
         from .bench import accuracy
 
@@ -335,8 +344,10 @@ def build_parser() -> argparse.ArgumentParser:
                        description="The benchmarks of the README: speed (every step path "
                        "against its Pinocchio floor), accuracy (tracking near singularities, "
                        "rest at unreachable targets, exits from saddles), ik (TRAC-IK's "
-                       "protocol on five arms).")
-    p.add_argument("kind", choices=["speed", "accuracy", "ik"], help="which benchmark")
+                       "protocol on five arms), collision (three scenes with and without "
+                       "CollisionLimit, and pink's barrier).")
+    p.add_argument("kind", choices=["speed", "accuracy", "ik", "collision"],
+                   help="which benchmark")
     p.add_argument("--peers", action="store_true",
                    help="speed: add pink's solve_ik (pip install -e '.[bench]')")
     p.add_argument("--steps", type=positive_int, default=5000, help="speed: timed steps per path "
@@ -344,7 +355,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--poses", type=positive_int, default=1000, help="ik: random poses per robot "
                    "(default: 1000)")
     p.add_argument("--no-peers", action="store_true",
-                   help="ik: skip TRAC-IK and robotics-toolbox's ik_LM")
+                   help="ik: skip TRAC-IK and robotics-toolbox's ik_LM; collision: skip pink")
     p.add_argument("--json", default=None, metavar="PATH", type=output_file(parents=False),
                    help="also write the results as JSON (its folder must exist)")
     p.set_defaults(func=bench)
