@@ -34,6 +34,12 @@ def test_bad_pose_target(ur5, target, match):
         sjt.SJTSolver(ur5).step(ur5.q0, target)
 
 
+def test_a_position_for_a_pose_task_suggests_a_position_task(ur5):
+    with pytest.raises(ValueError, match=r"got shape \(3,\) \(a position alone\? a "
+                                         "PositionTask takes a 3-vector in m\\)"):
+        sjt.SJTSolver(ur5).step(ur5.q0, [0.3, 0.2, 0.4])
+
+
 def test_bad_position_target_and_velocity(ur5):
     solver = sjt.SJTSolver(ur5, task=sjt.PositionTask())
     with pytest.raises(ValueError, match=r"target must have shape \(3,\)"):
