@@ -271,6 +271,22 @@ def test_a_target_far_beyond_reach_warns_naming_the_units(ur5):
         sjt.SJTSolver(ur5).solve(near, ur5.q0, max_iters=5, restarts=0)
 
 
+def test_a_humanoids_reach_is_measured_from_its_floating_base():
+    talos = sjt.Robot.from_example("talos")
+    assert 1.0 < talos.reach < 3.0  # was inf: the free flyer's travel counted
+    hand = sjt.PoseTask(frame="gripper_left_joint")
+    near = talos.fk(talos.q0, "gripper_left_joint")
+    q = talos.q0.copy()
+    q[:3] += [500.0, 0.0, 0.0]  # the base walked 500 m: a hand target there is fine
+    far = pin.SE3(near.rotation, near.translation + [500.0, 0.0, 0.0])
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        sjt.SJTSolver(talos, task=hand).step(q, far)
+    with pytest.warns(UserWarning, match="m from the robot's base, more than 10 times"):
+        sjt.SJTSolver(talos, task=hand).step(talos.q0, far)
+
+
 # -- big robots: memory, long lists ----------------------------------------------------------------
 def chain(joints: int) -> str:
     links = "".join(f'<link name="l{i}"/>' for i in range(joints + 1))
