@@ -135,7 +135,8 @@ class Robot:
         self.ee_frame_id = self.frame_id(ee_frame, frame_type)
         self.ee_frame = model.frames[self.ee_frame_id].name
         self._units = _unit_blocks(model)
-        self.reach = _reach(model)  #: an upper bound of the distance any frame can reach, m
+        #: an upper bound of the distance from the base any frame can reach, m
+        self.reach, self._base_q = _reach(model)
         self._lower, self._upper = _position_limits(model)
         limit = np.asarray(model.velocityLimit, dtype=float)
         self._velocity = np.where((limit > 0) & (limit < 1e30), limit, np.inf)
@@ -400,7 +401,7 @@ class Robot:
                 and f.type == kind]
         robot.ee_frame_id = same[0] if same else robot.frame_id(self.ee_frame)
         robot._units = _unit_blocks(reduced)
-        robot.reach = _reach(reduced)
+        robot.reach, robot._base_q = _reach(reduced)
         robot._lower, robot._upper = _position_limits(reduced)
         limit = np.asarray(reduced.velocityLimit, dtype=float)
         robot._velocity = np.where((limit > 0) & (limit < 1e30), limit, np.inf)
@@ -422,17 +423,24 @@ class Robot:
         """Whether a configuration holds unit-norm blocks (quaternions, (cos, sin) pairs)."""
         return bool(self._units)
 
-    def check_reach(self, position, name: str = "target") -> None:
+    def check_reach(self, position, q=None, name: str = "target") -> None:
         """Warn when ``position`` (m, world) lies more than :data:`REACH_FACTOR` times the
-        robot's reach (:attr:`reach`) from the world origin: most likely a target in mm, or cm.
-        ``step()`` checks its first targets, ``solve()`` each target. Never for a robot with a
-        floating base or an unlimited prismatic joint (its reach is infinite)."""
+        robot's reach (:attr:`reach`) from its base: most likely a target in mm, or cm. The
+        base is the world origin, or a floating base's position in ``q`` (no check without
+        ``q`` then). ``step()`` checks its first targets, ``solve()`` each target. Never for a
+        robot whose reach is infinite (a planar or unlimited prismatic joint)."""
+        origin: float | np.ndarray = 0.0
+        if self._base_q is not None:
+            if q is None:
+                return
+            origin = np.asarray(q, dtype=float)[self._base_q:self._base_q + 3]
         with np.errstate(over="ignore", invalid="ignore"):
-            distance = float(np.linalg.norm(position))
+            distance = float(np.linalg.norm(np.asarray(position, dtype=float) - origin))
         # NaN, inf or an overflowing distance: the task error cannot be finite, step() raises
         if np.isfinite(distance) and distance > REACH_FACTOR * self.reach:
+            where = "the origin" if self._base_q is None else "the robot's base"
             warnings.warn(
-                f"{name} is {distance:.4g} m from the origin, more than {REACH_FACTOR:g} times "
+                f"{name} is {distance:.4g} m from {where}, more than {REACH_FACTOR:g} times "
                 f"{self.name}'s reach ({self.reach:.3g} m): positions are in m (check its "
                 "units: mm or cm by mistake?)", UserWarning, stacklevel=3)
 
@@ -575,24 +583,30 @@ def _unit_blocks(model: pin.Model) -> UnitBlocks:
     return UnitBlocks(blocks)
 
 
-def _reach(model: pin.Model) -> float:
-    """An upper bound of the distance from the world origin any frame can reach (m): the
-    lengths of the joint placements along each chain, plus prismatic ranges (``inf`` with a
-    free flyer, a planar joint or an unlimited prismatic joint)."""
+def _reach(model: pin.Model) -> tuple[float, int | None]:
+    """An upper bound of the distance from the robot's base any frame can reach (m): the
+    lengths of the joint placements along each chain, plus prismatic ranges; and the index in
+    q of a floating base's position (a free flyer at the root: the base is there), else None.
+    The reach is ``inf`` with a planar joint, an unlimited prismatic joint or a free flyer
+    elsewhere than at the root."""
     length = np.zeros(model.njoints)
+    base = None
     for j in range(1, model.njoints):
         joint = model.joints[j]
+        kind = joint.shortname()
         travel = 0.0
-        if joint.nq == 1 and joint.shortname().startswith("JointModelP"):
+        if joint.nq == 1 and kind.startswith("JointModelP"):
             lo, hi = model.lowerPositionLimit[joint.idx_q], model.upperPositionLimit[joint.idx_q]
             travel = max(abs(lo), abs(hi)) if hi > lo else np.inf
-        elif joint.shortname() in ("JointModelFreeFlyer", "JointModelPlanar",
-                                   "JointModelTranslation"):
+        elif kind == "JointModelFreeFlyer" and model.parents[j] == 0 and base is None:
+            base = joint.idx_q  # distances are then measured from the base's position
+        elif kind in ("JointModelFreeFlyer", "JointModelPlanar", "JointModelTranslation"):
             travel = np.inf
         length[j] = (length[model.parents[j]] + travel
                      + float(np.linalg.norm(model.jointPlacements[j].translation)))
-    return max((length[f.parentJoint] + float(np.linalg.norm(f.placement.translation))
-                for f in model.frames), default=0.0)
+    reach = max((length[f.parentJoint] + float(np.linalg.norm(f.placement.translation))
+                 for f in model.frames), default=0.0)
+    return reach, base
 
 
 def _data_bytes(model: pin.Model) -> int:

@@ -225,7 +225,7 @@ def solve(solver, target, q0, *, tol: float = TOL, max_iters: int = MAX_ITERS,
     for goal in targets:  # a target in mm by mistake: warn, as step() does
         position = goal.translation if isinstance(goal, pin.SE3) else goal
         if isinstance(position, np.ndarray) and position.shape == (3,):
-            solver.robot.check_reach(position)
+            solver.robot.check_reach(position, q)
     if not isinstance(rng, np.random.Generator):
         rng = np.random.default_rng(0 if rng is None else rng)
     deadline = math.inf if timeout is None else time.perf_counter() + positive(timeout, "timeout",

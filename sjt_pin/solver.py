@@ -409,7 +409,7 @@ class Solver:
             for target in targets:
                 position = target.translation if isinstance(target, pin.SE3) else target
                 if isinstance(position, np.ndarray) and position.shape == (3,):
-                    self.robot.check_reach(position)
+                    self.robot.check_reach(position, q)
         if self._gain_check:
             self._check_gain(J)
         step, dt = self._step, self._dt

@@ -160,7 +160,10 @@ def as_pose(value, name: str = "target") -> pin.SE3:
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{name} must be a pin.SE3 or a 4x4 matrix, got {value!r}") from exc
     if homogeneous.shape != (4, 4):
-        raise ValueError(f"{name} must be a pin.SE3 or a 4x4 matrix, got shape {homogeneous.shape}")
+        hint = (" (a position alone? a PositionTask takes a 3-vector in m)"
+                if homogeneous.shape == (3,) else "")
+        raise ValueError(f"{name} must be a pin.SE3 or a 4x4 matrix, got shape "
+                         f"{homogeneous.shape}{hint}")
     homogeneous = np.ascontiguousarray(homogeneous)
     defect = rotation_defect(homogeneous)
     if not defect <= PROJECT_TOL:

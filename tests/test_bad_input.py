@@ -34,6 +34,12 @@ def test_bad_pose_target(ur5, target, match):
         sjt.SJTSolver(ur5).step(ur5.q0, target)
 
 
+def test_a_position_for_a_pose_task_suggests_a_position_task(ur5):
+    with pytest.raises(ValueError, match=r"got shape \(3,\) \(a position alone\? a "
+                                         "PositionTask takes a 3-vector in m\\)"):
+        sjt.SJTSolver(ur5).step(ur5.q0, [0.3, 0.2, 0.4])
+
+
 def test_bad_position_target_and_velocity(ur5):
     solver = sjt.SJTSolver(ur5, task=sjt.PositionTask())
     with pytest.raises(ValueError, match=r"target must have shape \(3,\)"):
@@ -263,6 +269,22 @@ def test_a_target_far_beyond_reach_warns_naming_the_units(ur5):
         warnings.simplefilter("error")
         sjt.SJTSolver(ur5).step(ur5.q0, near)
         sjt.SJTSolver(ur5).solve(near, ur5.q0, max_iters=5, restarts=0)
+
+
+def test_a_humanoids_reach_is_measured_from_its_floating_base():
+    talos = sjt.Robot.from_example("talos")
+    assert 1.0 < talos.reach < 3.0  # was inf: the free flyer's travel counted
+    hand = sjt.PoseTask(frame="gripper_left_joint")
+    near = talos.fk(talos.q0, "gripper_left_joint")
+    q = talos.q0.copy()
+    q[:3] += [500.0, 0.0, 0.0]  # the base walked 500 m: a hand target there is fine
+    far = pin.SE3(near.rotation, near.translation + [500.0, 0.0, 0.0])
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        sjt.SJTSolver(talos, task=hand).step(q, far)
+    with pytest.warns(UserWarning, match="m from the robot's base, more than 10 times"):
+        sjt.SJTSolver(talos, task=hand).step(talos.q0, far)
 
 
 # -- big robots: memory, long lists ----------------------------------------------------------------
