@@ -289,3 +289,26 @@ def test_page_of_names_that_open_comments_and_scripts_still_shows_its_view(chrom
         assert changed_fraction(shown, hidden) > 0.002  # the robot is drawn
     finally:
         page.close()
+
+
+def test_static_cell_shows_the_scene_in_its_sandboxed_iframe(chromium, tmp_path):
+    """What a notebook keeps: the page in an iframe's srcdoc, scripts only, no server."""
+    robot = sjt.Robot.from_example("ur5")
+    with Viewer(robot, live=False) as viewer:
+        viewer.show(np.array([0.3, -1.2, 1.5, -1.8, -1.5, 0.2]))
+        cell = viewer.static_cell(height=420)
+    (tmp_path / "notebook.html").write_text(f"<!DOCTYPE html><body>{cell.data}</body>",
+                                            encoding="utf-8")
+    page = chromium.browser.new_page(viewport={"width": 900, "height": 600})
+    errors = []
+    page.on("pageerror", lambda error: errors.append(str(error)))
+    try:
+        page.goto((tmp_path / "notebook.html").as_uri(), wait_until="load")
+        frame = page.frames[1]
+        frame.wait_for_function(
+            "() => { let n = 0; viewer.scene.traverse(o => { if (o.isMesh) n++; }); "
+            f"return n >= {len(robot.visual_model.geometryObjects)}; }}", timeout=60_000)
+        assert errors == []
+        assert frame.locator("canvas").first.bounding_box()["height"] > 300
+    finally:
+        page.close()

@@ -175,12 +175,21 @@ def test_runs_against_the_installed_package(run):
     check_installed(report, run.work)
 
 
-def test_writes_only_into_temporary_folders(run):
+def test_writes_nothing_and_keeps_a_static_copy_of_each_view(run):
+    """No file in the working folder, no temporary folder left (they used to stay, 1.5-2 MB
+    each), and each viewer made has a static copy of its page in the cell outputs, which the
+    saved notebook keeps after the kernel stopped (a live view is an iframe on a server)."""
     assert run.error is None, "the notebook failed (see test_notebook_executes)"
     assert not any(run.work.iterdir()), (
         f"{run.path.name} wrote into its working folder: {sorted(run.work.iterdir())}")
-    pages = sorted(run.tmp.glob("sjt-pin-*/*.html"))
-    assert pages, f"{run.path.name} saved no page under its TMPDIR"
+    left = sorted(p.name for p in run.tmp.iterdir() if p.name.startswith("sjt-pin"))
+    assert left == [], f"{run.path.name} left temporary folders: {left}"
+    viewers = sum(len(re.findall(r"\bViewer\(", c.source)) for c in run.cells)
+    copies = [o["data"]["text/html"] for c in run.cells for o in c.outputs
+              if "srcdoc=" in o.get("data", {}).get("text/html", "")]
+    assert viewers > 0 and len(copies) >= viewers, (viewers, len(copies))
+    for page in copies:  # the whole page: meshcat's script, the scene, the page's script
+        assert "new MeshCat.Viewer" in page and "sjt-scene" in page and "127.0.0.1" not in page
 
 
 def test_a_script_outside_the_checkout_uses_the_installed_package(tmp_path):
