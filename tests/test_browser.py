@@ -119,6 +119,24 @@ def test_demo_page_legend_and_error_plots_are_visible_in_the_methods_colours(dem
             assert color_pixels(picture, METHOD_COLORS[method]) > 40, (robot, method)
 
 
+def test_demo_page_panel_fits_a_900_px_window_and_says_why_sjt_is_the_default(demo_page):
+    page = demo_page.page
+    page.set_viewport_size({"width": 1400, "height": 900})
+    try:
+        page.wait_for_function("() => document.getElementById('panel').clientHeight === 900")
+        height, seen = page.evaluate("""() => {
+            const panel = document.getElementById("panel");
+            return [panel.scrollHeight, panel.clientHeight]; }""")
+        assert height <= seen, f"the panel scrolls: {height} px of content in {seen} px"
+        text = page.locator("p.description").inner_text()
+        assert "JP tracks these circles best" in text and "SJT is the default because" in text
+        for robot in ROBOTS:  # every robot's plot is on screen without scrolling
+            box = page.locator(f'section.robot[data-robot="{robot}"] svg').bounding_box()
+            assert box["y"] + box["height"] <= 900, robot
+    finally:
+        page.set_viewport_size({"width": 1400, "height": 940})
+
+
 def test_demo_page_plays_on_open_and_its_controls_work(demo_page):
     page = demo_page.page
     page.reload()  # as opened, before other tests paused it
