@@ -223,18 +223,23 @@ def test_readme_viewer_snippet_is_the_readmes():
     assert README_VIEWER.strip() in readme
 
 
-@pytest.mark.parametrize("size", [(1400, 900), (800, 600)])
+@pytest.mark.parametrize("source, size", [("readme", (1400, 900)), ("readme", (800, 600)),
+                                          ("demo ur5", (1400, 900))])
 def test_one_robot_page_keeps_the_robot_inside_the_view_for_the_whole_animation(
-        chromium, tmp_path, monkeypatch, size):
-    monkeypatch.chdir(tmp_path)  # the README's Viewer snippet, as written
-    exec(compile(README_VIEWER, "README", "exec"), {})
-    page = chromium.open((tmp_path / "ur5_circle.html").as_uri(), meshes=10, width=size[0],
-                         height=size[1])
+        chromium, tmp_path, monkeypatch, source, size):
+    monkeypatch.chdir(tmp_path)
+    if source == "readme":  # the README's Viewer snippet, as written
+        exec(compile(README_VIEWER, "README", "exec"), {})
+        path, node, end = tmp_path / "ur5_circle.html", "robot", 4.0
+    else:
+        path, node, end = tmp_path / "demo.html", "ur5", 4 * RUN
+        assert main(["demo", "--robot", "ur5", "--out", str(path)]) == 0
+    page = chromium.open(path.as_uri(), meshes=10, width=size[0], height=size[1])
     try:
         assert page.errors == []
-        for time in np.linspace(0.0, 4.0, 9):
+        for time in np.linspace(0.0, end, 9):
             page.pose(time)
-            low, high = projected_box(page, "robot")
+            low, high = projected_box(page, node)
             assert np.all(low >= -0.98) and np.all(high <= 0.98), (time, low, high)
             assert high[1] - low[1] > 0.5, "the robot is under a quarter of the view's height"
         gui = page.page.locator(".dg.main").first.bounding_box()  # meshcat's "Open Controls"

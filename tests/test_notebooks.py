@@ -236,3 +236,26 @@ def test_figures_leave_the_backend_alone(tmp_path):
                           capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     assert done.stdout.split()[-1] == "svg"
+
+
+def _code(path: Path) -> list[str]:
+    return ["".join(c["source"]) for c in json.loads(path.read_text())["cells"]
+            if c["cell_type"] == "code"]
+
+
+@pytest.mark.parametrize("name", ["02_panda", "03_ur5"])
+def test_methods_have_the_viewers_colours(name):
+    """Every line drawn per method takes its colour from the viewer's palette (one palette for
+    the pages and the plots: matplotlib's own cycle gave other colours)."""
+    code = _code(ROOT / "notebooks" / f"{name}.ipynb")
+    assert any("method_color(" in cell for cell in code)
+    calls = [m.group(0) for cell in code
+             for m in re.finditer(r"\.(plot|semilogy|loglog)\((?:[^()]|\([^()]*\))*\)", cell)
+             if "label=name" in m.group(0) or "label=variant" in m.group(0)]
+    assert calls and all("color=COLORS[" in call for call in calls), calls
+
+
+def test_the_path_figure_has_axis_labels():
+    cell = next(c for c in _code(ROOT / "notebooks" / "01_paper_planar_arm.ipynb")
+                if "desired paths" in c)
+    assert 'set_xlabel("x [m]")' in cell and 'set_ylabel("y [m]")' in cell
