@@ -128,7 +128,7 @@ def test_demo_page_panel_fits_a_900_px_window_and_says_why_sjt_is_the_default(de
             const panel = document.getElementById("panel");
             return [panel.scrollHeight, panel.clientHeight]; }""")
         assert height <= seen, f"the panel scrolls: {height} px of content in {seen} px"
-        text = page.locator("p.description").inner_text()
+        text = page.locator("#panel h1 + p").inner_text()
         assert "JP tracks these circles best" in text and "SJT is the default because" in text
         for robot in ROBOTS:  # every robot's plot is on screen without scrolling
             box = page.locator(f'section.robot[data-robot="{robot}"] svg').bounding_box()

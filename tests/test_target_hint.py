@@ -11,7 +11,8 @@ def ur5():
     return sjt.Robot.from_example("ur5")
 
 
-@pytest.mark.parametrize("task", [sjt.PoseTask(), sjt.OrientationTask()], ids=lambda task: type(task).__name__)
+@pytest.mark.parametrize("task", [sjt.PoseTask(), sjt.OrientationTask()],
+                         ids=lambda task: type(task).__name__)
 def test_a_3_vector_target_of_a_pose_task_suggests_position_task(ur5, task):
     solver = sjt.SJTSolver(ur5, task=task)
     for call in (lambda: solver.step(ur5.q0, np.array([0.3, 0.2, 0.4])),

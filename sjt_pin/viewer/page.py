@@ -73,7 +73,7 @@ p { margin: 4px 0; }
 .methods, .legend { list-style: none; margin: 4px 0; padding: 0; font-size: 13px; }
 .methods { display: flex; flex-wrap: wrap; gap: 0 12px; }
 .methods li { white-space: nowrap; }
-p.description { font-size: 13px; }
+h1 + p { font-size: 13px; }  /* the description */
 .legend { display: flex; flex-wrap: wrap; gap: 2px 2px; }
 .legend li { padding: 1px 4px; border-radius: 4px; white-space: nowrap;
              font-variant-numeric: tabular-nums; }
@@ -142,7 +142,7 @@ def page_html(commands: Sequence[bytes], robots: Sequence[RobotEntry], title: st
 </div>
 <aside id="panel">
 <h1>{html.escape(title)}</h1>
-{f'<p class="description">{html.escape(description)}</p>' if description else ""}
+{f"<p>{html.escape(description)}</p>" if description else ""}
 {_guide(robots)}
 {"".join(_robot(r) for r in robots)}
 <p class="guide">Drag to turn the view, scroll to zoom, right-drag to pan.</p>
