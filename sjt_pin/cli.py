@@ -1,4 +1,5 @@
-"""The ``sjt-pin`` command: ``demo``, ``reproduce`` (the paper's simulations), ``bench``.
+"""The ``sjt-pin`` command: ``demo``, ``reproduce`` (the paper's simulations), ``bench``,
+``robots`` (the names ``Robot.from_example`` takes).
 
 Every argument is checked while the command line is parsed, before any work: numbers by their
 ``type=`` (:func:`positive_int`, :func:`non_negative_float`), output paths by
@@ -109,6 +110,19 @@ def reproduce(args: argparse.Namespace) -> int:
 
     path = run(args.out, processes=args.processes, progress=not args.quiet, grid=args.grid)
     print(f"wrote {path} and its figures")
+    return 0
+
+
+def robots(args: argparse.Namespace) -> int:
+    """Print the robot names ``Robot.from_example`` takes (example-robot-data's)."""
+    from example_robot_data.robots_loader import ROBOTS
+
+    names = sorted(ROBOTS)
+    print(f"{len(names)} robots of example-robot-data, for sjt.Robot.from_example(name):")
+    width = max(map(len, names)) + 2
+    columns = max(1, 96 // width)
+    for start in range(0, len(names), columns):
+        print("  " + "".join(n.ljust(width) for n in names[start:start + columns]).rstrip())
     return 0
 
 
@@ -359,6 +373,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", default=None, metavar="PATH", type=output_file(parents=False),
                    help="also write the results as JSON (its folder must exist)")
     p.set_defaults(func=bench)
+    about = "list the robot names of example-robot-data (for Robot.from_example)"
+    p = sub.add_parser("robots", help=about, description=about[0].upper() + about[1:] + ".")
+    p.set_defaults(func=robots)
     return parser
 
 

@@ -119,6 +119,24 @@ def test_demo_page_legend_and_error_plots_are_visible_in_the_methods_colours(dem
             assert color_pixels(picture, METHOD_COLORS[method]) > 40, (robot, method)
 
 
+def test_demo_page_panel_fits_a_900_px_window_and_says_why_sjt_is_the_default(demo_page):
+    page = demo_page.page
+    page.set_viewport_size({"width": 1400, "height": 900})
+    try:
+        page.wait_for_function("() => document.getElementById('panel').clientHeight === 900")
+        height, seen = page.evaluate("""() => {
+            const panel = document.getElementById("panel");
+            return [panel.scrollHeight, panel.clientHeight]; }""")
+        assert height <= seen, f"the panel scrolls: {height} px of content in {seen} px"
+        text = page.locator("#panel h1 + p").inner_text()
+        assert "JP tracks these circles best" in text and "SJT is the default because" in text
+        for robot in ROBOTS:  # every robot's plot is on screen without scrolling
+            box = page.locator(f'section.robot[data-robot="{robot}"] svg').bounding_box()
+            assert box["y"] + box["height"] <= 900, robot
+    finally:
+        page.set_viewport_size({"width": 1400, "height": 940})
+
+
 def test_demo_page_plays_on_open_and_its_controls_work(demo_page):
     page = demo_page.page
     page.reload()  # as opened, before other tests paused it
@@ -205,18 +223,23 @@ def test_readme_viewer_snippet_is_the_readmes():
     assert README_VIEWER.strip() in readme
 
 
-@pytest.mark.parametrize("size", [(1400, 900), (800, 600)])
+@pytest.mark.parametrize("source, size", [("readme", (1400, 900)), ("readme", (800, 600)),
+                                          ("demo ur5", (1400, 900))])
 def test_one_robot_page_keeps_the_robot_inside_the_view_for_the_whole_animation(
-        chromium, tmp_path, monkeypatch, size):
-    monkeypatch.chdir(tmp_path)  # the README's Viewer snippet, as written
-    exec(compile(README_VIEWER, "README", "exec"), {})
-    page = chromium.open((tmp_path / "ur5_circle.html").as_uri(), meshes=10, width=size[0],
-                         height=size[1])
+        chromium, tmp_path, monkeypatch, source, size):
+    monkeypatch.chdir(tmp_path)
+    if source == "readme":  # the README's Viewer snippet, as written
+        exec(compile(README_VIEWER, "README", "exec"), {})
+        path, node, end = tmp_path / "ur5_circle.html", "robot", 4.0
+    else:
+        path, node, end = tmp_path / "demo.html", "ur5", 4 * RUN
+        assert main(["demo", "--robot", "ur5", "--out", str(path)]) == 0
+    page = chromium.open(path.as_uri(), meshes=10, width=size[0], height=size[1])
     try:
         assert page.errors == []
-        for time in np.linspace(0.0, 4.0, 9):
+        for time in np.linspace(0.0, end, 9):
             page.pose(time)
-            low, high = projected_box(page, "robot")
+            low, high = projected_box(page, node)
             assert np.all(low >= -0.98) and np.all(high <= 0.98), (time, low, high)
             assert high[1] - low[1] > 0.5, "the robot is under a quarter of the view's height"
         gui = page.page.locator(".dg.main").first.bounding_box()  # meshcat's "Open Controls"
@@ -287,5 +310,28 @@ def test_page_of_names_that_open_comments_and_scripts_still_shows_its_view(chrom
         shown = page.screenshot(time=0.2)
         hidden = page.screenshot(time=0.2, hide=EVIL)
         assert changed_fraction(shown, hidden) > 0.002  # the robot is drawn
+    finally:
+        page.close()
+
+
+def test_static_cell_shows_the_scene_in_its_sandboxed_iframe(chromium, tmp_path):
+    """What a notebook keeps: the page in an iframe's srcdoc, scripts only, no server."""
+    robot = sjt.Robot.from_example("ur5")
+    with Viewer(robot, live=False) as viewer:
+        viewer.show(np.array([0.3, -1.2, 1.5, -1.8, -1.5, 0.2]))
+        cell = viewer.static_cell(height=420)
+    (tmp_path / "notebook.html").write_text(f"<!DOCTYPE html><body>{cell.data}</body>",
+                                            encoding="utf-8")
+    page = chromium.browser.new_page(viewport={"width": 900, "height": 600})
+    errors = []
+    page.on("pageerror", lambda error: errors.append(str(error)))
+    try:
+        page.goto((tmp_path / "notebook.html").as_uri(), wait_until="load")
+        frame = page.frames[1]
+        frame.wait_for_function(
+            "() => { let n = 0; viewer.scene.traverse(o => { if (o.isMesh) n++; }); "
+            f"return n >= {len(robot.visual_model.geometryObjects)}; }}", timeout=60_000)
+        assert errors == []
+        assert frame.locator("canvas").first.bounding_box()["height"] > 300
     finally:
         page.close()

@@ -231,3 +231,13 @@ def test_help_has_no_rest_markup_and_every_command_a_description(capsys):
         assert "``" not in text and ":func:" not in text, argv
     for name, command in sub.choices.items():
         assert command.description, name
+
+
+def test_robots_lists_every_name_from_example_takes(capsys):
+    from example_robot_data.robots_loader import ROBOTS
+
+    assert main(["robots"]) == 0
+    out = capsys.readouterr().out
+    listed = out.split(":", 1)[1].split()
+    assert sorted(listed) == sorted(ROBOTS) and "ur5" in listed and "panda" in listed
+    assert f"{len(ROBOTS)} robots" in out

@@ -23,6 +23,10 @@ LABELS = {"planar3": "Planar 3R arm", "ur5": "UR5", "panda": "Franka Panda"}
 TASKS = {"planar3": "x-y position, the paper's task 3", "ur5": "pose", "panda": "pose"}
 #: The planar arm stood up: its x axis along world y, its y axis up (world z).
 STAND_UP = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+#: Why SJT is the default though JP tracks these circles best (the README's benchmarks).
+WHY_SJT = ("JP tracks these circles best; SJT is the default because its stable gain does not "
+           "depend on the robot's size or length unit, it comes to rest at targets out of reach "
+           "(JP and DLS keep moving) and it leaves singular saddles (JP does not).")
 GAP = 0.2  # m between the widths of two robots
 MARGIN = 0.1  # m added on each side of a robot's frames and paths for the links' thickness
 
@@ -59,7 +63,7 @@ def describe(names: Sequence[str], dt: float) -> str:
     tasks = "; ".join(f"{LABELS.get(n, n)}: {TASKS.get(n, 'its task')}" for n in names)
     return (f"Each robot tracks a circle with each method in turn, at a {1e3 * dt:g} ms control "
             f"period ({tasks}). The errors are too small to see in the view: the plots show "
-            "them.")
+            "them. " + WHY_SJT)
 
 
 def _span(robot: Robot, logs: Iterable[TrackingLog],

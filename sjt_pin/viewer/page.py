@@ -51,6 +51,9 @@ class RobotEntry:
     runs: tuple[Run, ...]
 
 
+#: Height (px) of a robot's error plot: three robots' blocks and the guide fit a 900 px window.
+PLOT_HEIGHT = 92
+
 STYLE = """
 html, body { margin: 0; height: 100%; }
 body { display: flex; font: 14px/1.4 system-ui, -apple-system, "Segoe UI", sans-serif;
@@ -68,6 +71,9 @@ p { margin: 4px 0; }
 .guide span.key { display: inline-block; vertical-align: middle; margin: 0 3px 0 1px; }
 .robot { border-top: 1px solid #e1e4e8; margin-top: 8px; }
 .methods, .legend { list-style: none; margin: 4px 0; padding: 0; font-size: 13px; }
+.methods { display: flex; flex-wrap: wrap; gap: 0 12px; }
+.methods li { white-space: nowrap; }
+h1 + p { font-size: 13px; }  /* the description */
 .legend { display: flex; flex-wrap: wrap; gap: 2px 2px; }
 .legend li { padding: 1px 4px; border-radius: 4px; white-space: nowrap;
              font-variant-numeric: tabular-nums; }
@@ -185,9 +191,8 @@ def _guide(robots: Sequence[RobotEntry]) -> str:
     return (f'<ul class="methods">{methods}</ul>'
             f'<p class="guide"><span class="key dots" style="color:{css(DESIRED_COLOR)}">'
             "&#8226;&#8226;&#8226;</span> desired path, <span class=\"key dot halo\"></span> "
-            "target; in a method's colour: the path followed and the end effector. The robots "
-            "replay their runs in turn (highlighted: the run on screen); numbers are each "
-            "run's largest error.</p>")
+            "target; in a method's colour: the path followed and the end effector. "
+            "Highlighted: the run on screen; numbers: each run's largest error.</p>")
 
 
 def _robot(robot: RobotEntry) -> str:
@@ -205,7 +210,7 @@ def _robot(robot: RobotEntry) -> str:
         parts.append(f'<ul class="legend">{items}</ul>')
         series = [Series(run.label, run.color, run.log.t - run.log.t[0], run.log.error_norm)
                   for run in robot.runs]
-        parts.append(error_plot(series, width=388, height=125,
+        parts.append(error_plot(series, width=388, height=PLOT_HEIGHT,
                                 ylabel="tracking error (m, rad)"))
     parts.append("</section>")
     return "\n".join(parts)

@@ -15,6 +15,7 @@ Several robots can share one scene (``add_robot`` with an ``offset``); every dra
 
 from __future__ import annotations
 
+import html
 import webbrowser
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -387,8 +388,24 @@ class Viewer:
         path.write_text(self.static_html(title, description), encoding="utf-8")
         return path
 
+    def static_cell(self, height: int = 480, title: str = "sjt-pin viewer",
+                    description: str = ""):
+        """A static copy of the scene for a Jupyter cell: :meth:`static_html` in an iframe's
+        ``srcdoc``, so the picture, its animation and its plots stay in the saved notebook after
+        the kernel (and the server) stopped. ``height`` in CSS pixels."""
+        from IPython.display import HTML
+
+        if not isinstance(height, int) or height <= 0:
+            raise ValueError(f"height must be a positive integer (pixels), got {height!r}")
+        page = html.escape(self.static_html(title, description), quote=True)
+        return HTML(f'<div class="sjt-pin-static"><iframe srcdoc="{page}" '
+                    f'title="{html.escape(title, quote=True)}" style="width: 100%; '
+                    f'height: {height}px; border: 1px solid #d8dbe0" sandbox="allow-scripts">'
+                    "</iframe></div>")
+
     def jupyter_cell(self, height: int = 400):
-        """The live viewer in a Jupyter cell (an iframe on :attr:`url`)."""
+        """The live viewer in a Jupyter cell (an iframe on :attr:`url`); blank once the kernel
+        stops: :meth:`static_cell` keeps a copy in the notebook."""
         if self._server is None:
             raise RuntimeError(_NOT_LIVE)
         return self.meshcat.jupyter_cell(height=height)
