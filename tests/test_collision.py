@@ -392,3 +392,135 @@ def test_random_scenes_keep_the_margin(name, panda, ur5):
     run()
     assert len(checked) >= 5
     assert min(checked) < margin + 0.01  # some scenes bring the obstacle to the margin
+
+
+# -- the viewer ---------------------------------------------------------------------------
+def _cube_mesh():
+    """A 6 cm cube as a coal mesh (BVHModel) of 12 triangles."""
+    corners = np.array([[x, y, z] for x in (-0.03, 0.03) for y in (-0.03, 0.03)
+                        for z in (-0.03, 0.03)])
+    faces = [(0, 1, 3), (0, 3, 2), (4, 6, 7), (4, 7, 5), (0, 4, 5), (0, 5, 1), (2, 3, 7),
+             (2, 7, 6), (0, 2, 6), (0, 6, 4), (1, 5, 7), (1, 7, 3)]
+    mesh = coal.BVHModelOBBRSS()
+    mesh.beginModel(len(faces), len(corners))
+    for a, b, c in faces:
+        mesh.addTriangle(corners[a], corners[b], corners[c])
+    mesh.endModel()
+    return mesh
+
+
+def test_obstacle_meshes_cover_every_shape_kind():
+    from sjt_pin.viewer.obstacles import obstacle_mesh
+
+    hull = _cube_mesh()
+    hull.buildConvexHull(True, "Qt")
+    shapes = {"sphere": coal.Sphere(0.05), "box": coal.Box(0.1, 0.2, 0.3),
+              "capsule": coal.Capsule(0.03, 0.2), "cylinder": coal.Cylinder(0.04, 0.1),
+              "convex": hull.convex, "mesh": _cube_mesh()}
+    extent = {"sphere": [0.05] * 3, "box": [0.05, 0.1, 0.15], "capsule": [0.03, 0.03, 0.13],
+              "cylinder": [0.04, 0.04, 0.05], "convex": [0.03] * 3, "mesh": [0.03] * 3}
+    for name, shape in shapes.items():
+        vertices, faces = obstacle_mesh(shape)
+        assert faces.ndim == 2 and faces.shape[1] == 3 and faces.max() < len(vertices), name
+        # the drawing spans the shape: its bounding box is the shape's (tessellation: 2 %)
+        np.testing.assert_allclose(np.abs(vertices).max(axis=0), extent[name], rtol=0.02,
+                                   err_msg=name)
+    with pytest.raises(ValueError, match="shape: cannot draw a Halfspace"):
+        obstacle_mesh(coal.Halfspace(np.array([0.0, 0.0, 1.0]), 0.0))
+
+
+def test_obstacle_page_draws_obstacles_and_closest_point_segments(panda, tmp_path):
+    """The page of a Panda passing a ball: in headless Chromium the obstacles are drawn (hiding
+    them changes the picture), the closest-point segments show while the pair is within
+    influence, and the side panel plots the closest distance beside the error."""
+    from sjt_pin.viewer import Viewer
+    from sjt_pin.viewer.obstacles import OBSTACLE_COLOR, SEGMENT_COLOR
+
+    from .browser import Chromium, changed_fraction, color_pixels, require_chromium
+
+    require_chromium()
+    q0 = panda.q0.copy()
+    start = panda.fk(q0)
+    ball = (coal.Sphere(0.04), pin.SE3(np.eye(3), start.translation + [0.0, 0.2, -0.07]))
+    box = (_cube_mesh(), pin.SE3(np.eye(3), start.translation + [0.25, -0.3, 0.0]))
+    limit = sjt.CollisionLimit(panda, [ball, box], margin=0.01)
+    line = sjt.PoseInterpolation(start, pin.SE3(start.rotation, start.translation
+                                                + [0.0, 0.4, 0.0]), duration=1.5)
+    log = sjt.track(sjt.SJTSolver(panda, limits=[limit]), line, q0, duration=2.0)
+    viewer = Viewer(panda, live=False, name="panda")
+    for i, (shape, pose) in enumerate([ball, box]):
+        viewer.add_obstacle(shape, pose, f"obstacle_{i}")
+    viewer.animate(log, collision=limit, label="sjt")
+    page_path = viewer.save_html(tmp_path / "obstacle.html", "obstacles")
+    active = [i for i, q in enumerate(log.q[::33]) if limit.closest_points(q)]
+    assert active  # the ball comes within influence during the run
+    chromium = Chromium()
+    try:
+        page = chromium.open(page_path.as_uri(), meshes=10, width=1100, height=700)
+        assert page.errors == []
+        assert all(u.startswith(("file:", "data:")) for u in page.requests), page.requests
+        t = (active[len(active) // 2] * 33) * 1e-3  # the ball is near the hand
+        shown = page.screenshot(time=t)
+        assert color_pixels(shown, OBSTACLE_COLOR, tol=60) > 50
+        page.evaluate("""() => { viewer.scene_tree.find(["meshcat", "panda", "obstacles"])
+                                     .object.visible = false; viewer.render(); }""")
+        hidden = page.image(page.page.locator("canvas").first)
+        assert changed_fraction(shown, hidden) > 0.002
+        assert color_pixels(hidden, OBSTACLE_COLOR, tol=60) < color_pixels(
+            shown, OBSTACLE_COLOR, tol=60) / 5
+        segment = page.evaluate("""(t) => {
+            const node = viewer.scene_tree.find(["meshcat", "panda", "runs", "sjt", "segments",
+                                                 "0"]).object;
+            return [node.visible, node.scale.y]; }""", t)
+        assert segment[0] and 0.005 < segment[1] < limit.influence + 1e-3, segment
+        assert color_pixels(shown, SEGMENT_COLOR, tol=50) > 5
+        labels = page.page.locator("svg.error-plot").all_text_contents()
+        assert len(labels) == 2 and "closest distance (m)" in labels[1]
+    finally:
+        chromium.close()
+
+
+def test_demo_collision_scene_keeps_the_margin_and_plots_the_distance():
+    from sjt_pin.viewer.demo import OBSTACLE_LABEL, demo_viewer, obstacle_scene
+
+    scene = obstacle_scene(1e-3)
+    (shape, pose), = scene.obstacles
+    distance = Independent(scene.robot, shape, pose)
+    log = scene.logs["sjt"]
+    assert min(distance(q) for q in log.q) >= scene.limit.margin - 1e-3
+    assert log.error_norm[-1] < 1e-3
+    page = demo_viewer({}, obstacle=scene).static_html("demo")
+    assert OBSTACLE_LABEL in page and "closest distance (m)" in page
+
+
+# -- sjt-pin bench collision --------------------------------------------------------------
+def test_bench_collision_meets_the_targets():
+    """The bench's scenes for SJT and DLS: without the limit each scene collides; with it no
+    pair comes within margin - 1 mm (checked on the meshes, independently), the task recovers
+    within 2 s of the target stopping where the way clears, and the arm rests at the target
+    inside the table."""
+    from sjt_pin.bench import collision as bench
+
+    rows = bench.collision(methods=("sjt", "dls"), peers=False)
+    assert len(rows) == 3 * 2 * 2
+    for row in rows:
+        if not row.limit:
+            assert row.min_distance < bench.MARGIN - 1e-3, row  # the scene needs the limit
+            continue
+        assert row.min_distance >= bench.MARGIN - 1e-3, row
+        assert row.floor_us > 0 and row.rows_us > 0 and row.us_per_step > 0
+        if row.scene.startswith("UR5"):
+            assert row.final_error > 0.05 and row.rest < 1e-3, row  # blocked: at rest
+        else:
+            assert row.final_error < 1e-3, row
+    table = bench.collision_table(rows)
+    assert table.count("\n") == len(rows) + 1
+
+
+@pytest.mark.bench
+def test_bench_collision_runs_pink_on_the_same_scenes():
+    from sjt_pin.bench import collision as bench
+
+    rows = [r for r in bench.collision(methods=(), peers=True) if r.method == "pink"]
+    assert len(rows) == 3 * 2
+    assert all(np.isfinite(r.min_distance) and r.us_per_step > 0 for r in rows)

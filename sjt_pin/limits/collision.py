@@ -34,7 +34,7 @@ except ImportError:  # pragma: no cover - the pin wheel ships coal
 from ..exceptions import SJTError
 from .base import Limit, Motion
 
-__all__ = ["CollisionLimit", "CollisionError", "PairDistance"]
+__all__ = ["ClosestPoints", "CollisionLimit", "CollisionError", "PairDistance"]
 
 #: the precision (m) of coal's GJK and EPA on convex shapes (its default is 1e-6)
 GJK_TOLERANCE = 1e-9
@@ -59,6 +59,21 @@ class PairDistance:
     link_a: str
     link_b: str
     distance: float
+
+
+@dataclass(frozen=True)
+class ClosestPoints:
+    """One pair of :meth:`CollisionLimit.closest_points`: the pair and its distance, and the
+    closest point of each geometry (world, m; on ``pair.a`` and on ``pair.b``)."""
+
+    pair: PairDistance
+    a: np.ndarray
+    b: np.ndarray
+
+    @property
+    def distance(self) -> float:
+        """The pair's signed distance (m)."""
+        return self.pair.distance
 
 
 def _supported(shape) -> bool:
@@ -403,6 +418,27 @@ class CollisionLimit(Limit):
             d = self._distance(k).min_distance
             na, nb = self.pair_names[k]
             out.append(PairDistance(na, nb, self._link(a), self._link(b), float(d)))
+        out.sort(key=lambda p: p.distance)
+        return out
+
+    def closest_points(self, q: np.ndarray, within: float | None = None
+                       ) -> list[ClosestPoints]:
+        """The checked pairs closer than ``within`` (m; default ``influence``) at ``q``, with
+        their closest points, closest first (e.g. to draw them: ``Viewer.show(..., collision=)``).
+        """
+        within = self.influence if within is None else float(within)
+        pin.framesForwardKinematics(self.model, self._data, np.asarray(q, dtype=float))
+        pin.updateGeometryPlacements(self.model, self._data, self.geometry, self.geometry_data)
+        out = []
+        for k, (a, b) in enumerate(self.pairs):
+            res = self._distance(k)
+            d = res.min_distance
+            if d < within:
+                na, nb = self.pair_names[k]
+                out.append(ClosestPoints(PairDistance(na, nb, self._link(a), self._link(b),
+                                                      float(d)),
+                                         np.array(res.getNearestPoint1()),
+                                         np.array(res.getNearestPoint2())))
         out.sort(key=lambda p: p.distance)
         return out
 

@@ -44,11 +44,13 @@ class Run:
 
 @dataclass(frozen=True)
 class RobotEntry:
-    """A robot of the scene: its node name, the label shown for it, its runs in order."""
+    """A robot of the scene: its node name, the label shown for it, its runs in order, and
+    further plots (SVG markup) shown under its error plot."""
 
     node: str
     label: str
     runs: tuple[Run, ...]
+    plots: tuple[str, ...] = ()
 
 
 #: Height (px) of a robot's error plot: three robots' blocks and the guide fit a 900 px window.
@@ -212,6 +214,7 @@ def _robot(robot: RobotEntry) -> str:
                   for run in robot.runs]
         parts.append(error_plot(series, width=388, height=PLOT_HEIGHT,
                                 ylabel="tracking error (m, rad)"))
+    parts.extend(robot.plots)
     parts.append("</section>")
     return "\n".join(parts)
 

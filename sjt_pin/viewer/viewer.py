@@ -29,7 +29,9 @@ from meshcat.animation import Animation, AnimationClip, AnimationTrack
 from ..robot import Robot
 from ..tracking import TrackingLog
 from .meshes import visual_parts
+from .obstacles import OBSTACLE_COLOR, OBSTACLE_OPACITY, draw_obstacle, key_segments, show_segments
 from .page import RobotEntry, Run, page_html
+from .plot import Series, error_plot
 from .scene import SceneRecord
 from .server import LiveWindow, LoopbackServer
 from .style import DESIRED_COLOR, EXTRA_COLORS, METHOD_COLORS, OTHER_COLOR, to_int
@@ -81,6 +83,7 @@ class _Rig:
             raise ValueError(f"robot {robot.name!r} has no visual model to draw")
         self.robot, self.name, self.label = robot, name, label
         self.runs: list[Run] = []
+        self.distances: list[Series] = []  # closest distance over each run with a collision
         self.nodes: list[str] = []
         self.geometries: list[int] = []
         for index, geometry in enumerate(robot.visual_model.geometryObjects):
@@ -213,12 +216,26 @@ class Viewer:
         x, y, z = np.asarray(position, dtype=float)
         self.meshcat["/Cameras/default/rotated/<object>"].set_property("position", [x, z, -y])
 
-    def show(self, q, robot: str | None = None) -> None:
-        """Place ``robot`` at configuration ``q``."""
+    def show(self, q, robot: str | None = None, collision=None, segments: int = 4) -> None:
+        """Place ``robot`` at configuration ``q``.
+
+        With ``collision`` (a :class:`~sjt_pin.CollisionLimit` of this robot), also draw the
+        closest-point segments of its ``segments`` closest pairs within its ``influence``.
+        """
         rig = self._rig(robot)
         placements = rig.placements(rig.robot.check_q(q))
         for node, T in zip(rig.nodes, placements, strict=True):
             self.meshcat[node].set_transform(T)
+        if collision is not None:
+            show_segments(self.meshcat, f"{rig.name}/segments", collision, q, segments)
+
+    def add_obstacle(self, shape, pose, name: str = "obstacle", robot: str | None = None,
+                     color=OBSTACLE_COLOR, opacity: float = OBSTACLE_OPACITY) -> None:
+        """Draw the coal ``shape`` (sphere, box, capsule, cylinder, cone, ellipsoid, convex or
+        mesh) at ``pose`` (``pin.SE3`` or 4x4; m) in the frame of ``robot``'s base, as a
+        :class:`~sjt_pin.CollisionLimit` of that robot takes its obstacles."""
+        draw_obstacle(self.meshcat[f"{self._rig(robot).name}/obstacles/{name}"], shape, pose,
+                      color, opacity)
 
     # -- drawings ----------------------------------------------------------------------------
     def draw_path(self, points, color="blue", name: str = "path", robot: str | None = None,
@@ -279,17 +296,35 @@ class Viewer:
 
     # -- animations --------------------------------------------------------------------------
     def animate(self, log: TrackingLog, fps: float = 30.0, robot: str | None = None,
-                color=None, start: float = 0.0, label: str | None = None) -> float:
+                color=None, start: float = 0.0, label: str | None = None, collision=None,
+                segments: int = 4) -> float:
         """Play ``log`` on ``robot`` from ``start`` s of the timeline; returns its end time.
 
         Draws the desired path (dark) and the path followed (``color``, default the method's,
         or a free colour when another run already has it); the target and the end effector are
         drawn as spheres that move with the animation. ``label`` names the run on the page
-        (default: the method).
+        (default: the method). With ``collision`` (a :class:`~sjt_pin.CollisionLimit` of this
+        robot), the closest-point segments of its ``segments`` closest pairs within
+        ``influence`` move with the run, and the page plots the closest distance over time.
         """
         end = self._add_run(log, fps, robot, color, start, label)
+        if collision is not None:
+            self._add_distances(log, fps, robot, start, collision, segments)
         self._send_animation()
         return end
+
+    def _add_distances(self, log: TrackingLog, fps: float, robot: str | None, start: float,
+                       collision, segments: int) -> None:
+        """Key the last run's closest-point segments (under its run node, so shown only while
+        it plays) and keep its closest distance over time for the page."""
+        rig = self._rig(robot)
+        run = rig.runs[-1]
+        safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in run.label)
+        frames = np.arange(0.0, log.t[-1] + 0.5 / fps, 1.0 / fps)
+        indices = np.minimum(np.searchsorted(log.t, frames), len(log) - 1)
+        closest = key_segments(self._animation, self.meshcat, f"{rig.name}/runs/{safe}/segments",
+                               collision, log.q[indices], int(round(start * fps)), segments)
+        rig.distances.append(Series(run.label, run.color, frames, np.array(closest)))
 
     def compare(self, logs: Mapping[str, TrackingLog] | Sequence[TrackingLog], fps: float = 30.0,
                 robot: str | None = None) -> None:
@@ -376,7 +411,9 @@ class Viewer:
         runs in their colours, a plot of each run's tracking error over time; under it a
         play/pause button and a time slider.
         """
-        robots = [RobotEntry(rig.name, rig.label, tuple(rig.runs)) for rig in self._rigs.values()]
+        robots = [RobotEntry(rig.name, rig.label, tuple(rig.runs), tuple(
+            [error_plot(rig.distances, width=388, height=125, ylabel="closest distance (m)")]
+            if rig.distances else [])) for rig in self._rigs.values()]
         view = None if self._camera is not None else VIEW_DIRECTION
         dots = [f"{rig.name}/paths/desired" for rig in self._rigs.values() if rig.runs]
         return page_html(self._record.commands(), robots, title, description, view, dots)
