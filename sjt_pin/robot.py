@@ -17,7 +17,9 @@ import numpy as np
 import pinocchio as pin
 
 from .exceptions import FrameNotFound, URDFError
-from .urdf_check import URDFSource, build_model, check_urdf, read_urdf
+from .joint_ranges import position_ranges
+from .mimic import MimicJoint, apply_mimics, joint_values, reduced_configuration
+from .urdf_check import URDFSource, build_model, check_urdf, read_urdf, urdf_mimics
 from .validation import as_vector
 
 #: End-effector frames used when ``Robot.from_example`` is called without ``ee_frame``.
@@ -62,8 +64,11 @@ class Robot:
         collision_model: pin.GeometryModel | None = None,
         urdf: str | None = None,
         package_dirs: Sequence[str] = (),
+        mimic_joints: Sequence[MimicJoint] = (),
     ):
         self.model = model
+        #: the mimic relations of ``model``'s mimic joints (see :mod:`sjt_pin.mimic`)
+        self.mimic_joints: list[MimicJoint] = list(mimic_joints)
         self._local = threading.local()  # one pin.Data per thread: queries never race
         self.name = name or model.name
         self.visual_model = visual_model
@@ -72,7 +77,7 @@ class Robot:
         self.package_dirs = list(package_dirs)
         self.ee_frame_id = self.frame_id(ee_frame)
         self.ee_frame = ee_frame
-        self._lower, self._upper = _position_limits(model)
+        self._lower, self._upper = position_ranges(model)
         limit = np.asarray(model.velocityLimit, dtype=float)
         self._velocity = np.where((limit > 0) & (limit < 1e30), limit, np.inf)
         #: name of the joint of each velocity (tangent) index: columns of J, entries of dq
@@ -98,7 +103,8 @@ class Robot:
         """Load ``name`` from example-robot-data (``"panda"``, ``"ur5"``, ``"talos_full"``, ...).
 
         ``ee_frame`` defaults to :data:`DEFAULT_EE_FRAMES` for the robots listed there.
-        ``q0`` is the robot's reference configuration from its SRDF.
+        ``q0`` is the robot's reference configuration from its SRDF. Mimic joints (Panda's
+        second finger, TALOS's grippers) are Pinocchio mimic joints, as in :meth:`from_urdf`.
         """
         import example_robot_data as erd
         from example_robot_data.robots_loader import ROBOTS
@@ -120,10 +126,12 @@ class Robot:
                     f"{sorted(DEFAULT_EE_FRAMES)})"
                 )
         wrapper = erd.load(name)
+        model, q0, mimics = _with_mimics(wrapper.model, wrapper.q0, getattr(wrapper, "urdf", None))
         return cls(
-            wrapper.model,
+            model,
             ee_frame,
-            q0=wrapper.q0,
+            q0=q0,
+            mimic_joints=mimics,
             name=name,
             visual_model=wrapper.visual_model,
             collision_model=wrapper.collision_model,
@@ -148,11 +156,14 @@ class Robot:
         ``load_visuals=False`` skips it.
 
         The URDF is checked before Pinocchio parses it (:mod:`sjt_pin.urdf_check`): a broken
-        one raises :class:`URDFError` naming the file and the joint or link at fault.
+        one raises :class:`URDFError` naming the file and the joint or link at fault. A joint
+        with ``<mimic>`` becomes a Pinocchio mimic joint without a coordinate of its own
+        (:mod:`sjt_pin.mimic`); ``lower == upper`` locks a joint at that value
+        (:mod:`sjt_pin.joint_ranges`).
         """
         source = read_urdf(path_or_xml)
-        check_urdf(source)
-        model = build_model(source)
+        mimics = check_urdf(source)
+        model, mimics = apply_mimics(build_model(source), mimics, source.error)
         if isinstance(package_dirs, (str, Path)):
             package_dirs = [package_dirs]  # one folder, not a sequence of characters
         dirs = [str(p) for p in (package_dirs or [])]
@@ -162,7 +173,8 @@ class Robot:
             ee_frame = _only_leaf_body(model, source.label)
         visual = _visual_model(model, source, dirs) if load_visuals else None
         urdf = source.text if source.path is None else str(source.path)
-        return cls(model, ee_frame, visual_model=visual, urdf=urdf, package_dirs=dirs)
+        return cls(model, ee_frame, visual_model=visual, urdf=urdf, package_dirs=dirs,
+                   mimic_joints=mimics)
 
     @classmethod
     def planar3(cls, ee_frame: str = "ee") -> Robot:
@@ -251,6 +263,11 @@ class Robot:
         J = pin.computeFrameJacobian(self.model, self.data, q, fid, reference)
         return np.asarray(J, dtype=float).reshape(6, self.model.nv)
 
+    def joint_values(self, q) -> dict[str, float]:
+        """Every 1-DoF joint's position at ``q`` (rad or m) by name, the mimic joints' from
+        their relations included: what the robot's joint controllers take."""
+        return joint_values(self.model, self.mimic_joints, self.check_q(q))
+
     def random_configuration(self, rng: np.random.Generator | None = None) -> np.ndarray:
         """A configuration drawn uniformly within the position limits (``[-pi, pi]`` if none),
         reproducibly from ``rng`` (it reseeds Pinocchio's global generator, under a lock)."""
@@ -265,20 +282,17 @@ class Robot:
         return f"Robot({self.name!r}, ee_frame={self.ee_frame!r}, nq={self.nq}, nv={self.nv})"
 
 
-def _position_limits(model: pin.Model) -> tuple[np.ndarray, np.ndarray]:
-    """The position limits the solvers enforce (nq,): a 1-DoF revolute or prismatic joint's
-    URDF limits; -inf / +inf for every other coordinate."""
-    lower, upper = np.full(model.nq, -np.inf), np.full(model.nq, np.inf)
-    for j in range(1, model.njoints):
-        joint = model.joints[j]
-        if joint.nq != 1 or joint.nv != 1:
-            continue  # continuous (cos, sin), floating base, spherical, planar: unlimited
-        i = joint.idx_q
-        lo, hi = model.lowerPositionLimit[i], model.upperPositionLimit[i]
-        # a URDF joint without <limit> parses to [0, 0] or to +-max double: neither is a limit
-        if hi > lo and abs(lo) < 1e30 and abs(hi) < 1e30:
-            lower[i], upper[i] = lo, hi
-    return lower, upper
+def _with_mimics(model: pin.Model, q0: np.ndarray, urdf: str | None
+                 ) -> tuple[pin.Model, np.ndarray, list[MimicJoint]]:
+    """An example-robot-data model (parsed without mimic joints) with the mimic relations of
+    its URDF file applied, and its reference configuration without the mimic coordinates."""
+    if not urdf or not Path(urdf).is_file():
+        return model, q0, []
+    source = read_urdf(Path(urdf))
+    reduced, mimics = apply_mimics(model, urdf_mimics(source), source.error)
+    if not mimics:
+        return model, q0, []
+    return reduced, reduced_configuration(model, reduced, np.asarray(q0, dtype=float)), mimics
 
 
 def _visual_model(model: pin.Model, source: URDFSource, dirs: list[str]) -> pin.GeometryModel:

@@ -103,8 +103,8 @@ class TaskStack:
                 chain[:] = 1.0  # a posture task moves every joint
                 continue
             for j in model.supports[model.frames[t.frame_id].parentJoint][1:]:
-                joint = model.joints[j]
-                chain[joint.idx_v:joint.idx_v + joint.nv] = 1.0
+                joint = model.joints[j]  # a mimic joint moves the joint it follows:
+                chain[joint.idx_v:joint.idx_v + joint.nvExtended] = 1.0  # nv 0, nvExtended 1
         self.chain = chain
         self.n_chain = int(chain.sum())
         self.kinematics = Kinematics(model)

@@ -27,6 +27,7 @@ import pinocchio as pin
 from lxml import etree
 
 from .exceptions import URDFError
+from .mimic import MimicJoint, read_mimics
 
 #: The joint types of the URDF specification.
 JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", "planar")
@@ -126,10 +127,11 @@ def _preview(value: str | bytes, size: int = 60) -> str:
 
 
 # -- the document ------------------------------------------------------------------------------
-def check_urdf(source: URDFSource) -> None:
+def check_urdf(source: URDFSource) -> list[MimicJoint]:
     """Raise :class:`URDFError` unless ``source`` is well-formed XML describing one tree of
-    named links joined by URDF joints, with finite origins and axes, nonzero axes and
-    ``lower <= upper`` limits."""
+    named links joined by URDF joints, with finite origins and axes, nonzero axes,
+    ``lower <= upper`` limits and mimic relations Pinocchio can keep; returns those relations
+    (:func:`sjt_pin.mimic.read_mimics`)."""
     root = _parse(source)
     if _tag(root) != "robot":
         raise source.error(f"the root element is <{_tag(root)}>, not <robot>")
@@ -152,6 +154,13 @@ def check_urdf(source: URDFSource) -> None:
                 f"{joint.get('name')!r} (from link {_link_of(joint, 'parent')!r})")
         parents[child] = joint
     _check_tree(link_names, parents, source)
+    return read_mimics(joints, source.error)
+
+
+def urdf_mimics(source: URDFSource) -> list[MimicJoint]:
+    """The mimic relations of ``source`` (checked as in :func:`check_urdf`), without checking
+    the rest of the document (a URDF that Pinocchio has already parsed)."""
+    return read_mimics(_children(_parse(source), "joint"), source.error)
 
 
 def _parse(source: URDFSource) -> etree._Element:
