@@ -34,3 +34,13 @@ def position_ranges(model: pin.Model) -> tuple[np.ndarray, np.ndarray]:
             continue
         lower[i], upper[i] = lo, hi
     return lower, upper
+
+
+def outside(model: pin.Model, q: np.ndarray, lower: np.ndarray, upper: np.ndarray
+            ) -> tuple[str, ...]:
+    """Names of the 1-DoF joints whose position in ``q`` lies outside ``[lower, upper]``."""
+    out = (q < lower) | (q > upper)
+    if not out.any():
+        return ()
+    return tuple(model.names[j] for j in range(1, model.njoints)
+                 if model.joints[j].nq == 1 and out[model.joints[j].idx_q])
