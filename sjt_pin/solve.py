@@ -28,6 +28,7 @@ import numpy as np
 import pinocchio as pin
 
 from . import kernels as K
+from .joint_ranges import outside
 from .kernels import (
     CONVERGED,
     S_BEST,
@@ -38,7 +39,6 @@ from .kernels import (
     STATE_SIZE,
     search_iteration,
 )
-from .joint_ranges import outside
 from .kinematics import Kinematics
 from .limits.base import Motion
 from .mappings import COLUMN_TOL

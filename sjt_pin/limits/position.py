@@ -86,6 +86,7 @@ class PositionLimit(Limit):
             # recovery speed, not a jump; and into the range without braking at its edge
             # (inside, the far limit bounds it)
             A, J = self._braking
+            assert A is not None  # set with the acceleration limits
             toward = np.where(above, -v, v)
             cap = np.minimum(self.recovery_speeds, np.where(above, room_down, room_up) / dt)
             push = A
