@@ -19,7 +19,7 @@ import pinocchio as pin
 from .exceptions import FrameNotFound, URDFError
 from .joint_ranges import position_ranges
 from .mimic import MimicJoint, apply_mimics, joint_values, reduced_configuration
-from .urdf_check import URDFSource, build_model, check_urdf, read_urdf, urdf_mimics
+from .urdf_check import URDFSource, load_model, read_urdf, urdf_mimics
 from .validation import as_vector
 
 #: End-effector frames used when ``Robot.from_example`` is called without ``ee_frame``.
@@ -83,7 +83,9 @@ class Robot:
         #: name of the joint of each velocity (tangent) index: columns of J, entries of dq
         self.velocity_names: list[str] = [
             model.names[j] for j in range(1, model.njoints) for _ in range(model.joints[j].nv)]
-        self.q0 = pin.neutral(model) if q0 is None else self._inside(self.check_q(q0, "q0"))
+        # without a reference configuration: the neutral one, clipped into the limits
+        self.q0 = (np.clip(pin.neutral(model), self._lower, self._upper) if q0 is None
+                   else self._inside(self.check_q(q0, "q0")))
 
     def __getstate__(self) -> dict:
         """A pickled robot (``solve_many``'s workers) carries its kinematic model, not its
@@ -159,11 +161,11 @@ class Robot:
         one raises :class:`URDFError` naming the file and the joint or link at fault. A joint
         with ``<mimic>`` becomes a Pinocchio mimic joint without a coordinate of its own
         (:mod:`sjt_pin.mimic`); ``lower == upper`` locks a joint at that value
-        (:mod:`sjt_pin.joint_ranges`).
+        (:mod:`sjt_pin.joint_ranges`); a planar joint moves in the plane normal to its
+        ``<axis>`` (:mod:`sjt_pin.planar`).
         """
         source = read_urdf(path_or_xml)
-        mimics = check_urdf(source)
-        model, mimics = apply_mimics(build_model(source), mimics, source.error)
+        model, mimics = load_model(source)
         if isinstance(package_dirs, (str, Path)):
             package_dirs = [package_dirs]  # one folder, not a sequence of characters
         dirs = [str(p) for p in (package_dirs or [])]
