@@ -69,6 +69,8 @@ class Robot:
         self.model = model
         #: the mimic relations of ``model``'s mimic joints (see :mod:`sjt_pin.mimic`)
         self.mimic_joints: list[MimicJoint] = list(mimic_joints)
+        #: ``model`` before its mimic joints were made (what a pickled robot carries)
+        self._unmimicked: pin.Model | None = None
         self._local = threading.local()  # one pin.Data per thread: queries never race
         self.name = name or model.name
         self.visual_model = visual_model
@@ -93,9 +95,20 @@ class Robot:
         state = self.__dict__.copy()
         del state["_local"]  # per-thread scratch space: each process makes its own
         state["visual_model"] = state["collision_model"] = None
+        if len(self.model.mimicking_joints):
+            # Pinocchio 4.1 unpickles a mimic joint broken (nvExtended -1: fk then crashes);
+            # the model goes as the one without mimic joints, the relations applied anew
+            if self._unmimicked is None:
+                raise TypeError(f"robot {self.name!r} has Pinocchio mimic joints but no model "
+                                "without them to pickle (load it with Robot.from_urdf or "
+                                "Robot.from_example)")
+            state["model"] = None
         return state
 
     def __setstate__(self, state: dict) -> None:
+        if state["model"] is None:
+            state["model"], _ = apply_mimics(state["_unmimicked"], state["mimic_joints"],
+                                             URDFError)
         self.__dict__.update(state)
         self._local = threading.local()
 
@@ -129,7 +142,7 @@ class Robot:
                 )
         wrapper = erd.load(name)
         model, q0, mimics = _with_mimics(wrapper.model, wrapper.q0, getattr(wrapper, "urdf", None))
-        return cls(
+        robot = cls(
             model,
             ee_frame,
             q0=q0,
@@ -139,6 +152,8 @@ class Robot:
             collision_model=wrapper.collision_model,
             urdf=getattr(wrapper, "urdf", None),
         )
+        robot._unmimicked = wrapper.model if mimics else None
+        return robot
 
     @classmethod
     def from_urdf(
@@ -165,7 +180,7 @@ class Robot:
         ``<axis>`` (:mod:`sjt_pin.planar`).
         """
         source = read_urdf(path_or_xml)
-        model, mimics = load_model(source)
+        model, mimics, unmimicked = load_model(source)
         if isinstance(package_dirs, (str, Path)):
             package_dirs = [package_dirs]  # one folder, not a sequence of characters
         dirs = [str(p) for p in (package_dirs or [])]
@@ -175,8 +190,10 @@ class Robot:
             ee_frame = _only_leaf_body(model, source.label)
         visual = _visual_model(model, source, dirs) if load_visuals else None
         urdf = source.text if source.path is None else str(source.path)
-        return cls(model, ee_frame, visual_model=visual, urdf=urdf, package_dirs=dirs,
-                   mimic_joints=mimics)
+        robot = cls(model, ee_frame, visual_model=visual, urdf=urdf, package_dirs=dirs,
+                    mimic_joints=mimics)
+        robot._unmimicked = unmimicked if mimics else None
+        return robot
 
     @classmethod
     def planar3(cls, ee_frame: str = "ee") -> Robot:

@@ -145,13 +145,15 @@ class URDFContent:
     planar_normals: dict[str, np.ndarray] = field(default_factory=dict)
 
 
-def load_model(source: URDFSource) -> tuple[pin.Model, list[MimicJoint]]:
+def load_model(source: URDFSource) -> tuple[pin.Model, list[MimicJoint], pin.Model]:
     """Pinocchio's model of ``source``, checked (:func:`check_urdf`), with its planar joints
     in the planes of their axes (:mod:`sjt_pin.planar`) and its mimic joints as Pinocchio
-    mimic joints (:mod:`sjt_pin.mimic`); and the mimic relations applied."""
+    mimic joints (:mod:`sjt_pin.mimic`); the mimic relations applied; and the model before
+    them (every joint a coordinate of its own)."""
     content = check_urdf(source)
-    model = orient_planar_joints(build_model(source), content.planar_normals)
-    return apply_mimics(model, content.mimics, source.error)
+    unmimicked = orient_planar_joints(build_model(source), content.planar_normals)
+    model, mimics = apply_mimics(unmimicked, content.mimics, source.error)
+    return model, mimics, unmimicked
 
 
 # -- the document ------------------------------------------------------------------------------

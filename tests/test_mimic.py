@@ -3,6 +3,8 @@ exactly by fk, the Jacobians, step(), solve() and the viewer's meshes, their lim
 the relation. Before, ``<mimic>`` was ignored and the solver moved such joints freely (the
 relation broken by up to 17.8 rad or m)."""
 
+import copy
+import pickle
 from pathlib import Path
 
 import numpy as np
@@ -233,3 +235,31 @@ def test_a_mimicking_joint_first_in_the_tree_becomes_the_independent_one():
         assert values["j_a"] == pytest.approx(2 * values["j_b"] + 0.1, abs=1e-12)
         assert robot.fk(q, "lb").translation[1] == pytest.approx(values["j_b"], abs=1e-12)
         assert robot.fk(q, "la").translation[1] == pytest.approx(q_a, abs=1e-12)
+
+
+def test_copies_of_a_mimic_robot_and_its_solver_are_the_same(gripper):
+    # Pinocchio 4.1 unpickles a mimic joint broken (fk then crashes the interpreter): a robot
+    # pickles its model without mimic joints and applies the relations anew
+    q = np.array([0.3, 0.2, 0.4, 0.01])
+    target = gripper.fk(np.array([0.5, 0.4, 0.3, 0.02]))
+    for copy_of in (lambda x: pickle.loads(pickle.dumps(x)), copy.deepcopy):
+        robot = copy_of(gripper)
+        assert robot.mimic_joints == gripper.mimic_joints
+        assert np.array_equal(robot.lower_limits, gripper.lower_limits)
+        assert np.array_equal(robot.velocity_limits, gripper.velocity_limits)
+        assert robot.fk(q) == gripper.fk(q)
+        solver = sjt.SJTSolver(gripper)
+        twin = copy_of(solver)
+        assert np.array_equal(twin.step(q, target), solver.step(q, target))
+    panda = sjt.Robot.from_example("panda")
+    twin = pickle.loads(pickle.dumps(panda))
+    assert twin.nq == 8 and twin.fk(panda.q0) == panda.fk(panda.q0)
+    results = sjt.solve_many(sjt.SJTSolver(gripper), [target] * 4, gripper.q0, processes=2,
+                             chunk=2, progress=False)
+    assert all(r.success for r in results)
+
+
+def test_a_robot_with_pinocchio_mimic_joints_alone_refuses_to_pickle():
+    model = pin.transformJointIntoMimic(pin.buildModelFromUrdf(str(GRIPPER)), 4, 5, -1.0, 0.0)
+    with pytest.raises(TypeError, match="mimic joints but no model without them"):
+        pickle.dumps(sjt.Robot(model, "tcp"))
