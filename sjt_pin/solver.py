@@ -82,8 +82,9 @@ class StepInfo:
             speed limit (a start outside the range, limits changed between steps).
         outside_limits: joints whose position in the ``q`` given to this step lay outside
             their URDF range (a seed out of range): the step moves each back toward its range
-            (if the tasks move it) at its recovery speed, ramped within the acceleration and
-            jerk limits — never a jump; ``()`` when ``q`` was within every limit.
+            at its recovery speed, ramped within the acceleration and jerk limits — never a
+            jump — if a task moves it (a joint off every task's chain stays put unless a
+            posture task is stacked); ``()`` when ``q`` was within every limit.
         velocity_scale: the same as ``task_scale`` (its former name).
     """
 

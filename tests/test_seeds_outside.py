@@ -4,6 +4,8 @@ acceleration (and jerk) limits, and says so (``StepInfo.outside_limits``). Befor
 from a seed out of range returned configurations out of range (253 of 1,000 random URDFs whose
 neutral configuration lies outside a joint's range)."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -91,3 +93,20 @@ def test_step_brings_a_seed_back_without_a_jump(offset, options):
         a = np.diff(v, axis=0) / dt
         assert np.abs(v[0]).max() <= 2.0 * dt * (1 + 1e-9)  # from rest: no jump
         assert np.abs(a).max() <= 2.0 * (1 + 1e-9)
+
+
+def test_a_joint_no_task_moves_is_named_and_a_posture_task_brings_it_back():
+    gripper = sjt.Robot.from_urdf(Path(__file__).parent / "fixtures" / "mimic" / "gripper.urdf",
+                                  ee_frame="tcp")
+    target = gripper.fk(np.array([0.5, 0.4, 0.3, 0.01]))
+    start = np.array([0.3, 0.3, 0.2, 0.05])  # the finger (off the tool's chain) out of range
+    alone = sjt.SJTSolver(gripper, dt=1e-2)
+    with_posture = sjt.SJTSolver(gripper, dt=1e-2, posture=sjt.PostureTask(weight=1e-2))
+    for solver in (alone, with_posture):
+        q = start
+        for _ in range(100):
+            q = solver.step(q, target)
+        if solver is alone:  # the task is met; the finger, which no task moves, stays out
+            assert solver.error_norm < 1e-6 and q[3] == 0.05
+    assert alone.last.outside_limits == ("left_finger",)
+    assert with_posture.last.outside_limits == () and 0.0 <= q[3] <= 0.04
