@@ -131,7 +131,7 @@ def franka(methods=METHODS, seconds: float = 20.0, progress=None) -> list[LimitR
             for _ in range(500):
                 q = solver.step(q, target)
                 qs.append(q)
-        near = np.clip(q + np.r_[rng.uniform(-0.3, 0.3, 7), 0, 0], panda.lower_limits,
+        near = np.clip(q + np.r_[rng.uniform(-0.3, 0.3, 7), 0], panda.lower_limits,
                        panda.upper_limits)
         held = panda.fk(near)
         for _ in range(3000):
