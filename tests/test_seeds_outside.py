@@ -93,6 +93,8 @@ def test_step_brings_a_seed_back_without_a_jump(offset, options):
         a = np.diff(v, axis=0) / dt
         assert np.abs(v[0]).max() <= 2.0 * dt * (1 + 1e-9)  # from rest: no jump
         assert np.abs(a).max() <= 2.0 * (1 + 1e-9)
+    if "jerk_limits" in options:
+        assert np.abs(np.diff(a, axis=0) / dt).max() <= 50.0 * (1 + 1e-9)
 
 
 def test_a_joint_no_task_moves_is_named_and_a_posture_task_brings_it_back():
