@@ -20,7 +20,9 @@ import pinocchio as pin
 
 from . import mesh_paths
 from .exceptions import FrameNotFound, URDFError
-from .urdf_check import URDFSource, build_model, check_urdf, read_urdf
+from .joint_ranges import position_ranges
+from .mimic import MimicJoint, apply_mimics, joint_values, reduced_configuration
+from .urdf_check import URDFSource, check_urdf, load_model, read_urdf, urdf_mimics
 from .validation import UnitBlocks, configuration, name_list
 
 #: End-effector frames used when ``Robot.from_example`` is called without ``ee_frame``.
@@ -113,8 +115,13 @@ class Robot:
         frame_type: pin.FrameType | str | None = None,
         allow_outside_meshes: bool = False,
         memory_budget: float = MEMORY_BUDGET,
+        mimic_joints: Sequence[MimicJoint] = (),
     ):
         self.model = model
+        #: the mimic relations of ``model``'s mimic joints (see :mod:`sjt_pin.mimic`)
+        self.mimic_joints: list[MimicJoint] = list(mimic_joints)
+        #: ``model`` before its mimic joints were made (what a pickled robot carries)
+        self._unmimicked: pin.Model | None = None
         self._local = threading.local()  # one pin.Data per thread: queries never race
         self.name = name or model.name
         _check_memory(model, self.name, memory_budget)
@@ -137,14 +144,16 @@ class Robot:
         self._units = _unit_blocks(model)
         #: an upper bound of the distance from the base any frame can reach, m
         self.reach, self._base_q = _reach(model)
-        self._lower, self._upper = _position_limits(model)
+        self._lower, self._upper = position_ranges(model)
         limit = np.asarray(model.velocityLimit, dtype=float)
         self._velocity = np.where((limit > 0) & (limit < 1e30), limit, np.inf)
         #: name of the joint of each velocity (tangent) index: columns of J, entries of dq
         self.velocity_names: list[str] = [
             model.names[j] for j in range(1, model.njoints) for _ in range(model.joints[j].nv)]
         self.locked_joints: list[str] = []  #: joints removed by :meth:`reduced`
-        self.q0 = pin.neutral(model) if q0 is None else self._inside(self.check_q(q0, "q0"))
+        # without a reference configuration: the neutral one, clipped into the limits
+        self.q0 = (np.clip(pin.neutral(model), self._lower, self._upper) if q0 is None
+                   else self._inside(self.check_q(q0, "q0")))
 
     @property
     def data_bytes(self) -> int:
@@ -158,9 +167,20 @@ class Robot:
         state = self.__dict__.copy()
         del state["_local"]  # per-thread scratch space: each process makes its own
         state["visual_model"] = state["collision_model"] = None
+        if len(self.model.mimicking_joints):
+            # Pinocchio 4.1 unpickles a mimic joint broken (nvExtended -1: fk then crashes);
+            # the model goes as the one without mimic joints, the relations applied anew
+            if self._unmimicked is None:
+                raise TypeError(f"robot {self.name!r} has Pinocchio mimic joints but no model "
+                                "without them to pickle (load it with Robot.from_urdf or "
+                                "Robot.from_example)")
+            state["model"] = None
         return state
 
     def __setstate__(self, state: dict) -> None:
+        if state["model"] is None:
+            state["model"], _ = apply_mimics(state["_unmimicked"], state["mimic_joints"],
+                                             URDFError)
         self.__dict__.update(state)
         self._local = threading.local()
 
@@ -178,7 +198,8 @@ class Robot:
         ``locked_joints`` (joint names) are removed from the model at the reference
         configuration (see :meth:`reduced`); by default the gripper joints of
         :data:`DEFAULT_LOCKED_JOINTS`, ``()`` for none. ``q0`` is the robot's reference
-        configuration from its SRDF.
+        configuration from its SRDF. Mimic joints (Panda's second finger, TALOS's
+        grippers) are Pinocchio mimic joints, as in :meth:`from_urdf`.
         """
         import example_robot_data as erd
         from example_robot_data.robots_loader import ROBOTS
@@ -201,13 +222,14 @@ class Robot:
                 )
         wrapper = erd.load(name)
         urdf = getattr(wrapper, "urdf", None)
-        model = wrapper.model
+        model, q0, mimics = _with_mimics(wrapper.model, wrapper.q0, urdf)
         locked = [j for j in DEFAULT_LOCKED_JOINTS.get(name, ()) if model.existJointName(j)] \
             if locked_joints is None else list(_names_arg(locked_joints, "locked_joints"))
         # the full model's frame named by ee_frame, found again (by name) in the reduced one
-        full = cls(model, ee_frame, q0=wrapper.q0, name=name, frame_type=frame_type,
+        full = cls(model, ee_frame, q0=q0, name=name, frame_type=frame_type,
                    visual_model=wrapper.visual_model, collision_model=wrapper.collision_model,
-                   urdf=urdf, package_dirs=_example_dirs(urdf))
+                   urdf=urdf, package_dirs=_example_dirs(urdf), mimic_joints=mimics)
+        full._unmimicked = wrapper.model if mimics else None
         return full.reduced(locked) if locked else full
 
     @classmethod
@@ -245,10 +267,13 @@ class Robot:
         The URDF is checked before Pinocchio parses it (:mod:`sjt_pin.urdf_check`): a broken
         one raises :class:`URDFError` naming the file and the joint or link at fault. A model
         whose ``pin.Data`` would take more than ``memory_budget`` bytes is refused
-        (:data:`MEMORY_BUDGET`).
+        (:data:`MEMORY_BUDGET`). A joint with ``<mimic>`` becomes a Pinocchio mimic joint
+        without a coordinate of its own (:mod:`sjt_pin.mimic`); ``lower == upper`` locks a joint
+        at that value (:mod:`sjt_pin.joint_ranges`); a planar joint moves in the plane normal to
+        its ``<axis>`` (:mod:`sjt_pin.planar`).
         """
         source = read_urdf(path_or_xml)
-        check_urdf(source)
+        content = check_urdf(source)
         if isinstance(package_dirs, (str, Path)):
             package_dirs = [package_dirs]  # one folder, not a sequence of characters
         dirs = [str(p) for p in (package_dirs or [])]
@@ -263,7 +288,7 @@ class Robot:
             dirs.append(str(urdf_dir))
         mesh_paths.check_references(source.label, source.data, urdf_dir, dirs,
                                     allow_outside_meshes, must_exist=load_visuals)
-        model = build_model(source)
+        model, mimics, unmimicked = load_model(source, content)
         _check_memory(model, source.label, memory_budget)
         if ee_frame is None:
             ee_frame = _only_leaf_body(model, source.label)
@@ -271,7 +296,8 @@ class Robot:
         urdf = source.text if source.path is None else str(source.path)
         robot = cls(model, ee_frame, visual_model=visual, urdf=urdf, package_dirs=dirs,
                     frame_type=frame_type, allow_outside_meshes=allow_outside_meshes,
-                    memory_budget=memory_budget)
+                    memory_budget=memory_budget, mimic_joints=mimics)
+        robot._unmimicked = unmimicked if mimics else None
         locked = list(_names_arg(locked_joints, "locked_joints"))
         return robot.reduced(locked) if locked else robot
 
@@ -380,12 +406,38 @@ class Robot:
                 raise ValueError(f"locked_joints: {self.name} has no joint {joint!r}; {hint}")
             ids.append(model.getJointId(joint))
         q_ref = self.q0 if q is None else self.check_q(q)
+        base, q_base, mimics = model, q_ref, self.mimic_joints
+        if mimics:
+            # Pinocchio reduces a model without mimic joints: lock on that one (a joint that
+            # follows a locked one is locked with it), then tie the other relations again
+            locked = set(names)
+            for m in mimics:  # (each relation is on an independent joint: one pass)
+                if m.mimicked in locked:
+                    locked.add(m.joint)
+            base = self._unmimicked
+            if base is None:
+                raise TypeError(f"robot {self.name!r} has mimic joints but no model without "
+                                "them to reduce (load it with from_urdf or from_example)")
+            values = joint_values(model, mimics, q_ref)
+            q_base = pin.neutral(base)
+            for j in range(1, base.njoints):
+                joint, own = base.joints[j], model.joints[j]
+                if own.nq:
+                    q_base[joint.idx_q:joint.idx_q + joint.nq] = q_ref[own.idx_q:own.idx_q
+                                                                       + own.nq]
+                elif base.names[j] in values:
+                    q_base[joint.idx_q] = values[base.names[j]]
+            ids = [base.getJointId(name) for name in sorted(locked, key=base.getJointId)]
+            mimics = [m for m in mimics if m.joint not in locked and m.mimicked not in locked]
         geometries = [g for g in (self.visual_model, self.collision_model) if g is not None]
         if geometries:
-            reduced, reduced_geometries = pin.buildReducedModel(model, geometries, ids, q_ref)
+            reduced, reduced_geometries = pin.buildReducedModel(base, geometries, ids, q_base)
             reduced_geometries = list(reduced_geometries)
         else:
-            reduced, reduced_geometries = pin.buildReducedModel(model, ids, q_ref), []
+            reduced, reduced_geometries = pin.buildReducedModel(base, ids, q_base), []
+        unmimicked = reduced if mimics else None
+        if mimics:
+            reduced, mimics = apply_mimics(reduced, mimics, URDFError)
         visual = reduced_geometries.pop(0) if self.visual_model is not None else None
         collision = reduced_geometries.pop(0) if self.collision_model is not None else None
         q0 = np.concatenate([np.zeros(0)] + [
@@ -402,12 +454,13 @@ class Robot:
         robot.ee_frame_id = same[0] if same else robot.frame_id(self.ee_frame)
         robot._units = _unit_blocks(reduced)
         robot.reach, robot._base_q = _reach(reduced)
-        robot._lower, robot._upper = _position_limits(reduced)
+        robot._lower, robot._upper = position_ranges(reduced)
         limit = np.asarray(reduced.velocityLimit, dtype=float)
         robot._velocity = np.where((limit > 0) & (limit < 1e30), limit, np.inf)
         robot.velocity_names = [reduced.names[j] for j in range(1, reduced.njoints)
                                 for _ in range(reduced.joints[j].nv)]
         robot.q0 = q0
+        robot.mimic_joints, robot._unmimicked = list(mimics), unmimicked
         robot.locked_joints = [*self.locked_joints, *names]
         return robot
 
@@ -473,6 +526,11 @@ class Robot:
         J = pin.computeFrameJacobian(self.model, self.data, q, fid, reference)
         return np.asarray(J, dtype=float).reshape(6, self.model.nv)
 
+    def joint_values(self, q) -> dict[str, float]:
+        """Every 1-DoF joint's position at ``q`` (rad or m) by name, the mimic joints' from
+        their relations included: what the robot's joint controllers take."""
+        return joint_values(self.model, self.mimic_joints, self.check_q(q))
+
     def random_configuration(self, rng: np.random.Generator | None = None) -> np.ndarray:
         """A configuration drawn uniformly within the position limits (``[-pi, pi]`` if none),
         reproducibly from ``rng`` (it reseeds Pinocchio's global generator, under a lock)."""
@@ -487,20 +545,17 @@ class Robot:
         return f"Robot({self.name!r}, ee_frame={self.ee_frame!r}, nq={self.nq}, nv={self.nv})"
 
 
-def _position_limits(model: pin.Model) -> tuple[np.ndarray, np.ndarray]:
-    """The position limits the solvers enforce (nq,): a 1-DoF revolute or prismatic joint's
-    URDF limits; -inf / +inf for every other coordinate."""
-    lower, upper = np.full(model.nq, -np.inf), np.full(model.nq, np.inf)
-    for j in range(1, model.njoints):
-        joint = model.joints[j]
-        if joint.nq != 1 or joint.nv != 1:
-            continue  # continuous (cos, sin), floating base, spherical, planar: unlimited
-        i = joint.idx_q
-        lo, hi = model.lowerPositionLimit[i], model.upperPositionLimit[i]
-        # a URDF joint without <limit> parses to [0, 0] or to +-max double: neither is a limit
-        if hi > lo and abs(lo) < 1e30 and abs(hi) < 1e30:
-            lower[i], upper[i] = lo, hi
-    return lower, upper
+def _with_mimics(model: pin.Model, q0: np.ndarray, urdf: str | None
+                 ) -> tuple[pin.Model, np.ndarray, list[MimicJoint]]:
+    """An example-robot-data model (parsed without mimic joints) with the mimic relations of
+    its URDF file applied, and its reference configuration without the mimic coordinates."""
+    if not urdf or not Path(urdf).is_file():
+        return model, q0, []
+    source = read_urdf(Path(urdf))
+    reduced, mimics = apply_mimics(model, urdf_mimics(source), source.error)
+    if not mimics:
+        return model, q0, []
+    return reduced, reduced_configuration(model, reduced, np.asarray(q0, dtype=float)), mimics
 
 
 def _visual_model(model: pin.Model, source: URDFSource, dirs: list[str]) -> pin.GeometryModel:

@@ -36,6 +36,7 @@ from .constraints import ConstraintStage, Outcome
 from .escape import SaddleEscape
 from .exceptions import ConcurrentStepError, GainWarning
 from .gains import FixedGain, Gain, as_gain
+from .joint_ranges import outside
 from .limits import AccelerationLimit, JerkLimit, Limit, Motion, PositionLimit, VelocityLimit
 from .limits.position import braking_speed
 from .methods import Method
@@ -79,6 +80,11 @@ class StepInfo:
         active_rows: names of the limits whose general rows (``A q_dot <= b``) are active.
         limit_conflicts: joints whose acceleration or jerk limit had to yield to a position or
             speed limit (a start outside the range, limits changed between steps).
+        outside_limits: joints whose position in the ``q`` given to this step lay outside
+            their URDF range (a seed out of range): the step moves each back toward its range
+            at its recovery speed, ramped within the acceleration and jerk limits — never a
+            jump — if a task moves it (a joint off every task's chain stays put unless a
+            posture task is stacked); ``()`` when ``q`` was within every limit.
         velocity_scale: the same as ``task_scale`` (its former name).
     """
 
@@ -96,6 +102,7 @@ class StepInfo:
     active_limits: tuple[tuple[str, str], ...] = ()
     active_rows: tuple[str, ...] = ()
     limit_conflicts: tuple[str, ...] = ()
+    outside_limits: tuple[str, ...] = ()
 
     @property
     def velocity_scale(self) -> float:
@@ -599,7 +606,9 @@ class Solver:
                 pose=stack.poses(), alpha=alpha, escaped=escaped,
                 clamped=clamped, clamped_joints=names, task_scale=float(outcome.scale),
                 active_limits=outcome.active, active_rows=outcome.rows,
-                limit_conflicts=outcome.conflict)
+                limit_conflicts=outcome.conflict,
+                outside_limits=outside(self._model, q, self.robot.lower_limits,
+                                       self.robot.upper_limits))
         return self._last
 
     def _kernel_outcome(self, q: np.ndarray, step: np.ndarray, status: int) -> Outcome:

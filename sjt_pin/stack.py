@@ -99,8 +99,8 @@ class TaskStack:
         model = robot.model
         for t in self.tasks:
             for j in t.joints(model):
-                joint = model.joints[j]
-                chain[joint.idx_v:joint.idx_v + joint.nv] = 1.0
+                joint = model.joints[j]  # a mimic joint moves the joint it follows:
+                chain[joint.idx_v:joint.idx_v + joint.nvExtended] = 1.0  # nv 0, nvExtended 1
         self.chain = chain
         self.n_chain = int(chain.sum())
         self.kinematics = Kinematics(model)
