@@ -135,7 +135,7 @@ SPIN = """<robot name="spinner">
 
 
 def test_shape_errors_name_nq_and_nv(panda):
-    with pytest.raises(ValueError, match=r"q must have shape \(9,\): .*nq = 9 .*nv = 9; got "
+    with pytest.raises(ValueError, match=r"q must have shape \(8,\): .*nq = 8 .*nv = 8; got "
                                          r"shape \(6,\)"):
         panda.fk(np.zeros(6))
     kinova = sjt.Robot.from_example("kinova")  # continuous joints: nq = 9, nv = 6

@@ -104,10 +104,6 @@ class Task(ABC):
         """``value`` validated and converted for :meth:`compute` (default: a rigid pose)."""
         if type(value) is pin.SE3 and rotation_defect(value.np) <= RIGID_TOL:
             return value  # the usual case, one compiled test (a NaN translation shows in e)
-        if np.shape(value) == (3,) and not isinstance(value, (str, bytes)):
-            raise ValueError(f"target of the {type(self).__name__} must be a pin.SE3 or a 4x4 "
-                             "matrix, got a 3-vector (a position): for a position target use "
-                             "task=sjt.PositionTask()")
         return as_pose(value, "target")
 
     def velocity(self, value) -> np.ndarray:
