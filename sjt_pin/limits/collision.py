@@ -197,6 +197,7 @@ class CollisionLimit(Limit):
             raise ValueError(f"gain must be in (0, 1], got {gain!r}")
         self.margin, self.influence, self.gain = float(margin), float(influence), float(gain)
         self.model: pin.Model = robot.model
+        self._mimic = _mimic_map(robot.model, getattr(robot, "mimic_joints", ()))
         self.geometry = _collision_model(robot)
         if convex:
             _to_hulls(self.geometry)
@@ -328,13 +329,15 @@ class CollisionLimit(Limit):
         # the sphere-box test pays only where exact distances are dear (meshes)
         self._refine = any(isinstance(g.geometry, coal.BVHModelBase)
                            and not isinstance(g.geometry, coal.ConvexBase) for g in geoms)
-        # supports[j]: the velocity coordinates that move joint j's frame (WORLD Jacobian columns)
-        self._support = np.zeros((model.njoints, model.nv))
+        # supports[j]: the columns of Pinocchio's WORLD joint Jacobians (data.J) that move
+        # joint j's frame; data.J has a column per joint coordinate, mimic joints' included
+        # (nvExtended), which _mimic folds onto the coordinates they follow
+        self._support = np.zeros((model.njoints, model.nvExtended))
         for j in range(1, model.njoints):
             for i in model.supports[j]:
                 if i > 0:
-                    joint = model.joints[i]
-                    self._support[j, joint.idx_v:joint.idx_v + joint.nv] = 1.0
+                    start = model.idx_vExtendeds[i]
+                    self._support[j, start:start + model.nvExtendeds[i]] = 1.0
         self._version = 0  # bumped by move(): a new scene
         self._cache: tuple | None = None
 
@@ -496,7 +499,25 @@ class CollisionLimit(Limit):
         U = u @ data.J
         U *= self._support[np.concatenate((self._jb[k], self._ja[k]))]
         A = U[:len(found)] + U[len(found):]
+        if self._mimic is not None:
+            A = A @ self._mimic
         b = self.gain / dt * (np.array(distance) - self.margin)
         A.setflags(write=False)
         b.setflags(write=False)
         return A, b
+
+
+def _mimic_map(model: pin.Model, mimic_joints) -> np.ndarray | None:
+    """The (nvExtended, nv) matrix from the velocity of every joint coordinate, mimic joints'
+    included, to the model's velocity coordinates (a mimic joint's column adds, times its
+    multiplier, to the one it follows); ``None`` without mimic joints."""
+    if model.nvExtended == model.nv:
+        return None
+    G = np.zeros((model.nvExtended, model.nv))
+    for j in range(1, model.njoints):
+        for k in range(model.nvs[j]):
+            G[model.idx_vExtendeds[j] + k, model.idx_vs[j] + k] = 1.0
+    for mimic in mimic_joints:
+        follower, leader = model.getJointId(mimic.joint), model.getJointId(mimic.mimicked)
+        G[model.idx_vExtendeds[follower], model.idx_vs[leader]] = mimic.multiplier
+    return G
