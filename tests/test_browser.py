@@ -326,11 +326,11 @@ def test_static_cell_shows_the_scene_in_its_sandboxed_iframe(chromium, tmp_path)
     errors = []
     page.on("pageerror", lambda error: errors.append(str(error)))
     try:
-        page.goto((tmp_path / "notebook.html").as_uri(), wait_until="load")
+        page.goto((tmp_path / "notebook.html").as_uri(), wait_until="load", timeout=120_000)
         frame = page.frames[1]
         frame.wait_for_function(
             "() => { let n = 0; viewer.scene.traverse(o => { if (o.isMesh) n++; }); "
-            f"return n >= {len(robot.visual_model.geometryObjects)}; }}", timeout=60_000)
+            f"return n >= {len(robot.visual_model.geometryObjects)}; }}", timeout=120_000)
         assert errors == []
         assert frame.locator("canvas").first.bounding_box()["height"] > 300
     finally:

@@ -112,8 +112,9 @@ SCRIPT_TEMPLATE = r"""
         if (!o.isPoints) return;
         const {gap, depth} = onScreen(o);
         const pixels = Math.max(1.5, Math.min(DOT_PIXELS, DOT_GAP * gap));
-        // three.js draws a point size * (height / 2) / depth pixels wide
-        o.material.size = (2 * pixels * Math.max(depth, 1e-3)) / Math.max(pane.clientHeight, 1);
+        // attenuated, three.js draws a point size * (height / 2) / depth pixels wide
+        o.material.size = o.material.sizeAttenuation
+          ? (2 * pixels * Math.max(depth, 1e-3)) / Math.max(pane.clientHeight, 1) : pixels;
       });
     }
   }

@@ -31,6 +31,7 @@ from ..tracking import TrackingLog
 from .meshes import visual_parts
 from .obstacles import OBSTACLE_COLOR, OBSTACLE_OPACITY, draw_obstacle, key_segments, show_segments
 from .page import RobotEntry, Run, page_html
+from .page_script import DOT_PIXELS
 from .plot import Series, error_plot
 from .scene import SceneRecord
 from .server import LiveWindow, LoopbackServer
@@ -44,8 +45,9 @@ PATH_POINTS = 500
 DESIRED_DOTS = 60
 #: Least spacing of those dots along the path, as a fraction of the robot's size (its largest
 #: frame distance from its base): a short path gets few dots, far enough apart that the path
-#: followed shows between them. On the page they are :data:`.page_script.DOT_PIXELS` wide.
-DOT_SPACING = 0.02
+#: followed shows between them. They are :data:`.page_script.DOT_PIXELS` wide whatever the
+#: distance (the page makes them smaller where they would crowd).
+DOT_SPACING = 0.03
 _NOT_LIVE = ("this viewer has no live server (it was made with live=False, or closed); "
              "restart() starts one")
 _GRID_SCALE = 0.25
@@ -362,8 +364,11 @@ class Viewer:
         safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in label)
         run_node, target_node = f"{rig.name}/runs/{safe}", f"{rig.name}/markers/target"
         every = -(-len(log) // PATH_POINTS)  # a path of at most PATH_POINTS points
-        self.draw_points(_dots(log.target, DOT_SPACING * rig.size), DESIRED_COLOR, "desired",
-                         robot=rig.name, size=1.5 * DOT_SPACING * rig.size)
+        dots = _dots(log.target, DOT_SPACING * rig.size)
+        rgb = np.array([(DESIRED_COLOR >> shift & 255) / 255.0 for shift in (16, 8, 0)])
+        self.meshcat[f"{rig.name}/paths/desired"].set_object(mg.Points(
+            mg.PointsGeometry(dots.T, color=np.tile(rgb[:, None], len(dots))),
+            _ScreenPointsMaterial(size=DOT_PIXELS)))
         self.meshcat[f"{run_node}/path"].set_object(mg.Line(
             mg.PointsGeometry(_points(log.position[::every]).T),
             mg.LineBasicMaterial(color=color, linewidth=2.0)))
@@ -466,6 +471,13 @@ class Viewer:
     def __repr__(self) -> str:
         url = self._server.web_url if self._server is not None else None
         return f"Viewer({list(self._rigs)}, url={url!r})"
+
+
+class _ScreenPointsMaterial(mg.PointsMaterial):
+    """Points ``size`` pixels wide at any distance (three.js' ``sizeAttenuation`` off)."""
+
+    def lower(self, object_data):
+        return {**super().lower(object_data), "sizeAttenuation": False}
 
 
 def _dots(path: np.ndarray, spacing: float) -> np.ndarray:
