@@ -524,3 +524,56 @@ def test_bench_collision_runs_pink_on_the_same_scenes():
     rows = [r for r in bench.collision(methods=(), peers=True) if r.method == "pink"]
     assert len(rows) == 3 * 2
     assert all(np.isfinite(r.min_distance) and r.us_per_step > 0 for r in rows)
+
+
+# -- the start, and small steps -----------------------------------------------------------
+def test_links_that_overlap_at_the_start_are_dropped_and_close_ones_keep_their_distance(panda):
+    """A start where links 5 and 6 are inside the base and link 5 is 4.5 mm from link 1: the
+    overlapping pairs are dropped with a warning naming them, the close one keeps its start
+    distance as its margin (no row pushes it away at once), every other pair keeps margin."""
+    q = np.array([1.111, -1.614, 2.819, -2.779, -2.223, 1.902, -0.285, 0.021, 0.039])
+    limit = CollisionLimit(panda, self_collision=True, margin=0.01)
+    before = {(x.a, x.b): x.distance for x in limit.distances(q)}
+    assert before[("panda_link0_0", "panda_link6_0")] < 0
+    assert 0 < before[("panda_link1_0", "panda_link5_0")] < 0.01
+    kin = Kinematics(panda.model)
+    kin.update(q)
+    with pytest.warns(UserWarning, match="overlap at the start.*panda_link0_0', 'panda_link6_0"):
+        A, b = limit.rows(kin, at(1e-3))
+    dropped = {pair for pair, d in before.items() if d <= 0}
+    assert dropped and not dropped & set(limit.pair_names)
+    assert set(limit.pair_names) == set(before) - dropped
+    k = limit.pair_names.index(("panda_link1_0", "panda_link5_0"))
+    assert limit.margins[k] == pytest.approx(before[("panda_link1_0", "panda_link5_0")])
+    assert np.all(limit.margins[np.arange(len(limit.pairs)) != k] == 0.01)
+    i = limit.active.index(k)
+    assert b[i] == pytest.approx(0.0, abs=1e-6)  # at its own margin: it may not shrink
+
+
+def test_speed_bounds_keep_every_point_within_half_the_influence_per_step(panda, ur5):
+    """The bounds' levers bound the speed of every vertex of the checked geometry per unit of
+    each joint's velocity, at random configurations: a step at the bound moves no point more
+    than (influence - margin) / 2."""
+    for robot in (panda, ur5):
+        limit = CollisionLimit(robot, self_collision=True)
+        lower, upper = limit.bounds(None, at(1e-3))
+        assert np.all(lower == -upper)
+        rng = np.random.default_rng(5)
+        model, data = robot.model, robot.model.createData()
+        vertices = [np.asarray(g.geometry.points()) if hasattr(g.geometry, "points") else
+                    np.zeros((1, 3)) for g in limit.geometry.geometryObjects[:limit.n_robot]]
+        for _ in range(10):
+            q = robot.random_configuration(rng)
+            pin.computeJointJacobians(model, data, q)
+            pin.updateGeometryPlacements(model, data, limit.geometry, limit.geometry_data)
+            for g, local in enumerate(vertices):
+                obj = limit.geometry.geometryObjects[g]
+                if obj.parentJoint == 0:
+                    continue
+                J = pin.getJointJacobian(model, data, obj.parentJoint, pin.WORLD)
+                world = local @ limit.geometry_data.oMg[g].rotation.T + \
+                    limit.geometry_data.oMg[g].translation
+                for p in world:  # the speed of p per unit of each joint velocity
+                    speed = np.linalg.norm(J[:3] + np.cross(J[3:].T, p).T, axis=0)
+                    assert np.all(speed * upper * 1e-3 <= (limit.influence - limit.margin) / 2
+                                  + 1e-12)
