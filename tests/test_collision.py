@@ -451,9 +451,12 @@ def test_obstacle_page_draws_obstacles_and_closest_point_segments(panda, tmp_pat
     for i, (shape, pose) in enumerate([ball, box]):
         viewer.add_obstacle(shape, pose, f"obstacle_{i}")
     viewer.animate(log, collision=limit, label="sjt")
-    page_path = viewer.save_html(tmp_path / "obstacle.html", "obstacles")
     active = [i for i, q in enumerate(log.q[::33]) if limit.closest_points(q)]
     assert active  # the ball comes within influence during the run
+    near = log.q[::33][active[0]]
+    closest = limit.closest_points(near)[0]
+    viewer.show(near, collision=limit)  # a static drawing too, under panda/segments
+    page_path = viewer.save_html(tmp_path / "obstacle.html", "obstacles")
     chromium = Chromium()
     try:
         page = chromium.open(page_path.as_uri(), meshes=10, width=1100, height=700)
@@ -474,6 +477,13 @@ def test_obstacle_page_draws_obstacles_and_closest_point_segments(panda, tmp_pat
             return [node.visible, node.scale.y]; }""", t)
         assert segment[0] and 0.005 < segment[1] < limit.influence + 1e-3, segment
         assert color_pixels(shown, SEGMENT_COLOR, tol=50) > 5
+        length, middle = page.evaluate("""() => {
+            const node = viewer.scene_tree.find(["meshcat", "panda", "segments", "0"]).object;
+            const scale = new MeshCat.THREE.Vector3().setFromMatrixScale(node.matrix);
+            const p = new MeshCat.THREE.Vector3().setFromMatrixPosition(node.matrix);
+            return [scale.y, [p.x, p.y, p.z]]; }""")
+        assert length == pytest.approx(np.linalg.norm(closest.a - closest.b), rel=1e-5)
+        np.testing.assert_allclose(middle, (closest.a + closest.b) / 2, atol=1e-6)
         labels = page.page.locator("svg.error-plot").all_text_contents()
         assert len(labels) == 2 and "closest distance (m)" in labels[1]
     finally:
@@ -555,9 +565,15 @@ def test_speed_bounds_keep_every_point_within_half_the_influence_per_step(panda,
     each joint's velocity, at random configurations: a step at the bound moves no point more
     than (influence - margin) / 2."""
     for robot in (panda, ur5):
-        limit = CollisionLimit(robot, self_collision=True)
-        lower, upper = limit.bounds(None, at(1e-3))
+        q0 = _start(robot)
+        limit = CollisionLimit(robot, _near_obstacles(robot, q0), self_collision=True)
+        kin = Kinematics(robot.model)
+        kin.update(q0)
+        lower, upper = limit.bounds(kin, at(1e-3))
         assert np.all(lower == -upper)
+        kin.update(q0 + 0.0)  # a copy: the same configuration, a new array
+        far = CollisionLimit(robot, [(coal.Sphere(0.05), pin.SE3(np.eye(3), np.ones(3) * 3))])
+        assert far.bounds(kin, at(1e-3)) is None  # nothing near: no bound
         rng = np.random.default_rng(5)
         model, data = robot.model, robot.model.createData()
         vertices = [np.asarray(g.geometry.points()) if hasattr(g.geometry, "points") else

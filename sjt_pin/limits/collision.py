@@ -381,7 +381,10 @@ class CollisionLimit(Limit):
         2`` in one period, so that the first-order rows hold (a correction of the stage that
         turns a joint by a radian in one step would carry a link through an obstacle before
         any row could see it). Far above a robot's own speeds at usual periods: 20 rad/s for a
-        1 m lever at 1 kHz with the defaults."""
+        1 m lever at 1 kHz with the defaults. Only while a pair is within ``influence`` (the
+        step's rows, computed here once for both)."""
+        if self.rows(kinematics, motion) is None:
+            return None  # nothing near: no row, and the robot's own speed limits suffice
         dt = motion.dt
         if self._bounds is None or self._bounds[0] != dt:
             with np.errstate(divide="ignore"):
