@@ -593,3 +593,41 @@ def test_speed_bounds_keep_every_point_within_half_the_influence_per_step(panda,
                     speed = np.linalg.norm(J[:3] + np.cross(J[3:].T, p).T, axis=0)
                     assert np.all(speed * upper * 1e-3 <= (limit.influence - limit.margin) / 2
                                   + 1e-12)
+
+
+def test_a_pickled_limit_is_the_same_limit_and_solve_many_keeps_the_margin(panda):
+    """A copy through pickle (as solve_many sends a solver to its workers) checks the same
+    pairs at the same obstacle poses and gives the same rows; solve_many in 2 processes
+    returns the same configurations as one, each keeping the margin where it succeeded."""
+    import pickle
+
+    q0 = panda.q0.copy()
+    start = panda.fk(q0)
+    sphere = coal.Sphere(0.05)
+    pose = pin.SE3(np.eye(3), start.translation + [0.0, 0.5, 0.0])
+    limit = CollisionLimit(panda, [(sphere, pose)], self_collision=True, margin=0.01)
+    moved = pin.SE3(np.eye(3), start.translation + [0.0, 0.2, -0.05])
+    limit.move(0, moved)
+    copy = pickle.loads(pickle.dumps(limit))
+    assert copy.pair_names == limit.pair_names
+    np.testing.assert_allclose(copy.obstacles[0][1].homogeneous, moved.homogeneous)
+    kin = Kinematics(panda.model)
+    kin.update(q0)
+    A, b = limit.rows(kin, at(1e-3))
+    A2, b2 = copy.rows(kin, at(1e-3))
+    np.testing.assert_allclose(A2, A, atol=1e-9)
+    np.testing.assert_allclose(b2, b, atol=1e-6)
+    solver = sjt.SJTSolver(panda, limits=[limit])
+    targets = [pin.SE3(start.rotation, start.translation + offset)
+               for offset in ([0.0, 0.25, -0.05], [0.1, 0.2, -0.1], [0.0, -0.2, 0.0])]
+    one = sjt.solve_many(solver, targets, q0, processes=1, progress=False, timeout=None,
+                         budget=600)
+    two = sjt.solve_many(solver, targets, q0, processes=2, progress=False, timeout=None,
+                         budget=600)
+    distance = Independent(panda, sphere, moved)
+    for a, c in zip(one, two, strict=True):
+        assert a.success == c.success
+        np.testing.assert_allclose(c.q, a.q, atol=1e-9)
+        if a.success:
+            assert distance(a.q) >= 0.01 - 1e-6
+    assert any(r.success for r in one)

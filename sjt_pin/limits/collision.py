@@ -197,8 +197,14 @@ class CollisionLimit(Limit):
         if not (0 < gain <= 1):
             raise ValueError(f"gain must be in (0, 1], got {gain!r}")
         self.margin, self.influence, self.gain = float(margin), float(influence), float(gain)
+        # what a copy in another process is rebuilt from (coal's hulls do not pickle)
+        self._args = dict(robot=robot, obstacles=list(obstacles), self_collision=self_collision,
+                          margin=margin, influence=influence, gain=gain, pairs=list(pairs),
+                          ignore=list(ignore), srdf=srdf, convex=convex)
         self.model: pin.Model = robot.model
-        self.geometry = _collision_model(robot)
+        source = self.__dict__.pop("_restored_geometry", None)  # set by __setstate__
+        self.geometry = source.copy() if source is not None else _collision_model(robot)
+        self._source = self.geometry.copy()  # the robot's own geometry (meshes), for copies
         if convex:
             _to_hulls(self.geometry)
         self.n_robot = self.geometry.ngeoms
@@ -212,6 +218,17 @@ class CollisionLimit(Limit):
         self._checked = False
         self.active: list[int] = []
         self._prepare_broad_phase()
+
+    def __getstate__(self) -> dict:
+        """Pickled as its arguments (obstacles at their current poses) and the robot's own
+        collision geometry (the robot pickles without it; coal's hulls do not pickle, they
+        are built again)."""
+        return {"args": {**self._args, "obstacles": self.obstacles},
+                "geometry": self._source.copy()}
+
+    def __setstate__(self, state: dict) -> None:
+        self._restored_geometry = state["geometry"]
+        self.__init__(**state["args"])  # type: ignore[misc]
 
     # -- construction ------------------------------------------------------------------------
     def _add_obstacle(self, i: int, item) -> None:
