@@ -466,7 +466,9 @@ class CollisionLimit(Limit):
         return pin.computeDistance(self.geometry, self.geometry_data, int(k))
 
     def check(self, q: np.ndarray) -> None:
-        """Raise :class:`CollisionError` if an obstacle overlaps the robot at ``q``."""
+        """Raise :class:`CollisionError` if an obstacle overlaps the robot at ``q``, and take
+        ``q`` as the start (what the first step does otherwise): pairs of the robot's links
+        that overlap there are dropped, those closer than ``margin`` keep their distance."""
         pin.framesForwardKinematics(self.model, self._data, np.asarray(q, dtype=float))
         self._check(self.model, self._data)
 
