@@ -455,7 +455,7 @@ def test_obstacle_page_draws_obstacles_and_closest_point_segments(panda, tmp_pat
     assert active  # the ball comes within influence during the run
     near = log.q[::33][active[0]]
     closest = limit.closest_points(near)[0]
-    viewer.show(near, collision=limit)  # a static drawing too, under panda/segments
+    viewer.show(near, collision=limit, geometry=True)  # static, under panda/segments
     page_path = viewer.save_html(tmp_path / "obstacle.html", "obstacles")
     chromium = Chromium()
     try:
@@ -483,6 +483,10 @@ def test_obstacle_page_draws_obstacles_and_closest_point_segments(panda, tmp_pat
             const p = new MeshCat.THREE.Vector3().setFromMatrixPosition(node.matrix);
             return [scale.y, [p.x, p.y, p.z]]; }""")
         assert length == pytest.approx(np.linalg.norm(closest.a - closest.b), rel=1e-5)
+        # the collision geometry as measured (hulls): a translucent node per moving geometry
+        drawn = page.evaluate("""() => viewer.scene_tree.find(["meshcat", "panda", "collision"])
+                                 .object.children.length""")
+        assert drawn == len(limit.placements(near)) > 5
         np.testing.assert_allclose(middle, (closest.a + closest.b) / 2, atol=1e-6)
         labels = page.page.locator("svg.error-plot").all_text_contents()
         assert len(labels) == 2 and "closest distance (m)" in labels[1]
@@ -631,3 +635,27 @@ def test_a_pickled_limit_is_the_same_limit_and_solve_many_keeps_the_margin(panda
         if a.success:
             assert distance(a.q) >= 0.01 - 1e-6
     assert any(r.success for r in one)
+
+
+def test_animate_keys_the_collision_geometry_with_the_run(panda):
+    """With geometry=True the measured geometry follows the run: one node per moving geometry,
+    placed as the limit places it at the run's first configuration."""
+    from sjt_pin.viewer import Viewer
+
+    q0 = panda.q0.copy()
+    start = panda.fk(q0)
+    limit = CollisionLimit(panda, [(coal.Sphere(0.04), pin.SE3(np.eye(3), start.translation
+                                                              + [0.0, 0.2, -0.07]))])
+    line = sjt.PoseInterpolation(start, pin.SE3(start.rotation, start.translation
+                                                + [0.0, 0.1, 0.0]), duration=0.2)
+    log = sjt.track(sjt.SJTSolver(panda, limits=[limit]), line, q0)
+    viewer = Viewer(panda, live=False, name="panda")
+    plain = len(viewer.static_html())
+    viewer.animate(log, collision=limit, label="sjt")
+    segments_only = len(viewer.static_html())
+    viewer = Viewer(panda, live=False, name="panda")
+    viewer.animate(log, collision=limit, label="sjt", geometry=True)
+    page = viewer.static_html()
+    assert len(page) > segments_only > plain
+    assert len(limit.placements(q0)) == sum(
+        g.parentJoint != 0 for g in panda.collision_model.geometryObjects)

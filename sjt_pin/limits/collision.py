@@ -516,6 +516,15 @@ class CollisionLimit(Limit):
         out.sort(key=lambda p: p.distance)
         return out
 
+    def placements(self, q: np.ndarray) -> list[tuple[str, object, np.ndarray]]:
+        """The robot's checked geometry at ``q``: ``(name, coal shape, 4x4 world pose)`` for
+        each geometry that moves (hulls with ``convex=True``), e.g. to draw it."""
+        pin.framesForwardKinematics(self.model, self._data, np.asarray(q, dtype=float))
+        pin.updateGeometryPlacements(self.model, self._data, self.geometry, self.geometry_data)
+        geoms = self.geometry.geometryObjects
+        return [(geoms[g].name, geoms[g].geometry, self.geometry_data.oMg[g].homogeneous)
+                for g in range(self.n_robot) if geoms[g].parentJoint != 0]
+
     def closest_points(self, q: np.ndarray, within: float | None = None
                        ) -> list[ClosestPoints]:
         """The checked pairs closer than ``within`` (m; default ``influence``) at ``q``, with
