@@ -451,9 +451,12 @@ def test_obstacle_page_draws_obstacles_and_closest_point_segments(panda, tmp_pat
     for i, (shape, pose) in enumerate([ball, box]):
         viewer.add_obstacle(shape, pose, f"obstacle_{i}")
     viewer.animate(log, collision=limit, label="sjt")
-    page_path = viewer.save_html(tmp_path / "obstacle.html", "obstacles")
     active = [i for i, q in enumerate(log.q[::33]) if limit.closest_points(q)]
     assert active  # the ball comes within influence during the run
+    near = log.q[::33][active[0]]
+    closest = limit.closest_points(near)[0]
+    viewer.show(near, collision=limit, geometry=True)  # static, under panda/segments
+    page_path = viewer.save_html(tmp_path / "obstacle.html", "obstacles")
     chromium = Chromium()
     try:
         page = chromium.open(page_path.as_uri(), meshes=10, width=1100, height=700)
@@ -474,6 +477,17 @@ def test_obstacle_page_draws_obstacles_and_closest_point_segments(panda, tmp_pat
             return [node.visible, node.scale.y]; }""", t)
         assert segment[0] and 0.005 < segment[1] < limit.influence + 1e-3, segment
         assert color_pixels(shown, SEGMENT_COLOR, tol=50) > 5
+        length, middle = page.evaluate("""() => {
+            const node = viewer.scene_tree.find(["meshcat", "panda", "segments", "0"]).object;
+            const scale = new MeshCat.THREE.Vector3().setFromMatrixScale(node.matrix);
+            const p = new MeshCat.THREE.Vector3().setFromMatrixPosition(node.matrix);
+            return [scale.y, [p.x, p.y, p.z]]; }""")
+        assert length == pytest.approx(np.linalg.norm(closest.a - closest.b), rel=1e-5)
+        # the collision geometry as measured (hulls): a translucent node per moving geometry
+        drawn = page.evaluate("""() => viewer.scene_tree.find(["meshcat", "panda", "collision"])
+                                 .object.children.length""")
+        assert drawn == len(limit.placements(near)) > 5
+        np.testing.assert_allclose(middle, (closest.a + closest.b) / 2, atol=1e-6)
         labels = page.page.locator("svg.error-plot").all_text_contents()
         assert len(labels) == 2 and "closest distance (m)" in labels[1]
     finally:
@@ -524,3 +538,124 @@ def test_bench_collision_runs_pink_on_the_same_scenes():
     rows = [r for r in bench.collision(methods=(), peers=True) if r.method == "pink"]
     assert len(rows) == 3 * 2
     assert all(np.isfinite(r.min_distance) and r.us_per_step > 0 for r in rows)
+
+
+# -- the start, and small steps -----------------------------------------------------------
+def test_links_that_overlap_at_the_start_are_dropped_and_close_ones_keep_their_distance(panda):
+    """A start where links 5 and 6 are inside the base and link 5 is 4.5 mm from link 1: the
+    overlapping pairs are dropped with a warning naming them, the close one keeps its start
+    distance as its margin (no row pushes it away at once), every other pair keeps margin."""
+    q = np.array([1.111, -1.614, 2.819, -2.779, -2.223, 1.902, -0.285, 0.021, 0.039])
+    limit = CollisionLimit(panda, self_collision=True, margin=0.01)
+    before = {(x.a, x.b): x.distance for x in limit.distances(q)}
+    assert before[("panda_link0_0", "panda_link6_0")] < 0
+    assert 0 < before[("panda_link1_0", "panda_link5_0")] < 0.01
+    kin = Kinematics(panda.model)
+    kin.update(q)
+    with pytest.warns(UserWarning, match="overlap at the start.*panda_link0_0', 'panda_link6_0"):
+        A, b = limit.rows(kin, at(1e-3))
+    dropped = {pair for pair, d in before.items() if d <= 0}
+    assert dropped and not dropped & set(limit.pair_names)
+    assert set(limit.pair_names) == set(before) - dropped
+    k = limit.pair_names.index(("panda_link1_0", "panda_link5_0"))
+    assert limit.margins[k] == pytest.approx(before[("panda_link1_0", "panda_link5_0")])
+    assert np.all(limit.margins[np.arange(len(limit.pairs)) != k] == 0.01)
+    i = limit.active.index(k)
+    assert b[i] == pytest.approx(0.0, abs=1e-6)  # at its own margin: it may not shrink
+
+
+def test_speed_bounds_keep_every_point_within_half_the_influence_per_step(panda, ur5):
+    """The bounds' levers bound the speed of every vertex of the checked geometry per unit of
+    each joint's velocity, at random configurations: a step at the bound moves no point more
+    than (influence - margin) / 2."""
+    for robot in (panda, ur5):
+        q0 = _start(robot)
+        limit = CollisionLimit(robot, _near_obstacles(robot, q0), self_collision=True)
+        kin = Kinematics(robot.model)
+        kin.update(q0)
+        lower, upper = limit.bounds(kin, at(1e-3))
+        assert np.all(lower == -upper)
+        kin.update(q0 + 0.0)  # a copy: the same configuration, a new array
+        far = CollisionLimit(robot, [(coal.Sphere(0.05), pin.SE3(np.eye(3), np.ones(3) * 3))])
+        assert far.bounds(kin, at(1e-3)) is None  # nothing near: no bound
+        rng = np.random.default_rng(5)
+        model, data = robot.model, robot.model.createData()
+        vertices = [np.asarray(g.geometry.points()) if hasattr(g.geometry, "points") else
+                    np.zeros((1, 3)) for g in limit.geometry.geometryObjects[:limit.n_robot]]
+        for _ in range(10):
+            q = robot.random_configuration(rng)
+            pin.computeJointJacobians(model, data, q)
+            pin.updateGeometryPlacements(model, data, limit.geometry, limit.geometry_data)
+            for g, local in enumerate(vertices):
+                obj = limit.geometry.geometryObjects[g]
+                if obj.parentJoint == 0:
+                    continue
+                J = pin.getJointJacobian(model, data, obj.parentJoint, pin.WORLD)
+                world = local @ limit.geometry_data.oMg[g].rotation.T + \
+                    limit.geometry_data.oMg[g].translation
+                for p in world:  # the speed of p per unit of each joint velocity
+                    speed = np.linalg.norm(J[:3] + np.cross(J[3:].T, p).T, axis=0)
+                    assert np.all(speed * upper * 1e-3 <= (limit.influence - limit.margin) / 2
+                                  + 1e-12)
+
+
+def test_a_pickled_limit_is_the_same_limit_and_solve_many_keeps_the_margin(panda):
+    """A copy through pickle (as solve_many sends a solver to its workers) checks the same
+    pairs at the same obstacle poses and gives the same rows; solve_many in 2 processes
+    returns the same configurations as one, each keeping the margin where it succeeded."""
+    import pickle
+
+    q0 = panda.q0.copy()
+    start = panda.fk(q0)
+    sphere = coal.Sphere(0.05)
+    pose = pin.SE3(np.eye(3), start.translation + [0.0, 0.5, 0.0])
+    limit = CollisionLimit(panda, [(sphere, pose)], self_collision=True, margin=0.01)
+    moved = pin.SE3(np.eye(3), start.translation + [0.0, 0.2, -0.05])
+    limit.move(0, moved)
+    copy = pickle.loads(pickle.dumps(limit))
+    assert copy.pair_names == limit.pair_names
+    np.testing.assert_allclose(copy.obstacles[0][1].homogeneous, moved.homogeneous)
+    kin = Kinematics(panda.model)
+    kin.update(q0)
+    A, b = limit.rows(kin, at(1e-3))
+    A2, b2 = copy.rows(kin, at(1e-3))
+    np.testing.assert_allclose(A2, A, atol=1e-9)
+    np.testing.assert_allclose(b2, b, atol=1e-6)
+    solver = sjt.SJTSolver(panda, limits=[limit])
+    targets = [pin.SE3(start.rotation, start.translation + offset)
+               for offset in ([0.0, 0.25, -0.05], [0.1, 0.2, -0.1], [0.0, -0.2, 0.0])]
+    one = sjt.solve_many(solver, targets, q0, processes=1, progress=False, timeout=None,
+                         budget=600)
+    two = sjt.solve_many(solver, targets, q0, processes=2, progress=False, timeout=None,
+                         budget=600)
+    distance = Independent(panda, sphere, moved)
+    for a, c in zip(one, two, strict=True):
+        assert a.success == c.success
+        np.testing.assert_allclose(c.q, a.q, atol=1e-9)
+        if a.success:
+            assert distance(a.q) >= 0.01 - 1e-6
+    assert any(r.success for r in one)
+
+
+def test_animate_keys_the_collision_geometry_with_the_run(panda):
+    """With geometry=True the measured geometry follows the run: one node per moving geometry,
+    placed as the limit places it at the run's first configuration."""
+    from sjt_pin.viewer import Viewer
+
+    q0 = panda.q0.copy()
+    start = panda.fk(q0)
+    limit = CollisionLimit(panda, [(coal.Sphere(0.04), pin.SE3(np.eye(3), start.translation
+                                                              + [0.0, 0.2, -0.07]))])
+    line = sjt.PoseInterpolation(start, pin.SE3(start.rotation, start.translation
+                                                + [0.0, 0.1, 0.0]), duration=0.2)
+    log = sjt.track(sjt.SJTSolver(panda, limits=[limit]), line, q0)
+    viewer = Viewer(panda, live=False, name="panda")
+    plain = len(viewer.static_html())
+    viewer.animate(log, collision=limit, label="sjt")
+    segments_only = len(viewer.static_html())
+    viewer = Viewer(panda, live=False, name="panda")
+    viewer.animate(log, collision=limit, label="sjt", geometry=True)
+    page = viewer.static_html()
+    assert len(page) > segments_only > plain
+    assert len(limit.placements(q0)) == sum(
+        g.parentJoint != 0 for g in panda.collision_model.geometryObjects)

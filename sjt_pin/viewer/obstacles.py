@@ -27,6 +27,9 @@ OBSTACLE_OPACITY = 0.55
 SEGMENT_COLOR = 0xD81B60
 #: Radius (m) of a drawn segment.
 SEGMENT_RADIUS = 0.0035
+#: Colour and opacity of the robot's collision geometry, when drawn.
+GEOMETRY_COLOR = 0x4A90D9
+GEOMETRY_OPACITY = 0.3
 
 
 def obstacle_mesh(shape) -> tuple[np.ndarray, np.ndarray]:
@@ -117,6 +120,24 @@ def show_segments(meshcat, prefix: str, limit, q, count: int) -> None:
         T[:3, 1] *= max(length, 1e-6)  # the node's matrix carries the length as a scale
         node.set_transform(T)
         node.set_property("visible", True)
+
+
+def show_geometry(meshcat, prefix: str, limit, q) -> None:
+    """Draw ``limit``'s robot geometry (what it measures: hulls with ``convex=True``) at
+    ``q`` under ``prefix/<name>``, translucent."""
+    for name, shape, T in limit.placements(q):
+        draw_obstacle(meshcat[f"{prefix}/{name}"], shape, T, GEOMETRY_COLOR, GEOMETRY_OPACITY)
+
+
+def key_geometry(animation, meshcat, prefix: str, limit, configurations: Sequence[np.ndarray],
+                 first: int) -> None:
+    """Draw ``limit``'s robot geometry under ``prefix`` and key its placements for each of
+    ``configurations`` (one per frame, from frame ``first``) into ``animation``."""
+    show_geometry(meshcat, prefix, limit, configurations[0])
+    for i, q in enumerate(configurations):
+        with animation.at_frame(meshcat, first + i) as frame:
+            for name, _, T in limit.placements(q):
+                frame[f"{prefix}/{name}"].set_transform(T)
 
 
 def key_segments(animation, meshcat, prefix: str, limit, configurations: Sequence[np.ndarray],

@@ -29,7 +29,15 @@ from meshcat.animation import Animation, AnimationClip, AnimationTrack
 from ..robot import Robot
 from ..tracking import TrackingLog
 from .meshes import visual_parts
-from .obstacles import OBSTACLE_COLOR, OBSTACLE_OPACITY, draw_obstacle, key_segments, show_segments
+from .obstacles import (
+    OBSTACLE_COLOR,
+    OBSTACLE_OPACITY,
+    draw_obstacle,
+    key_geometry,
+    key_segments,
+    show_geometry,
+    show_segments,
+)
 from .page import RobotEntry, Run, page_html
 from .page_script import DOT_PIXELS
 from .plot import Series, error_plot
@@ -218,11 +226,13 @@ class Viewer:
         x, y, z = np.asarray(position, dtype=float)
         self.meshcat["/Cameras/default/rotated/<object>"].set_property("position", [x, z, -y])
 
-    def show(self, q, robot: str | None = None, collision=None, segments: int = 4) -> None:
+    def show(self, q, robot: str | None = None, collision=None, segments: int = 4,
+             geometry: bool = False) -> None:
         """Place ``robot`` at configuration ``q``.
 
         With ``collision`` (a :class:`~sjt_pin.CollisionLimit` of this robot), also draw the
-        closest-point segments of its ``segments`` closest pairs within its ``influence``.
+        closest-point segments of its ``segments`` closest pairs within its ``influence``, and
+        with ``geometry`` the collision geometry it measures (translucent).
         """
         rig = self._rig(robot)
         placements = rig.placements(rig.robot.check_q(q))
@@ -230,6 +240,8 @@ class Viewer:
             self.meshcat[node].set_transform(T)
         if collision is not None:
             show_segments(self.meshcat, f"{rig.name}/segments", collision, q, segments)
+            if geometry:
+                show_geometry(self.meshcat, f"{rig.name}/collision", collision, q)
 
     def add_obstacle(self, shape, pose, name: str = "obstacle", robot: str | None = None,
                      color=OBSTACLE_COLOR, opacity: float = OBSTACLE_OPACITY) -> None:
@@ -299,7 +311,7 @@ class Viewer:
     # -- animations --------------------------------------------------------------------------
     def animate(self, log: TrackingLog, fps: float = 30.0, robot: str | None = None,
                 color=None, start: float = 0.0, label: str | None = None, collision=None,
-                segments: int = 4) -> float:
+                segments: int = 4, geometry: bool = False) -> float:
         """Play ``log`` on ``robot`` from ``start`` s of the timeline; returns its end time.
 
         Draws the desired path (dark) and the path followed (``color``, default the method's,
@@ -307,16 +319,17 @@ class Viewer:
         drawn as spheres that move with the animation. ``label`` names the run on the page
         (default: the method). With ``collision`` (a :class:`~sjt_pin.CollisionLimit` of this
         robot), the closest-point segments of its ``segments`` closest pairs within
-        ``influence`` move with the run, and the page plots the closest distance over time.
+        ``influence`` move with the run, and the page plots the closest distance over time;
+        with ``geometry`` also the collision geometry it measures (translucent).
         """
         end = self._add_run(log, fps, robot, color, start, label)
         if collision is not None:
-            self._add_distances(log, fps, robot, start, collision, segments)
+            self._add_distances(log, fps, robot, start, collision, segments, geometry)
         self._send_animation()
         return end
 
     def _add_distances(self, log: TrackingLog, fps: float, robot: str | None, start: float,
-                       collision, segments: int) -> None:
+                       collision, segments: int, geometry: bool = False) -> None:
         """Key the last run's closest-point segments (under its run node, so shown only while
         it plays) and keep its closest distance over time for the page."""
         rig = self._rig(robot)
@@ -324,8 +337,12 @@ class Viewer:
         safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in run.label)
         frames = np.arange(0.0, log.t[-1] + 0.5 / fps, 1.0 / fps)
         indices = np.minimum(np.searchsorted(log.t, frames), len(log) - 1)
+        first = int(round(start * fps))
         closest = key_segments(self._animation, self.meshcat, f"{rig.name}/runs/{safe}/segments",
-                               collision, log.q[indices], int(round(start * fps)), segments)
+                               collision, log.q[indices], first, segments)
+        if geometry:
+            key_geometry(self._animation, self.meshcat, f"{rig.name}/runs/{safe}/collision",
+                         collision, log.q[indices], first)
         rig.distances.append(Series(run.label, run.color, frames, np.array(closest)))
 
     def compare(self, logs: Mapping[str, TrackingLog] | Sequence[TrackingLog], fps: float = 30.0,
