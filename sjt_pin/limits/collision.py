@@ -603,13 +603,9 @@ class CollisionLimit(Limit):
         U = u @ data.J
         U *= self._support[np.concatenate((self._jb[k], self._ja[k]))]
         A = U[:len(found)] + U[len(found):]
-<<<<<<< HEAD
         if self._mimic is not None:
             A = A @ self._mimic
-        b = self.gain / dt * (np.array(distance) - self.margin)
-=======
         b = self.gain / dt * (np.array(distance) - self.margins[k])
->>>>>>> h/collision
         A.setflags(write=False)
         b.setflags(write=False)
         return A, b
