@@ -73,7 +73,7 @@ def demo(args: argparse.Namespace) -> int:
     viewer = demo_viewer(runs, live=args.keep > 0, obstacle=obstacle_scene(DEMO_DT))
     try:
         Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-        path = viewer.save_html(args.out, f"sjt-pin demo: tracking a circle with {methods}",
+        path = viewer.save_html(args.out, f"sjt-pin demo: {methods} on a circle",
                                 describe(args.robot, DEMO_DT, obstacle=True))
         print(f"Wrote {path.resolve()} ({path.stat().st_size / 1e6:.1f} MB, self-contained, "
               "works offline): open it in a web browser", flush=True)

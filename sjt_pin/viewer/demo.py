@@ -26,8 +26,8 @@ TASKS = {"planar3": "x-y position, the paper's task 3", "ur5": "pose", "panda": 
 STAND_UP = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 #: Why SJT is the default though JP tracks these circles best (the README's benchmarks).
 WHY_SJT = ("JP tracks these circles best; SJT is the default because its stable gain does not "
-           "depend on the robot's size or length unit, it comes to rest at targets out of reach "
-           "(JP and DLS keep moving) and it leaves singular saddles (JP does not).")
+           "depend on the robot's size or length unit, it rests at targets out of reach and it "
+           "leaves singular saddles.")
 GAP = 0.2  # m between the widths of two robots
 MARGIN = 0.1  # m added on each side of a robot's frames and paths for the links' thickness
 FRONT = -1.2  # m along world x from the row to the collision scene's robot (behind it)
@@ -117,14 +117,11 @@ def describe(names: Sequence[str], dt: float, obstacle: bool = False) -> str:
     """The page's description of the demo's runs on the robots ``names``, period ``dt`` (s),
     and of the collision scene if ``obstacle``."""
     tasks = "; ".join(f"{LABELS.get(n, n)}: {TASKS.get(n, 'its task')}" for n in names)
-    text = (f"Each robot tracks a circle with each method in turn, at a {1e3 * dt:g} ms control "
-            f"period ({tasks}). The errors are too small to see in the view: the plots show "
-            "them. " + WHY_SJT)
+    text = (f"Each robot tracks a circle with each method in turn ({1e3 * dt:g} ms period; "
+            f"{tasks}). " + WHY_SJT)
     if obstacle:
-        text += (f" {OBSTACLE_LABEL} (behind): the hand follows a 40 cm line past a ball with a "
-                 "collision limit (10 mm margin; without it the fingers would go 47 mm deep "
-                 "into the ball); crimson segments join the closest points of the pairs within "
-                 "5 cm, and its second plot shows the closest distance.")
+        text += (f" {OBSTACLE_LABEL} (behind): a line past a ball, 10 mm margin (47 mm deep "
+                 "without the limit); crimson: the closest points.")
     return text
 
 

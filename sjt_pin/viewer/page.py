@@ -53,8 +53,11 @@ class RobotEntry:
     plots: tuple[str, ...] = ()
 
 
-#: Height (px) of a robot's error plot: three robots' blocks and the guide fit a 900 px window.
-PLOT_HEIGHT = 92
+#: Height (px) of a robot's error plot: the demo's four robots' blocks and the guide fit a
+#: 900 px window.
+PLOT_HEIGHT = 62
+#: Width (px) of each of two plots side by side (a robot with a closest-distance plot).
+PLOT_WIDTH_BESIDE = 190
 
 STYLE = """
 html, body { margin: 0; height: 100%; }
@@ -65,7 +68,7 @@ body { display: flex; font: 14px/1.4 system-ui, -apple-system, "Segoe UI", sans-
 #meshcat-pane { flex: 1 1 auto; min-height: 0; }
 #panel { flex: 0 0 420px; height: 100vh; overflow-y: auto; box-sizing: border-box;
          padding: 14px 16px; border-left: 1px solid #d8dbe0; background: #fafbfc; }
-h1 { font-size: 18px; margin: 0 0 6px; }
+h1 { font-size: 16px; margin: 0 0 4px; }
 h2 { font-size: 15px; margin: 10px 0 2px; }
 p { margin: 4px 0; }
 .guide { color: #444; font-size: 13px; }
@@ -87,6 +90,7 @@ h1 + p { font-size: 13px; }  /* the description */
        vertical-align: middle; }
 .dot.halo { width: 14px; height: 14px; background: rgba(34, 34, 34, 0.3); }
 .dots { font-size: 16px; line-height: 1; letter-spacing: 1px; }
+.plots { display: flex; gap: 8px; }
 svg.error-plot { display: block; margin-top: 2px; font-size: 10px; fill: #444; }
 svg.error-plot .frame { fill: #fff; stroke: #c9ced6; }
 svg.error-plot .grid { stroke: #eceef1; }
@@ -212,9 +216,14 @@ def _robot(robot: RobotEntry) -> str:
         parts.append(f'<ul class="legend">{items}</ul>')
         series = [Series(run.label, run.color, run.log.t - run.log.t[0], run.log.error_norm)
                   for run in robot.runs]
-        parts.append(error_plot(series, width=388, height=PLOT_HEIGHT,
-                                ylabel="tracking error (m, rad)"))
-    parts.extend(robot.plots)
+        # a robot with further plots (the closest distance) shows them beside its error plot
+        width = 388 if not robot.plots else PLOT_WIDTH_BESIDE
+        parts.append('<div class="plots">' + error_plot(
+            series, width=width, height=PLOT_HEIGHT, ylabel="tracking error (m, rad)"))
+        parts.extend(robot.plots)
+        parts.append("</div>")
+    else:
+        parts.extend(robot.plots)
     parts.append("</section>")
     return "\n".join(parts)
 

@@ -38,7 +38,7 @@ from .obstacles import (
     show_geometry,
     show_segments,
 )
-from .page import RobotEntry, Run, page_html
+from .page import PLOT_HEIGHT, PLOT_WIDTH_BESIDE, RobotEntry, Run, page_html
 from .page_script import DOT_PIXELS
 from .plot import Series, error_plot
 from .scene import SceneRecord
@@ -434,7 +434,8 @@ class Viewer:
         play/pause button and a time slider.
         """
         robots = [RobotEntry(rig.name, rig.label, tuple(rig.runs), tuple(
-            [error_plot(rig.distances, width=388, height=125, ylabel="closest distance (m)")]
+            [error_plot(rig.distances, width=PLOT_WIDTH_BESIDE, height=PLOT_HEIGHT,
+                        ylabel="closest distance (m)")]
             if rig.distances else [])) for rig in self._rigs.values()]
         view = None if self._camera is not None else VIEW_DIRECTION
         dots = [f"{rig.name}/paths/desired" for rig in self._rigs.values() if rig.runs]
