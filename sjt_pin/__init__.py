@@ -5,12 +5,13 @@ with ``D = diag(1 / (J_i^T J_i))``; the pseudoinverse, damped least-squares and 
 transpose baselines share the same interface.
 """
 
+from .batch import BatchError, BatchPart, solve_chunks, solve_many
 from .exceptions import FrameNotFound, GainWarning, URDFError
 from .gains import AutoGain, FixedGain, Gain
 from .kinematics import Kinematics
 from .limits import CollisionLimit
 from .robot import Robot
-from .solve import IKResult, solve_many
+from .solve import IKResult
 from .solver import Solver, StepInfo
 from .solvers import DLSSolver, JPSolver, JTSolver, SJTSolver, make_solver
 from .tasks import OrientationTask, PoseTask, PositionTask, PostureTask, Task
@@ -22,6 +23,8 @@ DifferentialIKSolver = Solver
 
 __all__ = [
     "AutoGain",
+    "BatchError",
+    "BatchPart",
     "Circle",
     "CollisionLimit",
     "DLSSolver",
@@ -49,6 +52,7 @@ __all__ = [
     "TrackingLog",
     "URDFError",
     "make_solver",
+    "solve_chunks",
     "solve_many",
     "track",
 ]
