@@ -167,7 +167,7 @@ def bench(args: argparse.Namespace) -> int:
                                 "saturating": [asdict(r) for r in saturating],
                                 "franka": [asdict(r) for r in franka]})
     else:
-        from .bench.ik import ik_benchmark, ik_table, many_throughput
+        from .bench.ik import ik_benchmark, ik_table, many_line, many_throughput
 
         rows = ik_benchmark(poses=args.poses, peers=not args.no_peers,
                             progress=lambda r: print(f"  {r.robot} {r.method}: "
@@ -175,8 +175,7 @@ def bench(args: argparse.Namespace) -> int:
         print(ik_table(rows))
         many = [many_throughput(name, poses=20 * args.poses) for name in ("ur5", "panda")]
         for m in many:
-            print(f"solve_many on {m.robot}, {m.poses} poses: {m.single:.0f} poses/s in 1 "
-                  f"process, {m.parallel:.0f} in {m.processes} ({m.speedup:.2f}x)")
+            print(many_line(m), flush=True)
         _write_json(args.json, {"machine": machine, "rows": [asdict(r) for r in rows],
                                 "solve_many": [asdict(m) for m in many]})
     return 0
