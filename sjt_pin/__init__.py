@@ -10,6 +10,7 @@ from .exceptions import FrameNotFound, GainWarning, URDFError
 from .gains import AutoGain, FixedGain, Gain
 from .kinematics import Kinematics
 from .limits import CollisionLimit
+from .reach import ReachMap, reachability
 from .robot import Robot
 from .solve import IKResult
 from .solver import Solver, StepInfo
@@ -43,6 +44,7 @@ __all__ = [
     "PoseTask",
     "PositionTask",
     "PostureTask",
+    "ReachMap",
     "Robot",
     "SJTSolver",
     "Solver",
@@ -52,6 +54,7 @@ __all__ = [
     "TrackingLog",
     "URDFError",
     "make_solver",
+    "reachability",
     "solve_chunks",
     "solve_many",
     "track",

@@ -181,6 +181,40 @@ def bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def reach(args: argparse.Namespace) -> int:
+    """``sjt-pin reach ROBOT``: the reachability map (:mod:`sjt_pin.reach`)."""
+    from .reach import reach_command
+
+    reach_command(args.robot, args.step, args.orientations, out=args.out, page=args.html,
+                  processes=args.processes, scheduler=args.scheduler, budget=args.budget,
+                  seed=args.seed, quiet=args.quiet)
+    return 0
+
+
+def _reach_parser(sub) -> None:
+    about = ("reachability map: solve() on a grid of positions x orientations over the "
+             "robot's workspace; writes an .npz and a self-contained page")
+    p = sub.add_parser("reach", help=about, description=about[0].upper() + about[1:] + ".")
+    p.add_argument("robot", help="an example-robot-data robot, e.g. panda, ur5")
+    p.add_argument("--step", type=float, default=0.05, help="grid spacing in m (default 0.05)")
+    p.add_argument("--orientations", type=int, default=20,
+                   help="orientations per point (default 20)")
+    p.add_argument("--budget", type=int, default=500,
+                   help="solve() iterations per pose (default 500)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the random restarts")
+    p.add_argument("--out", default=None, metavar="PATH",
+                   help="the .npz (default reach_ROBOT.npz); a partial one resumes")
+    p.add_argument("--html", default=None, metavar="PATH",
+                   help="the page (default reach_ROBOT.html)")
+    p.add_argument("--processes", type=int, default=None,
+                   help="worker processes (default: one per core)")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="solve on the Dask cluster at ADDRESS (e.g. tcp://host:8786; "
+                   "pip install 'sjt-pin[cluster]')")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=reach)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="sjt-pin", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -223,6 +257,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="ik: skip TRAC-IK and robotics-toolbox's ik_LM")
     p.add_argument("--json", default=None, metavar="PATH", help="also write the results as JSON")
     p.set_defaults(func=bench)
+    _reach_parser(sub)
     return parser
 
 
