@@ -110,7 +110,7 @@ def _shortest_chain(origins: np.ndarray, axes: np.ndarray, end: np.ndarray,
         return _chain_length(origins + trial[:, None] * axes, end)
 
     for _ in range(sweeps):
-        for i in np.flatnonzero(np.any(axes != 0.0, axis=1)):
+        for i in np.flatnonzero(np.any(axes != 0.0, axis=1)).tolist():
             a, b = t[i] - scale, t[i] + scale
             for _ in range(40):
                 c, d = b - ratio * (b - a), a + ratio * (b - a)
