@@ -41,8 +41,8 @@ import pinocchio as pin
 
 from .solve import IKResult, _integer
 
-#: targets per chunk: in this process and the pool, and on another executor (a task of a Dask
-#: cluster costs about a millisecond of the scheduler's time: larger chunks amortise it)
+#: targets per chunk: in this process and the pool, and on another executor (fewer, larger
+#: tasks for a cluster's scheduler)
 CHUNK, EXECUTOR_CHUNK = 64, 256
 #: chunks submitted ahead of the results: per process of the pool, and on another executor
 POOL_INFLIGHT, EXECUTOR_INFLIGHT = 4, 64

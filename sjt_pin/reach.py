@@ -32,8 +32,9 @@ from __future__ import annotations
 import importlib
 import math
 import os
+import sys
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -245,7 +246,8 @@ def reachability(robot: Robot, step: float = STEP, orientations: int = ORIENTATI
                  solver=None, limits: Sequence = (), out: str | Path | None = None,
                  processes: int | None = None, executor=None, seed: int = 0,
                  budget: int = BUDGET, progress: bool = True,
-                 checkpoint: float = CHECKPOINT) -> ReachMap:
+                 checkpoint: float = CHECKPOINT,
+                 report: Callable[[ReachMap], object] | None = None) -> ReachMap:
     """The reachability map of ``robot`` (see the module docstring for the sampling).
 
     Args:
@@ -262,7 +264,10 @@ def reachability(robot: Robot, step: float = STEP, orientations: int = ORIENTATI
             e.g. Dask's ``client.get_executor()``).
         seed: the seed of the random restarts (pose ``k``: ``default_rng([seed, k])``).
         budget: iterations of ``solve`` per pose.
-        progress: a progress bar (tqdm) with the elapsed time and an estimate of the rest.
+        progress: a progress bar (tqdm, on a terminal) with the elapsed time and an estimate
+            of the rest.
+        checkpoint: seconds between writes of ``out`` (and calls of ``report``).
+        report: called with the partial map every ``checkpoint`` seconds.
     """
     from .solvers import SJTSolver
 
@@ -299,9 +304,12 @@ def reachability(robot: Robot, step: float = STEP, orientations: int = ORIENTATI
             a, b = start + part.start, start + part.start + len(part)
             reached[a:b], q[a:b], error[a:b] = part.success, part.q, part.error
             result.done = b
-            if out is not None and time.monotonic() - last > checkpoint:
+            if time.monotonic() - last > checkpoint:
                 result.seconds = time.perf_counter() - began
-                result.save(out)
+                if out is not None:
+                    result.save(out)
+                if report is not None:
+                    report(result)
                 last = time.monotonic()
     finally:
         result.seconds = time.perf_counter() - began
@@ -334,10 +342,17 @@ def reach_command(name: str, step: float = STEP, orientations: int = ORIENTATION
         workers = len(client.scheduler_info()["workers"])
         print(f"on the Dask cluster at {scheduler} ({workers} workers)", flush=True)
         executor = client.get_executor()
+    def report(partial: ReachMap) -> None:  # a line per checkpoint where no bar is drawn
+        rate = (partial.done - resumed) / max(time.perf_counter() - start, 1e-9)
+        print(f"  {partial.done:,} of {partial.poses:,} poses, {partial.seconds:.0f} s; about "
+              f"{(partial.poses - partial.done) / max(rate, 1e-9):.0f} s left", flush=True)
+
+    resumed = ReachMap.load(out).done if Path(out).exists() else 0
     try:
         start = time.perf_counter()
         result = reachability(robot, step, orientations, out=out, processes=processes,
-                              executor=executor, seed=seed, budget=budget, progress=not quiet)
+                              executor=executor, seed=seed, budget=budget, progress=not quiet,
+                              report=None if quiet or sys.stderr.isatty() else report)
         elapsed = time.perf_counter() - start
     finally:
         if client is not None:
