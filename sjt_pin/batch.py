@@ -39,7 +39,8 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from .solve import IKResult, _integer
+from .solve import IKResult
+from .validation import integer
 
 #: targets per chunk: in this process and the pool, and on another executor (fewer, larger
 #: tasks for a cluster's scheduler)
@@ -237,11 +238,11 @@ def solve_chunks(solver, targets: Iterable, q0, *, processes: int | None = None,
     """:func:`solve_many` as a stream: a :class:`BatchPart` per chunk, in order, as soon as
     it and every chunk before it are done. Closing the iterator early (``break``, an error)
     cancels the chunks not yet done. The arguments are :func:`solve_many`'s."""
-    chunk = None if chunk is None else _integer(chunk, "chunk")
-    inflight = None if inflight is None else _integer(inflight, "inflight")
-    seed, first = _integer(seed, "seed", 0), _integer(first, "first", 0)
+    chunk = None if chunk is None else integer(chunk, "chunk")
+    inflight = None if inflight is None else integer(inflight, "inflight")
+    seed, first = integer(seed, "seed", 0), integer(first, "first", 0)
     if processes is not None:
-        processes = _integer(processes, "processes")
+        processes = integer(processes, "processes")
     if executor is not None and not isinstance(executor, Executor):
         raise TypeError(f"executor must be a concurrent.futures.Executor (e.g. Dask's "
                         f"client.get_executor()), got {type(executor).__name__}")

@@ -43,7 +43,7 @@ import pinocchio as pin
 
 from .batch import solve_chunks
 from .robot import Robot
-from .validation import positive
+from .validation import integer, positive
 
 STEP = 0.05  # m
 ORIENTATIONS = 20
@@ -142,9 +142,7 @@ def grid(centre, radius: float, step: float = STEP) -> np.ndarray:
 def spread_rotations(count: int = ORIENTATIONS) -> np.ndarray:
     """``count`` rotations evenly spread over SO(3): unit quaternions (x, y, z, w), (count, 4),
     the first points of a super-Fibonacci spiral (Alexa 2022; ``w >= 0``)."""
-    if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1:
-        raise ValueError(f"orientations must be an integer >= 1, got {count!r}")
-    count = int(count)
+    count = integer(count, "orientations")
     s = np.arange(count) + 0.5
     r, R = np.sqrt(s / count), np.sqrt(1.0 - s / count)
     alpha, beta = 2.0 * np.pi * s / PHI, 2.0 * np.pi * s / PSI
@@ -271,6 +269,8 @@ def reachability(robot: Robot, step: float = STEP, orientations: int = ORIENTATI
     """
     from .solvers import SJTSolver
 
+    budget, seed = integer(budget, "budget"), integer(seed, "seed", 0)
+    checkpoint = positive(checkpoint, "checkpoint", "s")
     if solver is None:
         solver = SJTSolver(robot, limits=list(limits))
     elif limits:

@@ -38,7 +38,7 @@ from .kernels import (
 from .kinematics import Kinematics
 from .limits.base import Motion
 from .mappings import COLUMN_TOL
-from .validation import positive, raise_non_finite_targets
+from .validation import integer, positive, raise_non_finite_targets
 
 #: |e| (m and rad, the target rows) below which a pose counts as solved
 TOL = 1e-6
@@ -217,9 +217,9 @@ def solve(solver, target, q0, *, tol: float = TOL, max_iters: int = MAX_ITERS,
     """
     search = solver.search()
     tol = positive(tol, "tol", "task units")
-    max_iters, budget = _integer(max_iters, "max_iters"), _integer(budget, "budget")
+    max_iters, budget = integer(max_iters, "max_iters"), integer(budget, "budget")
     if restarts is not None:
-        restarts = _integer(restarts, "restarts", 0)
+        restarts = integer(restarts, "restarts", 0)
     q = solver.robot.check_q(q0, "q0").copy()
     targets, _ = search.stack.targets(target, None)
     if not isinstance(rng, np.random.Generator):
@@ -246,14 +246,3 @@ def solve(solver, target, q0, *, tol: float = TOL, max_iters: int = MAX_ITERS,
         if out_of_starts or total >= budget or time.perf_counter() > deadline:
             return IKResult(best[0], False, total, best[1], attempt)
         attempt += 1
-
-
-def _integer(value, name: str, minimum: int = 1) -> int:
-    """``value`` as an int >= ``minimum``, or an error naming ``name``."""
-    whole = (isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
-             or isinstance(value, (float, np.floating)) and float(value).is_integer())
-    if not whole:
-        raise TypeError(f"{name} must be an integer >= {minimum}, got {value!r}")
-    if int(value) < minimum:
-        raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
-    return int(value)
