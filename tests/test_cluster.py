@@ -158,3 +158,19 @@ def test_the_core_does_not_import_dask():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True)
     assert out.stdout.strip() == "[]"
+
+
+def test_reach_on_the_cluster_by_its_address(client, tmp_path):
+    """``sjt-pin reach --scheduler ADDRESS`` gives the map one process gives."""
+    from sjt_pin.cli import main
+    from sjt_pin.reach import ReachMap, reachability
+
+    out = tmp_path / "map.npz"
+    assert main(["reach", "panda", "--step", "0.4", "--orientations", "2", "--quiet",
+                 "--scheduler", client.scheduler.address, "--out", str(out),
+                 "--html", str(tmp_path / "map.html")]) == 0
+    on_dask = ReachMap.load(out)
+    alone = reachability(sjt.Robot.from_example("panda"), 0.4, 2, processes=1, progress=False)
+    assert on_dask.complete and on_dask.reached.any()
+    np.testing.assert_array_equal(on_dask.reached, alone.reached)
+    np.testing.assert_array_equal(on_dask.q, alone.q)
