@@ -62,7 +62,7 @@ def legend_html(reach_map) -> str:
 
 def reach_viewer(reach_map, robot: Robot, size: float | None = None) -> Viewer:
     """A viewer (no live server) with ``robot`` at ``q0`` and the map's cloud; ``size``: the
-    dots' size (three.js units; default half the grid's step)."""
+    dots' size (three.js units; default 0.4 of the grid's step)."""
     viewer = Viewer(robot, live=False, label=robot.name)
     fraction = reach_map.fraction
     shown = fraction > 0
@@ -71,7 +71,7 @@ def reach_viewer(reach_map, robot: Robot, size: float | None = None) -> Viewer:
         return viewer
     geometry = mg.PointsGeometry(points.T, color=colors(fraction[shown]).T)
     viewer.meshcat[NODE].set_object(mg.Points(
-        geometry, mg.PointsMaterial(size=size or 0.5 * reach_map.step)))
+        geometry, mg.PointsMaterial(size=size or 0.4 * reach_map.step)))
     return viewer
 
 
