@@ -6,7 +6,7 @@ transpose baselines share the same interface.
 """
 
 from .batch import BatchError, BatchPart, solve_chunks, solve_many
-from .exceptions import FrameNotFound, GainWarning, URDFError
+from .exceptions import ConcurrentStepError, FrameNotFound, GainWarning, URDFError
 from .gains import AutoGain, FixedGain, Gain
 from .kinematics import Kinematics
 from .limits import CollisionLimit
@@ -15,7 +15,14 @@ from .robot import Robot
 from .solve import IKResult
 from .solver import Solver, StepInfo
 from .solvers import DLSSolver, JPSolver, JTSolver, SJTSolver, make_solver
-from .tasks import OrientationTask, PoseTask, PositionTask, PostureTask, Task
+from .tasks import (
+    OrientationTask,
+    PoseTask,
+    PositionTask,
+    PostureTask,
+    RelativePoseTask,
+    Task,
+)
 from .tracking import TrackingLog, track
 from .trajectories import Circle, Line, PoseInterpolation, Trajectory
 
@@ -33,6 +40,7 @@ __all__ = [
     "FixedGain",
     "FrameNotFound",
     "Gain",
+    "ConcurrentStepError",
     "GainWarning",
     "IKResult",
     "JPSolver",
@@ -45,6 +53,7 @@ __all__ = [
     "PositionTask",
     "PostureTask",
     "ReachMap",
+    "RelativePoseTask",
     "Robot",
     "SJTSolver",
     "Solver",

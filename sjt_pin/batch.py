@@ -73,7 +73,8 @@ class BatchError(RuntimeError):
 class BatchPart:
     """The results of consecutive targets ``start, start + 1, ...`` (indices in the batch
     passed, from 0): ``q`` (n, nq), ``success`` (n,) bool, ``iterations`` and ``restarts``
-    (n,) int, ``error`` (n,) float (the tasks' error norm, m and rad)."""
+    (n,) int, ``error`` (n,) float (the tasks' error norm, m and rad), ``clipped`` (n tuples:
+    the joints whose start was clipped into the limits, see :class:`~sjt_pin.IKResult`)."""
 
     start: int
     q: np.ndarray
@@ -81,15 +82,16 @@ class BatchPart:
     iterations: np.ndarray
     error: np.ndarray
     restarts: np.ndarray
+    clipped: list[tuple[str, ...]]
 
     def __len__(self) -> int:
         return len(self.success)
 
     def results(self) -> list[IKResult]:
         """The part as :class:`~sjt_pin.IKResult` objects."""
-        return [IKResult(q, bool(s), int(i), float(e), int(r)) for q, s, i, e, r in
+        return [IKResult(q, bool(s), int(i), float(e), int(r), c) for q, s, i, e, r, c in
                 zip(self.q, self.success, self.iterations, self.error, self.restarts,
-                    strict=True)]
+                    self.clipped, strict=True)]
 
 
 # -- the worker's side -----------------------------------------------------------------------------
@@ -143,12 +145,14 @@ def _run_chunk(key: str, payload: bytes | None, targets, seeds: np.ndarray, star
 def _solve_part(solver, targets: list, seeds: np.ndarray, start: int, first: int, seed: int,
                 options: dict) -> tuple:
     """Targets ``start, start + 1, ...`` of the batch: (q (n, nq), success, iterations, error,
-    restarts) as arrays; a failure raises :class:`BatchError` naming the target."""
+    restarts) as arrays, and the clipped joints; a failure raises :class:`BatchError` naming
+    the target."""
     n = len(targets)
     q = np.empty((n, solver.robot.nq))
     success = np.empty(n, dtype=bool)
     iterations, restarts = np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
     error = np.empty(n)
+    clipped = []
     for k, target in enumerate(targets):
         q0 = seeds if seeds.ndim == 1 else seeds[k]
         try:
@@ -158,7 +162,8 @@ def _solve_part(solver, targets: list, seeds: np.ndarray, start: int, first: int
             raise BatchError(start + k, start, start + n, _portable(exc)) from exc
         q[k], success[k], iterations[k], error[k], restarts[k] = (
             r.q, r.success, r.iterations, r.error, r.restarts)
-    return q, success, iterations, error, restarts
+        clipped.append(r.clipped)
+    return q, success, iterations, error, restarts, clipped
 
 
 def _portable(exc: Exception) -> Exception:

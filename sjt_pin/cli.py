@@ -1,13 +1,23 @@
-"""The ``sjt-pin`` command: ``demo``, ``reproduce`` (the paper's simulations), ``bench``."""
+"""The ``sjt-pin`` command: ``demo``, ``reproduce`` (the paper's simulations), ``bench``,
+``robots`` (the names ``Robot.from_example`` takes).
+
+Every argument is checked while the command line is parsed, before any work: numbers by their
+``type=`` (:func:`positive_int`, :func:`non_negative_float`), output paths by
+:func:`output_file` and :func:`output_folder`, which try to write there. A bad argument is one
+line on stderr (``sjt-pin demo: error: ...``) and exit code 2, never a traceback.
+"""
 
 from __future__ import annotations
 
 import argparse
 import contextlib
+import math
+import os
 import sys
+import tempfile
 import time
 import webbrowser
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from .paper import scenarios
@@ -56,15 +66,15 @@ def demo(args: argparse.Namespace) -> int:
     print(f"\nErrors in m/rad, joint speeds in rad/s (gain = auto)\n{_table(rows)}", flush=True)
     if args.no_viewer:
         return 0
-    from .viewer.demo import demo_viewer, describe
+    from .viewer.demo import demo_viewer, describe, obstacle_scene
 
     print("\nWriting the page ...", flush=True)
     methods = ", ".join(m.upper() for m in args.method)
-    viewer = demo_viewer(runs, live=args.keep > 0)
+    viewer = demo_viewer(runs, live=args.keep > 0, obstacle=obstacle_scene(DEMO_DT))
     try:
         Path(args.out).parent.mkdir(parents=True, exist_ok=True)
         path = viewer.save_html(args.out, f"sjt-pin demo: tracking a circle with {methods}",
-                                describe(args.robot, DEMO_DT))
+                                describe(args.robot, DEMO_DT, obstacle=True))
         print(f"Wrote {path.resolve()} ({path.stat().st_size / 1e6:.1f} MB, self-contained, "
               "works offline): open it in a web browser", flush=True)
         if args.open:
@@ -103,6 +113,19 @@ def reproduce(args: argparse.Namespace) -> int:
     return 0
 
 
+def robots(args: argparse.Namespace) -> int:
+    """Print the robot names ``Robot.from_example`` takes (example-robot-data's)."""
+    from example_robot_data.robots_loader import ROBOTS
+
+    names = sorted(ROBOTS)
+    print(f"{len(names)} robots of example-robot-data, for sjt.Robot.from_example(name):")
+    width = max(map(len, names)) + 2
+    columns = max(1, 96 // width)
+    for start in range(0, len(names), columns):
+        print("  " + "".join(n.ljust(width) for n in names[start:start + columns]).rstrip())
+    return 0
+
+
 def _write_json(path: str | None, payload) -> None:
     if path:
         import json
@@ -113,7 +136,8 @@ def _write_json(path: str | None, payload) -> None:
 
 
 def bench(args: argparse.Namespace) -> int:
-    """``sjt-pin bench speed|accuracy|ik``: the tables of the README's Benchmarks section."""
+    """``sjt-pin bench speed|accuracy|ik|collision``: the tables of the README's Benchmarks
+    section (collision: its Collision avoidance section)."""
     from dataclasses import asdict
 
     from .bench import speed as speed_bench
@@ -134,6 +158,18 @@ def bench(args: argparse.Namespace) -> int:
         for robot, ratio in sorted(speed_bench.peer_ratios(report).items()):
             print(f"pink / SJT with a target velocity on {robot}: {ratio:.1f}x")
         _write_json(args.json, report.to_dict() | {"cold_start": cold})
+    elif args.kind == "collision":
+        from .bench import collision
+
+        rows = collision.collision(peers=not args.no_peers, progress=lambda r: print(
+            f"  {r.scene}, {r.method}, limit {'on' if r.limit else 'off'}", flush=True))
+        print("\nCollision avoidance (margin 10 mm; distances checked with coal on the meshes):\n"
+              + collision.collision_table(rows))
+        plain, idle = collision.idle()
+        print(f"\nSJT on Panda, self-collision, nothing within influence: {idle:.1f} us/step "
+              f"against {plain:.1f} without the limit ({idle / plain:.1f}x)")
+        _write_json(args.json, {"machine": machine, "rows": [asdict(r) for r in rows],
+                                "idle_us": {"plain": plain, "limit": idle}})
     elif args.kind == "accuracy":
         from .bench import accuracy
 
@@ -181,6 +217,111 @@ def bench(args: argparse.Namespace) -> int:
     return 0
 
 
+class Parser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line (``prog: error: message``), exit code 2."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def positive_int(text: str) -> int:
+    """``type=`` for counts: an integer >= 1."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {value}")
+    return value
+
+
+def at_least(low: int) -> Callable[[str], int]:
+    """``type=`` for counts of at least ``low``."""
+    def parse(text: str) -> int:
+        value = positive_int(text)
+        if value < low:
+            raise argparse.ArgumentTypeError(f"expected an integer >= {low}, got {value}")
+        return value
+
+    parse.__name__ = f"integer >= {low}"
+    return parse
+
+
+def non_negative_float(text: str) -> float:
+    """``type=`` for durations: a finite number >= 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number >= 0, got {text!r}") from None
+    if not math.isfinite(value) or value < 0:
+        raise argparse.ArgumentTypeError(f"expected a finite number >= 0, got {text}")
+    return value
+
+
+def _can_write_in(folder: Path) -> None:
+    """Raise ArgumentTypeError unless a file can be created in the existing ``folder``."""
+    try:
+        with tempfile.TemporaryFile(dir=folder):
+            pass
+    except OSError as error:
+        raise argparse.ArgumentTypeError(
+            f"cannot write in {str(folder)!r}: {error.strerror or error}") from None
+
+
+def _existing_ancestor(path: Path) -> Path:
+    """The nearest of ``path``'s parents that exists; it must be a folder."""
+    for parent in path.absolute().parents:
+        if parent.exists():
+            if not parent.is_dir():
+                raise argparse.ArgumentTypeError(f"{str(parent)!r} is a file, not a folder")
+            return parent
+    return Path(path.absolute().anchor)
+
+
+def output_file(parents: bool) -> Callable[[str], Path]:
+    """``type=`` for a file to write: not '', not a folder, in a folder where one can write.
+
+    With ``parents``, missing folders on the way are fine (the command creates them); without,
+    the file's folder must exist. An existing file must be writable (it is not changed here).
+    """
+    def parse(text: str) -> Path:
+        if not text.strip():
+            raise argparse.ArgumentTypeError("expected a file path, got ''")
+        path = Path(text).expanduser()
+        if path.is_dir():
+            raise argparse.ArgumentTypeError(f"{text!r} is a folder; give a file path")
+        if path.exists():
+            if not os.access(path, os.W_OK):
+                raise argparse.ArgumentTypeError(f"cannot write {text!r}: permission denied")
+            folder = path.absolute().parent
+        elif parents:
+            folder = _existing_ancestor(path)
+        else:
+            folder = path.absolute().parent
+            if not folder.is_dir():
+                what = "is a file" if folder.exists() else "does not exist"
+                raise argparse.ArgumentTypeError(f"the folder of {text!r} {what}")
+        _can_write_in(folder)
+        return path
+
+    parse.__name__ = "output file"
+    return parse
+
+
+def output_folder(text: str) -> Path:
+    """``type=`` for a folder to write into: not '', not a file; it may not exist yet."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("expected a folder path, got ''")
+    path = Path(text).expanduser()
+    if path.exists() and not path.is_dir():
+        raise argparse.ArgumentTypeError(f"{text!r} is a file, not a folder")
+    _can_write_in(path if path.is_dir() else _existing_ancestor(path))
+    return path
+
+
+output_folder.__name__ = "output folder"
+
+
 def reach(args: argparse.Namespace) -> int:
     """``sjt-pin reach ROBOT``: the reachability map (:mod:`sjt_pin.reach`)."""
     from .reach import reach_command
@@ -191,22 +332,45 @@ def reach(args: argparse.Namespace) -> int:
     return 0
 
 
+def _grid_step(text: str) -> float:
+    """``type=`` for reach's grid spacing: a finite number of metres > 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a length in m > 0, got {text!r}") from None
+    if not math.isfinite(value) or value <= 0:
+        raise argparse.ArgumentTypeError(f"expected a length in m > 0, got {text}")
+    return value
+
+
+def _seed(text: str) -> int:
+    """``type=`` for a seed: an integer >= 0."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {value}")
+    return value
+
+
 def _reach_parser(sub) -> None:
     about = ("reachability map: solve() on a grid of positions x orientations over the "
              "robot's workspace; writes an .npz and a self-contained page")
     p = sub.add_parser("reach", help=about, description=about[0].upper() + about[1:] + ".")
     p.add_argument("robot", help="an example-robot-data robot, e.g. panda, ur5")
-    p.add_argument("--step", type=float, default=0.05, help="grid spacing in m (default 0.05)")
-    p.add_argument("--orientations", type=int, default=20,
+    p.add_argument("--step", type=_grid_step, default=0.05,
+                   help="grid spacing in m (default 0.05)")
+    p.add_argument("--orientations", type=positive_int, default=20,
                    help="orientations per point (default 20)")
-    p.add_argument("--budget", type=int, default=500,
+    p.add_argument("--budget", type=positive_int, default=500,
                    help="solve() iterations per pose (default 500)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the random restarts")
-    p.add_argument("--out", default=None, metavar="PATH",
+    p.add_argument("--seed", type=_seed, default=0, help="seed of the random restarts")
+    p.add_argument("--out", default=None, metavar="PATH", type=output_file(parents=False),
                    help="the .npz (default reach_ROBOT.npz); a partial one resumes")
-    p.add_argument("--html", default=None, metavar="PATH",
+    p.add_argument("--html", default=None, metavar="PATH", type=output_file(parents=False),
                    help="the page (default reach_ROBOT.html)")
-    p.add_argument("--processes", type=int, default=None,
+    p.add_argument("--processes", type=positive_int, default=None,
                    help="worker processes (default: one per core)")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="solve on the Dask cluster at ADDRESS (e.g. tcp://host:8786; "
@@ -216,7 +380,9 @@ def _reach_parser(sub) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="sjt-pin", description=__doc__)
+    parser = Parser(prog="sjt-pin", description="Differential IK with the scaled Jacobian "
+                    "transpose: a demo page, the paper's simulations, the benchmarks. "
+                    "Run 'sjt-pin COMMAND --help' for a command's options.")
     sub = parser.add_subparsers(dest="command", required=True)
     about = ("track a circle on the planar arm, UR5 and Panda with each method; print a table "
              "and write a self-contained animated page")
@@ -226,37 +392,50 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--method", nargs="+", choices=sorted(SOLVERS),
                    default=["sjt", "jt", "dls", "jp"], help="methods to compare "
                    "(default: sjt jt dls jp)")
-    p.add_argument("--out", default="demo.html", metavar="PATH",
-                   help="where to write the page (default: ./demo.html)")
+    p.add_argument("--out", default="demo.html", metavar="PATH", type=output_file(parents=True),
+                   help="where to write the page; missing folders are made (default: "
+                   "./demo.html)")
     p.add_argument("--open", action="store_true", help="open the page in a web browser")
     p.add_argument("--no-viewer", action="store_true", help="print the table only, no page")
-    p.add_argument("--keep", type=float, default=0.0, metavar="SECONDS",
+    p.add_argument("--keep", type=non_negative_float, default=0.0, metavar="SECONDS",
                    help="also serve the live meshcat viewer on 127.0.0.1 for SECONDS before "
                    "exiting (default 0: no live viewer)")
     p.set_defaults(func=demo)
-    p = sub.add_parser("reproduce", help="the paper's simulations: figures and results.md")
-    p.add_argument("--out", default="results", help="output folder (default: results)")
-    p.add_argument("--processes", type=int, default=None,
+    about = "the paper's simulations: figures and results.md"
+    p = sub.add_parser("reproduce", help=about, description="Run the simulations of Lee, Yim "
+                       "and Choi's paper on its 3-link planar arm (its three tasks, gain sweeps "
+                       "against the stability bound, the motion ellipsoids) and write the "
+                       "figures and results.md into the output folder.")
+    p.add_argument("--out", default="results", type=output_folder, metavar="FOLDER",
+                   help="output folder, made if missing (default: results)")
+    p.add_argument("--processes", type=positive_int, default=None,
                    help="worker processes for the sweeps (default: one per core)")
-    p.add_argument("--grid", type=int, default=30, help="gains per sweep (default: 30)")
+    p.add_argument("--grid", type=at_least(2), default=30,
+                   help="gains per sweep, at least 2 (default: 30)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=reproduce)
     p = sub.add_parser("bench", help="benchmarks: step speed, accuracy, solve to a pose",
                        description="The benchmarks of the README: speed (every step path "
                        "against its Pinocchio floor), accuracy (tracking near singularities, "
                        "rest at unreachable targets, exits from saddles), ik (TRAC-IK's "
-                       "protocol on five arms).")
-    p.add_argument("kind", choices=["speed", "accuracy", "ik"], help="which benchmark")
+                       "protocol on five arms), collision (three scenes with and without "
+                       "CollisionLimit, and pink's barrier).")
+    p.add_argument("kind", choices=["speed", "accuracy", "ik", "collision"],
+                   help="which benchmark")
     p.add_argument("--peers", action="store_true",
                    help="speed: add pink's solve_ik (pip install -e '.[bench]')")
-    p.add_argument("--steps", type=int, default=5000, help="speed: timed steps per path "
+    p.add_argument("--steps", type=positive_int, default=5000, help="speed: timed steps per path "
                    "(default: 5000)")
-    p.add_argument("--poses", type=int, default=1000, help="ik: random poses per robot "
+    p.add_argument("--poses", type=positive_int, default=1000, help="ik: random poses per robot "
                    "(default: 1000)")
     p.add_argument("--no-peers", action="store_true",
-                   help="ik: skip TRAC-IK and robotics-toolbox's ik_LM")
-    p.add_argument("--json", default=None, metavar="PATH", help="also write the results as JSON")
+                   help="ik: skip TRAC-IK and robotics-toolbox's ik_LM; collision: skip pink")
+    p.add_argument("--json", default=None, metavar="PATH", type=output_file(parents=False),
+                   help="also write the results as JSON (its folder must exist)")
     p.set_defaults(func=bench)
+    about = "list the robot names of example-robot-data (for Robot.from_example)"
+    p = sub.add_parser("robots", help=about, description=about[0].upper() + about[1:] + ".")
+    p.set_defaults(func=robots)
     _reach_parser(sub)
     return parser
 

@@ -66,8 +66,6 @@ class SaddleEscape:
 
     def reset(self) -> None:
         """Forget the stall, any escape in progress and the last curvature test."""
-        self._count = 0
-        self._last_step = -2
         self._wait = self.WINDOW
         self._error_start = 0.0
         self._tested: tuple[np.ndarray, float] | None = None
@@ -85,24 +83,28 @@ class SaddleEscape:
         """Whether an escape velocity is being added."""
         return self.direction is not None
 
-    def observe(self, step: int, e_sq: float) -> bool:
-        """Count the stalled step number ``step`` (the step kernel flags a stall: a stall ratio
-        below ``STALL_RATIO`` with ``|e|`` above ``ERROR_FLOOR``); True when the curvature should
-        be tested: a run of stalled steps long enough without progress. After a test that
-        found no saddle the run needed doubles (up to ``MAX_WAIT`` windows), so a persistent
-        minimum costs a test ever more rarely; a new run starts from ``WINDOW`` again."""
-        if step != self._last_step + 1:  # a new run of stalled steps
-            self._count, self._wait, self._error_start = 0, self.WINDOW, e_sq
-        self._last_step = step
-        self._count += 1
-        if self._count < self._wait:
+    def observe(self, run: float, e_sq: float) -> bool:
+        """A stall seen by the step kernel (a stall ratio below ``STALL_RATIO`` with ``|e|``
+        above ``ERROR_FLOOR``), which counts the stalled steps of a run in ``run`` and asks
+        Python only on the first (``run == 1``) and when ``run`` reaches :attr:`wait`. True
+        when the curvature should be tested: a window of stalled steps without progress. After
+        a test that found no saddle the window doubles (up to ``MAX_WAIT`` windows), so a
+        persistent minimum costs a test ever more rarely; a new run starts from ``WINDOW``
+        again. The caller restarts the kernel's count after a window."""
+        if run <= 1.0:  # a new run of stalled steps
+            self._wait, self._error_start = self.WINDOW, e_sq
             return False
-        self._count = 0
         test = e_sq > (1.0 - self.PROGRESS) ** 2 * self._error_start
         self._error_start = e_sq
         if test:
             self._wait = min(2 * self._wait, self.MAX_WAIT * self.WINDOW)
         return test
+
+    @property
+    def wait(self) -> int:
+        """Stalled steps in the current window before :meth:`observe` decides (the kernel's
+        ``P_STALL_WAIT``)."""
+        return self._wait
 
     def test(self, q: np.ndarray, rows: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
              ) -> bool:
@@ -164,7 +166,7 @@ class SaddleEscape:
             self._start_error = e_sq
         elif e_sq > (1.0 + 2.0 * self.GROWTH) ** 2 * self._start_error:
             self.direction, self.speed = None, 0.0  # making things worse: stop now
-            self._count, self._wait = 0, self.WINDOW
+            self._wait = self.WINDOW
             return None
         elif e_sq > (1.0 + self.GROWTH) ** 2 * self._start_error:
             self._leaving = True
@@ -176,7 +178,7 @@ class SaddleEscape:
             self.speed = max(self.speed - accel * dt, 0.0)
             if self.speed == 0.0:
                 self.direction = None
-                self._count, self._wait = 0, self.WINDOW
+                self._wait = self.WINDOW
                 return None
         else:
             self.speed = min(self.speed + accel * dt, self._top)

@@ -11,15 +11,23 @@ class SJTError(Exception):
 
 
 class FrameNotFound(SJTError, KeyError):
-    """A frame name that the model does not have; the message lists the closest names."""
+    """A frame name that the model does not have; the message lists the closest names (by
+    spelling, and names containing it) and the model's frames (``Robot.frames()`` lists them
+    with their types and joints)."""
 
-    def __init__(self, name: str, available: Iterable[str], robot: str = "the model"):
-        available = list(available)
-        close = difflib.get_close_matches(name, available, n=5, cutoff=0.4)
-        hint = f"close names: {close}" if close else f"frames: {available[:20]}"
+    def __init__(self, name: str, available: Iterable[str], robot: str = "the model",
+                 message: str | None = None):
+        available = list(dict.fromkeys(available))
+        lowered = name.lower()
+        close = difflib.get_close_matches(name, available, n=5, cutoff=0.6)
+        close += [a for a in available if lowered and lowered in a.lower() and a not in close]
+        shown = available if len(available) <= 30 else [*available[:30], "..."]
+        hint = f"close names: {close[:8]}; " if close else ""
         self.name = name
         self.available = available
-        super().__init__(f"frame {name!r} not found in {robot}; {hint}")
+        super().__init__(message or (
+            f"frame {name!r} not found in {robot}; {hint}its {len(available)} frames: {shown} "
+            "(robot.frames() lists them with type and parent joint)"))
 
     def __str__(self) -> str:  # KeyError would quote the message
         return self.args[0]
@@ -28,6 +36,11 @@ class FrameNotFound(SJTError, KeyError):
 class URDFError(SJTError, ValueError):
     """A URDF that is missing, empty, not XML or not a valid robot tree; the message names the
     file (or ``<URDF string>``) and the joint or link at fault."""
+
+
+class ConcurrentStepError(SJTError, RuntimeError):
+    """A solver stepped by a second thread while a step of it is running: its buffers and its
+    ``pin.Data`` are one thread's. Give each thread its own solver (or a copy)."""
 
 
 class GainWarning(UserWarning):

@@ -319,7 +319,8 @@ def reachability(robot: Robot, step: float = STEP, orientations: int = ORIENTATI
 
 
 def reach_command(name: str, step: float = STEP, orientations: int = ORIENTATIONS, *,
-                  out: str | None = None, page: str | None = None, processes: int | None = None,
+                  out: str | Path | None = None, page: str | Path | None = None,
+                  processes: int | None = None,
                   scheduler: str | None = None, budget: int = BUDGET, seed: int = 0,
                   quiet: bool = False) -> ReachMap:
     """``sjt-pin reach NAME``: the map of example-robot-data's robot ``name``, written to
@@ -336,7 +337,11 @@ def reach_command(name: str, step: float = STEP, orientations: int = ORIENTATION
           flush=True)
     executor, client = None, None
     if scheduler is not None:
-        import distributed
+        try:
+            import distributed
+        except ImportError as exc:
+            raise ImportError("--scheduler needs Dask's distributed: python -m pip install "
+                              "'sjt-pin[cluster]'") from exc
 
         client = distributed.Client(scheduler)
         workers = len(client.scheduler_info()["workers"])
@@ -361,6 +366,10 @@ def reach_command(name: str, step: float = STEP, orientations: int = ORIENTATION
           f"run): {100 * result.reached.mean():.1f} % reached, "
           f"{np.count_nonzero(result.fraction > 0):,} of {points:,} points in some orientation",
           flush=True)
-    path = result.save_html(page, robot)
+    try:
+        path = result.save_html(page, robot)
+    except ImportError as exc:  # the viewer's extra is not installed: the map is saved anyway
+        print(f"wrote {out}; no page: {exc}", flush=True)
+        return result
     print(f"wrote {out} and {path} (self-contained: open it in a web browser)", flush=True)
     return result

@@ -8,17 +8,22 @@ from __future__ import annotations
 
 import difflib
 import importlib.resources
+import os
 import threading
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import pinocchio as pin
 
+from . import mesh_paths
 from .exceptions import FrameNotFound, URDFError
-from .urdf_check import URDFSource, build_model, check_urdf, read_urdf
-from .validation import as_vector
+from .joint_ranges import position_ranges
+from .mimic import MimicJoint, apply_mimics, joint_values, reduced_configuration
+from .urdf_check import URDFSource, check_urdf, load_model, read_urdf, urdf_mimics
+from .validation import UnitBlocks, configuration, name_list
 
 #: End-effector frames used when ``Robot.from_example`` is called without ``ee_frame``.
 DEFAULT_EE_FRAMES: dict[str, str] = {
@@ -34,9 +39,47 @@ DEFAULT_EE_FRAMES: dict[str, str] = {
     "talos_full": "gripper_left_joint",
     "talos_arm": "gripper_left_joint",
     "kinova": "j2s6s200_end_effector",
-    "z1": "gripperMover",
+    "z1": "gripperStator",  # the rigid half of the gripper (a link; a fixed joint shares it)
     "xarm7": "link_eef",
 }
+
+#: Gripper joints that ``Robot.from_example`` locks (removes from the model, at the reference
+#: configuration) unless ``locked_joints=`` says otherwise: on these robots the default end
+#: effector lies beyond the gripper joint, which would otherwise be an IK degree of freedom.
+#: The Panda keeps its fingers: they lie beyond ``panda_hand``, so no task on the hand moves
+#: them (``locked_joints=["panda_finger_joint1", "panda_finger_joint2"]`` removes them).
+DEFAULT_LOCKED_JOINTS: dict[str, tuple[str, ...]] = {
+    "z1": ("jointGripper",),
+    "talos_arm": ("gripper_left_joint",),
+    "talos": ("gripper_left_joint", "gripper_right_joint"),
+    "talos_full": tuple(f"gripper_{side}_{part}" for side in ("left", "right") for part in (
+        "joint", "inner_double_joint", "fingertip_1_joint", "fingertip_2_joint",
+        "inner_single_joint", "fingertip_3_joint", "motor_single_joint")),
+}
+
+#: Which frame a name shared by several frames means, most preferred first: an operational
+#: frame or a link (body) over a sensor, a fixed joint and a moving joint of the same name.
+FRAME_PREFERENCE: tuple[pin.FrameType, ...] = (
+    pin.FrameType.OP_FRAME, pin.FrameType.BODY, pin.FrameType.SENSOR,
+    pin.FrameType.FIXED_JOINT, pin.FrameType.JOINT)
+
+#: Bytes one ``pin.Data`` may take by default (:meth:`Robot.data_bytes`); a robot whose data
+#: would need more is refused (pass ``memory_budget=``), one needing a quarter of it warned.
+#: Each thread that queries a robot, and each solver, holds its own ``pin.Data``.
+MEMORY_BUDGET = 2e9
+
+#: A target farther from the robot's base than this many times its reach gets a warning.
+REACH_FACTOR = 10.0
+
+
+class FrameInfo(NamedTuple):
+    """One frame of a robot, as :meth:`Robot.frames` lists it."""
+
+    id: int  #: index in ``model.frames``
+    name: str
+    type: str  #: Pinocchio's frame type: ``"BODY"`` (a link), ``"JOINT"``, ``"FIXED_JOINT"``,
+    #: ``"OP_FRAME"`` or ``"SENSOR"``
+    parent_joint: str  #: the joint that moves it (``"universe"``: fixed to the world)
 
 
 #: guards Pinocchio's global random generator (seeded and drawn by random_configuration)
@@ -49,12 +92,19 @@ class Robot:
     Build one with :meth:`from_example`, :meth:`from_urdf` or :meth:`planar3`. ``model``, ``data``,
     ``visual_model`` and ``collision_model`` are Pinocchio's own objects; ``data`` is this robot's
     scratch space, overwritten by every kinematic call.
+
+    ``ee_frame`` is a frame name or id, ``frame_type`` picks among frames sharing the name (see
+    :meth:`frame_id`). Geometry handed in is checked against the folders its meshes may come
+    from (``package_dirs`` and the folder of the ``urdf`` file, :mod:`sjt_pin.mesh_paths`)
+    unless ``allow_outside_meshes``; with neither named, it is the caller's own and not checked.
+    A model whose ``pin.Data`` would take more than ``memory_budget`` bytes is refused
+    (:data:`MEMORY_BUDGET`).
     """
 
     def __init__(
         self,
         model: pin.Model,
-        ee_frame: str,
+        ee_frame: str | int,
         *,
         q0: np.ndarray | None = None,
         name: str | None = None,
@@ -62,23 +112,54 @@ class Robot:
         collision_model: pin.GeometryModel | None = None,
         urdf: str | None = None,
         package_dirs: Sequence[str] = (),
+        frame_type: pin.FrameType | str | None = None,
+        allow_outside_meshes: bool = False,
+        memory_budget: float = MEMORY_BUDGET,
+        mimic_joints: Sequence[MimicJoint] = (),
     ):
         self.model = model
+        #: the mimic relations of ``model``'s mimic joints (see :mod:`sjt_pin.mimic`)
+        self.mimic_joints: list[MimicJoint] = list(mimic_joints)
+        #: ``model`` before its mimic joints were made (what a pickled robot carries)
+        self._unmimicked: pin.Model | None = None
         self._local = threading.local()  # one pin.Data per thread: queries never race
         self.name = name or model.name
+        _check_memory(model, self.name, memory_budget)
         self.visual_model = visual_model
         self.collision_model = collision_model
         self.urdf = urdf  #: the URDF file path or XML text the model came from
         self.package_dirs = list(package_dirs)
-        self.ee_frame_id = self.frame_id(ee_frame)
-        self.ee_frame = ee_frame
-        self._lower, self._upper = _position_limits(model)
+        #: the folders mesh files may be read from (None: anywhere, ``allow_outside_meshes``)
+        self.mesh_roots: tuple[Path, ...] | None = None
+        if not allow_outside_meshes:
+            urdf_dir = (Path(urdf).resolve().parent if urdf is not None and
+                        not urdf.lstrip().startswith("<") else None)
+            # geometry the caller built, naming no URDF file or folder, is theirs: None
+            self.mesh_roots = mesh_paths.roots(urdf_dir, self.package_dirs) or None
+            if self.mesh_roots is not None:
+                for geometry in (visual_model, collision_model):
+                    mesh_paths.check_geometry(geometry, self.mesh_roots, self.name)
+        self.ee_frame_id = self.frame_id(ee_frame, frame_type)
+        self.ee_frame = model.frames[self.ee_frame_id].name
+        self._units = _unit_blocks(model)
+        #: an upper bound of the distance from the base any frame can reach, m
+        self.reach, self._base_q = _reach(model)
+        self._lower, self._upper = position_ranges(model)
         limit = np.asarray(model.velocityLimit, dtype=float)
         self._velocity = np.where((limit > 0) & (limit < 1e30), limit, np.inf)
         #: name of the joint of each velocity (tangent) index: columns of J, entries of dq
         self.velocity_names: list[str] = [
             model.names[j] for j in range(1, model.njoints) for _ in range(model.joints[j].nv)]
-        self.q0 = pin.neutral(model) if q0 is None else self._inside(self.check_q(q0, "q0"))
+        self.locked_joints: list[str] = []  #: joints removed by :meth:`reduced`
+        # without a reference configuration: the neutral one, clipped into the limits
+        self.q0 = (np.clip(pin.neutral(model), self._lower, self._upper) if q0 is None
+                   else self._inside(self.check_q(q0, "q0")))
+
+    @property
+    def data_bytes(self) -> int:
+        """Estimated bytes of one ``pin.Data`` of this model (it grows as nv³: Pinocchio
+        keeps nv x nv x nv second-order derivative tensors)."""
+        return _data_bytes(self.model)
 
     def __getstate__(self) -> dict:
         """A pickled robot (``solve_many``'s workers) carries its kinematic model, not its
@@ -86,19 +167,39 @@ class Robot:
         state = self.__dict__.copy()
         del state["_local"]  # per-thread scratch space: each process makes its own
         state["visual_model"] = state["collision_model"] = None
+        if len(self.model.mimicking_joints):
+            # Pinocchio 4.1 unpickles a mimic joint broken (nvExtended -1: fk then crashes);
+            # the model goes as the one without mimic joints, the relations applied anew
+            if self._unmimicked is None:
+                raise TypeError(f"robot {self.name!r} has Pinocchio mimic joints but no model "
+                                "without them to pickle (load it with Robot.from_urdf or "
+                                "Robot.from_example)")
+            state["model"] = None
         return state
 
     def __setstate__(self, state: dict) -> None:
+        if state["model"] is None:
+            state["model"], _ = apply_mimics(state["_unmimicked"], state["mimic_joints"],
+                                             URDFError)
         self.__dict__.update(state)
         self._local = threading.local()
 
     # -- construction ------------------------------------------------------------------------
     @classmethod
-    def from_example(cls, name: str, ee_frame: str | None = None) -> Robot:
-        """Load ``name`` from example-robot-data (``"panda"``, ``"ur5"``, ``"talos_full"``, ...).
+    def from_example(cls, name: str, ee_frame: str | int | None = None, *,
+                     frame_type: pin.FrameType | str | None = None,
+                     locked_joints: Sequence[str] | None = None) -> Robot:
+        """Load ``name`` from example-robot-data (``"panda"``, ``"ur5"``, ``"talos_full"``, ...;
+        ``example_robot_data.robots_loader.ROBOTS`` lists every name).
 
-        ``ee_frame`` defaults to :data:`DEFAULT_EE_FRAMES` for the robots listed there.
-        ``q0`` is the robot's reference configuration from its SRDF.
+        ``ee_frame`` (a frame name, or an id of the model as loaded, before joints are locked;
+        ``frame_type`` picks among frames sharing the name, see :meth:`frame_id`) defaults to
+        :data:`DEFAULT_EE_FRAMES` for the robots listed there.
+        ``locked_joints`` (joint names) are removed from the model at the reference
+        configuration (see :meth:`reduced`); by default the gripper joints of
+        :data:`DEFAULT_LOCKED_JOINTS`, ``()`` for none. ``q0`` is the robot's reference
+        configuration from its SRDF. Mimic joints (Panda's second finger, TALOS's
+        grippers) are Pinocchio mimic joints, as in :meth:`from_urdf`.
         """
         import example_robot_data as erd
         from example_robot_data.robots_loader import ROBOTS
@@ -117,52 +218,88 @@ class Robot:
             if ee_frame is None:
                 raise ValueError(
                     f"no default ee_frame for {name!r}; pass ee_frame= (defaults exist for "
-                    f"{sorted(DEFAULT_EE_FRAMES)})"
+                    f"{sorted(DEFAULT_EE_FRAMES)}; robot.frames() lists a robot's frames)"
                 )
         wrapper = erd.load(name)
-        return cls(
-            wrapper.model,
-            ee_frame,
-            q0=wrapper.q0,
-            name=name,
-            visual_model=wrapper.visual_model,
-            collision_model=wrapper.collision_model,
-            urdf=getattr(wrapper, "urdf", None),
-        )
+        urdf = getattr(wrapper, "urdf", None)
+        model, q0, mimics = _with_mimics(wrapper.model, wrapper.q0, urdf)
+        locked = [j for j in DEFAULT_LOCKED_JOINTS.get(name, ()) if model.existJointName(j)] \
+            if locked_joints is None else list(_names_arg(locked_joints, "locked_joints"))
+        # the full model's frame named by ee_frame, found again (by name) in the reduced one
+        full = cls(model, ee_frame, q0=q0, name=name, frame_type=frame_type,
+                   visual_model=wrapper.visual_model, collision_model=wrapper.collision_model,
+                   urdf=urdf, package_dirs=_example_dirs(urdf), mimic_joints=mimics)
+        full._unmimicked = wrapper.model if mimics else None
+        return full.reduced(locked) if locked else full
 
     @classmethod
     def from_urdf(
         cls,
         path_or_xml: str | Path | bytes,
-        ee_frame: str | None = None,
-        package_dirs: Sequence[str | Path] | None = None,
+        ee_frame: str | int | None = None,
+        package_dirs: Sequence[str | Path] | str | Path | None = None,
         *,
         load_visuals: bool = True,
+        frame_type: pin.FrameType | str | None = None,
+        locked_joints: Sequence[str] = (),
+        allow_outside_meshes: bool = False,
+        memory_budget: float = MEMORY_BUDGET,
     ) -> Robot:
         """Load a URDF from a file path (``str`` or ``pathlib.Path``) or from XML text (a string,
         or UTF-8 bytes, starting with ``<``).
 
-        ``ee_frame`` defaults to the URDF's only leaf link; with several leaves it must be given.
-        ``package_dirs`` (folders, or one folder) resolve ``package://`` mesh paths (the URDF's
-        folder is always searched). Visual geometry is loaded when its meshes can be found;
-        ``load_visuals=False`` skips it.
+        ``ee_frame`` (a frame name or id, ``frame_type`` as in :meth:`frame_id`) defaults to the
+        URDF's only leaf link; with several leaves it must be given. ``locked_joints`` are
+        removed at the neutral configuration (:meth:`reduced`).
+
+        Meshes: ``package_dirs`` (folders, or one folder) are searched for ``package://`` and
+        relative mesh paths, then the URDF's own folder. A ``package://pkg/...`` that none of
+        them holds is looked for above the URDF file: the folder that contains a folder named
+        ``pkg`` holding the URDF is added (so example-robot-data's and ROS packages' own files
+        find their meshes). With ``load_visuals=True`` (default) the visual meshes are loaded,
+        and a mesh that cannot be found raises :class:`URDFError` naming it and the folder to
+        pass; ``load_visuals=False`` loads no geometry (``visual_model`` is None; the viewer
+        then has nothing to draw). Mesh files are read only from those folders, after resolving
+        ``..`` and symbolic links: a mesh path outside them (``../``, an absolute path,
+        ``file://``, a link pointing out) raises :class:`URDFError` naming the path, unless
+        ``allow_outside_meshes=True``.
 
         The URDF is checked before Pinocchio parses it (:mod:`sjt_pin.urdf_check`): a broken
-        one raises :class:`URDFError` naming the file and the joint or link at fault.
+        one raises :class:`URDFError` naming the file and the joint or link at fault. A model
+        whose ``pin.Data`` would take more than ``memory_budget`` bytes is refused
+        (:data:`MEMORY_BUDGET`). A joint with ``<mimic>`` becomes a Pinocchio mimic joint
+        without a coordinate of its own (:mod:`sjt_pin.mimic`); ``lower == upper`` locks a joint
+        at that value (:mod:`sjt_pin.joint_ranges`); a planar joint moves in the plane normal to
+        its ``<axis>`` (:mod:`sjt_pin.planar`).
         """
         source = read_urdf(path_or_xml)
-        check_urdf(source)
-        model = build_model(source)
+        content = check_urdf(source)
         if isinstance(package_dirs, (str, Path)):
             package_dirs = [package_dirs]  # one folder, not a sequence of characters
         dirs = [str(p) for p in (package_dirs or [])]
+        for folder in dirs:
+            if not os.path.isdir(folder):
+                raise URDFError(f"package_dirs: {folder!r} is not a folder")
+        urdf_dir = None
         if source.path is not None:
-            dirs.append(str(source.path.resolve().parent))
+            urdf_dir = source.path.resolve().parent
+            references = mesh_paths.mesh_references(source.data)
+            dirs += mesh_paths.guess_package_dirs(source.path, references, dirs)
+            dirs.append(str(urdf_dir))
+        mesh_paths.check_references(source.label, source.data, urdf_dir, dirs,
+                                    allow_outside_meshes, must_exist=load_visuals)
+        model, mimics, unmimicked = load_model(source, content)
+        _check_memory(model, source.label, memory_budget)
         if ee_frame is None:
             ee_frame = _only_leaf_body(model, source.label)
         visual = _visual_model(model, source, dirs) if load_visuals else None
         urdf = source.text if source.path is None else str(source.path)
-        return cls(model, ee_frame, visual_model=visual, urdf=urdf, package_dirs=dirs)
+        robot = cls(model, ee_frame, visual_model=visual, urdf=urdf, package_dirs=dirs,
+                    frame_type=frame_type, allow_outside_meshes=allow_outside_meshes,
+                    memory_budget=memory_budget, mimic_joints=mimics)
+        robot._unmimicked = unmimicked if mimics else None
+        locked = list(_names_arg(locked_joints, "locked_joints"))
+        return robot.reduced(locked) if locked else robot
 
     @classmethod
     def planar3(cls, ee_frame: str = "ee") -> Robot:
@@ -213,15 +350,152 @@ class Robot:
         return np.clip(q0, self._lower, self._upper)
 
     # -- frames and kinematics ---------------------------------------------------------------
-    def frame_id(self, name: str) -> int:
-        """Index of frame ``name``; :class:`FrameNotFound` (listing close names) if absent."""
-        if not isinstance(name, str) or not self.model.existFrame(name):
-            raise FrameNotFound(str(name), [f.name for f in self.model.frames], self.name)
-        return self.model.getFrameId(name)
+    def frame_id(self, name: str | int, frame_type: pin.FrameType | str | None = None) -> int:
+        """Index of frame ``name`` (a frame name, or an index of ``model.frames``).
+
+        Several frames may share a name (a link and the fixed joint that attaches it, say):
+        ``frame_type`` (``pin.FrameType`` or its name, ``"BODY"``, ``"JOINT"``, ...) picks
+        one; without it the first in :data:`FRAME_PREFERENCE` order is meant (an operational
+        frame or link before a joint). :class:`FrameNotFound` (a ``KeyError`` listing close
+        names and the robot's frames) if there is none.
+        """
+        frames = self.model.frames
+        if isinstance(name, (int, np.integer)) and not isinstance(name, (bool, np.bool_)):
+            if not 0 <= int(name) < len(frames):
+                raise FrameNotFound(str(name), [f.name for f in frames], self.name,
+                                    f"frame id {int(name)} is outside 0..{len(frames) - 1}")
+            return int(name)
+        if not isinstance(name, str):
+            raise TypeError(f"frame must be a frame name (str) or a frame id (int), got {name!r}")
+        wanted = None if frame_type is None else _frame_type(frame_type)
+        matches = [i for i, f in enumerate(frames) if f.name == name]
+        if wanted is not None:
+            kinds = [str(frames[i].type).rsplit(".", 1)[-1] for i in matches]
+            matches = [i for i in matches if frames[i].type == wanted]
+            if not matches and kinds:
+                raise FrameNotFound(name, [f.name for f in frames], self.name,
+                                    f"frame {name!r} of type {_type_name(wanted)} not found in "
+                                    f"{self.name}; frames of that name have types {kinds}")
+        if not matches:
+            raise FrameNotFound(name, [f.name for f in frames], self.name)
+        return min(matches, key=lambda i: FRAME_PREFERENCE.index(frames[i].type))
+
+    def frames(self) -> list[FrameInfo]:
+        """Every frame of the model: id, name, type (``"BODY"`` for a link, ``"JOINT"``,
+        ``"FIXED_JOINT"``, ``"OP_FRAME"``, ``"SENSOR"``) and the joint that moves it."""
+        model = self.model
+        return [FrameInfo(i, f.name, _type_name(f.type), model.names[f.parentJoint])
+                for i, f in enumerate(model.frames)]
+
+    def reduced(self, locked_joints: Sequence[str], q=None) -> Robot:
+        """A copy without ``locked_joints`` (joint names): each is fixed at its value in ``q``
+        (default: the reference configuration ``q0``), with Pinocchio's
+        ``buildReducedModel``; visual and collision geometry follow. A locked joint is no
+        degree of freedom of any task, limit or solver (a gripper, a joint a tool blocks). The
+        end-effector frame keeps its name (a locked joint's frame becomes a fixed joint's);
+        ``q0`` keeps the other joints' values.
+        """
+        names = list(_names_arg(locked_joints, "locked_joints"))
+        model = self.model
+        ids = []
+        for joint in names:
+            if not model.existJointName(joint) or joint == "universe":
+                known = [model.names[j] for j in range(1, model.njoints)]
+                close = difflib.get_close_matches(joint, known, n=3)
+                hint = f"close names: {close}" if close else f"joints: {name_list(known)}"
+                raise ValueError(f"locked_joints: {self.name} has no joint {joint!r}; {hint}")
+            ids.append(model.getJointId(joint))
+        q_ref = self.q0 if q is None else self.check_q(q)
+        base, q_base, mimics = model, q_ref, self.mimic_joints
+        if mimics:
+            # Pinocchio reduces a model without mimic joints: lock on that one (a joint that
+            # follows a locked one is locked with it), then tie the other relations again
+            locked = set(names)
+            for m in mimics:  # (each relation is on an independent joint: one pass)
+                if m.mimicked in locked:
+                    locked.add(m.joint)
+            base = self._unmimicked
+            if base is None:
+                raise TypeError(f"robot {self.name!r} has mimic joints but no model without "
+                                "them to reduce (load it with from_urdf or from_example)")
+            values = joint_values(model, mimics, q_ref)
+            q_base = pin.neutral(base)
+            for j in range(1, base.njoints):
+                joint, own = base.joints[j], model.joints[j]
+                if own.nq:
+                    q_base[joint.idx_q:joint.idx_q + joint.nq] = q_ref[own.idx_q:own.idx_q
+                                                                       + own.nq]
+                elif base.names[j] in values:
+                    q_base[joint.idx_q] = values[base.names[j]]
+            ids = [base.getJointId(name) for name in sorted(locked, key=base.getJointId)]
+            mimics = [m for m in mimics if m.joint not in locked and m.mimicked not in locked]
+        geometries = [g for g in (self.visual_model, self.collision_model) if g is not None]
+        if geometries:
+            reduced, reduced_geometries = pin.buildReducedModel(base, geometries, ids, q_base)
+            reduced_geometries = list(reduced_geometries)
+        else:
+            reduced, reduced_geometries = pin.buildReducedModel(base, ids, q_base), []
+        unmimicked = reduced if mimics else None
+        if mimics:
+            reduced, mimics = apply_mimics(reduced, mimics, URDFError)
+        visual = reduced_geometries.pop(0) if self.visual_model is not None else None
+        collision = reduced_geometries.pop(0) if self.collision_model is not None else None
+        q0 = np.concatenate([np.zeros(0)] + [
+            self.q0[model.idx_qs[model.getJointId(reduced.names[j])]:][
+                :reduced.joints[j].nq] for j in range(1, reduced.njoints)])
+        robot = type(self).__new__(type(self))
+        robot.__dict__.update(self.__dict__)
+        robot._local = threading.local()
+        robot.package_dirs = list(self.package_dirs)
+        robot.model, robot.visual_model, robot.collision_model = reduced, visual, collision
+        kind = model.frames[self.ee_frame_id].type  # the same frame: same name, same type
+        same = [i for i, f in enumerate(reduced.frames) if f.name == self.ee_frame
+                and f.type == kind]
+        robot.ee_frame_id = same[0] if same else robot.frame_id(self.ee_frame)
+        robot._units = _unit_blocks(reduced)
+        robot.reach, robot._base_q = _reach(reduced)
+        robot._lower, robot._upper = position_ranges(reduced)
+        limit = np.asarray(reduced.velocityLimit, dtype=float)
+        robot._velocity = np.where((limit > 0) & (limit < 1e30), limit, np.inf)
+        robot.velocity_names = [reduced.names[j] for j in range(1, reduced.njoints)
+                                for _ in range(reduced.joints[j].nv)]
+        robot.q0 = q0
+        robot.mimic_joints, robot._unmimicked = list(mimics), unmimicked
+        robot.locked_joints = [*self.locked_joints, *names]
+        return robot
 
     def check_q(self, q, name: str = "q") -> np.ndarray:
-        """``q`` as a finite real vector of shape (nq,), or ``ValueError`` naming ``name``."""
-        return as_vector(q, name, self.model.nq)
+        """``q`` as a finite real vector of shape (nq,), on its manifold: each unit quaternion
+        (free flyer, spherical joint) and each (cos, sin) pair (continuous, planar joint) of
+        norm within :data:`~sjt_pin.validation.UNIT_TOL` of 1 (then normalised); otherwise
+        ``ValueError`` naming ``name`` (and the joint)."""
+        return self._units.check(configuration(q, name, self.model.nq, self.model.nv), name)
+
+    @property
+    def unit_coordinates(self) -> bool:
+        """Whether a configuration holds unit-norm blocks (quaternions, (cos, sin) pairs)."""
+        return bool(self._units)
+
+    def check_reach(self, position, q=None, name: str = "target") -> None:
+        """Warn when ``position`` (m, world) lies more than :data:`REACH_FACTOR` times the
+        robot's reach (:attr:`reach`) from its base: most likely a target in mm, or cm. The
+        base is the world origin, or a floating base's position in ``q`` (no check without
+        ``q`` then). ``step()`` checks its first targets, ``solve()`` each target. Never for a
+        robot whose reach is infinite (a planar or unlimited prismatic joint)."""
+        origin: float | np.ndarray = 0.0
+        if self._base_q is not None:
+            if q is None:
+                return
+            origin = np.asarray(q, dtype=float)[self._base_q:self._base_q + 3]
+        with np.errstate(over="ignore", invalid="ignore"):
+            distance = float(np.linalg.norm(np.asarray(position, dtype=float) - origin))
+        # NaN, inf or an overflowing distance: the task error cannot be finite, step() raises
+        if np.isfinite(distance) and distance > REACH_FACTOR * self.reach:
+            where = "the origin" if self._base_q is None else "the robot's base"
+            warnings.warn(
+                f"{name} is {distance:.4g} m from {where}, more than {REACH_FACTOR:g} times "
+                f"{self.name}'s reach ({self.reach:.3g} m): positions are in m (check its "
+                "units: mm or cm by mistake?)", UserWarning, stacklevel=3)
 
     @property
     def data(self) -> pin.Data:
@@ -231,8 +505,9 @@ class Robot:
             data = self._local.data = self.model.createData()
         return data
 
-    def fk(self, q, frame: str | None = None) -> pin.SE3:
-        """World pose of ``frame`` (default: the end effector) at configuration ``q``.
+    def fk(self, q, frame: str | int | None = None) -> pin.SE3:
+        """World pose of ``frame`` (a name or id, as :meth:`frame_id` takes it; default: the
+        end effector) at configuration ``q``.
 
         Safe to call from several threads (each has its own ``pin.Data``).
         """
@@ -242,7 +517,7 @@ class Robot:
         pin.forwardKinematics(self.model, data, q)
         return pin.updateFramePlacement(self.model, data, fid)
 
-    def jacobian(self, q, frame: str | None = None,
+    def jacobian(self, q, frame: str | int | None = None,
                  reference: pin.ReferenceFrame = pin.LOCAL) -> np.ndarray:
         """Frame Jacobian (6, nv), rows [linear; angular], in ``reference`` axes (LOCAL default);
         always 2-D, also for a robot with one joint."""
@@ -250,6 +525,11 @@ class Robot:
         fid = self.ee_frame_id if frame is None else self.frame_id(frame)
         J = pin.computeFrameJacobian(self.model, self.data, q, fid, reference)
         return np.asarray(J, dtype=float).reshape(6, self.model.nv)
+
+    def joint_values(self, q) -> dict[str, float]:
+        """Every 1-DoF joint's position at ``q`` (rad or m) by name, the mimic joints' from
+        their relations included: what the robot's joint controllers take."""
+        return joint_values(self.model, self.mimic_joints, self.check_q(q))
 
     def random_configuration(self, rng: np.random.Generator | None = None) -> np.ndarray:
         """A configuration drawn uniformly within the position limits (``[-pi, pi]`` if none),
@@ -265,20 +545,17 @@ class Robot:
         return f"Robot({self.name!r}, ee_frame={self.ee_frame!r}, nq={self.nq}, nv={self.nv})"
 
 
-def _position_limits(model: pin.Model) -> tuple[np.ndarray, np.ndarray]:
-    """The position limits the solvers enforce (nq,): a 1-DoF revolute or prismatic joint's
-    URDF limits; -inf / +inf for every other coordinate."""
-    lower, upper = np.full(model.nq, -np.inf), np.full(model.nq, np.inf)
-    for j in range(1, model.njoints):
-        joint = model.joints[j]
-        if joint.nq != 1 or joint.nv != 1:
-            continue  # continuous (cos, sin), floating base, spherical, planar: unlimited
-        i = joint.idx_q
-        lo, hi = model.lowerPositionLimit[i], model.upperPositionLimit[i]
-        # a URDF joint without <limit> parses to [0, 0] or to +-max double: neither is a limit
-        if hi > lo and abs(lo) < 1e30 and abs(hi) < 1e30:
-            lower[i], upper[i] = lo, hi
-    return lower, upper
+def _with_mimics(model: pin.Model, q0: np.ndarray, urdf: str | None
+                 ) -> tuple[pin.Model, np.ndarray, list[MimicJoint]]:
+    """An example-robot-data model (parsed without mimic joints) with the mimic relations of
+    its URDF file applied, and its reference configuration without the mimic coordinates."""
+    if not urdf or not Path(urdf).is_file():
+        return model, q0, []
+    source = read_urdf(Path(urdf))
+    reduced, mimics = apply_mimics(model, urdf_mimics(source), source.error)
+    if not mimics:
+        return model, q0, []
+    return reduced, reduced_configuration(model, reduced, np.asarray(q0, dtype=float)), mimics
 
 
 def _visual_model(model: pin.Model, source: URDFSource, dirs: list[str]) -> pin.GeometryModel:
@@ -302,4 +579,107 @@ def _only_leaf_body(model: pin.Model, source: str) -> str:
     leaves = [f.name for f in bodies if f.name not in children]
     if len(leaves) == 1:
         return leaves[0]
-    raise ValueError(f"{source} has several leaf links {leaves}; pass ee_frame=")
+    raise ValueError(f"{source} has several leaf links {name_list(leaves)}; pass "
+                     "ee_frame= (Robot.frames() lists every frame)")
+
+
+def _frame_type(value) -> pin.FrameType:
+    """``value`` (a ``pin.FrameType`` or its name) as a ``pin.FrameType``."""
+    if isinstance(value, pin.FrameType):
+        return value
+    if isinstance(value, str) and value.upper() in pin.FrameType.names:
+        return pin.FrameType.names[value.upper()]
+    raise ValueError(f"frame_type must be a pinocchio.FrameType or one of "
+                     f"{sorted(pin.FrameType.names)}, got {value!r}")
+
+
+def _type_name(kind: pin.FrameType) -> str:
+    return str(kind).rsplit(".", 1)[-1]
+
+
+def _names_arg(value, name: str) -> tuple[str, ...]:
+    """``value`` as a tuple of names (one str is one name)."""
+    if isinstance(value, str):
+        return (value,)
+    try:
+        names = tuple(value)
+    except TypeError:
+        raise TypeError(f"{name} must be joint names (a sequence of str), got {value!r}") from None
+    if not all(isinstance(n, str) for n in names):
+        raise TypeError(f"{name} must be joint names (a sequence of str), got {value!r}")
+    return names
+
+
+def _example_dirs(urdf: str | None) -> list[str]:
+    """The folder that contains ``example-robot-data`` (its meshes' package), for an
+    example-robot-data URDF file."""
+    if urdf is None or urdf.lstrip().startswith("<"):
+        return []
+    for folder in Path(urdf).resolve().parents:
+        if folder.name == "example-robot-data":
+            return [str(folder.parent)]
+    return []
+
+
+def _unit_blocks(model: pin.Model) -> UnitBlocks:
+    """The unit-norm blocks of ``model``'s configurations (see :class:`UnitBlocks`)."""
+    blocks = []
+    for j in range(1, model.njoints):
+        joint = model.joints[j]
+        kind, first = joint.shortname(), joint.idx_q
+        if kind == "JointModelFreeFlyer":
+            blocks.append((model.names[j], "quaternion (x, y, z, w)", first + 3, 4))
+        elif kind == "JointModelSpherical":
+            blocks.append((model.names[j], "quaternion (x, y, z, w)", first, 4))
+        elif kind == "JointModelPlanar":
+            blocks.append((model.names[j], "(cos, sin) pair", first + 2, 2))
+        elif kind.startswith("JointModelRUB") or kind == "JointModelRevoluteUnboundedUnaligned":
+            blocks.append((model.names[j], "(cos, sin) pair", first, 2))
+    return UnitBlocks(blocks)
+
+
+def _reach(model: pin.Model) -> tuple[float, int | None]:
+    """An upper bound of the distance from the robot's base any frame can reach (m): the
+    lengths of the joint placements along each chain, plus prismatic ranges; and the index in
+    q of a floating base's position (a free flyer at the root: the base is there), else None.
+    The reach is ``inf`` with a planar joint, an unlimited prismatic joint or a free flyer
+    elsewhere than at the root."""
+    length = np.zeros(model.njoints)
+    base = None
+    for j in range(1, model.njoints):
+        joint = model.joints[j]
+        kind = joint.shortname()
+        travel = 0.0
+        if joint.nq == 1 and kind.startswith("JointModelP"):
+            lo, hi = model.lowerPositionLimit[joint.idx_q], model.upperPositionLimit[joint.idx_q]
+            travel = max(abs(lo), abs(hi)) if hi > lo else np.inf
+        elif kind == "JointModelFreeFlyer" and model.parents[j] == 0 and base is None:
+            base = joint.idx_q  # distances are then measured from the base's position
+        elif kind in ("JointModelFreeFlyer", "JointModelPlanar", "JointModelTranslation"):
+            travel = np.inf
+        length[j] = (length[model.parents[j]] + travel
+                     + float(np.linalg.norm(model.jointPlacements[j].translation)))
+    reach = max((length[f.parentJoint] + float(np.linalg.norm(f.placement.translation))
+                 for f in model.frames), default=0.0)
+    return reach, base
+
+
+def _data_bytes(model: pin.Model) -> int:
+    """Estimated bytes of one ``pin.Data``: 30 nv³ + 1100 nv², fitted to Pinocchio 3 on
+    serial chains (measured 41 MB at nv = 100, 279 MB at 200, 901 MB at 300)."""
+    nv = model.nv
+    return int(30 * nv**3 + 1100 * nv**2)
+
+
+def _check_memory(model: pin.Model, label: str, budget: float) -> None:
+    """Refuse a model whose ``pin.Data`` would take more than ``budget`` bytes; warn above a
+    quarter of it."""
+    need = _data_bytes(model)
+    if need > budget:
+        raise ValueError(f"{label}: a pin.Data of this model (nv = {model.nv}) would take about "
+                         f"{need / 1e9:.3g} GB, above memory_budget = {budget / 1e9:.3g} GB; "
+                         "every thread and solver holds one (pass memory_budget= to allow it)")
+    if need > budget / 4:
+        warnings.warn(f"{label}: a pin.Data of this model (nv = {model.nv}) takes about "
+                      f"{need / 1e9:.3g} GB, and every thread and solver holds one",
+                      UserWarning, stacklevel=4)

@@ -25,6 +25,7 @@ import numpy as np
 import pinocchio as pin
 
 from . import kernels as K
+from .joint_ranges import outside
 from .kernels import (
     CONVERGED,
     S_BEST,
@@ -57,13 +58,17 @@ NU_START, MU = 1.0, 1e-6
 @dataclass
 class IKResult:
     """Outcome of :func:`solve`: the configuration, whether ``|e| < tol``, the iterations used
-    (over all starts), the final error norm (task units) and the restarts made."""
+    (over all starts), the final error norm (task units), the restarts made, and ``clipped``:
+    the joints whose seed ``q0`` lay outside their position limits and was clipped into them
+    before the search (``()`` for a seed within the limits). ``q`` is always within the
+    limits."""
 
     q: np.ndarray
     success: bool
     iterations: int
     error: float
     restarts: int = 0
+    clipped: tuple[str, ...] = ()
 
 
 class Search:
@@ -200,8 +205,9 @@ def solve(solver, target, q0, *, tol: float = TOL, max_iters: int = MAX_ITERS,
 
     Args:
         target: as for ``step`` (a pose, or ``{frame: target}`` with several tasks).
-        q0: the first start (nq,); later starts are random within the limits (a floating base
-            and prismatic joints without limits keep ``q0``'s values).
+        q0: the first start (nq,), clipped into the position limits first (``IKResult.clipped``
+            names the joints moved); later starts are random within the limits (a floating
+            base and prismatic joints without limits keep ``q0``'s values).
         tol: success when the tasks' error norm is below ``tol`` (m and rad; > 0).
         max_iters: iterations of one start.
         restarts: most restarts after the first start (``None``: as many as the budget allows).
@@ -220,8 +226,16 @@ def solve(solver, target, q0, *, tol: float = TOL, max_iters: int = MAX_ITERS,
     max_iters, budget = integer(max_iters, "max_iters"), integer(budget, "budget")
     if restarts is not None:
         restarts = integer(restarts, "restarts", 0)
-    q = solver.robot.check_q(q0, "q0").copy()
+    robot = solver.robot
+    q = robot.check_q(q0, "q0").copy()
+    clipped = outside(robot.model, q, robot.lower_limits, robot.upper_limits)
+    if clipped:  # a seed out of range starts at its nearest point within the limits
+        np.clip(q, robot.lower_limits, robot.upper_limits, out=q)
     targets, _ = search.stack.targets(target, None)
+    for goal in targets:  # a target in mm by mistake: warn, as step() does
+        position = goal.translation if isinstance(goal, pin.SE3) else goal
+        if isinstance(position, np.ndarray) and position.shape == (3,):
+            solver.robot.check_reach(position, q)
     if not isinstance(rng, np.random.Generator):
         rng = np.random.default_rng(0 if rng is None else rng)
     if timeout is None:
@@ -241,8 +255,8 @@ def solve(solver, target, q0, *, tol: float = TOL, max_iters: int = MAX_ITERS,
         if best is None or error < best[1]:
             best = (search.q.copy(), error)
         if success:
-            return IKResult(search.q.copy(), True, total, error, attempt)
+            return IKResult(search.q.copy(), True, total, error, attempt, clipped)
         out_of_starts = restarts is not None and attempt >= restarts
         if out_of_starts or total >= budget or time.perf_counter() > deadline:
-            return IKResult(best[0], False, total, best[1], attempt)
+            return IKResult(best[0], False, total, best[1], attempt, clipped)
         attempt += 1

@@ -34,8 +34,9 @@ import pinocchio as pin
 from . import kernels as K
 from .constraints import ConstraintStage, Outcome
 from .escape import SaddleEscape
-from .exceptions import GainWarning
+from .exceptions import ConcurrentStepError, GainWarning
 from .gains import FixedGain, Gain, as_gain
+from .joint_ranges import outside
 from .limits import AccelerationLimit, JerkLimit, Limit, Motion, PositionLimit, VelocityLimit
 from .limits.position import braking_speed
 from .methods import Method
@@ -79,6 +80,11 @@ class StepInfo:
         active_rows: names of the limits whose general rows (``A q_dot <= b``) are active.
         limit_conflicts: joints whose acceleration or jerk limit had to yield to a position or
             speed limit (a start outside the range, limits changed between steps).
+        outside_limits: joints whose position in the ``q`` given to this step lay outside
+            their URDF range (a seed out of range): the step moves each back toward its range
+            at its recovery speed, ramped within the acceleration and jerk limits — never a
+            jump — if a task moves it (a joint off every task's chain stays put unless a
+            posture task is stacked); ``()`` when ``q`` was within every limit.
         velocity_scale: the same as ``task_scale`` (its former name).
     """
 
@@ -96,6 +102,7 @@ class StepInfo:
     active_limits: tuple[tuple[str, str], ...] = ()
     active_rows: tuple[str, ...] = ()
     limit_conflicts: tuple[str, ...] = ()
+    outside_limits: tuple[str, ...] = ()
 
     @property
     def velocity_scale(self) -> float:
@@ -178,6 +185,11 @@ class Solver:
         n = robot.nv
         self._model = robot.model
         self._q_shape = (robot.nq,)
+        #: a q with quaternions or (cos, sin) pairs is checked on its manifold unless it is the
+        #: array the last step returned (pin.integrate keeps it there): no cost in a loop
+        self._units = robot.unit_coordinates
+        self._returned: np.ndarray | None = None
+        self._first = True  # the first step checks the targets' distance (units)
         self._dt = period(dt)
         self._kernel = method.kernel if method.kernel is not None else method.python_step
         # the constraint stage: the URDF's position and speed limits, acceleration and jerk
@@ -257,6 +269,7 @@ class Solver:
         self._gain = as_gain(gain, stack.target_dim)
         self._configure()
         self._count = 0
+        self._stepping = False  # a step runs (ConcurrentStepError for a second thread)
         self._last: StepInfo | None = None
         #: the last step's rows, error, displacement and status (None before the first)
         self._record: tuple | None = None
@@ -310,7 +323,7 @@ class Solver:
     def _update_slow(self) -> None:
         """Whether every step must take the slow path (an escape in progress, a pending
         stability check, limits outside the kernel's box)."""
-        self._always = (self._gain_check or self._staged
+        self._always = (self._first or self._gain_check or self._staged
                         or (self.escape is not None and self.escape.active))
 
     def reset(self) -> None:
@@ -321,6 +334,7 @@ class Solver:
         if self.escape is not None:
             self.escape.reset()
         self._work[K.P_ESCAPING] = 0.0
+        self._work[K.P_STALL_RUN], self._work[K.P_STALL_WAIT] = -1.0, np.inf
         self._escape_velocity[:] = 0.0
 
     # -- one control period --------------------------------------------------------------------
@@ -335,8 +349,25 @@ class Solver:
                 [linear (m/s), angular (rad/s)], world axes at the desired origin (``None``:
                 no feed-forward); with several tasks a ``{frame: velocity}`` mapping (missing
                 frames: 0).
+
+        A second thread that steps this solver while a step runs gets
+        :class:`~sjt_pin.exceptions.ConcurrentStepError`: a solver's buffers are one thread's.
         """
-        if not (type(q) is np.ndarray and q.shape == self._q_shape and q.dtype == _F64):
+        if self._stepping:
+            raise ConcurrentStepError(
+                f"{type(self).__name__} is being stepped by another thread: a solver's buffers "
+                "and pin.Data are one thread's; give each thread its own solver "
+                "(copy.deepcopy(solver) makes one in the same state)")
+        self._stepping = True
+        try:
+            return self._control(q, target, target_velocity)
+        finally:
+            self._stepping = False
+
+    def _control(self, q, target, target_velocity=None) -> np.ndarray:
+        """:meth:`step` itself."""
+        if not (type(q) is np.ndarray and q.shape == self._q_shape and q.dtype == _F64) or (
+                self._units and q is not self._returned):
             q = self.robot.check_q(q)
         # 1. the task rows at q
         stack = self.stack
@@ -372,26 +403,40 @@ class Solver:
             np.subtract(dq, motion.dq, out=motion.ddq)
             motion.ddq /= dt
             motion.dq[:] = dq
-        return pin.integrate(self._model, q, step)
+        self._returned = q_next = pin.integrate(self._model, q, step)
+        return q_next
 
     def _slow(self, status, q, J, e, ff, targets) -> np.ndarray:
         """What the fast path skips: errors, the stability check, the escape's state (its
         velocity for the next step), limits beyond the built-in ones."""
         if status & K.NON_FINITE:
             self._raise_non_finite(q, targets)
+        if self._first:
+            self._first = False
+            for target in targets:
+                position = target.translation if isinstance(target, pin.SE3) else target
+                if isinstance(position, np.ndarray) and position.shape == (3,):
+                    self.robot.check_reach(position, q)
         if self._gain_check:
             self._check_gain(J)
         step, dt = self._step, self._dt
         escape = self.escape
         self._escaped = (self._count, escape is not None and escape.active)
         if escape is not None:
-            if (status & K.STALLED and not escape.active
-                    and escape.observe(self._count, self._info[K.I_E_SQ])):
-                escape.test(q, self._weighted_rows(targets))
+            work = self._work
+            if status & K.STALLED and not escape.active:
+                run = float(work[K.P_STALL_RUN])
+                if escape.observe(run, float(self._info[K.I_E_SQ])):
+                    escape.test(q, self._weighted_rows(targets))
+                if run > 1.0:  # a window ended: the kernel counts the next one
+                    work[K.P_STALL_RUN] = 0.0
+                work[K.P_STALL_WAIT] = escape.wait
             velocity = escape.velocity(float(self._info[K.I_REGULAR]), dt,
                                        float(self._info[K.I_E_SQ]))
             if velocity is None:
-                self._work[K.P_ESCAPING] = 0.0
+                if work[K.P_ESCAPING]:  # an escape ended: a stall after it is a new run
+                    work[K.P_STALL_RUN] = -1.0
+                work[K.P_ESCAPING] = 0.0
                 self._escape_velocity[:] = 0.0
             else:  # the kernel adds it, within the limits, from the next step on
                 self._work[K.P_ESCAPING] = 1.0
@@ -561,7 +606,9 @@ class Solver:
                 pose=stack.poses(), alpha=alpha, escaped=escaped,
                 clamped=clamped, clamped_joints=names, task_scale=float(outcome.scale),
                 active_limits=outcome.active, active_rows=outcome.rows,
-                limit_conflicts=outcome.conflict)
+                limit_conflicts=outcome.conflict,
+                outside_limits=outside(self._model, q, self.robot.lower_limits,
+                                       self.robot.upper_limits))
         return self._last
 
     def _kernel_outcome(self, q: np.ndarray, step: np.ndarray, status: int) -> Outcome:
@@ -604,7 +651,7 @@ class Solver:
             f"{self.method.name.upper()} gain {self._gain.largest:g} 1/s exceeds the stability "
             f"bound 2 / (dt lambda_max(J M)) = {2.0 / (self._dt * lam):.4g} 1/s at the current "
             f"configuration (dt = {self._dt:g} s); the closed loop will oscillate or diverge",
-            GainWarning, stacklevel=4)
+            GainWarning, stacklevel=5)
 
     def _raise_non_finite(self, q: np.ndarray, targets) -> None:
         self.robot.check_q(q)  # names q if it holds NaN or inf
@@ -643,7 +690,8 @@ class Solver:
         state = {"motion": (self._motion.dq.copy(), self._motion.ddq.copy()),
                  "escape": self.escape, "escaping": float(self._work[K.P_ESCAPING]),
                  "escape_velocity": self._escape_velocity.copy(), "warned": self._warned,
-                 "count": self._count}
+                 "count": self._count, "stall": (float(self._work[K.P_STALL_RUN]),
+                                                  float(self._work[K.P_STALL_WAIT]))}
         return (_rebuild, (type(self), self.robot, self.method, arguments), state)
 
     def __setstate__(self, state: dict) -> None:
@@ -652,6 +700,7 @@ class Solver:
         self._work[K.P_ESCAPING] = state["escaping"]
         self._escape_velocity[:] = state["escape_velocity"]
         self._warned, self._count = state["warned"], state["count"]
+        self._work[K.P_STALL_RUN], self._work[K.P_STALL_WAIT] = state["stall"]
         self._configure()
 
     def __repr__(self) -> str:

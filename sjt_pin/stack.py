@@ -61,8 +61,8 @@ class TaskStack:
 
     ``J`` (m, nv), ``e`` (m,) and ``ff`` (m,) hold every task's rows in order; ``sqrt_weight``
     (m,) the weights' square roots; ``chain`` (nv,) is 1 for the joints that move at least one
-    task (a posture task moves all). With a single task, :meth:`evaluate` returns that task's
-    own arrays without copying.
+    task (``Task.joints``; a posture task moves all). With a single task, :meth:`evaluate`
+    returns that task's own arrays without copying.
     """
 
     def __init__(self, robot, tasks: list[Task]):
@@ -72,9 +72,8 @@ class TaskStack:
         if not self.targeted:
             raise ValueError("a solver needs at least one task that takes a target (PoseTask, "
                              "PositionTask, OrientationTask, ...)")
-        self.frames = [t.frame for t in self.targeted]
-        if len(set(self.frames)) != len(self.frames):
-            raise ValueError(f"each frame takes one task, got frames {self.frames}")
+        #: the keys of the targets, in order (a task's frame; tasks on one frame share it)
+        self.frames = list(dict.fromkeys(t.key for t in self.targeted))
         self.single = len(self.tasks) == 1
         self.task = self.targeted[0]
         nv = robot.nv
@@ -99,12 +98,9 @@ class TaskStack:
         chain = np.zeros(nv)
         model = robot.model
         for t in self.tasks:
-            if not t.takes_target:
-                chain[:] = 1.0  # a posture task moves every joint
-                continue
-            for j in model.supports[model.frames[t.frame_id].parentJoint][1:]:
-                joint = model.joints[j]
-                chain[joint.idx_v:joint.idx_v + joint.nv] = 1.0
+            for j in t.joints(model):
+                joint = model.joints[j]  # a mimic joint moves the joint it follows:
+                chain[joint.idx_v:joint.idx_v + joint.nvExtended] = 1.0  # nv 0, nvExtended 1
         self.chain = chain
         self.n_chain = int(chain.sum())
         self.kinematics = Kinematics(model)
@@ -140,12 +136,17 @@ class TaskStack:
                 return targets, None
             return targets, [task.velocity(target_velocity)] + tail
         if not mapping:
-            raise ValueError(f"target must be a {{frame: target}} mapping for frames {self.frames}")
+            if len(self.frames) != 1:
+                raise ValueError(f"target must be a {{frame: target}} mapping for frames "
+                                 f"{self.frames}")
+            target = {self.frames[0]: target}  # several tasks on one frame: one target
+            if target_velocity is not None:
+                target_velocity = {self.frames[0]: target_velocity}
         try:
-            targets = [task.target(target[task.frame]) for task in targeted]
+            targets = [task.target(target[task.key]) for task in targeted]
         except KeyError:
             targets = []
-        if len(targets) != len(targeted) or len(target) != len(targeted):
+        if len(targets) != len(targeted) or len(target) != len(self.frames):
             unknown = sorted(map(str, set(target) - set(self.frames)))
             missing = sorted(str(f) for f in set(self.frames) - set(target))
             raise ValueError(f"target must have exactly the frames {self.frames}; "
@@ -156,9 +157,9 @@ class TaskStack:
         if not (type(target_velocity) is dict or isinstance(target_velocity, Mapping)):
             raise ValueError(f"target_velocity must be a {{frame: velocity}} mapping over "
                              f"{self.frames}")
-        if len(target_velocity) == len(targeted):  # the usual case: a velocity for every frame
+        if len(target_velocity) == len(self.frames):  # the usual case: a velocity per frame
             try:
-                every = [task.velocity(target_velocity[task.frame]) for task in targeted]
+                every = [task.velocity(target_velocity[task.key]) for task in targeted]
             except KeyError:
                 every = []
             if every:
@@ -167,8 +168,8 @@ class TaskStack:
             unknown = sorted(map(str, set(target_velocity) - self._frame_set))
             raise ValueError(f"target_velocity has frames {unknown} that are not task frames "
                              f"{self.frames}")
-        velocities: list = [task.velocity(target_velocity[task.frame])
-                            if task.frame in target_velocity else None for task in targeted]
+        velocities: list = [task.velocity(target_velocity[task.key])
+                            if task.key in target_velocity else None for task in targeted]
         return targets, velocities + tail
 
     # -- rows --------------------------------------------------------------------------------
@@ -201,4 +202,4 @@ class TaskStack:
         ``{frame: pin.SE3}`` dict with several target-taking tasks."""
         if len(self.targeted) == 1:
             return self.task.placement
-        return {t.frame: t.placement for t in self.targeted}
+        return {t.key: t.placement for t in self.targeted}

@@ -95,6 +95,9 @@ def track(
         feedforward: pass the trajectory's velocity x_dot_d to the solver; False runs the
             feedback term K e alone (to show what the feed-forward buys).
 
+    A position-only ``Line`` or ``Circle`` (made without ``rotation=``) is tracked holding the
+    task frame's orientation at ``q0``.
+
     A diverging run (non-finite state, ``max_step`` or ``max_error`` exceeded) stops there with
     ``diverged=True`` and the reason, instead of raising.
     """
@@ -107,6 +110,9 @@ def track(
     max_step = positive(max_step, "max_step", "rad")
     max_error = positive(max_error, "max_error", "task units")
     q = solver.robot.check_q(q0, "q0").copy()
+    if trajectory.position_only:  # no rotation= given: hold the frame's start orientation
+        frame = solver.stack.task.frame_id
+        trajectory = trajectory.holding(solver.robot.fk(q, frame if frame >= 0 else None).rotation)
     dt = solver.dt
     times = trajectory.times(dt, duration)
     positions_d, rotations_d, velocities_d = trajectory.samples(times)

@@ -4,11 +4,20 @@
 ``pin.Motion`` with ``linear = p_dot_d`` (m/s) and ``angular = omega_d`` (rad/s), both in world
 axes at the desired origin. ``samples(times)`` returns the same for many times at once, as
 arrays. Before 0 and after ``duration`` a trajectory holds its end pose with zero velocity, so
-``track`` can keep commanding the final target.
+``track`` can keep commanding the final target. Times must be finite (``ValueError``
+otherwise: a NaN time would give a NaN pose).
+
+A ``Line`` or ``Circle`` made without ``rotation=`` is *position-only* (``position_only`` is
+True): it prescribes no orientation. ``track`` then holds the task frame's orientation at the
+start configuration (so a pose task keeps the tool as it was, and a position task is
+unaffected); ``sample`` and ``samples`` return the identity rotation, meaningful only with a
+position task, so give ``rotation=`` (or call :meth:`Trajectory.holding`) to step a pose task
+with it yourself.
 """
 
 from __future__ import annotations
 
+import copy
 from abc import ABC, abstractmethod
 
 import numpy as np
@@ -25,8 +34,23 @@ def _timing(name: str) -> str:
     return name
 
 
+def _finite_times(t) -> None:
+    """``ValueError`` unless every time in ``t`` is a finite number."""
+    if not np.all(np.isfinite(t)):
+        raise ValueError(f"t must be finite times in s, got {t!r}")
+
+
+def _rotation(rotation) -> np.ndarray | None:
+    """``rotation`` (3x3) as a rotation matrix (projected if within the tolerance), or None."""
+    if rotation is None:
+        return None
+    return as_pose(pin.SE3(np.asarray(rotation, dtype=float), np.zeros(3)),
+                   "rotation").rotation
+
+
 def _progress(t, duration: float, timing: str):
     """Path parameter s(t) in [0, 1] and its rate ds/dt (1/s); ``t`` a number or an array."""
+    _finite_times(t)
     tau = np.clip(np.asarray(t, dtype=float) / duration, 0.0, 1.0)
     inside = (np.asarray(t) >= 0.0) & (np.asarray(t) < duration)  # right-continuous rate
     if timing == "linear":
@@ -43,6 +67,20 @@ class Trajectory(ABC):
     """A desired pose x_d(t) for t in [0, duration] (s), with its velocity x_dot_d(t)."""
 
     duration: float
+    #: True when the trajectory prescribes a position only (no ``rotation=``): see the module
+    position_only: bool = False
+    #: the orientation held (3x3), for trajectories that hold one; None when position-only
+    rotation: np.ndarray | None = None
+
+    def holding(self, rotation) -> Trajectory:
+        """A copy that holds the orientation ``rotation`` (3x3) throughout (no longer
+        position-only); ``self`` if it prescribes an orientation of its own."""
+        if not self.position_only:
+            return self
+        held = copy.copy(self)
+        held.rotation = _rotation(rotation)
+        held.position_only = False
+        return held
 
     @abstractmethod
     def sample(self, t: float) -> tuple[pin.SE3, pin.Motion]:
@@ -52,6 +90,7 @@ class Trajectory(ABC):
         """Desired positions (N, 3) in m, rotations (N, 3, 3) and velocities (N, 6)
         [p_dot_d (m/s), omega_d (rad/s)] at ``times`` (N,) in s, as :meth:`sample` gives them."""
         times = np.asarray(times, dtype=float)
+        _finite_times(times)
         positions, rotations = np.empty((times.size, 3)), np.empty((times.size, 3, 3))
         velocities = np.empty((times.size, 6))
         for k, t in enumerate(times):
@@ -71,25 +110,35 @@ class Trajectory(ABC):
         return np.array([self.sample(t)[0].translation for t in self.times(dt)])
 
 
+_IDENTITY = np.eye(3)
+_IDENTITY.flags.writeable = False
+
+
+def _held(rotation: np.ndarray | None) -> np.ndarray:
+    """The rotation a trajectory samples: its own, or the identity when position-only."""
+    return _IDENTITY if rotation is None else rotation
+
+
 class Line(Trajectory):
     """Straight line from ``start`` to ``end`` (3-vectors, m) in ``duration`` s.
 
-    The orientation is held at ``rotation`` (3x3, default identity). ``timing`` is ``"linear"``
-    (constant speed, as in the paper's tasks) or ``"min_jerk"`` (rest to rest).
+    The orientation is held at ``rotation`` (3x3); without it the line is position-only (see
+    the module: ``track`` holds the start orientation). ``timing`` is ``"linear"`` (constant
+    speed, as in the paper's tasks) or ``"min_jerk"`` (rest to rest).
     """
 
     def __init__(self, start, end, duration: float, rotation=None, timing: str = "linear"):
         self.start = as_vector(start, "start", 3)
         self.end = as_vector(end, "end", 3)
         self.duration = positive(duration, "duration", "s")
-        self.rotation = np.eye(3) if rotation is None else as_pose(
-            pin.SE3(np.asarray(rotation, dtype=float), np.zeros(3)), "rotation").rotation
+        self.rotation = _rotation(rotation)
+        self.position_only = rotation is None
         self.timing = _timing(timing)
 
     def sample(self, t):
         s, ds = _progress(t, self.duration, self.timing)
         delta = self.end - self.start
-        return (pin.SE3(self.rotation, self.start + s * delta),
+        return (pin.SE3(_held(self.rotation), self.start + s * delta),
                 pin.Motion(ds * delta, np.zeros(3)))
 
     def samples(self, times):
@@ -97,8 +146,8 @@ class Line(Trajectory):
         delta = self.end - self.start
         velocities = np.zeros((s.size, 6))
         velocities[:, :3] = ds[:, None] * delta
-        return (self.start + s[:, None] * delta, np.broadcast_to(self.rotation, (s.size, 3, 3)),
-                velocities)
+        return (self.start + s[:, None] * delta,
+                np.broadcast_to(_held(self.rotation), (s.size, 3, 3)), velocities)
 
 
 class Circle(Trajectory):
@@ -106,7 +155,8 @@ class Circle(Trajectory):
 
     Starts at angle ``start_angle`` (rad, measured from the plane's first axis: world x for the
     default normal +z) and runs ``turns`` times counter-clockwise about ``normal`` at constant
-    speed over ``duration`` s, with the orientation held at ``rotation`` (default identity).
+    speed over ``duration`` s, with the orientation held at ``rotation`` (3x3; without it the
+    circle is position-only, see the module).
     """
 
     def __init__(self, center, radius: float, duration: float, normal=(0.0, 0.0, 1.0),
@@ -125,12 +175,12 @@ class Circle(Trajectory):
         self.normal = n
         self.start_angle = float(as_vector([start_angle], "start_angle", 1)[0])
         self.turns = float(as_vector([turns], "turns", 1)[0])
-        self.rotation = np.eye(3) if rotation is None else as_pose(
-            pin.SE3(np.asarray(rotation, dtype=float), np.zeros(3)), "rotation").rotation
+        self.rotation = _rotation(rotation)
+        self.position_only = rotation is None
 
     def sample(self, t):
         positions, _, velocities = self.samples(np.array([t], dtype=float))
-        return pin.SE3(self.rotation, positions[0]), pin.Motion(velocities[0])
+        return pin.SE3(_held(self.rotation), positions[0]), pin.Motion(velocities[0])
 
     def samples(self, times):
         s, ds = _progress(np.asarray(times, dtype=float), self.duration, "linear")
@@ -141,7 +191,7 @@ class Circle(Trajectory):
         velocities = np.zeros((s.size, 6))
         velocities[:, :3] = (self.radius * sweep * ds)[:, None] * tangent
         return (self.center + self.radius * radial,
-                np.broadcast_to(self.rotation, (s.size, 3, 3)), velocities)
+                np.broadcast_to(_held(self.rotation), (s.size, 3, 3)), velocities)
 
 
 class PoseInterpolation(Trajectory):

@@ -19,15 +19,26 @@ import math
 import os
 import sys
 import tempfile
+import threading
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
 import pinocchio as pin
 from lxml import etree
 
 from .exceptions import URDFError
+from .mimic import MimicJoint, apply_mimics, read_mimics
+from .planar import orient_planar_joints
+from .validation import name_list
 
+#: An ``<axis xyz>`` shorter than this (it is normalised) is refused: no CAD tool means a
+#: direction by a vector of norm 1e-9, and below ~1e-154 its norm cannot even be computed.
+AXIS_EPSILON = 1e-9
+#: The deepest tree accepted, in links from the root: Pinocchio's parser recurses once per link
+#: and overflows an 8 MB stack (a SIGSEGV, no message) between 3,750 and 3,800 (measured).
+MAX_DEPTH = 1000
 #: The joint types of the URDF specification.
 JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", "planar")
 #: Joint types whose ``<axis>`` matters (for ``planar`` it is the plane's normal).
@@ -125,11 +136,36 @@ def _preview(value: str | bytes, size: int = 60) -> str:
     return repr(value[:size]) + ("..." if len(value) > size else "")
 
 
+@dataclass
+class URDFContent:
+    """What :func:`check_urdf` found that Pinocchio's parser does not keep by itself."""
+
+    #: the ``<mimic>`` relations (:func:`sjt_pin.mimic.read_mimics`)
+    mimics: list[MimicJoint] = field(default_factory=list)
+    #: planar joint -> the unit normal of its plane (its ``<axis>``), where it is not +z
+    planar_normals: dict[str, np.ndarray] = field(default_factory=dict)
+
+
+def load_model(source: URDFSource, content: URDFContent | None = None
+               ) -> tuple[pin.Model, list[MimicJoint], pin.Model]:
+    """Pinocchio's model of ``source``, checked (:func:`check_urdf`, unless its ``content``
+    is given), with its planar joints in the planes of their axes (:mod:`sjt_pin.planar`) and
+    its mimic joints as Pinocchio mimic joints (:mod:`sjt_pin.mimic`); the mimic relations
+    applied; and the model before them (every joint a coordinate of its own)."""
+    if content is None:
+        content = check_urdf(source)
+    unmimicked = orient_planar_joints(build_model(source), content.planar_normals)
+    model, mimics = apply_mimics(unmimicked, content.mimics, source.error)
+    return model, mimics, unmimicked
+
+
 # -- the document ------------------------------------------------------------------------------
-def check_urdf(source: URDFSource) -> None:
+def check_urdf(source: URDFSource) -> URDFContent:
     """Raise :class:`URDFError` unless ``source`` is well-formed XML describing one tree of
-    named links joined by URDF joints, with finite origins and axes, nonzero axes and
-    ``lower <= upper`` limits."""
+    named links joined by URDF joints, at most :data:`MAX_DEPTH` links deep, with finite
+    origins and axes, axes of norm at least :data:`AXIS_EPSILON`, ``lower <= upper`` limits
+    and mimic relations Pinocchio can keep. Returns what Pinocchio's parser would drop: the
+    mimic relations and the planes of planar joints."""
     root = _parse(source)
     if _tag(root) != "robot":
         raise source.error(f"the root element is <{_tag(root)}>, not <robot>")
@@ -142,8 +178,9 @@ def check_urdf(source: URDFSource) -> None:
     for link in links:
         _check_link(link, source)
     parents: dict = {}  # child link -> its joint element
+    known_links = set(link_names)  # once: the checks stay linear in the URDF's size
     for joint in joints:
-        _check_joint(joint, set(link_names), source)
+        _check_joint(joint, known_links, source)
         child = _link_of(joint, "child")
         if child in parents:
             raise source.error(
@@ -152,6 +189,23 @@ def check_urdf(source: URDFSource) -> None:
                 f"{joint.get('name')!r} (from link {_link_of(joint, 'parent')!r})")
         parents[child] = joint
     _check_tree(link_names, parents, source)
+    _check_depth(link_names, parents, source)
+    content = URDFContent(read_mimics(joints, source.error))
+    for joint in joints:
+        if joint.get("type") == "planar":
+            axes = _children(joint, "axis")
+            xyz = _vector(axes[0], "xyz", "", source) if axes else None
+            normal = np.array((1.0, 0.0, 0.0) if xyz is None else xyz)  # the URDF default
+            normal /= np.linalg.norm(normal)
+            if not np.array_equal(normal, [0.0, 0.0, 1.0]):
+                content.planar_normals[joint.get("name")] = normal
+    return content
+
+
+def urdf_mimics(source: URDFSource) -> list[MimicJoint]:
+    """The mimic relations of ``source`` (checked as in :func:`check_urdf`), without checking
+    the rest of the document (a URDF that Pinocchio has already parsed)."""
+    return read_mimics(_children(_parse(source), "joint"), source.error)
 
 
 def _parse(source: URDFSource) -> etree._Element:
@@ -178,13 +232,15 @@ def _children(element: etree._Element, tag: str) -> list[etree._Element]:
 
 def _names(elements: list[etree._Element], kind: str, source: URDFSource) -> list[str]:
     """The ``name`` of each element; :class:`URDFError` if one is missing or repeated."""
-    names = []
+    names: list[str] = []
+    seen: set[str] = set()
     for element in elements:
         name = element.get("name")
         if not name:
             raise source.error(f"a <{kind}> without a name (line {element.sourceline})")
-        if name in names:
+        if name in seen:
             raise source.error(f"two {kind}s named {name!r} (line {element.sourceline})")
+        seen.add(name)
         names.append(name)
     return names
 
@@ -236,12 +292,20 @@ def _check_origin(origin: etree._Element, what: str, source: URDFSource) -> None
 
 
 def _check_axis(joint: etree._Element, what: str, source: URDFSource) -> None:
-    """A moving joint's ``<axis xyz>`` (default 1 0 0) is finite and not zero."""
+    """A moving joint's ``<axis xyz>`` (default 1 0 0) is finite and of norm at least
+    :data:`AXIS_EPSILON` (it can be normalised)."""
     for axis in _children(joint, "axis"):
         xyz = _vector(axis, "xyz", f"{what}: <axis>", source)
-        if xyz is not None and math.hypot(*xyz) == 0.0:
+        if xyz is None:
+            continue
+        norm = math.hypot(*xyz)
+        if norm == 0.0:
             raise source.error(f"{what}: <axis xyz={axis.get('xyz')!r}> is zero-length; a "
                                f"{joint.get('type')} joint needs a direction")
+        if norm < AXIS_EPSILON:
+            raise source.error(f"{what}: <axis xyz={axis.get('xyz')!r}> has norm {norm:.3g}, "
+                               f"below {AXIS_EPSILON:g}: too short to be normalised into a "
+                               "direction")
 
 
 def _check_limit(limit: etree._Element, kind: str, what: str, source: URDFSource) -> None:
@@ -293,9 +357,11 @@ def _check_tree(links: list[str], parents: dict[str, etree._Element],
     done: set[str] = set()
     for start in links:
         path: list[str] = []
+        on_path: set[str] = set()  # path as a set: the walk stays linear in the chain's length
         link: str | None = start
-        while link in parents and link not in done and link not in path:
+        while link in parents and link not in done and link not in on_path:
             path.append(link)
+            on_path.add(link)
             link = _link_of(parents[link], "parent")
         if link in path:
             cycle = (path[path.index(link):] + [link])[::-1]  # parent -> child order
@@ -305,8 +371,30 @@ def _check_tree(links: list[str], parents: dict[str, etree._Element],
         done.update(path)
     roots = [link for link in links if link not in parents]
     if len(roots) > 1:
-        raise source.error(f"several root links {roots} (links that are no joint's child); a "
-                           "URDF robot is one tree")
+        raise source.error(f"several root links {name_list(roots)} (links that are no joint's "
+                           "child); a URDF robot is one tree")
+
+
+def _check_depth(links: list[str], parents: dict[str, etree._Element],
+                 source: URDFSource) -> None:
+    """The tree is at most :data:`MAX_DEPTH` links deep (linear in its size: each link's depth
+    is computed once)."""
+    depth: dict[str, int] = {}
+    for start in links:
+        path: list[str] = []
+        link: str | None = start
+        while link is not None and link not in depth:
+            path.append(link)
+            joint = parents.get(link)
+            link = None if joint is None else _link_of(joint, "parent")
+        base = -1 if link is None else depth[link]
+        for k, name in enumerate(reversed(path)):
+            depth[name] = base + 1 + k
+            if depth[name] > MAX_DEPTH:
+                raise source.error(
+                    f"link {name!r} is {depth[name]} links below the root: deeper than "
+                    f"{MAX_DEPTH}, beyond which Pinocchio's recursive parser may overflow the "
+                    "stack and kill the interpreter")
 
 
 # -- Pinocchio ---------------------------------------------------------------------------------
@@ -330,13 +418,19 @@ def build_model(source: URDFSource) -> pin.Model:
     return model
 
 
+#: one capture of fd 2 at a time: two threads that swapped fd 2 in turn would each restore the
+#: other's temporary file, and the process would lose its stderr for good
+_FD2 = threading.Lock()
+
+
 @contextlib.contextmanager
 def captured_stderr() -> Iterator[io.StringIO]:
     """Redirect file descriptor 2, where C++ libraries print, into the yielded buffer (filled
-    on exit). Process-wide while it lasts: other threads' stderr lands there too."""
+    on exit). Process-wide while it lasts (other threads' stderr lands there too), and one
+    capture at a time (a module lock): fd 2 is always given back as it was."""
     printed = io.StringIO()
-    sys.stderr.flush()
-    with tempfile.TemporaryFile() as log:
+    with _FD2, tempfile.TemporaryFile() as log:
+        sys.stderr.flush()
         saved = os.dup(2)
         os.dup2(log.fileno(), 2)
         try:

@@ -2,7 +2,10 @@
 ``ValueError``/``TypeError`` that names the argument, what was expected and what came.
 
 Nothing is repaired silently: a complex number is not cast to its real part, a 4x4 matrix whose
-last row is not [0 0 0 1] is not a pose, a scaled rotation is not a rotation.
+last row is not [0 0 0 1] is not a pose, a scaled rotation is not a rotation. Two repairs are
+documented and bounded: a rotation within :data:`PROJECT_TOL` of orthonormal (float32 data) is
+projected to the nearest rotation, and a unit quaternion or (cos, sin) pair within
+:data:`UNIT_TOL` of unit norm is normalised.
 """
 
 from __future__ import annotations
@@ -14,8 +17,27 @@ import pinocchio as pin
 
 from .kernels import rotation_defect
 
-#: Largest |R^T R - I| accepted as a rotation (targets are often built in float32).
-RIGID_TOL = 1e-6
+#: Largest max|R^T R - I| of a rotation taken as it is (double-precision products of rotations).
+RIGID_TOL = 1e-9
+#: Largest max|R^T R - I| of a matrix taken as a rotation: between RIGID_TOL and this, it is
+#: replaced by the nearest rotation (SVD, the orthogonal Procrustes solution). float32 pipelines
+#: (cameras, ROS messages, learned policies) give 1e-7 to 1e-5; beyond 1e-4 it is refused.
+PROJECT_TOL = 1e-4
+#: Largest |norm - 1| of a unit quaternion (free flyer, spherical joint) or of a continuous or
+#: planar joint's (cos, sin) pair in a configuration: within it the block is normalised, beyond
+#: it the configuration is refused, naming the joint.
+UNIT_TOL = 1e-5
+#: Names shown in an error message before the list is cut ("... and N more").
+MAX_NAMES = 12
+
+
+def name_list(names, limit: int = MAX_NAMES) -> str:
+    """``names`` as a list for a message, cut after ``limit`` entries ("... and N more")."""
+    names = list(names)
+    if len(names) <= limit:
+        return repr(names)
+    shown = ", ".join(map(repr, names[:limit]))
+    return f"[{shown}, ... and {len(names) - limit} more]"
 
 
 def as_vector(value, name: str, size: int | None = None) -> np.ndarray:
@@ -36,15 +58,80 @@ def as_vector(value, name: str, size: int | None = None) -> np.ndarray:
     return arr
 
 
+def configuration(value, name: str, nq: int, nv: int) -> np.ndarray:
+    """``value`` as a finite float configuration vector of shape (nq,); a shape error names
+    nq (configuration coordinates) and nv (velocities: columns of the Jacobian)."""
+    try:
+        return as_vector(value, name, nq)
+    except ValueError as exc:
+        if not str(exc).startswith(f"{name} must have shape"):
+            raise
+        shape = str(exc).rsplit("got shape ", 1)[-1]
+        extra = (" (a continuous joint has 2 coordinates (cos, sin) and 1 velocity, a free "
+                 "flyer 7 and 6)" if nq != nv else "")
+        raise ValueError(f"{name} must have shape ({nq},): a configuration of this robot holds "
+                         f"nq = {nq} coordinates, a velocity nv = {nv}{extra}; got shape "
+                         f"{shape}") from None
+
+
+class UnitBlocks:
+    """The blocks of a configuration that must have unit norm: each free flyer's and spherical
+    joint's quaternion, each continuous and planar joint's (cos, sin) pair.
+
+    ``blocks`` holds ``(joint name, kind, first index, size)`` per block.
+    """
+
+    def __init__(self, blocks: list[tuple[str, str, int, int]]):
+        self.blocks = blocks
+        self.index = np.array([i for _, _, first, size in blocks
+                               for i in range(first, first + size)], dtype=np.intp)
+        self.starts = np.cumsum([0] + [size for *_, size in blocks[:-1]], dtype=np.intp)
+        self.sizes = np.array([size for *_, size in blocks], dtype=float)
+
+    def __bool__(self) -> bool:
+        return bool(self.blocks)
+
+    def check(self, q: np.ndarray, name: str) -> np.ndarray:
+        """``q`` with each block normalised if its norm is within :data:`UNIT_TOL` of 1 (a new
+        array if one changes); ``ValueError`` naming the first joint beyond it."""
+        if not self.blocks:
+            return q
+        values = q[self.index]
+        norms = np.sqrt(np.add.reduceat(values * values, self.starts))
+        defect = np.abs(norms - 1.0)
+        if not np.all(defect <= UNIT_TOL):
+            k = int(np.argmax(~(defect <= UNIT_TOL)))
+            joint, kind, first, size = self.blocks[k]
+            raise ValueError(
+                f"{name}[{first}:{first + size}] = {np.round(q[first:first + size], 6).tolist()} "
+                f"is the {kind} of joint {joint!r}: it must have unit norm (within "
+                f"{UNIT_TOL:g}), its norm is {norms[k]:.6g}")
+        if np.all(defect <= 1e-14):
+            return q
+        q = q.copy()
+        q[self.index] = values / np.repeat(norms, self.sizes.astype(np.intp))
+        return q
+
+
 def check_rigid(pose: pin.SE3, name: str = "target") -> pin.SE3:
-    """``pose`` unchanged if its rotation is a rotation and every entry is finite."""
+    """``pose`` unchanged if its rotation is a rotation (within :data:`RIGID_TOL`) and every
+    entry is finite; a copy with the nearest rotation if it is within :data:`PROJECT_TOL`."""
     homogeneous = pose.np
     defect = rotation_defect(homogeneous)
     if not defect <= RIGID_TOL:
-        _raise_not_rigid(homogeneous, defect, name)
+        if not defect <= PROJECT_TOL:
+            _raise_not_rigid(homogeneous, defect, name)
+        pose = pin.SE3(nearest_rotation(pose.rotation), pose.translation.copy())
     if not math.isfinite(float(np.abs(pose.translation).sum())):
         raise ValueError(f"{name} contains NaN or inf: translation {pose.translation}")
     return pose
+
+
+def nearest_rotation(R: np.ndarray) -> np.ndarray:
+    """The rotation closest to ``R`` in the Frobenius norm: ``U V^T`` of ``R = U S V^T``
+    (``R`` is near a rotation here, so ``det(U V^T) = +1``)."""
+    U, _, Vt = np.linalg.svd(np.asarray(R, dtype=float))
+    return U @ Vt
 
 
 def _raise_not_rigid(homogeneous: np.ndarray, defect: float, name: str) -> None:
@@ -58,7 +145,8 @@ def _raise_not_rigid(homogeneous: np.ndarray, defect: float, name: str) -> None:
         raise ValueError(f"{name} rotation is not a rotation matrix (det = "
                          f"{np.linalg.det(R):.3g}, a reflection or degenerate)")
     raise ValueError(f"{name} rotation is not a rotation matrix: |R^T R - I| = {defect:.3g} "
-                     f"(above {RIGID_TOL:g}; a scaled or sheared matrix)")
+                     f"(above {PROJECT_TOL:g}, the most that is projected to the nearest "
+                     "rotation; a scaled or sheared matrix)")
 
 
 def as_pose(value, name: str = "target") -> pin.SE3:
@@ -72,14 +160,20 @@ def as_pose(value, name: str = "target") -> pin.SE3:
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{name} must be a pin.SE3 or a 4x4 matrix, got {value!r}") from exc
     if homogeneous.shape != (4, 4):
-        raise ValueError(f"{name} must be a pin.SE3 or a 4x4 matrix, got shape {homogeneous.shape}")
+        hint = (" (a position alone? a PositionTask takes a 3-vector in m)"
+                if homogeneous.shape == (3,) else "")
+        raise ValueError(f"{name} must be a pin.SE3 or a 4x4 matrix, got shape "
+                         f"{homogeneous.shape}{hint}")
     homogeneous = np.ascontiguousarray(homogeneous)
     defect = rotation_defect(homogeneous)
-    if not defect <= RIGID_TOL:
+    if not defect <= PROJECT_TOL:
         _raise_not_rigid(homogeneous, defect, name)
     if not np.all(np.isfinite(homogeneous)):
         raise ValueError(f"{name} contains NaN or inf:\n{homogeneous}")
-    return pin.SE3(homogeneous[:3, :3].copy(), homogeneous[:3, 3].copy())
+    rotation = homogeneous[:3, :3].copy()
+    if not defect <= RIGID_TOL:
+        rotation = nearest_rotation(rotation)
+    return pin.SE3(rotation, homogeneous[:3, 3].copy())
 
 
 def as_motion(value, name: str = "target_velocity") -> np.ndarray:

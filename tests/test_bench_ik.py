@@ -83,3 +83,14 @@ def test_solve_many_throughput_row():
     assert row.dask > 0 and row.dask_ratio == row.dask / row.parallel
     line = ik.many_line(row)
     assert "in the pool of 2" in line and "on Dask" in line and line.endswith("yes")
+
+
+@pytest.mark.bench  # needs roboticstoolbox-python, from the bench extra: pytest -m bench
+def test_rtb_solves_a_sub_chain_of_a_larger_robot():
+    """Baxter's right arm is joints 1..7 of a 19-joint robot: robotics-toolbox's runner numbers
+    the chain's joints as its own (it solved 0 % when it kept the robot's numbering)."""
+    robot = sjt.Robot.from_example("baxter", ee_frame=ik.EE_FRAMES["baxter"])
+    run = ik._rtb(robot)
+    pairs = ik.problems(robot, 20)
+    solved = sum(ik.solved(robot, run(target, seed).q, target) for target, seed in pairs)
+    assert solved >= 19

@@ -28,7 +28,8 @@ def no_new_files(folder: Path):
     """Raise AssertionError if a file appears in ``folder`` meanwhile (e.g. ./demo.html)."""
     before = set(os.listdir(folder))
     yield
-    assert set(os.listdir(folder)) - before == set(), f"new files in {folder}"
+    new = {f for f in set(os.listdir(folder)) - before if not f.startswith(".coverage")}
+    assert new == set(), f"new files in {folder}"  # (coverage's data of the tests is not ours)
 
 
 @pytest.fixture(autouse=True)
@@ -148,3 +149,95 @@ def test_unknown_robot_is_refused():
 def test_the_working_folder_guard_catches_a_stray_file(tmp_path):
     with pytest.raises(AssertionError, match="new files"), no_new_files(tmp_path):
         (tmp_path / "demo.html").write_text("stray")
+
+
+def bad_arguments(tmp: Path) -> dict[str, list[str]]:
+    """Command lines with one bad argument each, and (key) what is wrong."""
+    (tmp / "a_file").write_text("")
+    (tmp / "a_folder").mkdir()
+    file, folder = str(tmp / "a_file"), str(tmp / "a_folder")
+    return {
+        "demo --out ''": ["demo", *FAST, "--out", ""],
+        "demo --out a folder": ["demo", *FAST, "--out", folder],
+        "demo --out under a file": ["demo", *FAST, "--out", file + "/page.html"],
+        "demo --out unwritable": ["demo", *FAST, "--out", "/proc/page.html"],
+        "demo --keep -1": ["demo", *FAST, "--keep", "-1"],
+        "demo --keep nan": ["demo", *FAST, "--keep", "nan"],
+        "bench speed --steps 0": ["bench", "speed", "--steps", "0"],
+        "bench speed --steps x": ["bench", "speed", "--steps", "x"],
+        "bench ik --poses 0": ["bench", "ik", "--poses", "0"],
+        "bench --json missing folder": ["bench", "ik", "--json", str(tmp / "no" / "r.json")],
+        "bench --json a folder": ["bench", "ik", "--json", folder],
+        "bench --json ''": ["bench", "ik", "--json", ""],
+        "bench --json unwritable": ["bench", "ik", "--json", "/proc/r.json"],
+        "reproduce --grid 0": ["reproduce", "--grid", "0"],
+        "reproduce --grid 1": ["reproduce", "--grid", "1"],
+        "reproduce --processes 0": ["reproduce", "--processes", "0"],
+        "reproduce --out a file": ["reproduce", "--out", file],
+        "reproduce --out ''": ["reproduce", "--out", ""],
+        "reproduce --out unwritable": ["reproduce", "--out", "/proc/results"],
+        "no command": [],
+    }
+
+
+@pytest.mark.parametrize("case", [
+    "demo --out ''", "demo --out a folder", "demo --out under a file", "demo --out unwritable",
+    "demo --keep -1", "demo --keep nan", "bench speed --steps 0", "bench speed --steps x",
+    "bench ik --poses 0", "bench --json missing folder", "bench --json a folder",
+    "bench --json ''", "bench --json unwritable", "reproduce --grid 0", "reproduce --grid 1",
+    "reproduce --processes 0", "reproduce --out a file", "reproduce --out ''",
+    "reproduce --out unwritable", "no command"])
+def test_a_bad_argument_is_one_line_and_exit_code_2_before_any_work(case, tmp_path, capsys):
+    argv = bad_arguments(tmp_path)[case]
+    before = sorted(p.name for p in tmp_path.iterdir())
+    with pytest.raises(SystemExit) as exit_:
+        main(argv)
+    assert exit_.value.code == 2
+    out, err = capsys.readouterr()
+    assert out == ""  # nothing ran: the demo and the benchmarks print as they start
+    assert len(err.strip().splitlines()) == 1 and ": error: " in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == before  # and nothing was written
+
+
+def test_a_bad_argument_gives_no_traceback_from_the_command_line(tmp_path):
+    here = str(Path(sjt_pin.__file__).parents[1])
+    run = subprocess.run([sys.executable, "-m", "sjt_pin.cli", "bench", "ik", "--json",
+                          str(tmp_path / "missing" / "r.json")], capture_output=True, text=True,
+                         cwd=tmp_path, env={**os.environ, "PYTHONPATH": here}, timeout=120)
+    assert run.returncode == 2 and run.stdout == ""
+    assert run.stderr == (f"sjt-pin bench: error: argument --json: the folder of "
+                          f"'{tmp_path / 'missing' / 'r.json'}' does not exist "
+                          "(see sjt-pin bench --help)\n")
+
+
+def test_good_output_paths_pass_and_leave_nothing_behind(tmp_path):
+    parser = build_parser()
+    args = parser.parse_args(["demo", "--out", str(tmp_path / "new" / "deeper" / "d.html")])
+    assert args.out == tmp_path / "new" / "deeper" / "d.html"
+    args = parser.parse_args(["reproduce", "--out", str(tmp_path / "results"), "--grid", "2"])
+    assert args.out == tmp_path / "results" and args.grid == 2
+    args = parser.parse_args(["bench", "speed", "--json", str(tmp_path / "r.json")])
+    assert args.json == tmp_path / "r.json"
+    assert list(tmp_path.iterdir()) == []  # checked by writing, but nothing is left
+
+
+def test_help_has_no_rest_markup_and_every_command_a_description(capsys):
+    parser = build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    for argv in ([], *([name] for name in sub.choices)):
+        with pytest.raises(SystemExit):
+            parser.parse_args([*argv, "--help"])
+        text = capsys.readouterr().out
+        assert "``" not in text and ":func:" not in text, argv
+    for name, command in sub.choices.items():
+        assert command.description, name
+
+
+def test_robots_lists_every_name_from_example_takes(capsys):
+    from example_robot_data.robots_loader import ROBOTS
+
+    assert main(["robots"]) == 0
+    out = capsys.readouterr().out
+    listed = out.split(":", 1)[1].split()
+    assert sorted(listed) == sorted(ROBOTS) and "ur5" in listed and "panda" in listed
+    assert f"{len(ROBOTS)} robots" in out

@@ -66,6 +66,7 @@ def _pair_distance(limit, k, q):
         poses.append((obj.geometry, coal.Transform3s(M.rotation, M.translation)))
     req, res = coal.DistanceRequest(), coal.DistanceResult()
     req.enable_signed_distance = True
+    req.gjk_tolerance = req.epa_tolerance = 1e-9
     coal.distance(poses[0][0], poses[0][1], poses[1][0], poses[1][1], req, res)
     return res.min_distance
 
@@ -96,13 +97,14 @@ def test_rows_match_finite_differences_of_the_distance(name, panda, ur5):
     obstacle_rows = [i for i, k in enumerate(limit.active) if "obstacle" in limit.pair_names[k][1]]
     assert len(obstacle_rows) >= 2, limit.pair_names  # the scene is near the arm
     rng = np.random.default_rng(1)
-    h = 1e-6
+    h = 1e-5
     for _ in range(3):
         v = rng.normal(size=robot.model.nv)
         for i, k in enumerate(limit.active):
             d = _pair_distance(limit, k, q)
             assert d < limit.influence
-            assert b[i] == pytest.approx(limit.gain * (d - limit.margin) / dt, rel=1e-9)
+            # the distance of the row (GJK on convex hulls: to its tolerance, about 1e-9 m)
+            assert b[i] * dt / limit.gain + limit.margin == pytest.approx(d, abs=1e-8)
             fd = (_pair_distance(limit, k, pin.integrate(robot.model, q, h * v))
                   - _pair_distance(limit, k, pin.integrate(robot.model, q, -h * v))) / (2 * h)
             # the row is -d_dot: A q_dot <= b is d_dot >= -gain (d - margin) / dt
@@ -142,7 +144,7 @@ def test_no_rows_when_nothing_is_within_influence(panda):
 def test_distances_match_coal_independently(panda):
     q = panda.q0.copy()
     obstacles = _near_obstacles(panda, q)
-    limit = CollisionLimit(panda, obstacles, self_collision=True)
+    limit = CollisionLimit(panda, obstacles, self_collision=True, convex=False)
     reference = _independent_distances(panda, obstacles, q)
     report = limit.distances(q)
     assert len(report) == len(limit.pairs)
@@ -150,6 +152,12 @@ def test_distances_match_coal_independently(panda):
     for x in report:
         assert x.distance == pytest.approx(reference[(x.a, x.b)], abs=1e-9)
     assert report[0].link_b == "world" and report[0].distance < 0.05
+    # convex hulls (the default) contain the meshes: never farther, and close on Panda
+    hulls = {(x.a, x.b): x.distance for x in
+             CollisionLimit(panda, obstacles, self_collision=True).distances(q)}
+    assert hulls.keys() == {(x.a, x.b) for x in report}
+    gaps = [reference[pair] - d for pair, d in hulls.items()]
+    assert min(gaps) > -1e-6 and max(gaps) < 0.04
 
 
 def test_move_between_calls(panda):
@@ -246,10 +254,9 @@ def test_broad_phase_never_drops_a_pair_within_influence(name, panda, ur5):
     kin = Kinematics(robot.model)
     checked = 0
     for _ in range(20):
-        q = pin.randomConfiguration(robot.model)
+        q = robot.random_configuration(rng)  # seeded: Pinocchio's own generator is global
         kin.update(q)
-        limit._update(robot.model, kin.data)
-        candidates = set(limit._candidates().tolist())
+        candidates = set(limit._candidates(kin.data).tolist())
         reference = _independent_distances(robot, obstacles, q)
         for k, pair in enumerate(limit.pair_names):
             if reference[pair] < limit.influence:
@@ -261,17 +268,28 @@ def test_broad_phase_never_drops_a_pair_within_influence(name, panda, ur5):
 # -- closed loop --------------------------------------------------------------------------
 
 
+class Independent:
+    """The least distance between the robot's collision geometry (its meshes) and one
+    obstacle, computed with coal on a geometry model of its own (not the limit's numbers)."""
+
+    def __init__(self, robot, shape, pose):
+        self.robot = robot
+        self.model = robot.collision_model.copy()
+        self.model.removeAllCollisionPairs()
+        obstacle = self.model.addGeometryObject(pin.GeometryObject("obstacle", 0, 0, pose, shape))
+        for g in range(obstacle):
+            if self.model.geometryObjects[g].parentJoint != 0:  # links fixed to the world: not
+                self.model.addCollisionPair(pin.CollisionPair(g, obstacle))  # checked
+        self.geometry_data = self.model.createData()
+        self.data = robot.model.createData()
+
+    def __call__(self, q) -> float:
+        pin.computeDistances(self.robot.model, self.data, self.model, self.geometry_data, q)
+        return min(r.min_distance for r in self.geometry_data.distanceResults)
+
+
 def independent_distance(robot, q, shape, pose) -> float:
-    """The least distance between the robot's collision geometry and one obstacle, computed
-    with coal on a geometry model of its own (not the limit's numbers)."""
-    model = robot.collision_model.copy()
-    model.removeAllCollisionPairs()
-    obstacle = model.addGeometryObject(pin.GeometryObject("obstacle", 0, 0, pose, shape))
-    for g in range(obstacle):
-        model.addCollisionPair(pin.CollisionPair(g, obstacle))
-    data = model.createData()
-    pin.computeDistances(robot.model, robot.model.createData(), model, data, q)
-    return min(r.min_distance for r in data.distanceResults)
+    return Independent(robot, shape, pose)(q)
 
 
 def test_a_line_past_a_sphere_keeps_the_margin_and_recovers(panda):
@@ -287,8 +305,222 @@ def test_a_line_past_a_sphere_keeps_the_margin_and_recovers(panda):
     solver = sjt.SJTSolver(panda, limits=[limit])
     line = sjt.PoseInterpolation(start, end, duration=2.0)
     log = sjt.track(solver, line, q0, duration=3.5)  # 1.5 s holding the end
-    closest = min(independent_distance(panda, q, sphere, pose) for q in log.q[::10])
+    distance = Independent(panda, sphere, pose)
+    closest = min(distance(q) for q in log.q)
     free = sjt.track(sjt.SJTSolver(panda), line, q0)
-    assert min(independent_distance(panda, q, sphere, pose) for q in free.q[::10]) < 0
+    assert min(distance(q) for q in free.q[::10]) < 0
     assert closest >= margin - 1e-3
     assert log.error_norm[-1] < 1e-3  # the end is reachable without touching: reached
+
+
+# -- solve() ------------------------------------------------------------------------------
+def test_solve_returns_a_collision_free_configuration_or_says_it_found_none(panda):
+    """A sphere where the elbow of the unconstrained solution lies: with the limit, solve()
+    finds another configuration that keeps the margin (checked independently); with the
+    target inside a sphere, it reports no success."""
+    q0 = panda.q0.copy()
+    start = panda.fk(q0)
+    target = pin.SE3(start.rotation, start.translation + [0.0, 0.3, -0.1])
+    free = sjt.SJTSolver(panda).solve(target, q0, timeout=None)
+    assert free.success
+    data = panda.model.createData()
+    pin.framesForwardKinematics(panda.model, data, free.q)
+    sphere = coal.Sphere(0.05)
+    pose = pin.SE3(np.eye(3), data.oMi[5].translation + [-0.083, 0.067, 0.057])
+    assert independent_distance(panda, free.q, sphere, pose) < -0.04  # it would collide
+    assert independent_distance(panda, q0, sphere, pose) > 0.1
+    margin = 0.01
+    limit = sjt.CollisionLimit(panda, [(sphere, pose)], margin=margin)
+    found = sjt.SJTSolver(panda, limits=[limit]).solve(target, q0, timeout=None)
+    assert found.success and found.error < 1e-6
+    assert independent_distance(panda, found.q, sphere, pose) >= margin - 1e-6
+    # no configuration reaches a target inside an obstacle: no success
+    ball = (coal.Sphere(0.05), pin.SE3(np.eye(3), target.translation))
+    inside = sjt.CollisionLimit(panda, [ball], margin=margin)
+    none = sjt.SJTSolver(panda, limits=[inside]).solve(target, q0, timeout=None, budget=400)
+    assert not none.success and none.error > 0.04
+
+
+# -- random scenes ------------------------------------------------------------------------
+def _random_scene(robot, rng):
+    """A start within the joint limits (away from them), a reachable end (a joint-space step
+    of up to 0.6 rad per joint), and one obstacle of a random kind 4-12 cm from the hand's
+    free straight path, not touching the robot at the start."""
+    model = robot.model
+    lower, upper = model.lowerPositionLimit, model.upperPositionLimit
+    middle, half = (lower + upper) / 2, np.minimum((upper - lower) / 2, np.pi)
+    q_start = middle + rng.uniform(-0.6, 0.6, model.nq) * half
+    q_end = np.clip(q_start + rng.uniform(-0.6, 0.6, model.nq), lower, upper)
+    start, end = robot.fk(q_start), robot.fk(q_end)
+    kinds = [coal.Sphere(rng.uniform(0.03, 0.06)), coal.Box(*rng.uniform(0.04, 0.12, 3)),
+             coal.Capsule(rng.uniform(0.02, 0.04), rng.uniform(0.05, 0.15)),
+             coal.Cylinder(rng.uniform(0.02, 0.05), rng.uniform(0.05, 0.15))]
+    shape = kinds[rng.integers(len(kinds))]
+    along = start.translation + rng.uniform(0.3, 0.7) * (end.translation - start.translation)
+    side = rng.normal(size=3)
+    where = along + rng.uniform(0.04, 0.12) * side / np.linalg.norm(side)
+    pose = pin.SE3(pin.exp3(rng.normal(size=3)), where)
+    return q_start, start, end, (shape, pose)
+
+
+@pytest.mark.parametrize("name", ["panda", "ur5"])
+def test_random_scenes_keep_the_margin(name, panda, ur5):
+    """Random obstacles near random reachable paths: along the whole run no geometry of the
+    robot comes closer than margin - 1 mm, checked with coal on a model of the test's own."""
+    from hypothesis import assume, given, settings
+    from hypothesis import strategies as st
+
+    robot = {"panda": panda, "ur5": ur5}[name]
+    margin = 0.01
+    checked = []
+
+    @settings(max_examples=8, deadline=None)
+    @given(seed=st.integers(0, 2**32 - 1), method=st.sampled_from(["sjt", "dls"]))
+    def run(seed, method):
+        q, start, end, (shape, pose) = _random_scene(robot, np.random.default_rng(seed))
+        assume(independent_distance(robot, q, shape, pose) > margin + 0.005)
+        limit = sjt.CollisionLimit(robot, [(shape, pose)], margin=margin)
+        solver = sjt.make_solver(method, robot, limits=[limit])
+        line = sjt.PoseInterpolation(start, end, duration=1.0)
+        log = sjt.track(solver, line, q, duration=1.3)
+        assert not log.diverged
+        distance = Independent(robot, shape, pose)
+        closest = min(distance(x) for x in log.q)
+        assert closest >= margin - 1e-3, (seed, method, closest)
+        checked.append(closest)
+
+    run()
+    assert len(checked) >= 5
+    assert min(checked) < margin + 0.01  # some scenes bring the obstacle to the margin
+
+
+# -- the viewer ---------------------------------------------------------------------------
+def _cube_mesh():
+    """A 6 cm cube as a coal mesh (BVHModel) of 12 triangles."""
+    corners = np.array([[x, y, z] for x in (-0.03, 0.03) for y in (-0.03, 0.03)
+                        for z in (-0.03, 0.03)])
+    faces = [(0, 1, 3), (0, 3, 2), (4, 6, 7), (4, 7, 5), (0, 4, 5), (0, 5, 1), (2, 3, 7),
+             (2, 7, 6), (0, 2, 6), (0, 6, 4), (1, 5, 7), (1, 7, 3)]
+    mesh = coal.BVHModelOBBRSS()
+    mesh.beginModel(len(faces), len(corners))
+    for a, b, c in faces:
+        mesh.addTriangle(corners[a], corners[b], corners[c])
+    mesh.endModel()
+    return mesh
+
+
+def test_obstacle_meshes_cover_every_shape_kind():
+    from sjt_pin.viewer.obstacles import obstacle_mesh
+
+    hull = _cube_mesh()
+    hull.buildConvexHull(True, "Qt")
+    shapes = {"sphere": coal.Sphere(0.05), "box": coal.Box(0.1, 0.2, 0.3),
+              "capsule": coal.Capsule(0.03, 0.2), "cylinder": coal.Cylinder(0.04, 0.1),
+              "convex": hull.convex, "mesh": _cube_mesh()}
+    extent = {"sphere": [0.05] * 3, "box": [0.05, 0.1, 0.15], "capsule": [0.03, 0.03, 0.13],
+              "cylinder": [0.04, 0.04, 0.05], "convex": [0.03] * 3, "mesh": [0.03] * 3}
+    for name, shape in shapes.items():
+        vertices, faces = obstacle_mesh(shape)
+        assert faces.ndim == 2 and faces.shape[1] == 3 and faces.max() < len(vertices), name
+        # the drawing spans the shape: its bounding box is the shape's (tessellation: 2 %)
+        np.testing.assert_allclose(np.abs(vertices).max(axis=0), extent[name], rtol=0.02,
+                                   err_msg=name)
+    with pytest.raises(ValueError, match="shape: cannot draw a Halfspace"):
+        obstacle_mesh(coal.Halfspace(np.array([0.0, 0.0, 1.0]), 0.0))
+
+
+def test_obstacle_page_draws_obstacles_and_closest_point_segments(panda, tmp_path):
+    """The page of a Panda passing a ball: in headless Chromium the obstacles are drawn (hiding
+    them changes the picture), the closest-point segments show while the pair is within
+    influence, and the side panel plots the closest distance beside the error."""
+    from sjt_pin.viewer import Viewer
+    from sjt_pin.viewer.obstacles import OBSTACLE_COLOR, SEGMENT_COLOR
+
+    from .browser import Chromium, changed_fraction, color_pixels, require_chromium
+
+    require_chromium()
+    q0 = panda.q0.copy()
+    start = panda.fk(q0)
+    ball = (coal.Sphere(0.04), pin.SE3(np.eye(3), start.translation + [0.0, 0.2, -0.07]))
+    box = (_cube_mesh(), pin.SE3(np.eye(3), start.translation + [0.25, -0.3, 0.0]))
+    limit = sjt.CollisionLimit(panda, [ball, box], margin=0.01)
+    line = sjt.PoseInterpolation(start, pin.SE3(start.rotation, start.translation
+                                                + [0.0, 0.4, 0.0]), duration=1.5)
+    log = sjt.track(sjt.SJTSolver(panda, limits=[limit]), line, q0, duration=2.0)
+    viewer = Viewer(panda, live=False, name="panda")
+    for i, (shape, pose) in enumerate([ball, box]):
+        viewer.add_obstacle(shape, pose, f"obstacle_{i}")
+    viewer.animate(log, collision=limit, label="sjt")
+    page_path = viewer.save_html(tmp_path / "obstacle.html", "obstacles")
+    active = [i for i, q in enumerate(log.q[::33]) if limit.closest_points(q)]
+    assert active  # the ball comes within influence during the run
+    chromium = Chromium()
+    try:
+        page = chromium.open(page_path.as_uri(), meshes=10, width=1100, height=700)
+        assert page.errors == []
+        assert all(u.startswith(("file:", "data:")) for u in page.requests), page.requests
+        t = (active[len(active) // 2] * 33) * 1e-3  # the ball is near the hand
+        shown = page.screenshot(time=t)
+        assert color_pixels(shown, OBSTACLE_COLOR, tol=60) > 50
+        page.evaluate("""() => { viewer.scene_tree.find(["meshcat", "panda", "obstacles"])
+                                     .object.visible = false; viewer.render(); }""")
+        hidden = page.image(page.page.locator("canvas").first)
+        assert changed_fraction(shown, hidden) > 0.002
+        assert color_pixels(hidden, OBSTACLE_COLOR, tol=60) < color_pixels(
+            shown, OBSTACLE_COLOR, tol=60) / 5
+        segment = page.evaluate("""(t) => {
+            const node = viewer.scene_tree.find(["meshcat", "panda", "runs", "sjt", "segments",
+                                                 "0"]).object;
+            return [node.visible, node.scale.y]; }""", t)
+        assert segment[0] and 0.005 < segment[1] < limit.influence + 1e-3, segment
+        assert color_pixels(shown, SEGMENT_COLOR, tol=50) > 5
+        labels = page.page.locator("svg.error-plot").all_text_contents()
+        assert len(labels) == 2 and "closest distance (m)" in labels[1]
+    finally:
+        chromium.close()
+
+
+def test_demo_collision_scene_keeps_the_margin_and_plots_the_distance():
+    from sjt_pin.viewer.demo import OBSTACLE_LABEL, demo_viewer, obstacle_scene
+
+    scene = obstacle_scene(1e-3)
+    (shape, pose), = scene.obstacles
+    distance = Independent(scene.robot, shape, pose)
+    log = scene.logs["sjt"]
+    assert min(distance(q) for q in log.q) >= scene.limit.margin - 1e-3
+    assert log.error_norm[-1] < 1e-3
+    page = demo_viewer({}, obstacle=scene).static_html("demo")
+    assert OBSTACLE_LABEL in page and "closest distance (m)" in page
+
+
+# -- sjt-pin bench collision --------------------------------------------------------------
+def test_bench_collision_meets_the_targets():
+    """The bench's scenes for SJT and DLS: without the limit each scene collides; with it no
+    pair comes within margin - 1 mm (checked on the meshes, independently), the task recovers
+    within 2 s of the target stopping where the way clears, and the arm rests at the target
+    inside the table."""
+    from sjt_pin.bench import collision as bench
+
+    rows = bench.collision(methods=("sjt", "dls"), peers=False)
+    assert len(rows) == 3 * 2 * 2
+    for row in rows:
+        if not row.limit:
+            assert row.min_distance < bench.MARGIN - 1e-3, row  # the scene needs the limit
+            continue
+        assert row.min_distance >= bench.MARGIN - 1e-3, row
+        assert row.floor_us > 0 and row.rows_us > 0 and row.us_per_step > 0
+        if row.scene.startswith("UR5"):
+            assert row.final_error > 0.05 and row.rest < 1e-3, row  # blocked: at rest
+        else:
+            assert row.final_error < 1e-3, row
+    table = bench.collision_table(rows)
+    assert table.count("\n") == len(rows) + 1
+
+
+@pytest.mark.bench
+def test_bench_collision_runs_pink_on_the_same_scenes():
+    from sjt_pin.bench import collision as bench
+
+    rows = [r for r in bench.collision(methods=(), peers=True) if r.method == "pink"]
+    assert len(rows) == 3 * 2
+    assert all(np.isfinite(r.min_distance) and r.us_per_step > 0 for r in rows)

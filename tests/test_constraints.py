@@ -208,7 +208,7 @@ def test_franka_conditions_acceleration_and_jerk_limits_hold_on_the_stream(panda
     rng = np.random.default_rng(11)
     q = panda.q0.copy()
     qs = [q]
-    near = panda.q0 + np.r_[rng.uniform(-0.3, 0.3, 7), 0, 0]
+    near = panda.q0 + np.r_[rng.uniform(-0.3, 0.3, 7), 0]  # the fingers: one coordinate
     targets = [panda.fk(panda.random_configuration(rng)),
                pin.SE3(np.eye(3), np.array([1.5, 0.3, 0.9])),  # out of reach
                panda.fk(np.clip(near, panda.lower_limits, panda.upper_limits))]

@@ -55,3 +55,42 @@ def test_a_copy_made_mid_escape_escapes_alike():
     for _ in range(300):
         a, b = solver.step(a, target), twin.step(b, target)
     np.testing.assert_array_equal(a, b)
+
+
+def test_a_second_thread_stepping_a_busy_solver_is_told(ur5):
+    """While one thread's step runs (held inside a limit of the constraint stage), another
+    thread's step of the same solver raises ConcurrentStepError instead of sharing its
+    buffers; the first step completes as if alone, and the solver steps on afterwards."""
+    import threading
+
+    from sjt_pin.limits import Limit
+
+    entered, release = threading.Event(), threading.Event()
+
+    class Held(Limit):
+        name = "held"
+        hold = True
+
+        def bounds(self, kinematics, motion):
+            if self.hold:
+                entered.set()
+                release.wait(10)
+            n = kinematics.model.nv
+            return np.full(n, -np.inf), np.full(n, np.inf)
+
+    limit = Held()
+    solver = sjt.SJTSolver(ur5, dt=1e-3, limits=[limit])
+    alone = sjt.SJTSolver(ur5, dt=1e-3)
+    q0 = np.array([0.3, -1.2, 1.5, -1.8, -1.5, 0.2])
+    target = ur5.fk(q0) * pin.SE3(np.eye(3), np.array([0.0, 0.0, 0.05]))
+    out = {}
+    first = threading.Thread(target=lambda: out.setdefault("q", solver.step(q0, target)))
+    first.start()
+    assert entered.wait(10)
+    with pytest.raises(sjt.ConcurrentStepError, match="another thread"):
+        solver.step(q0, target)
+    release.set()
+    first.join(10)
+    np.testing.assert_array_equal(out["q"], alone.step(q0, target))
+    limit.hold = False
+    np.testing.assert_array_equal(solver.step(out["q"], target), alone.step(out["q"], target))

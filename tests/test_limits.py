@@ -29,7 +29,8 @@ def test_random_targets_never_violate_panda_limits(panda, method, rng):
 def test_reachable_targets_still_converge_within_limits(panda, rng):
     solver = sjt.SJTSolver(panda, dt=0.01)
     for _ in range(3):
-        goal = np.clip(panda.q0 + rng.uniform(-0.3, 0.3, 9), panda.lower_limits, panda.upper_limits)
+        goal = np.clip(panda.q0 + rng.uniform(-0.3, 0.3, panda.nq), panda.lower_limits,
+                       panda.upper_limits)
         target = panda.fk(goal)
         q = panda.q0.copy()
         for _ in range(20_000):

@@ -175,12 +175,21 @@ def test_runs_against_the_installed_package(run):
     check_installed(report, run.work)
 
 
-def test_writes_only_into_temporary_folders(run):
+def test_writes_nothing_and_keeps_a_static_copy_of_each_view(run):
+    """No file in the working folder, no temporary folder left (they used to stay, 1.5-2 MB
+    each), and each viewer made has a static copy of its page in the cell outputs, which the
+    saved notebook keeps after the kernel stopped (a live view is an iframe on a server)."""
     assert run.error is None, "the notebook failed (see test_notebook_executes)"
     assert not any(run.work.iterdir()), (
         f"{run.path.name} wrote into its working folder: {sorted(run.work.iterdir())}")
-    pages = sorted(run.tmp.glob("sjt-pin-*/*.html"))
-    assert pages, f"{run.path.name} saved no page under its TMPDIR"
+    left = sorted(p.name for p in run.tmp.iterdir() if p.name.startswith("sjt-pin"))
+    assert left == [], f"{run.path.name} left temporary folders: {left}"
+    viewers = sum(len(re.findall(r"\bViewer\(", c.source)) for c in run.cells)
+    copies = [o["data"]["text/html"] for c in run.cells for o in c.outputs
+              if "srcdoc=" in o.get("data", {}).get("text/html", "")]
+    assert viewers > 0 and len(copies) >= viewers, (viewers, len(copies))
+    for page in copies:  # the whole page: meshcat's script, the scene, the page's script
+        assert "new MeshCat.Viewer" in page and "sjt-scene" in page and "127.0.0.1" not in page
 
 
 def test_a_script_outside_the_checkout_uses_the_installed_package(tmp_path):
@@ -227,3 +236,26 @@ def test_figures_leave_the_backend_alone(tmp_path):
                           capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     assert done.stdout.split()[-1] == "svg"
+
+
+def _code(path: Path) -> list[str]:
+    return ["".join(c["source"]) for c in json.loads(path.read_text())["cells"]
+            if c["cell_type"] == "code"]
+
+
+@pytest.mark.parametrize("name", ["02_panda", "03_ur5"])
+def test_methods_have_the_viewers_colours(name):
+    """Every line drawn per method takes its colour from the viewer's palette (one palette for
+    the pages and the plots: matplotlib's own cycle gave other colours)."""
+    code = _code(ROOT / "notebooks" / f"{name}.ipynb")
+    assert any("method_color(" in cell for cell in code)
+    calls = [m.group(0) for cell in code
+             for m in re.finditer(r"\.(plot|semilogy|loglog)\((?:[^()]|\([^()]*\))*\)", cell)
+             if "label=name" in m.group(0) or "label=variant" in m.group(0)]
+    assert calls and all("color=COLORS[" in call for call in calls), calls
+
+
+def test_the_path_figure_has_axis_labels():
+    cell = next(c for c in _code(ROOT / "notebooks" / "01_paper_planar_arm.ipynb")
+                if "desired paths" in c)
+    assert 'set_xlabel("x [m]")' in cell and 'set_ylabel("y [m]")' in cell

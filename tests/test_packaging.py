@@ -3,6 +3,9 @@
 import subprocess
 import sys
 import zipfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_wheel_ships_planar3_urdf_and_generator(tmp_path):
@@ -67,3 +70,46 @@ def test_the_core_is_type_clean():
     done = subprocess.run([sys.executable, "-m", "mypy"], cwd=root, capture_output=True,
                           text=True, timeout=600)
     assert done.returncode == 0, done.stdout[-3000:]
+
+
+def test_the_core_runs_without_the_extras():
+    """With the viewer's and the paper's packages unimportable (as after a bare
+    ``pip install .``), a robot steps and solves, and importing the viewer or the figures
+    names the extra to install."""
+    code = """
+import sys
+for name in ["meshcat", "trimesh", "fast_simplification", "collada", "matplotlib", "yourdfpy"]:
+    sys.modules[name] = None  # import fails as if not installed
+import numpy as np
+import sjt_pin as sjt
+robot = sjt.Robot.from_example("ur5")
+target = robot.fk(robot.q0 + 0.2)
+solver = sjt.SJTSolver(robot, dt=1e-3)
+q = robot.q0.copy()
+for _ in range(300):
+    q = solver.step(q, target)
+assert solver.error_norm < 1e-9 and solver.solve(target, robot.q0).success
+for module, extra in [("sjt_pin.viewer", "viewer"), ("sjt_pin.paper.figures", "paper"),
+                      ("sjt_pin.paper.experiments", "paper")]:
+    try:
+        __import__(module)
+    except ImportError as exc:
+        assert f"sjt-pin[{extra}]" in str(exc), exc
+    else:
+        raise AssertionError(module + " imported without its extra")
+print("ok")
+"""
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                            timeout=300)
+    assert result.returncode == 0 and result.stdout.strip() == "ok", result.stderr
+
+
+def test_the_core_dependencies_are_the_core_s():
+    """pyproject's core dependencies hold none of the extras' packages."""
+    import tomllib
+
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    core = " ".join(project["dependencies"])
+    for package in ["meshcat", "trimesh", "matplotlib", "yourdfpy", "pycollada"]:
+        assert package not in core
+    assert {"viewer", "paper", "dev"} <= set(project["optional-dependencies"])

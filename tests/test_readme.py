@@ -64,3 +64,44 @@ def test_the_extend_it_task_rows_are_the_derivative_of_its_error(rng):
             minus = rows(pin.integrate(ur5.model, q, -dv), target)[1]
             finite[:, i] = (plus - minus) / 2e-6
         np.testing.assert_allclose(finite, -J, atol=1e-6)
+
+
+def test_the_extend_it_two_frame_task_rows_and_joints(rng):
+    """The README's HandOffset: its rows are -de/dq (finite differences on q), and the joints
+    it leaves out (legs, head) have zero columns."""
+    import numpy as np
+    import pinocchio as pin
+
+    import sjt_pin as sjt
+
+    snippet = next(s for s in SNIPPETS if "class HandOffset" in s)
+    namespace: dict = {}
+    exec(snippet.split("\ntalos = ")[0], namespace)
+    talos = sjt.Robot.from_example("talos")
+    task = namespace["HandOffset"]("gripper_left_joint", "gripper_right_joint").bind(talos)
+    kinematics = sjt.Kinematics(talos.model)
+    moved = np.zeros(talos.nv, dtype=bool)
+    for j in task.joints(talos.model):
+        joint = talos.model.joints[j]
+        moved[joint.idx_v:joint.idx_v + joint.nv] = True
+    names = {talos.model.names[j] for j in task.joints(talos.model)}
+    assert {"arm_left_1_joint", "arm_right_1_joint", "torso_1_joint"} <= names
+    assert not any("leg" in n or "head" in n for n in names), names
+
+    def error(q, target):
+        kinematics.update(q)
+        J, e, _ = task.compute(kinematics, target, None)
+        return J.copy(), e.copy()
+
+    q = talos.q0.copy()
+    q[7:] += rng.uniform(-0.3, 0.3, talos.nq - 7)
+    J, _ = error(q, np.zeros(3))
+    finite = np.empty((3, talos.nv))
+    for i in range(talos.nv):
+        dv = np.zeros(talos.nv)
+        dv[i] = 1e-6
+        plus = error(pin.integrate(talos.model, q, dv), np.zeros(3))[1]
+        minus = error(pin.integrate(talos.model, q, -dv), np.zeros(3))[1]
+        finite[:, i] = (plus - minus) / 2e-6
+    np.testing.assert_allclose(finite, -J, atol=1e-6)
+    assert np.abs(J[:, ~moved]).max() < 1e-12

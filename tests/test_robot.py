@@ -47,8 +47,8 @@ def test_jacobian_matches_finite_differences(name, rng):
 
 def test_example_defaults(ur5, panda):
     assert ur5.ee_frame == "tool0" and (ur5.nq, ur5.nv) == (6, 6)
-    assert panda.ee_frame == "panda_hand" and (panda.nq, panda.nv) == (9, 9)
-    assert panda.jacobian(panda.q0).shape == (6, 9)
+    assert panda.ee_frame == "panda_hand" and (panda.nq, panda.nv) == (8, 8)  # finger 2 mimics 1
+    assert panda.jacobian(panda.q0).shape == (6, 8)
     assert isinstance(panda.fk(panda.q0), pin.SE3)
     # Panda's URDF limits: joint 4 in [-3.0718, -0.0698], fingers prismatic in [0, 0.04]
     assert panda.upper_limits[3] == pytest.approx(-0.0698)

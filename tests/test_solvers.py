@@ -51,7 +51,7 @@ def test_transpose_feedback_never_leaves_an_exact_saddle_without_the_escape(ur5,
 
 @pytest.mark.parametrize("method, gain", [("sjt", "auto"), ("jt", 20.0)])
 def test_transpose_methods_converge_from_stretched_panda(panda, method, gain):
-    q_stretched = np.zeros(9)  # joint 4 at 0: upper arm and forearm aligned
+    q_stretched = np.zeros(panda.nq)  # joint 4 at 0: upper arm and forearm aligned
     assert np.linalg.svd(panda.jacobian(q_stretched), compute_uv=False)[5] < 1e-12
     target = panda.fk(panda.q0)
     # q4 = 0 lies beyond joint 4's URDF limit (-0.07 rad): the bare method, without limits

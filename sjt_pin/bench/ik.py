@@ -37,7 +37,10 @@ from ..robot import Robot
 from ..solve import TOL
 from ..solvers import make_solver
 
-ROBOTS = ("ur5", "ur10", "panda", "kinova", "xarm7")
+ROBOTS = ("ur5", "ur10", "panda", "kinova", "xarm7", "baxter")
+#: end-effector frames of the bench robots that have no default (Baxter's right arm: a 7-DoF
+#: sub-chain of a 19-joint robot)
+EE_FRAMES = {"baxter": "right_hand_link"}
 POSITION_TOL, ROTATION_TOL = 1e-5, 1e-4  # m, rad: what counts as solved
 LIMIT_SLACK = 1e-9  # rad or m past a limit still counted as within it
 TRACIK_TIMEOUT, TRACIK_EPS = 5e-3, 1e-5  # s; m and rad, per component of the pose error
@@ -207,6 +210,12 @@ def _rtb(robot: Robot) -> Runner:
     links, name, _ = URDF_read(path, patch=lambda text: _local_packages(text, path))
     root, tip = chain_links(robot)
     ets = rtb.Robot(links, name=name).ets(start=root, end=tip)
+    # the chain's joints keep the whole robot's numbering (Baxter's right arm: 1..7 after the
+    # head); ik_LM indexes its q by it, so number them 0..n-1 as the chain's own
+    joints = [et for et in ets if et.isjoint]
+    for k, et in enumerate(joints):
+        et.jindex = k
+    ets = rtb.ETS(list(ets))
     chain = Chain(robot)
 
     def run(target, seed):
@@ -284,7 +293,7 @@ def _robot_rows(name: str, poses: int, peers: bool) -> list[IKRow]:
     """Every runner on ``poses`` seeded problems of robot ``name``. The runners take turns on
     blocks of ``BLOCK`` poses: a change in the machine's load reaches all of them alike, and
     one runner's threads and caches seldom slow another's timing."""
-    robot = Robot.from_example(name)
+    robot = Robot.from_example(name, ee_frame=EE_FRAMES.get(name))
     pairs = problems(robot, poses)
     runners = _runners(robot, peers)
     for run in runners.values():  # warm-up (compiles sjt-pin's kernels): not timed

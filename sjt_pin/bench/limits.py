@@ -25,8 +25,8 @@ from ..trajectories import Circle
 
 #: Franka Panda's published joint limits (its control interface's "necessary conditions"),
 #: and small ones for the fingers
-PANDA_ACCELERATION = np.array([15, 7.5, 10, 12.5, 15, 20, 20, 1.0, 1.0])  # rad/s^2, m/s^2
-PANDA_JERK = np.array([7500, 3750, 5000, 6250, 7500, 10000, 10000, 500, 500])  # rad/s^3
+PANDA_ACCELERATION = np.array([15, 7.5, 10, 12.5, 15, 20, 20, 1.0])  # rad/s^2, m/s^2
+PANDA_JERK = np.array([7500, 3750, 5000, 6250, 7500, 10000, 10000, 500])  # rad/s^3
 METHODS = ("sjt", "dls", "jp", "jt")
 #: TIAGo's arm with the torso raised, where circles in these planes need about 0.14 and
 #: 0.19 m/s of the torso (found by sampling; the arm follows them within every other limit)
@@ -131,7 +131,7 @@ def franka(methods=METHODS, seconds: float = 20.0, progress=None) -> list[LimitR
             for _ in range(500):
                 q = solver.step(q, target)
                 qs.append(q)
-        near = np.clip(q + np.r_[rng.uniform(-0.3, 0.3, 7), 0, 0], panda.lower_limits,
+        near = np.clip(q + np.r_[rng.uniform(-0.3, 0.3, 7), 0], panda.lower_limits,
                        panda.upper_limits)
         held = panda.fk(near)
         for _ in range(3000):

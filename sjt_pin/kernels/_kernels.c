@@ -24,9 +24,9 @@ enum {
     P_DT, P_GAIN_MODE, P_GAIN_ARG, P_FF_MODE, P_MU, P_COL_TOL, P_SCALED, P_RCOND, P_LENGTH2,
     P_FB_MODE, P_LM, P_ERROR_ROWS, P_STALL_RATIO, P_STALL_ERROR, P_ROWS, P_MASK, P_BOX,
     P_BOX_COUNT, P_SPEED, P_SCRATCH, P_EXTRA, P_CLAMPED, P_ESCAPING, P_HAS_FF,
-    P_IDENTITY_ROWS, P_COUNT
+    P_IDENTITY_ROWS, P_STALL_RUN, P_STALL_WAIT, P_COUNT
 };
-#define INFO 25
+#define INFO 27
 enum { I_E_SQ, I_FF_SQ, I_GAIN, I_LOOP, I_STALL, I_TRACE, I_EW_SQ, I_SCALE, I_REGULAR, I_COUNT };
 #define GAIN_FIXED 0
 #define FF_TRANSPOSE 1
@@ -739,7 +739,20 @@ static int step_c(int kind, Mat J, const double *e, const double *ff, const doub
     for (Py_ssize_t j = 0; j < n; j++) regular += step[j] * step[j];
     info[I_REGULAR] = sqrt(regular) / dt;
     int status = 0;
-    if (r.stall < work[P_STALL_RATIO] && r.e_sq > work[P_STALL_ERROR]) status = STALLED;
+    /* a stall (loop gain along the command below P_STALL_RATIO of tr, |e| above the floor)
+     * is Python's on the first stalled step of a run and when the run reaches P_STALL_WAIT
+     * (the escape's window; Python then restarts the count at 0): a lasting stall, such as
+     * a target out of reach, stays on the fast path in between */
+    if (r.stall < work[P_STALL_RATIO] && r.e_sq > work[P_STALL_ERROR]) {
+        if (work[P_STALL_RUN] < 0.0) {
+            work[P_STALL_RUN] = 1.0;
+            status = STALLED;
+        } else if ((work[P_STALL_RUN] += 1.0) >= work[P_STALL_WAIT]) {
+            status = STALLED;
+        }
+    } else {
+        work[P_STALL_RUN] = -1.0;
+    }
     int escaping = work[P_ESCAPING] != 0.0;
     Py_ssize_t extra = (Py_ssize_t)work[P_EXTRA];
     if (escaping)

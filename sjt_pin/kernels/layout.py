@@ -14,9 +14,9 @@ import numpy as np
 (P_DT, P_GAIN_MODE, P_GAIN_ARG, P_FF_MODE, P_MU, P_COL_TOL, P_SCALED, P_RCOND, P_LENGTH2,
  P_FB_MODE, P_LM, P_ERROR_ROWS, P_STALL_RATIO, P_STALL_ERROR, P_ROWS, P_MASK, P_BOX,
  P_BOX_COUNT, P_SPEED, P_SCRATCH, P_EXTRA, P_CLAMPED, P_ESCAPING, P_HAS_FF,
- P_IDENTITY_ROWS) = range(25)
+ P_IDENTITY_ROWS, P_STALL_RUN, P_STALL_WAIT) = range(27)
 #: results (work[INFO + I_*])
-INFO = 25
+INFO = 27
 I_E_SQ, I_FF_SQ, I_GAIN, I_LOOP, I_STALL, I_TRACE, I_EW_SQ, I_SCALE, I_REGULAR = range(9)
 INFO_SIZE = 9
 HEADER = INFO + INFO_SIZE
@@ -65,6 +65,7 @@ class Layout:
         work[P_ROWS], work[P_MASK], work[P_BOX] = self.rows, self.mask, self.box
         work[P_BOX_COUNT], work[P_SPEED], work[P_SCRATCH] = self.c, self.speed, self.scratch
         work[P_EXTRA], work[P_CLAMPED] = self.extra, self.clamped
+        work[P_STALL_RUN], work[P_STALL_WAIT] = -1.0, np.inf  # no stall counted yet
         return work
 
     def info(self, work: np.ndarray) -> np.ndarray:

@@ -22,7 +22,7 @@ class PositionLimit(Limit):
     that ramping that acceleration down adds is counted too). A joint approaching its limit
     thus brakes in time; it never stops in one step. A joint that starts outside its range
     (a start configuration out of range) returns at ``recovery_speeds`` (rad/s or m/s), never
-    jumps.
+    jumps: with acceleration (and jerk) limits its speed back ramps up within them.
 
     Args:
         robot: where the limits come from (``robot.lower_limits``, ``upper_limits``).
@@ -80,6 +80,22 @@ class PositionLimit(Limit):
         # outside the range: back toward it at the recovery speed, no further than the limit
         above, below = room_up < 0, room_down < 0
         back = np.minimum(self.recovery_speeds, np.abs(np.where(above, room_up, room_down)) / dt)
+        if self.acceleration is not None and (above.any() or below.any()):
+            # turn back no harder than the acceleration (and jerk) limits allow (with the
+            # braking's reserve): from the velocity toward the range, a ramp up to the
+            # recovery speed, not a jump; and into the range without braking at its edge
+            # (inside, the far limit bounds it)
+            A, J = self._braking
+            assert A is not None  # set with the acceleration limits
+            toward = np.where(above, -v, v)
+            cap = np.minimum(self.recovery_speeds, np.where(above, room_down, room_up) / dt)
+            push = A
+            if J is not None:  # the acceleration ramps, and ramps down before the cap
+                gap = np.maximum(cap - toward, 0.0)
+                push = np.minimum(np.minimum(A, np.maximum(np.where(above, -a, a), 0.0)
+                                             + J * dt),
+                                  np.sqrt((0.5 * J * dt) ** 2 + 2.0 * J * gap) - 0.5 * J * dt)
+            back = np.minimum(cap, toward + push * dt)
         lower = np.where(above, -back, np.where(below, back, lower))
         upper = np.where(above, -back, np.where(below, back, upper))
         lo, hi = np.full(self.nv, -np.inf), np.full(self.nv, np.inf)

@@ -30,17 +30,21 @@ from dataclasses import asdict, dataclass, replace
 import numpy as np
 import pinocchio as pin
 
-from ..mappings import jt_matrix, sjt_matrix
-from ..robot import Robot
-from ..robots import planar3 as generator
-from ..solvers import make_solver
-from ..tasks import PositionTask
-from ..tracking import TrackingLog, track
-from ..trajectories import Circle, Line, Trajectory
-from .ellipsoids import linear_gain_bound, motion_ellipsoid
-from .scenarios import PLANAR3_START, settle
-from .stability import largest_stable
-from .stability import stability as run_stability
+from ..extras import require
+
+require("yourdfpy")  # the planar arms are generated as URDF
+
+from ..mappings import jt_matrix, sjt_matrix  # noqa: E402
+from ..robot import Robot  # noqa: E402
+from ..robots import planar3 as generator  # noqa: E402
+from ..solvers import make_solver  # noqa: E402
+from ..tasks import PositionTask  # noqa: E402
+from ..tracking import TrackingLog, track  # noqa: E402
+from ..trajectories import Circle, Line, Trajectory  # noqa: E402
+from .ellipsoids import linear_gain_bound, motion_ellipsoid  # noqa: E402
+from .scenarios import PLANAR3_START, settle  # noqa: E402
+from .stability import largest_stable  # noqa: E402
+from .stability import stability as run_stability  # noqa: E402
 
 #: The paper's own updates: eq. (10) and eq. (21) exactly (alpha_i = 1 / J_i^T J_i, eq. 18).
 PAPER_FORM = {

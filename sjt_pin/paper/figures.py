@@ -11,11 +11,15 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib.pyplot as plt
-import numpy as np
+from ..extras import require
 
-from ..tracking import TrackingLog
-from .experiments import PAPER_GAINS, Sweep
+require("matplotlib")
+
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from ..tracking import TrackingLog  # noqa: E402
+from .experiments import PAPER_GAINS, Sweep  # noqa: E402
 
 COLORS = {"sjt": "tab:blue", "jt": "tab:red", "jp": "tab:green", "dls": "tab:purple"}
 TASK_TITLES = {1: "task 1: line inside the workspace", 2: "task 2: line leaving the workspace",

@@ -5,5 +5,6 @@ from .orientation import OrientationTask
 from .pose import PoseTask
 from .position import PositionTask
 from .posture import PostureTask
+from .relative_pose import RelativePoseTask
 
-__all__ = ["OrientationTask", "PoseTask", "PositionTask", "PostureTask", "Task"]
+__all__ = ["OrientationTask", "PoseTask", "PositionTask", "PostureTask", "RelativePoseTask", "Task"]

@@ -82,6 +82,20 @@ class Task(ABC):
         bound.frame = robot.model.frames[bound.frame_id].name
         return bound
 
+    @property
+    def key(self) -> str | None:
+        """The key of this task's target in a ``{key: target}`` mapping: its frame's name.
+        Tasks on the same frame share it (and so their target, e.g. a position task and an
+        orientation task with different weights); a task over several frames names its own."""
+        return self.frame
+
+    def joints(self, model: pin.Model) -> list[int]:
+        """The ids of the Pinocchio joints whose motion changes this task's rows (the columns
+        the solver may move for it): by default the joints that support its frame. A task that
+        reads several frames returns the joints of all of them; its Jacobian's columns of the
+        other joints must be zero."""
+        return list(model.supports[model.frames[self.frame_id].parentJoint][1:])
+
     def write_into(self, J: np.ndarray, e: np.ndarray, ff: np.ndarray) -> None:  # noqa: B027
         """Offer views of the stacked buffers for this task's rows: a task may compute its
         rows straight into them (and return them) instead of into arrays of its own."""
@@ -90,6 +104,10 @@ class Task(ABC):
         """``value`` validated and converted for :meth:`compute` (default: a rigid pose)."""
         if type(value) is pin.SE3 and rotation_defect(value.np) <= RIGID_TOL:
             return value  # the usual case, one compiled test (a NaN translation shows in e)
+        if np.shape(value) == (3,) and not isinstance(value, (str, bytes)):
+            raise ValueError(f"target of the {type(self).__name__} must be a pin.SE3 or a 4x4 "
+                             "matrix, got a 3-vector (a position): for a position target use "
+                             "task=sjt.PositionTask()")
         return as_pose(value, "target")
 
     def velocity(self, value) -> np.ndarray:

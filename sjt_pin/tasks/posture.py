@@ -38,6 +38,9 @@ class PostureTask(Task):
         bound._J = np.eye(robot.nv)
         return bound
 
+    def joints(self, model):
+        return list(range(1, model.njoints))  # a posture task moves every joint
+
     def compute(self, kinematics, target, velocity):
         if kinematics.q is None:  # asked for its constant rows before any configuration
             return self._J, np.zeros(self.dim), None

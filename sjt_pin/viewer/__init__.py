@@ -1,6 +1,11 @@
-"""The meshcat viewer: robots, animated tracking runs, the demo page (imports meshcat)."""
+"""The meshcat viewer: robots, animated tracking runs, the demo page (needs the viewer extra)."""
 
-from .style import METHOD_COLORS
-from .viewer import Viewer
+from ..extras import require
 
-__all__ = ["METHOD_COLORS", "Viewer"]
+require("meshcat", "trimesh", "fast_simplification")
+
+from .server import ServerTimeout  # noqa: E402
+from .style import METHOD_COLORS  # noqa: E402
+from .viewer import Viewer  # noqa: E402
+
+__all__ = ["METHOD_COLORS", "ServerTimeout", "Viewer"]

@@ -20,13 +20,17 @@ from __future__ import annotations
 import functools
 import math
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import coal
 import fast_simplification
 import numpy as np
 import pinocchio as pin
 import trimesh
+
+from ..mesh_paths import check_file
 
 #: Faces aimed at per visual geometry: enough for a robot a few hundred pixels tall.
 MAX_FACES = 2500
@@ -49,11 +53,14 @@ class Part:
     rgba: tuple[float, float, float, float]
 
 
-def visual_parts(geometry: pin.GeometryObject, max_faces: int = MAX_FACES) -> tuple[Part, ...]:
+def visual_parts(geometry: pin.GeometryObject, max_faces: int = MAX_FACES,
+                 folders: Sequence[Path] | None = None) -> tuple[Part, ...]:
     """The parts of one visual geometry, decimated toward ``max_faces`` faces in all.
 
     A URDF ``<material>`` (``overrideMaterial``) colours every part; otherwise a mesh file keeps
-    its own colours. Returns ``()``, with a warning, for a geometry that cannot be drawn.
+    its own colours. Returns ``()``, with a warning, for a geometry that cannot be drawn. A mesh
+    file is read only if it lies, after resolving ``..`` and symbolic links, inside ``folders``
+    (the robot's ``mesh_roots``; None: anywhere), else :class:`~sjt_pin.URDFError`.
     """
     color = tuple(float(c) for c in geometry.meshColor)
     shape = geometry.geometry
@@ -68,7 +75,8 @@ def visual_parts(geometry: pin.GeometryObject, max_faces: int = MAX_FACES) -> tu
         warnings.warn(f"cannot draw {geometry.name!r}: it has no mesh file", stacklevel=2)
         return ()
     scale = tuple(float(s) for s in geometry.meshScale)
-    parts = _mesh_file(geometry.meshPath, scale, max_faces)
+    path = check_file(geometry.meshPath, folders, f"geometry {geometry.name!r}: mesh")
+    parts = _mesh_file(path, scale, max_faces)
     if geometry.overrideMaterial:
         return tuple(Part(p.vertices, p.faces, color) for p in parts)
     return parts

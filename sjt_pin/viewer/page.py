@@ -44,12 +44,17 @@ class Run:
 
 @dataclass(frozen=True)
 class RobotEntry:
-    """A robot of the scene: its node name, the label shown for it, its runs in order."""
+    """A robot of the scene: its node name, the label shown for it, its runs in order, and
+    further plots (SVG markup) shown under its error plot."""
 
     node: str
     label: str
     runs: tuple[Run, ...]
+    plots: tuple[str, ...] = ()
 
+
+#: Height (px) of a robot's error plot: three robots' blocks and the guide fit a 900 px window.
+PLOT_HEIGHT = 92
 
 STYLE = """
 html, body { margin: 0; height: 100%; }
@@ -68,6 +73,9 @@ p { margin: 4px 0; }
 .guide span.key { display: inline-block; vertical-align: middle; margin: 0 3px 0 1px; }
 .robot { border-top: 1px solid #e1e4e8; margin-top: 8px; }
 .methods, .legend { list-style: none; margin: 4px 0; padding: 0; font-size: 13px; }
+.methods { display: flex; flex-wrap: wrap; gap: 0 12px; }
+.methods li { white-space: nowrap; }
+h1 + p { font-size: 13px; }  /* the description */
 .legend { display: flex; flex-wrap: wrap; gap: 2px 2px; }
 .legend li { padding: 1px 4px; border-radius: 4px; white-space: nowrap;
              font-variant-numeric: tabular-nums; }
@@ -104,14 +112,17 @@ svg.error-plot .cursor { stroke-width: 1.5; stroke-dasharray: 3 2; }
 
 
 def page_html(commands: Sequence[bytes], robots: Sequence[RobotEntry], title: str,
-              description: str, view: Sequence[float] | None) -> str:
+              description: str, view: Sequence[float] | None,
+              dots: Sequence[str] = ()) -> str:
     """The page of a scene rebuilt by ``commands`` (packed meshcat commands) with ``robots``.
 
     ``description`` is a paragraph of text under the title. ``view`` is the direction (world)
-    the camera frames the scene from; None keeps the camera the scene sets.
+    the camera frames the scene from; None keeps the camera the scene sets. ``dots`` are the
+    nodes of desired paths' dots, sized in pixels once the view is framed.
     """
     meta = {
         "view": None if view is None else [float(v) for v in view],
+        "dots": list(dots),
         "robots": [{"node": r.node, "label": r.label,
                     "runs": [{"method": run.label, "color": css(run.color), "start": run.start,
                               "end": run.end} for run in r.runs]} for r in robots],
@@ -147,9 +158,16 @@ def page_html(commands: Sequence[bytes], robots: Sequence[RobotEntry], title: st
 """
 
 
+#: Characters written as JSON escapes inside a ``<script>`` element: with ``<`` and ``>`` as
+#: ``\u003c`` and ``\u003e``, no ``</script``, ``<script`` or ``<!--`` in a name can end the
+#: element or switch the HTML parser into a state that swallows the scripts after it.
+_SCRIPT_ESCAPES = str.maketrans({"<": "\\u003c", ">": "\\u003e", "&": "\\u0026",
+                                 "\u2028": "\\u2028", "\u2029": "\\u2029"})
+
+
 def _json(value) -> str:
-    """JSON that is safe inside a ``<script>`` element."""
-    return json.dumps(value, separators=(",", ":")).replace("</", "<\\/")
+    """JSON that is safe inside a ``<script>`` element, whatever strings ``value`` holds."""
+    return json.dumps(value, separators=(",", ":")).translate(_SCRIPT_ESCAPES)
 
 
 def _controls(duration: float, reset: bool) -> str:
@@ -175,9 +193,8 @@ def _guide(robots: Sequence[RobotEntry]) -> str:
     return (f'<ul class="methods">{methods}</ul>'
             f'<p class="guide"><span class="key dots" style="color:{css(DESIRED_COLOR)}">'
             "&#8226;&#8226;&#8226;</span> desired path, <span class=\"key dot halo\"></span> "
-            "target; in a method's colour: the path followed and the end effector. The robots "
-            "replay their runs in turn (highlighted: the run on screen); numbers are each "
-            "run's largest error.</p>")
+            "target; in a method's colour: the path followed and the end effector. "
+            "Highlighted: the run on screen; numbers: each run's largest error.</p>")
 
 
 def _robot(robot: RobotEntry) -> str:
@@ -195,8 +212,9 @@ def _robot(robot: RobotEntry) -> str:
         parts.append(f'<ul class="legend">{items}</ul>')
         series = [Series(run.label, run.color, run.log.t - run.log.t[0], run.log.error_norm)
                   for run in robot.runs]
-        parts.append(error_plot(series, width=388, height=125,
+        parts.append(error_plot(series, width=388, height=PLOT_HEIGHT,
                                 ylabel="tracking error (m, rad)"))
+    parts.extend(robot.plots)
     parts.append("</section>")
     return "\n".join(parts)
 

@@ -2,8 +2,13 @@
 
 It replays the scene's commands in order (``#sjt-scene``, base64 msgpack) and sizes the view to
 its pane. If the page has a view direction (``#sjt-meta``), it puts the camera on that side of
-the scene, just far enough that every vertex of the scene fits the view; it does so again when
-the window is resized, until the user turns the camera. Each animation frame it then:
+the scene, just far enough that every vertex of the scene fits the view with a margin, at
+``FRAME_SAMPLES + 1`` times spread over the animation (a robot that rises during its run stays
+inside); it does so again when the window is resized, until the user turns the camera. The
+desired paths' dots (``meta.dots``) are then sized in pixels of that view (:data:`DOT_PIXELS`,
+at most :data:`DOT_GAP` of their spacing on screen), so they neither vanish in a wide scene nor
+hide the path followed. meshcat's own controls ("Open Controls") move from the top of the view
+to the bottom of the side panel. Each animation frame it then:
 
 - moves a tag over each robot with its label and the method being replayed;
 - highlights that run in the robot's legend;
@@ -13,7 +18,7 @@ the window is resized, until the user turns the camera. Each animation frame it 
 The play button and the slider drive meshcat's animator; ``window.viewer`` is meshcat's viewer.
 """
 
-SCRIPT = r"""
+SCRIPT_TEMPLATE = r"""
 "use strict";
 (function () {
   const meta = JSON.parse(document.getElementById("sjt-meta").textContent);
@@ -22,6 +27,15 @@ SCRIPT = r"""
   const view = document.getElementById("view");
   const viewer = new MeshCat.Viewer(pane);
   window.viewer = viewer;
+  const FRAME_SAMPLES = @SAMPLES@, FRAME_MARGIN = @MARGIN@, DOT_PIXELS = @DOT@,
+    DOT_GAP = @GAP@;
+  const gui = viewer.gui.domElement;  // meshcat's "Open Controls": under the panel, not the view
+  const panel = document.getElementById("panel");
+  if (panel) {
+    panel.appendChild(gui);
+    gui.style.position = "static";
+    gui.classList.add("meshcat-controls");
+  }
 
   // meshcat sizes its view to the window's height; size it to its pane instead
   const setSize = viewer.set_3d_pane_size.bind(viewer);
@@ -58,9 +72,55 @@ SCRIPT = r"""
     return points;
   }
 
+  function framedVertices(frame) {  // the scene's vertices at times spread over the animation
+    const actions = viewer.animator.actions;
+    if (actions.length === 0) return sceneVertices(frame);
+    const now = actions[0].time;
+    const duration = Math.max(...actions.map((action) => action.getClip().duration));
+    const points = [];
+    for (let k = 0; k <= FRAME_SAMPLES; k++) {
+      viewer.animator.seek((duration * k) / FRAME_SAMPLES);
+      for (const point of sceneVertices(frame)) points.push(point);
+    }
+    viewer.animator.seek(now);
+    return points;
+  }
+
+  function onScreen(points) {  // median spacing (pixels) and depth (m) of a Points' dots
+    const position = points.geometry.attributes.position;
+    const a = new THREE.Vector3(), b = new THREE.Vector3(), gaps = [], depths = [];
+    const median = (values) => values.sort((x, y) => x - y)[Math.floor(values.length / 2)];
+    for (let i = 0; i < position.count; i++) {
+      a.fromBufferAttribute(position, i).applyMatrix4(points.matrixWorld)
+        .applyMatrix4(viewer.camera.matrixWorldInverse);
+      depths.push(-a.z);
+      a.applyMatrix4(viewer.camera.projectionMatrix);
+      if (i > 0) {
+        gaps.push(Math.hypot((a.x - b.x) * pane.clientWidth, (a.y - b.y) * pane.clientHeight) / 2);
+      }
+      b.copy(a);
+    }
+    return {gap: gaps.length ? median(gaps) : Infinity, depth: median(depths)};
+  }
+
+  function sizeDots() {  // the desired paths' dots: DOT_PIXELS wide, or less where they are dense
+    viewer.camera.updateMatrixWorld();
+    viewer.scene.updateMatrixWorld(true);
+    for (const path of meta.dots || []) {
+      const node = viewer.scene_tree.find(["meshcat", ...path.split("/")]).object;
+      node.traverse((o) => {
+        if (!o.isPoints) return;
+        const {gap, depth} = onScreen(o);
+        const pixels = Math.max(1.5, Math.min(DOT_PIXELS, DOT_GAP * gap));
+        // three.js draws a point size * (height / 2) / depth pixels wide
+        o.material.size = (2 * pixels * Math.max(depth, 1e-3)) / Math.max(pane.clientHeight, 1);
+      });
+    }
+  }
+
   function frameScene() {
     const camera = viewer.camera;
-    const points = sceneVertices(camera.parent);  // in the camera's frame: y up, world z
+    const points = framedVertices(camera.parent);  // in the camera's frame: y up, world z
     if (points.length === 0) return;
     const center = new THREE.Box3().setFromPoints(points).getCenter(new THREE.Vector3());
     const [x, y, z] = meta.view;
@@ -91,9 +151,10 @@ SCRIPT = r"""
       center.addScaledVector(right, distance * (seen.left + seen.right) / 2)
             .addScaledVector(up, distance * (seen.bottom + seen.top) / 2);
     }
-    camera.position.copy(center).addScaledVector(back, 1.03 * distance);
+    camera.position.copy(center).addScaledVector(back, FRAME_MARGIN * distance);
     viewer.controls.target.copy(center);
     viewer.controls.update();
+    sizeDots();
     viewer.set_dirty();
   }
 
@@ -117,7 +178,7 @@ SCRIPT = r"""
     tag.append(name, " ", dot, " ", method);
     view.appendChild(tag);
     const visuals = viewer.scene_tree.find(["meshcat", robot.node, "visuals"]).object;
-    const section = document.querySelector(`section.robot[data-robot="${robot.node}"]`);
+    const section = document.querySelector(`section.robot[data-robot="${CSS.escape(robot.node)}"]`);
     return {robot, tag, dot, method, visuals,
             items: section ? Array.from(section.querySelectorAll("li[data-method]")) : [],
             plot: section ? section.querySelector("svg.error-plot") : null};
@@ -194,3 +255,16 @@ SCRIPT = r"""
   follow();
 })();
 """
+
+#: Times (after the first) at which the scene's vertices are gathered to frame it.
+FRAME_SAMPLES = 8
+#: Distance of the camera as a multiple of the least that fits every vertex: the margin.
+FRAME_MARGIN = 1.08
+#: Width in pixels of a desired path's dot, at the distance the view is framed from.
+DOT_PIXELS = 5.0
+#: A dot is at most this fraction of the (median) spacing of its path's dots on screen, so
+#: that most of the path followed shows between them.
+DOT_GAP = 0.35
+SCRIPT = (SCRIPT_TEMPLATE.replace("@SAMPLES@", str(FRAME_SAMPLES))
+          .replace("@MARGIN@", repr(FRAME_MARGIN)).replace("@DOT@", repr(DOT_PIXELS))
+          .replace("@GAP@", repr(DOT_GAP)))

@@ -15,7 +15,6 @@ pixel, and nearly halves an animation's size.
 from __future__ import annotations
 
 import umsgpack
-from meshcat.visualizer import ViewerWindow
 
 
 class _Node(dict):
@@ -43,7 +42,7 @@ class _Node(dict):
 class SceneRecord:
     """A meshcat window that records the scene and forwards each command to ``live``, if any."""
 
-    def __init__(self, live: ViewerWindow | None = None):
+    def __init__(self, live=None):
         self.live = live
         self.root = _Node()
 
@@ -79,11 +78,15 @@ class SceneRecord:
             return
         self.root.find("/".join(names[:-1])).pop(names[-1], None)
 
-    def commands(self) -> list[bytes]:
-        """The packed commands that rebuild the scene: objects, properties and transforms node by
-        node, then the animations, whose targets must exist by then."""
+    def lowered(self) -> list[dict]:
+        """The lowered commands that rebuild the scene: objects, properties and transforms node
+        by node, then the animations, whose targets must exist by then."""
         lowered: list[dict] = []
         for node in self.root.walk():
             lowered.extend(c for c in (node.object, *node.properties, node.transform) if c)
         lowered.extend(node.animation for node in self.root.walk() if node.animation)
-        return [umsgpack.packb(c, force_float_precision="single") for c in lowered]
+        return lowered
+
+    def commands(self) -> list[bytes]:
+        """:meth:`lowered`, packed (single-precision floats)."""
+        return [umsgpack.packb(c, force_float_precision="single") for c in self.lowered()]

@@ -9,6 +9,8 @@ METHOD_COLORS = {"sjt": 0x1F77B4, "jt": 0xD62728, "jp": 0x2CA02C, "dls": 0x9467B
 #: What the method names stand for, for the page's legend.
 METHOD_NAMES = {"sjt": "scaled Jacobian transpose", "jt": "Jacobian transpose",
                 "jp": "Jacobian pseudoinverse", "dls": "damped least squares"}
+#: Colour of the paper's exact SJT (eq. 21) where it is drawn beside the package's SJT.
+PAPER_SJT_COLOR = 0x8C564B
 #: Colour of a run whose method has none above.
 OTHER_COLOR = 0xFF7F0E
 #: Colours for further runs of a robot whose method's colour is taken (several SJT variants).
@@ -35,3 +37,12 @@ def to_int(color) -> int:
 def css(color: int) -> str:
     """``0xRRGGBB`` as a CSS colour, ``#rrggbb``."""
     return f"#{color:06x}"
+
+
+def method_color(method: str) -> str:
+    """The CSS colour (``#rrggbb``, what matplotlib takes) of ``method`` ("sjt", "jt", "jp",
+    "dls", or "sjt-paper" for eq. 21), as the viewer's pages draw it: one palette for the pages
+    and the notebooks' plots."""
+    if method == "sjt-paper":
+        return css(PAPER_SJT_COLOR)
+    return css(METHOD_COLORS.get(method, OTHER_COLOR))

@@ -5,7 +5,9 @@ The scene is kept in this process (:mod:`.scene`). :meth:`Viewer.save_html` writ
 self-contained page, with a legend, error plots and play controls (:mod:`.page`). With
 ``live=True`` (the default) each change also goes to a meshcat server, whose page shows the
 scene as it is built. That server listens on 127.0.0.1 only and stops when the viewer is closed,
-when the program exits, or when the program is killed (see :mod:`.server`).
+when the program exits, or when the program is killed (see :mod:`.server`). Each request to it
+waits at most ``timeout`` s: a server that died raises :class:`.ServerTimeout`, and
+:meth:`Viewer.restart` starts a new one with the scene so far.
 
 Several robots can share one scene (``add_robot`` with an ``offset``); every drawing method takes
 ``robot=`` to pick one (default: the first). Animations of all robots share one timeline.
@@ -13,8 +15,7 @@ Several robots can share one scene (``add_robot`` with an ``offset``); every dra
 
 from __future__ import annotations
 
-import contextlib
-import io
+import html
 import webbrowser
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -24,23 +25,29 @@ import meshcat.geometry as mg
 import numpy as np
 import pinocchio as pin
 from meshcat.animation import Animation, AnimationClip, AnimationTrack
-from meshcat.visualizer import ViewerWindow
 
 from ..robot import Robot
 from ..tracking import TrackingLog
 from .meshes import visual_parts
+from .obstacles import OBSTACLE_COLOR, OBSTACLE_OPACITY, draw_obstacle, key_segments, show_segments
 from .page import RobotEntry, Run, page_html
+from .plot import Series, error_plot
 from .scene import SceneRecord
-from .server import LoopbackServer
+from .server import LiveWindow, LoopbackServer
 from .style import DESIRED_COLOR, EXTRA_COLORS, METHOD_COLORS, OTHER_COLOR, to_int
 
 #: Direction (world, from the scene's centre) the page's camera looks from unless it is set.
 VIEW_DIRECTION = (1.0, 0.3, 0.4)
 #: Points drawn of a run's paths (a 0.2 m circle with 500 points is off by 3 um).
 PATH_POINTS = 500
-#: Dots drawn of a run's desired path.
+#: Dots drawn of a run's desired path, at most.
 DESIRED_DOTS = 60
-_NOT_LIVE = "this viewer has no live server (it was made with live=False)"
+#: Least spacing of those dots along the path, as a fraction of the robot's size (its largest
+#: frame distance from its base): a short path gets few dots, far enough apart that the path
+#: followed shows between them. On the page they are :data:`.page_script.DOT_PIXELS` wide.
+DOT_SPACING = 0.02
+_NOT_LIVE = ("this viewer has no live server (it was made with live=False, or closed); "
+             "restart() starts one")
 _GRID_SCALE = 0.25
 _BACKGROUND = ([0.97, 0.97, 0.98], [0.80, 0.83, 0.87])  # top and bottom colours, RGB in [0, 1]
 
@@ -76,10 +83,11 @@ class _Rig:
             raise ValueError(f"robot {robot.name!r} has no visual model to draw")
         self.robot, self.name, self.label = robot, name, label
         self.runs: list[Run] = []
+        self.distances: list[Series] = []  # closest distance over each run with a collision
         self.nodes: list[str] = []
         self.geometries: list[int] = []
         for index, geometry in enumerate(robot.visual_model.geometryObjects):
-            parts = visual_parts(geometry)
+            parts = visual_parts(geometry, folders=robot.mesh_roots)
             if not parts:
                 continue
             node = f"{name}/visuals/{geometry.name}"
@@ -94,6 +102,9 @@ class _Rig:
         scene[name].set_transform(placement)
         self.data = robot.model.createData()
         self.geometry_data = pin.GeometryData(robot.visual_model)
+        pin.framesForwardKinematics(robot.model, self.data, robot.q0)
+        #: The robot's size (m): its farthest frame from its base at ``q0``, at least 5 cm.
+        self.size = max(0.05, max(float(np.linalg.norm(f.translation)) for f in self.data.oMf))
 
     def placements(self, q: np.ndarray) -> list[np.ndarray]:
         """4x4 placements of the drawn geometries at ``q``, in the frame of the robot's base."""
@@ -112,17 +123,23 @@ class Viewer:
         open: open the live scene in the default web browser.
         live: start a meshcat server that shows the scene as it is built (:attr:`url`);
             without it the scene only goes to :meth:`save_html`.
-    Use as a context manager (or call :meth:`close`) to stop the server.
+        timeout: the longest wait (s) for the server's answer to one request; a server that
+            died or hangs raises :class:`~sjt_pin.viewer.server.ServerTimeout` (then
+            :meth:`restart`).
+    Use as a context manager (or call :meth:`close`) to stop the server. The server lives as
+    long as this process (whichever thread made the viewer) or until :meth:`close`.
     """
 
     def __init__(self, robot: Robot, open: bool = False, *, name: str = "robot",
-                 offset=(0.0, 0.0, 0.0), label: str | None = None, live: bool = True):
-        self._server = LoopbackServer() if live else None
-        window = None
-        if self._server is not None:
-            with contextlib.redirect_stdout(io.StringIO()):  # meshcat prints its URL
-                window = ViewerWindow(self._server.zmq_url, start_server=False, server_args=[])
-        self._record = SceneRecord(window)
+                 offset=(0.0, 0.0, 0.0), label: str | None = None, live: bool = True,
+                 timeout: float = 10.0):
+        if not isinstance(timeout, (int, float)) or not 0 < timeout < float("inf"):
+            raise ValueError(f"timeout must be a positive number of seconds, got {timeout!r}")
+        self.timeout = float(timeout)
+        self._server: LoopbackServer | None = None
+        self._record = SceneRecord(None)
+        if live:
+            self._record.live = self._start_server()
         self.meshcat = meshcat.Visualizer(window=self._record)
         self._rigs: dict[str, _Rig] = {}
         self._animation = Animation()
@@ -136,6 +153,22 @@ class Viewer:
         self._send_camera([1.8, 1.1, 0.9])
         if open:
             webbrowser.open(self.url, new=2)
+
+    def _start_server(self) -> LiveWindow:
+        self._server = LoopbackServer()
+        server = self._server
+        return LiveWindow(server.zmq_url, server.web_url, self.timeout,
+                          alive=lambda: server.running)
+
+    def restart(self) -> str:
+        """Start a new meshcat server (after a :class:`ServerTimeout`, or to go live), send it
+        the scene so far, and return its page's address (a new :attr:`url`)."""
+        self.close()
+        window = self._start_server()
+        for command in self._record.lowered():
+            window.send_lowered(command)
+        self._record.live = window
+        return self.url
 
     # -- scene -----------------------------------------------------------------------------------
     @property
@@ -153,6 +186,9 @@ class Viewer:
         ``pin.SE3`` (e.g. to stand a planar arm up). ``color`` (RGBA in [0, 1]) overrides the
         meshes' colours, e.g. for a ghost.
         """
+        if not isinstance(name, str) or not name or "/" in name:
+            raise ValueError(f"name must be a non-empty string without '/' (a meshcat node), "
+                             f"got {name!r}")
         if name in self._rigs:
             raise ValueError(f"name {name!r} is already in the scene")
         self._rigs[name] = _Rig(self.meshcat, robot, name, label or name, _placement(offset),
@@ -180,12 +216,26 @@ class Viewer:
         x, y, z = np.asarray(position, dtype=float)
         self.meshcat["/Cameras/default/rotated/<object>"].set_property("position", [x, z, -y])
 
-    def show(self, q, robot: str | None = None) -> None:
-        """Place ``robot`` at configuration ``q``."""
+    def show(self, q, robot: str | None = None, collision=None, segments: int = 4) -> None:
+        """Place ``robot`` at configuration ``q``.
+
+        With ``collision`` (a :class:`~sjt_pin.CollisionLimit` of this robot), also draw the
+        closest-point segments of its ``segments`` closest pairs within its ``influence``.
+        """
         rig = self._rig(robot)
         placements = rig.placements(rig.robot.check_q(q))
         for node, T in zip(rig.nodes, placements, strict=True):
             self.meshcat[node].set_transform(T)
+        if collision is not None:
+            show_segments(self.meshcat, f"{rig.name}/segments", collision, q, segments)
+
+    def add_obstacle(self, shape, pose, name: str = "obstacle", robot: str | None = None,
+                     color=OBSTACLE_COLOR, opacity: float = OBSTACLE_OPACITY) -> None:
+        """Draw the coal ``shape`` (sphere, box, capsule, cylinder, cone, ellipsoid, convex or
+        mesh) at ``pose`` (``pin.SE3`` or 4x4; m) in the frame of ``robot``'s base, as a
+        :class:`~sjt_pin.CollisionLimit` of that robot takes its obstacles."""
+        draw_obstacle(self.meshcat[f"{self._rig(robot).name}/obstacles/{name}"], shape, pose,
+                      color, opacity)
 
     # -- drawings ----------------------------------------------------------------------------
     def draw_path(self, points, color="blue", name: str = "path", robot: str | None = None,
@@ -246,17 +296,35 @@ class Viewer:
 
     # -- animations --------------------------------------------------------------------------
     def animate(self, log: TrackingLog, fps: float = 30.0, robot: str | None = None,
-                color=None, start: float = 0.0, label: str | None = None) -> float:
+                color=None, start: float = 0.0, label: str | None = None, collision=None,
+                segments: int = 4) -> float:
         """Play ``log`` on ``robot`` from ``start`` s of the timeline; returns its end time.
 
         Draws the desired path (dark) and the path followed (``color``, default the method's,
         or a free colour when another run already has it); the target and the end effector are
         drawn as spheres that move with the animation. ``label`` names the run on the page
-        (default: the method).
+        (default: the method). With ``collision`` (a :class:`~sjt_pin.CollisionLimit` of this
+        robot), the closest-point segments of its ``segments`` closest pairs within
+        ``influence`` move with the run, and the page plots the closest distance over time.
         """
         end = self._add_run(log, fps, robot, color, start, label)
+        if collision is not None:
+            self._add_distances(log, fps, robot, start, collision, segments)
         self._send_animation()
         return end
+
+    def _add_distances(self, log: TrackingLog, fps: float, robot: str | None, start: float,
+                       collision, segments: int) -> None:
+        """Key the last run's closest-point segments (under its run node, so shown only while
+        it plays) and keep its closest distance over time for the page."""
+        rig = self._rig(robot)
+        run = rig.runs[-1]
+        safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in run.label)
+        frames = np.arange(0.0, log.t[-1] + 0.5 / fps, 1.0 / fps)
+        indices = np.minimum(np.searchsorted(log.t, frames), len(log) - 1)
+        closest = key_segments(self._animation, self.meshcat, f"{rig.name}/runs/{safe}/segments",
+                               collision, log.q[indices], int(round(start * fps)), segments)
+        rig.distances.append(Series(run.label, run.color, frames, np.array(closest)))
 
     def compare(self, logs: Mapping[str, TrackingLog] | Sequence[TrackingLog], fps: float = 30.0,
                 robot: str | None = None) -> None:
@@ -294,8 +362,8 @@ class Viewer:
         safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in label)
         run_node, target_node = f"{rig.name}/runs/{safe}", f"{rig.name}/markers/target"
         every = -(-len(log) // PATH_POINTS)  # a path of at most PATH_POINTS points
-        self.draw_points(log.target[:: max(1, len(log) // DESIRED_DOTS)], DESIRED_COLOR,
-                         "desired", robot=rig.name)
+        self.draw_points(_dots(log.target, DOT_SPACING * rig.size), DESIRED_COLOR, "desired",
+                         robot=rig.name, size=1.5 * DOT_SPACING * rig.size)
         self.meshcat[f"{run_node}/path"].set_object(mg.Line(
             mg.PointsGeometry(_points(log.position[::every]).T),
             mg.LineBasicMaterial(color=color, linewidth=2.0)))
@@ -343,9 +411,12 @@ class Viewer:
         runs in their colours, a plot of each run's tracking error over time; under it a
         play/pause button and a time slider.
         """
-        robots = [RobotEntry(rig.name, rig.label, tuple(rig.runs)) for rig in self._rigs.values()]
+        robots = [RobotEntry(rig.name, rig.label, tuple(rig.runs), tuple(
+            [error_plot(rig.distances, width=388, height=125, ylabel="closest distance (m)")]
+            if rig.distances else [])) for rig in self._rigs.values()]
         view = None if self._camera is not None else VIEW_DIRECTION
-        return page_html(self._record.commands(), robots, title, description, view)
+        dots = [f"{rig.name}/paths/desired" for rig in self._rigs.values() if rig.runs]
+        return page_html(self._record.commands(), robots, title, description, view, dots)
 
     def save_html(self, path: str | Path, title: str = "sjt-pin viewer",
                   description: str = "") -> Path:
@@ -354,16 +425,37 @@ class Viewer:
         path.write_text(self.static_html(title, description), encoding="utf-8")
         return path
 
+    def static_cell(self, height: int = 480, title: str = "sjt-pin viewer",
+                    description: str = ""):
+        """A static copy of the scene for a Jupyter cell: :meth:`static_html` in an iframe's
+        ``srcdoc``, so the picture, its animation and its plots stay in the saved notebook after
+        the kernel (and the server) stopped. ``height`` in CSS pixels."""
+        from IPython.display import HTML
+
+        if not isinstance(height, int) or height <= 0:
+            raise ValueError(f"height must be a positive integer (pixels), got {height!r}")
+        page = html.escape(self.static_html(title, description), quote=True)
+        return HTML(f'<div class="sjt-pin-static"><iframe srcdoc="{page}" '
+                    f'title="{html.escape(title, quote=True)}" style="width: 100%; '
+                    f'height: {height}px; border: 1px solid #d8dbe0" sandbox="allow-scripts">'
+                    "</iframe></div>")
+
     def jupyter_cell(self, height: int = 400):
-        """The live viewer in a Jupyter cell (an iframe on :attr:`url`)."""
+        """The live viewer in a Jupyter cell (an iframe on :attr:`url`); blank once the kernel
+        stops: :meth:`static_cell` keeps a copy in the notebook."""
         if self._server is None:
             raise RuntimeError(_NOT_LIVE)
         return self.meshcat.jupyter_cell(height=height)
 
     def close(self) -> None:
-        """Stop the meshcat server, if any (idempotent)."""
+        """Stop the meshcat server, if any (idempotent); the scene stays for :meth:`save_html`
+        and :meth:`restart`."""
+        if isinstance(self._record.live, LiveWindow):
+            self._record.live.close()
+        self._record.live = None
         if self._server is not None:
             self._server.close()
+        self._server = None
 
     def __enter__(self) -> Viewer:
         return self
@@ -374,6 +466,16 @@ class Viewer:
     def __repr__(self) -> str:
         url = self._server.web_url if self._server is not None else None
         return f"Viewer({list(self._rigs)}, url={url!r})"
+
+
+def _dots(path: np.ndarray, spacing: float) -> np.ndarray:
+    """Points of ``path`` (N, 3) at least ``spacing`` m apart along it, at most DESIRED_DOTS
+    of them evenly spread, the first and the last included (two, for a path that stands still).
+    """
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))])
+    count = int(min(DESIRED_DOTS, arc[-1] / max(spacing, 1e-12))) + 1
+    indices = np.searchsorted(arc, np.linspace(0.0, arc[-1], max(count, 2)))
+    return path[np.minimum(indices, len(path) - 1)]
 
 
 def _translation(p) -> np.ndarray:

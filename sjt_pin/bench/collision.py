@@ -1,0 +1,303 @@
+"""``sjt-pin bench collision``: collision avoidance on three scenes, with and without the
+limit, for SJT, DLS and pink.
+
+- **Panda passes a ball** (:func:`scenes`): the hand follows a 40 cm line in 2 s that an 8 cm
+  sphere lies beside (the free arm drives its links into it), then holds the end, reachable
+  without touching, for 2 s. Self-collision on.
+- **Panda beside its base**: the hand is sent in 1.5 s to a pose beside and behind the robot's
+  own base (on the way the free arm drives its hand through link 2); the pose itself is
+  reachable without touching. Self-collision on.
+- **UR5 under a table**: a 4 cm table top 20 cm under the hand; the target goes down through
+  it in 1.5 s to 3 cm under it and stays there: the arm must stop above it, at rest.
+
+Each run reports the least distance of any checked pair, **measured independently**: coal on
+a geometry model of its own, built from the robot's collision meshes (not the limit's convex
+hulls, not the limit's numbers; each pair's hull distance, a lower bound, picks the pairs whose
+mesh distance is computed), the task error 2 s after the target stops, the RMS joint speed over
+the last second, and the CPU time per step (process time, so other processes do not count).
+pink runs its ``SelfCollisionBarrier`` on a geometry model with the obstacles attached to the
+world joint (its way to handle obstacles: every pair of its collision model is a barrier row),
+on the same convex hulls as the limit, with a ``FrameTask`` and a small ``PostureTask``.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import coal
+import numpy as np
+import pinocchio as pin
+
+from ..limits.collision import CollisionLimit, _to_hulls
+from ..robot import Robot
+from ..solvers import make_solver
+from ..trajectories import PoseInterpolation
+
+DT = 1e-3
+MARGIN = 0.01
+#: the hull distance (m) under which a pair's mesh distance is computed in the check
+CHECK_BELOW = 0.03
+UR5_START = np.array([0.0, -1.2, 1.5, -1.9, -1.57, 0.0])
+
+
+@dataclass
+class Scene:
+    """A robot, its obstacles, a path of targets (pose and velocity at time t) and how long
+    the run lasts (s); ``stop`` is when the target stops moving."""
+
+    name: str
+    robot: Robot
+    q0: np.ndarray
+    obstacles: list
+    target: Callable[[float], tuple[pin.SE3, np.ndarray]]
+    stop: float
+    duration: float
+    self_collision: bool = True
+
+
+@dataclass
+class CollisionRow:
+    scene: str
+    method: str
+    limit: bool
+    min_distance: float  # m, any checked pair, meshes, independent
+    pair: str  # the closest pair
+    final_error: float  # |e| 2 s after the target stops (m and rad)
+    rest: float  # RMS joint speed over the last second, rad/s
+    us_per_step: float  # CPU time of one step, us
+    floor_us: float = float("nan")  # plain step + coal's queries of the active pairs, us
+    rows_us: float = float("nan")  # the limit's rows() alone (broad phase, coal, rows), us
+    extra: dict = field(default_factory=dict)
+
+
+def _line(start: pin.SE3, end: pin.SE3, duration: float):
+    path = PoseInterpolation(start, end, duration=duration)
+
+    def target(t: float):
+        pose, velocity = path.sample(min(t, duration))
+        return pose, (np.zeros(6) if t >= duration else velocity.vector)
+
+    return target
+
+
+def scenes() -> list[Scene]:
+    """The three scenes of the module docstring."""
+    panda = Robot.from_example("panda")
+    q0 = panda.q0.copy()
+    start = panda.fk(q0)
+    end = pin.SE3(start.rotation, start.translation + [0.0, 0.4, 0.0])
+    ball = (coal.Sphere(0.04), pin.SE3(np.eye(3), start.translation + [0.0, 0.2, -0.07]))
+    side = pin.SE3(start.rotation, np.array([-0.1, 0.25, 0.35]))  # behind, left of link 1
+    ur5 = Robot.from_example("ur5")
+    top = ur5.fk(UR5_START)
+    table = (coal.Box(0.6, 0.8, 0.04), pin.SE3(np.eye(3), np.array([top.translation[0],
+                                                                     top.translation[1],
+                                                                     top.translation[2] - 0.2])))
+    below = pin.SE3(top.rotation, top.translation - [0.0, 0.0, 0.25])
+    return [
+        Scene("Panda passes a ball", panda, q0, [ball], _line(start, end, 2.0), 2.0, 4.0),
+        Scene("Panda beside its base", panda, q0, [], _line(start, side, 1.5), 1.5, 3.5),
+        Scene("UR5 under a table", ur5, UR5_START.copy(), [table], _line(top, below, 1.5), 1.5,
+              3.5),
+    ]
+
+
+class Checker:
+    """The least distance of the pairs a limit checks, computed independently (module
+    docstring): meshes where the robot has them, obstacles as given."""
+
+    def __init__(self, robot: Robot, obstacles, pair_names):
+        self.model = robot.model
+        self.data = robot.model.createData()
+        self.mesh = robot.collision_model.copy()
+        for i, (shape, pose) in enumerate(obstacles):
+            self.mesh.addGeometryObject(pin.GeometryObject(f"obstacle_{i}", 0, 0, pose, shape))
+        names = [g.name for g in self.mesh.geometryObjects]
+        self.mesh.removeAllCollisionPairs()
+        for a, b in pair_names:
+            self.mesh.addCollisionPair(pin.CollisionPair(names.index(a), names.index(b)))
+        self.hull = self.mesh.copy()
+        _to_hulls(self.hull)
+        self.mesh_data, self.hull_data = self.mesh.createData(), self.hull.createData()
+        for data in (self.mesh_data, self.hull_data):
+            for req in data.distanceRequests:
+                req.enable_signed_distance = True
+        self.names = [(names[p.first], names[p.second]) for p in self.mesh.collisionPairs]
+
+    def closest(self, q: np.ndarray) -> tuple[float, str]:
+        """(distance in m, pair) of the closest pair at ``q``."""
+        pin.updateGeometryPlacements(self.model, self.data, self.hull, self.hull_data, q)
+        pin.updateGeometryPlacements(self.model, self.data, self.mesh, self.mesh_data)
+        best, pair = np.inf, ""
+        for k in range(len(self.names)):
+            d = pin.computeDistance(self.hull, self.hull_data, k).min_distance
+            if d < CHECK_BELOW:  # the hull is a lower bound: only then the mesh can be close
+                d = pin.computeDistance(self.mesh, self.mesh_data, k).min_distance
+            if d < best:
+                best, pair = d, "/".join(self.names[k])
+        return float(best), pair
+
+
+def _pose_error(robot: Robot, q: np.ndarray, target: pin.SE3) -> float:
+    return float(np.linalg.norm(pin.log6(robot.fk(q).actInv(target)).vector))
+
+
+def _run(scene: Scene, step) -> tuple[np.ndarray, float]:
+    """Run ``step(q, pose, velocity) -> q`` over the scene: the configurations (N+1, nq) and
+    the CPU time per step (us)."""
+    q = scene.q0.copy()
+    qs = [q]
+    targets = [scene.target(k * DT) for k in range(int(round(scene.duration / DT)))]
+    clock = time.process_time
+    start = clock()
+    for pose, velocity in targets:
+        q = step(q, pose, velocity)
+        qs.append(q)
+    return np.array(qs), (clock() - start) / len(targets) * 1e6
+
+
+def _row(scene: Scene, method: str, limit: bool, qs: np.ndarray, us: float, checker: Checker,
+         ) -> CollisionRow:
+    closest = [checker.closest(q) for q in qs]
+    worst = min(range(len(closest)), key=lambda i: closest[i][0])
+    settle = min(len(qs) - 1, int(round((scene.stop + 2.0) / DT)))
+    end_pose, _ = scene.target(scene.duration)
+    speed = np.diff(qs[-int(1.0 / DT) - 1:], axis=0) / DT
+    return CollisionRow(scene.name, method, limit, closest[worst][0], closest[worst][1],
+                        _pose_error(scene.robot, qs[settle], end_pose),
+                        float(np.sqrt(np.mean(speed ** 2))), us)
+
+
+def _floor(scene: Scene, limit: CollisionLimit, qs: np.ndarray, plain_us: float
+           ) -> tuple[float, float]:
+    """The plain step's time plus coal's distance queries of the pairs the limit had within
+    ``influence`` at each configuration of the run, and the time of the limit's ``rows()``
+    alone at the same configurations (us per step)."""
+    from ..kinematics import Kinematics
+    from ..limits.base import Motion
+
+    kinematics = Kinematics(scene.robot.model)
+    motion = Motion(scene.q0, np.zeros(scene.robot.nv), np.zeros(scene.robot.nv), DT)
+    active = []
+    clock = time.process_time
+    rows_time = 0.0
+    for q in qs[:-1]:
+        kinematics.update(q)
+        start = clock()
+        limit.rows(kinematics, motion)
+        rows_time += clock() - start
+        active.append(list(limit.active))
+    geometry, data = limit.geometry, limit.geometry_data
+    model, pin_data = scene.robot.model, kinematics.data
+    start = clock()
+    for q, pairs in zip(qs[:-1], active, strict=True):
+        if pairs:
+            pin.updateGeometryPlacements(model, pin_data, geometry, data, q)
+            for k in pairs:
+                pin.computeDistance(geometry, data, k)
+    return (plain_us + (clock() - start) / len(active) * 1e6, rows_time / len(active) * 1e6)
+
+
+def _pink(scene: Scene, barrier: bool, geometry: pin.GeometryModel | None):
+    """pink's solve_ik with its SelfCollisionBarrier (or without any barrier)."""
+    try:
+        import pink
+        import qpsolvers
+        from pink.barriers import SelfCollisionBarrier
+        from pink.tasks import FrameTask, PostureTask
+    except ImportError:
+        return None
+    qp = "daqp" if "daqp" in qpsolvers.available_solvers else qpsolvers.available_solvers[0]
+    robot = scene.robot
+    if barrier:
+        gdata = geometry.createData()
+        for req in gdata.distanceRequests:
+            req.enable_signed_distance = True
+        configuration = pink.Configuration(robot.model, robot.model.createData(), scene.q0,
+                                           collision_model=geometry, collision_data=gdata)
+        barriers = [SelfCollisionBarrier(len(geometry.collisionPairs), gain=1.0, d_min=MARGIN)]
+    else:
+        configuration = pink.Configuration(robot.model, robot.model.createData(), scene.q0)
+        barriers = []
+    task = FrameTask(robot.ee_frame, position_cost=1.0, orientation_cost=1.0)
+    posture = PostureTask(cost=1e-3)
+    posture.set_target(scene.q0)
+
+    def step(q, pose, velocity):
+        configuration.update(q)
+        task.set_target(pose)
+        v = pink.solve_ik(configuration, [task, posture], DT, solver=qp, barriers=barriers,
+                          safety_break=False)
+        return configuration.integrate(v, DT)
+
+    return step
+
+
+def collision(methods=("sjt", "dls"), peers: bool = True, progress=None) -> list[CollisionRow]:
+    """Every scene (module docstring), every method with and without the limit, and pink."""
+    rows = []
+    for scene in scenes():
+        limit = CollisionLimit(scene.robot, scene.obstacles, self_collision=scene.self_collision,
+                               margin=MARGIN)
+        checker = Checker(scene.robot, scene.obstacles, limit.pair_names)
+        for method in methods:
+            plain_us = float("nan")
+            for with_limit in (False, True):
+                fence = CollisionLimit(scene.robot, scene.obstacles,
+                                       self_collision=scene.self_collision, margin=MARGIN)
+                solver = make_solver(method, scene.robot, dt=DT,
+                                     limits=[fence] if with_limit else ())
+                qs, us = _run(scene, lambda q, pose, v, s=solver: s.step(q, pose, v))
+                row = _row(scene, method.upper(), with_limit, qs, us, checker)
+                if with_limit:
+                    row.floor_us, row.rows_us = _floor(scene, fence, qs, plain_us)
+                else:
+                    plain_us = us
+                rows.append(row)
+                if progress:
+                    progress(row)
+        if peers:
+            geometry = limit.geometry.copy()  # the same hulls, pairs and obstacles
+            for with_barrier in (False, True):
+                step = _pink(scene, with_barrier, geometry)
+                if step is None:
+                    break
+                qs, us = _run(scene, step)
+                row = _row(scene, "pink", with_barrier, qs, us, checker)
+                rows.append(row)
+                if progress:
+                    progress(row)
+    return rows
+
+
+def collision_table(rows: list[CollisionRow]) -> str:
+    out = ["| scene | method | limit | min distance [mm] | closest pair | error 2 s after the "
+           "stop | RMS speed, last 1 s [rad/s] | CPU us/step | of which rows() | "
+           "with / (plain + coal) |",
+           "|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        ratio = r.us_per_step / r.floor_us if np.isfinite(r.floor_us) else float("nan")
+        out.append(f"| {r.scene} | {r.method} | {'yes' if r.limit else 'no'} | "
+                   f"{1e3 * r.min_distance:.1f} | {r.pair} | {r.final_error:.1e} | "
+                   f"{r.rest:.1e} | {r.us_per_step:.0f} | "
+                   f"{'' if np.isnan(r.rows_us) else f'{r.rows_us:.0f}'} | "
+                   f"{'' if np.isnan(ratio) else f'{ratio:.1f}'} |")
+    return "\n".join(out)
+
+
+def idle(steps: int = 3000) -> tuple[float, float]:
+    """CPU time per step (us) of SJT on Panda's 40 cm line without a limit, and with a
+    CollisionLimit (self-collision on, one ball 3 m away) whose pairs all stay beyond
+    ``influence``: the limit's cost when nothing is near (the broad phase alone)."""
+    scene = scenes()[0]
+    far = [(coal.Sphere(0.04), pin.SE3(np.eye(3), np.array([3.0, 0.0, 0.0])))]
+    scene = Scene("idle", scene.robot, scene.q0, far, scene.target, 2.0, steps * DT)
+    out = []
+    for limits in ((), (CollisionLimit(scene.robot, far, self_collision=True, margin=MARGIN),)):
+        solver = make_solver("sjt", scene.robot, dt=DT, limits=limits)
+        best = min(_run(scene, lambda q, pose, v, s=solver: s.step(q, pose, v))[1]
+                   for _ in range(3))
+        out.append(best)
+    return out[0], out[1]
