@@ -21,6 +21,7 @@ angles and back, and joints off the chain (fingers) keep the seed's values.
 
 from __future__ import annotations
 
+import logging
 import re
 import time
 import warnings
@@ -397,7 +398,7 @@ def many_throughput(name: str = "ur5", poses: int = 20_000, processes: int = 2,
             return row
         with distributed.LocalCluster(n_workers=processes, threads_per_worker=1,
                                       processes=True, dashboard_address=None,
-                                      silence_logs=40) as cluster, \
+                                      silence_logs=logging.CRITICAL) as cluster, \
                 distributed.Client(cluster) as client:
             row.dask, on_dask = timed(executor=client.get_executor())
         row.identical = identical and bool(np.array_equal(on_dask, reference))
