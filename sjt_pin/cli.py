@@ -326,9 +326,13 @@ def reach(args: argparse.Namespace) -> int:
     """``sjt-pin reach ROBOT``: the reachability map (:mod:`sjt_pin.reach`)."""
     from .reach import reach_command
 
-    reach_command(args.robot, args.step, args.orientations, out=args.out, page=args.html,
-                  processes=args.processes, scheduler=args.scheduler, budget=args.budget,
-                  seed=args.seed, quiet=args.quiet)
+    try:
+        reach_command(args.robot, args.step, args.orientations, out=args.out, page=args.html,
+                      processes=args.processes, scheduler=args.scheduler, budget=args.budget,
+                      seed=args.seed, quiet=args.quiet, frame=args.frame)
+    except ValueError as exc:  # an unknown robot or frame, a partial map of other settings
+        print(f"sjt-pin reach: error: {exc}", file=sys.stderr)
+        return 2
     return 0
 
 
@@ -359,6 +363,8 @@ def _reach_parser(sub) -> None:
              "robot's workspace; writes an .npz and a self-contained page")
     p = sub.add_parser("reach", help=about, description=about[0].upper() + about[1:] + ".")
     p.add_argument("robot", help="an example-robot-data robot, e.g. panda, ur5")
+    p.add_argument("--frame", default=None, help="the frame placed (default: the robot's "
+                   "end effector; needed for robots without one, e.g. baxter)")
     p.add_argument("--step", type=_grid_step, default=0.05,
                    help="grid spacing in m (default 0.05)")
     p.add_argument("--orientations", type=positive_int, default=20,

@@ -322,11 +322,12 @@ def reach_command(name: str, step: float = STEP, orientations: int = ORIENTATION
                   out: str | Path | None = None, page: str | Path | None = None,
                   processes: int | None = None,
                   scheduler: str | None = None, budget: int = BUDGET, seed: int = 0,
-                  quiet: bool = False) -> ReachMap:
-    """``sjt-pin reach NAME``: the map of example-robot-data's robot ``name``, written to
-    ``out`` (default ``reach_NAME.npz``, resumed if partial) and ``page`` (default
-    ``reach_NAME.html``); on the Dask cluster at ``scheduler`` when given."""
-    robot = Robot.from_example(name)
+                  quiet: bool = False, frame: str | None = None) -> ReachMap:
+    """``sjt-pin reach NAME``: the map of example-robot-data's robot ``name`` (its ``frame``,
+    default its end effector), written to ``out`` (default ``reach_NAME.npz``, resumed if
+    partial) and ``page`` (default ``reach_NAME.html``); on the Dask cluster at ``scheduler``
+    when given."""
+    robot = Robot.from_example(name, ee_frame=frame)
     out = out or f"reach_{name}.npz"
     page = page or f"reach_{name}.html"
     centre, radius = reach_sphere(robot)
