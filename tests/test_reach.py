@@ -152,3 +152,12 @@ def test_the_command_and_its_page(chromium, tmp_path, capsys):
         assert "Fraction of orientations reached" in legend.inner_text()
     finally:
         page.close()
+
+
+def test_the_command_names_a_missing_end_effector(tmp_path, capsys):
+    """Baxter has no default end effector: one line and exit code 2, before any work."""
+    out = tmp_path / "baxter.npz"
+    assert main(["reach", "baxter", "--step", "0.4", "--orientations", "1", "--quiet",
+                 "--out", str(out)]) == 2
+    assert "no default ee_frame for 'baxter'" in capsys.readouterr().err
+    assert not out.exists()
