@@ -5,12 +5,14 @@ with ``D = diag(1 / (J_i^T J_i))``; the pseudoinverse, damped least-squares and 
 transpose baselines share the same interface.
 """
 
+from .batch import BatchError, BatchPart, solve_chunks, solve_many
 from .exceptions import ConcurrentStepError, FrameNotFound, GainWarning, URDFError
 from .gains import AutoGain, FixedGain, Gain
 from .kinematics import Kinematics
 from .limits import CollisionLimit
+from .reach import ReachMap, reachability
 from .robot import Robot
-from .solve import IKResult, solve_many
+from .solve import IKResult
 from .solver import Solver, StepInfo
 from .solvers import DLSSolver, JPSolver, JTSolver, SJTSolver, make_solver
 from .tasks import (
@@ -29,6 +31,8 @@ DifferentialIKSolver = Solver
 
 __all__ = [
     "AutoGain",
+    "BatchError",
+    "BatchPart",
     "Circle",
     "CollisionLimit",
     "DLSSolver",
@@ -48,6 +52,7 @@ __all__ = [
     "PoseTask",
     "PositionTask",
     "PostureTask",
+    "ReachMap",
     "RelativePoseTask",
     "Robot",
     "SJTSolver",
@@ -58,6 +63,8 @@ __all__ = [
     "TrackingLog",
     "URDFError",
     "make_solver",
+    "reachability",
+    "solve_chunks",
     "solve_many",
     "track",
 ]

@@ -203,7 +203,7 @@ def bench(args: argparse.Namespace) -> int:
                                 "saturating": [asdict(r) for r in saturating],
                                 "franka": [asdict(r) for r in franka]})
     else:
-        from .bench.ik import ik_benchmark, ik_table, many_throughput
+        from .bench.ik import ik_benchmark, ik_table, many_line, many_throughput
 
         rows = ik_benchmark(poses=args.poses, peers=not args.no_peers,
                             progress=lambda r: print(f"  {r.robot} {r.method}: "
@@ -211,8 +211,7 @@ def bench(args: argparse.Namespace) -> int:
         print(ik_table(rows))
         many = [many_throughput(name, poses=20 * args.poses) for name in ("ur5", "panda")]
         for m in many:
-            print(f"solve_many on {m.robot}, {m.poses} poses: {m.single:.0f} poses/s in 1 "
-                  f"process, {m.parallel:.0f} in {m.processes} ({m.speedup:.2f}x)")
+            print(many_line(m), flush=True)
         _write_json(args.json, {"machine": machine, "rows": [asdict(r) for r in rows],
                                 "solve_many": [asdict(m) for m in many]})
     return 0
@@ -323,6 +322,69 @@ def output_folder(text: str) -> Path:
 output_folder.__name__ = "output folder"
 
 
+def reach(args: argparse.Namespace) -> int:
+    """``sjt-pin reach ROBOT``: the reachability map (:mod:`sjt_pin.reach`)."""
+    from .reach import reach_command
+
+    try:
+        reach_command(args.robot, args.step, args.orientations, out=args.out, page=args.html,
+                      processes=args.processes, scheduler=args.scheduler, budget=args.budget,
+                      seed=args.seed, quiet=args.quiet, frame=args.frame)
+    except ValueError as exc:  # an unknown robot or frame, a partial map of other settings
+        print(f"sjt-pin reach: error: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
+def _grid_step(text: str) -> float:
+    """``type=`` for reach's grid spacing: a finite number of metres > 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a length in m > 0, got {text!r}") from None
+    if not math.isfinite(value) or value <= 0:
+        raise argparse.ArgumentTypeError(f"expected a length in m > 0, got {text}")
+    return value
+
+
+def _seed(text: str) -> int:
+    """``type=`` for a seed: an integer >= 0."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {value}")
+    return value
+
+
+def _reach_parser(sub) -> None:
+    about = ("reachability map: solve() on a grid of positions x orientations over the "
+             "robot's workspace; writes an .npz and a self-contained page")
+    p = sub.add_parser("reach", help=about, description=about[0].upper() + about[1:] + ".")
+    p.add_argument("robot", help="an example-robot-data robot, e.g. panda, ur5")
+    p.add_argument("--frame", default=None, help="the frame placed (default: the robot's "
+                   "end effector; needed for robots without one, e.g. baxter)")
+    p.add_argument("--step", type=_grid_step, default=0.05,
+                   help="grid spacing in m (default 0.05)")
+    p.add_argument("--orientations", type=positive_int, default=20,
+                   help="orientations per point (default 20)")
+    p.add_argument("--budget", type=positive_int, default=500,
+                   help="solve() iterations per pose (default 500)")
+    p.add_argument("--seed", type=_seed, default=0, help="seed of the random restarts")
+    p.add_argument("--out", default=None, metavar="PATH", type=output_file(parents=False),
+                   help="the .npz (default reach_ROBOT.npz); a partial one resumes")
+    p.add_argument("--html", default=None, metavar="PATH", type=output_file(parents=False),
+                   help="the page (default reach_ROBOT.html)")
+    p.add_argument("--processes", type=positive_int, default=None,
+                   help="worker processes (default: one per core)")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="solve on the Dask cluster at ADDRESS (e.g. tcp://host:8786; "
+                   "pip install 'sjt-pin[cluster]')")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=reach)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = Parser(prog="sjt-pin", description="Differential IK with the scaled Jacobian "
                     "transpose: a demo page, the paper's simulations, the benchmarks. "
@@ -380,6 +442,7 @@ def build_parser() -> argparse.ArgumentParser:
     about = "list the robot names of example-robot-data (for Robot.from_example)"
     p = sub.add_parser("robots", help=about, description=about[0].upper() + about[1:] + ".")
     p.set_defaults(func=robots)
+    _reach_parser(sub)
     return parser
 
 

@@ -663,7 +663,7 @@ class Solver:
     def solve(self, target, q0, **options):
         """Solve to ``target`` from ``q0`` (set-point IK): Levenberg-Marquardt on this
         method's columns (SJT's normalised ones for SJT) within the limits, restarted from
-        random configurations until it succeeds or its budget (iterations, 5 ms) runs out; see
+        random configurations until it succeeds or its budget (2000 iterations) runs out; see
         :func:`sjt_pin.solve.solve` for the options. Returns an :class:`~sjt_pin.IKResult`."""
         from .solve import solve
 

@@ -239,3 +239,15 @@ def positive_limits(value, size: int, name: str, unit: str) -> np.ndarray:
         raise ValueError(f"{name} must be one positive number or {size} (one per velocity "
                          f"coordinate) in {unit}, inf for none; got {value!r}")
     return limits
+
+
+def integer(value, name: str, minimum: int = 1) -> int:
+    """``value`` as an int >= ``minimum`` (a whole float is accepted, a bool is not), or an
+    error naming ``name``."""
+    whole = (isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
+             or isinstance(value, (float, np.floating)) and float(value).is_integer())
+    if not whole:
+        raise TypeError(f"{name} must be an integer >= {minimum}, got {value!r}")
+    if int(value) < minimum:
+        raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
+    return int(value)

@@ -16,7 +16,7 @@ def kinova() -> sjt.Robot:
 
 def test_benchmark_rows_and_table():
     rows = ik.ik_benchmark(robots=("ur5", "kinova"), poses=5)
-    labels = {"SJT", "SJT, timeout=None", "DLS"}
+    labels = {"SJT", "SJT, timeout=5 ms", "DLS"}
     assert {r.method for r in rows} >= labels
     for r in rows:
         assert r.poses == 5 and 0.0 <= r.success <= 1.0
@@ -77,9 +77,12 @@ def test_tracik_sees_the_same_kinova(kinova):
 
 
 def test_solve_many_throughput_row():
-    row = ik.many_throughput("ur5", poses=40)
-    assert row.poses == 40 and row.processes == 2
+    row = ik.many_throughput("ur5", poses=300)
+    assert row.poses == 300 and row.processes == 2 and row.identical
     assert row.single > 0 and row.parallel > 0 and row.speedup == row.parallel / row.single
+    assert row.dask > 0 and row.dask_ratio == row.dask / row.parallel
+    line = ik.many_line(row)
+    assert "in the pool of 2" in line and "on Dask" in line and line.endswith("yes")
 
 
 @pytest.mark.bench  # needs roboticstoolbox-python, from the bench extra: pytest -m bench

@@ -204,11 +204,18 @@ def test_solve_many_arguments(ur5):
     solver, target = sjt.SJTSolver(ur5), ur5.fk(ur5.q0)
     assert sjt.solve_many(solver, [], ur5.q0, progress=False) == []
     for name, value, error in [("chunk", 0, ValueError), ("processes", 0, ValueError),
-                               ("seed", None, TypeError), ("first", -1, ValueError)]:
+                               ("seed", None, TypeError), ("first", -1, ValueError),
+                               ("inflight", 0, ValueError)]:
         with pytest.raises(error, match=f"{name} must be an integer"):
             sjt.solve_many(solver, [target], ur5.q0, progress=False, **{name: value})
     with pytest.raises(ValueError, match="q0 must be real"):
         sjt.solve_many(solver, [target], np.array([ur5.q0 + 0j]), progress=False)
     with pytest.raises(ValueError, match="q0 contains NaN"):
         sjt.solve_many(solver, [target], np.full((1, 6), np.nan), progress=False)
+    with pytest.raises(ValueError, match=r"q0 must have shape \(6,\) or \(2, 6\)"):
+        sjt.solve_many(solver, [target] * 2, np.zeros((3, 6)), progress=False)
+    with pytest.raises(TypeError, match="rng is not an option of solve_many"):
+        sjt.solve_many(solver, [target], ur5.q0, progress=False, rng=1)
+    with pytest.raises(TypeError, match="executor must be a concurrent.futures.Executor"):
+        sjt.solve_many(solver, [target], ur5.q0, progress=False, executor=object())
 

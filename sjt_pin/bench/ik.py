@@ -9,7 +9,8 @@ poses). A solution counts when its position error is below 1e-5 m, its rotation 
 Runners:
 
 - sjt-pin's :meth:`~sjt_pin.Solver.solve` with its defaults, SJT and DLS (budget: 2000
-  iterations and 5 ms), and SJT with ``timeout=None`` (the iteration budget only);
+  iterations, no time limit), and SJT with ``timeout=0.005`` (5 ms, TRAC-IK's budget, as
+  well);
 - TRAC-IK (C++, ``pytracik``): Speed mode, 5 ms timeout, eps 1e-5;
 - robotics-toolbox's C++ ``ik_LM`` on the same URDF file, when ``roboticstoolbox`` imports.
 
@@ -20,6 +21,7 @@ angles and back, and joints off the chain (fingers) keep the seed's values.
 
 from __future__ import annotations
 
+import logging
 import re
 import time
 import warnings
@@ -252,7 +254,7 @@ def _runners(robot: Robot, peers: bool) -> dict[str, Runner]:
     """The runners for ``robot`` by label: sjt-pin's, then the peers that import."""
     runners = {
         "SJT": _sjt_pin(robot, "sjt"),
-        "SJT, timeout=None": _sjt_pin(robot, "sjt", timeout=None),
+        "SJT, timeout=5 ms": _sjt_pin(robot, "sjt", timeout=TRACIK_TIMEOUT),
         "DLS": _sjt_pin(robot, "dls"),
     }
     available = peers_available() if peers else {}
@@ -342,31 +344,72 @@ def ik_table(rows: list[IKRow]) -> str:
 
 @dataclass
 class ManyRow:
-    """``solve_many`` throughput on one robot: poses per second with 1 and with ``processes``
-    processes (``timeout=None``, so both solve exactly the same problems)."""
+    """``solve_many`` throughput on one robot, in one run: poses per second in 1 process, in
+    its pool of ``processes`` processes, and on a Dask ``LocalCluster`` of ``processes`` worker
+    processes of one thread each (None: distributed does not import); ``identical``: the three
+    gave the same q for every pose (default arguments)."""
 
     robot: str
     poses: int
     processes: int
     single: float  # poses/s
-    parallel: float  # poses/s
+    parallel: float  # poses/s, the pool
+    dask: float | None = None  # poses/s, the LocalCluster
+    identical: bool = True
 
     @property
     def speedup(self) -> float:
         return self.parallel / self.single
 
+    @property
+    def dask_ratio(self) -> float | None:
+        """Dask's throughput over the pool's."""
+        return None if self.dask is None else self.dask / self.parallel
 
-def many_throughput(name: str = "ur5", poses: int = 20_000, processes: int = 2) -> ManyRow:
-    """Wall-clock throughput of :func:`~sjt_pin.solve_many` (pool start included)."""
-    from ..solve import solve_many
+
+def many_throughput(name: str = "ur5", poses: int = 20_000, processes: int = 2,
+                    dask: bool = True) -> ManyRow:
+    """Wall-clock throughput of :func:`~sjt_pin.solve_many` with its defaults: in this
+    process, in its pool (the pool's start included) and, with ``dask`` and when distributed
+    imports, on a ``LocalCluster`` started beforehand (the call includes sending the solver to
+    the workers)."""
+    from ..batch import solve_many
 
     robot = Robot.from_example(name)
     pairs = problems(robot, poses, seed=1)
     targets, seeds = [t for t, _ in pairs], np.array([s for _, s in pairs])
     solver = make_solver("sjt", robot)
-    rates = []
-    for count in (1, processes):
+
+    def timed(**where):
         start = time.perf_counter()
-        solve_many(solver, targets, seeds, processes=count, progress=False, timeout=None)
-        rates.append(poses / (time.perf_counter() - start))
-    return ManyRow(robot.name, poses, processes, *rates)
+        results = solve_many(solver, targets, seeds, progress=False, **where)
+        return poses / (time.perf_counter() - start), np.array([r.q for r in results])
+
+    single, reference = timed(processes=1)
+    parallel, pooled = timed(processes=processes)
+    identical = bool(np.array_equal(pooled, reference))
+    row = ManyRow(robot.name, poses, processes, single, parallel, identical=identical)
+    if dask:
+        try:
+            import distributed
+        except ImportError:
+            warnings.warn("distributed does not import: no Dask throughput (pip install "
+                          "'dask[distributed]')", stacklevel=2)
+            return row
+        with distributed.LocalCluster(n_workers=processes, threads_per_worker=1,
+                                      processes=True, dashboard_address=None,
+                                      silence_logs=logging.CRITICAL) as cluster, \
+                distributed.Client(cluster) as client:
+            row.dask, on_dask = timed(executor=client.get_executor())
+        row.identical = identical and bool(np.array_equal(on_dask, reference))
+    return row
+
+
+def many_line(row: ManyRow) -> str:
+    """The throughput line of ``sjt-pin bench ik``."""
+    line = (f"solve_many on {row.robot}, {row.poses} poses: {row.single:.0f} poses/s in 1 "
+            f"process, {row.parallel:.0f} in the pool of {row.processes} ({row.speedup:.2f}x)")
+    if row.dask is not None:
+        line += (f", {row.dask:.0f} on Dask (LocalCluster, {row.processes} worker processes: "
+                 f"{row.dask_ratio:.2f}x the pool)")
+    return line + f"; identical q everywhere: {'yes' if row.identical else 'NO'}"
