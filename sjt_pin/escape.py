@@ -41,7 +41,9 @@ class SaddleEscape:
     """
 
     STALL_RATIO = 1e-4  #: loop gain along the command below this (of tr) counts as stalled
-    ERROR_FLOOR = 1e-6  #: |e| below this (task units) is converged, not stalled
+    #: |e_w| below this times the tasks' length (see :func:`~sjt_pin.tasks.pose.tasks_length`) is
+    #: converged, not stalled: 1e-6 m on a 1 m arm, 1e-3 mm on the same arm in mm
+    ERROR_FLOOR = 1e-6
     WINDOW = 50  #: stalled steps before the curvature test
     MAX_WAIT = 64  #: the longest run (in windows) between tests at a persistent minimum
     PROGRESS = 0.01  #: ... during which |e| fell by less than this fraction
@@ -49,6 +51,10 @@ class SaddleEscape:
     CURVATURE = 1e-6  #: a curvature below -CURVATURE |e_w|^2 (per rad^2) is a saddle
     SPEED = 0.5  #: escape speed as a fraction of the URDF speed limits
     DEFAULT_SPEED = 1.0  #: rad/s or m/s for joints without a URDF speed limit
+    FLAT = 1e-6  #: curvatures within this fraction of the largest count as zero
+    PROBE = 0.2  #: rad (or m): how far a flat direction is probed
+    PROBE_NEWTON = 2  #: Newton steps that bring the other joints to the valley floor
+    PROBE_DROP = 1e-3  #: a fall of f by this fraction along a flat direction is a saddle
     RAMP = 0.1  #: s to ramp the escape velocity up, and down
     MAX_TRAVEL = 0.5  #: rad: an escape ends after moving this far along its direction
     #: an escape ramps down once |e| exceeds its value at the start by this fraction, and
@@ -87,8 +93,9 @@ class SaddleEscape:
 
     def observe(self, step: int, e_sq: float) -> bool:
         """Count the stalled step number ``step`` (the step kernel flags a stall: a stall ratio
-        below ``STALL_RATIO`` with ``|e|`` above ``ERROR_FLOOR``); True when the curvature should
-        be tested: a run of stalled steps long enough without progress. After a test that
+        below ``STALL_RATIO`` with ``|e_w|`` above ``ERROR_FLOOR`` L) of squared weighted error
+        ``e_sq``; True when the curvature should be tested: a run of stalled steps long enough
+        without progress. After a test that
         found no saddle the run needed doubles (up to ``MAX_WAIT`` windows), so a persistent
         minimum costs a test ever more rarely; a new run starts from ``WINDOW`` again."""
         if step != self._last_step + 1:  # a new run of stalled steps
@@ -133,16 +140,20 @@ class SaddleEscape:
             Jm, em = rows(pin.integrate(self.model, q, -dv))
             H[:, a] = -(ep @ Jp - em @ Jm)[columns] / (2.0 * h)  # d(grad f)/dq_j
         curvatures, vectors = np.linalg.eigh(0.5 * (H + H.T))
-        if not curvatures[0] < -self.CURVATURE * 2.0 * f0:
-            return False
-        direction = np.zeros(nv)
-        direction[columns] = vectors[:, 0]
-        # the sign that lowers f (its third-order term), as seen a little further out
-        reach = 1e2 * h
-        _, ep = rows(pin.integrate(self.model, q, reach * direction))
-        _, em = rows(pin.integrate(self.model, q, -reach * direction))
-        if ep @ ep > em @ em:
-            direction = -direction
+        if curvatures[0] < -self.CURVATURE * 2.0 * f0:
+            direction = np.zeros(nv)
+            direction[columns] = vectors[:, 0]
+            # the sign that lowers f (its third-order term), as seen a little further out
+            reach = 1e2 * h
+            _, ep = rows(pin.integrate(self.model, q, reach * direction))
+            _, em = rows(pin.integrate(self.model, q, -reach * direction))
+            if ep @ ep > em @ em:
+                direction = -direction
+        else:
+            found = self._flat_descent(q, rows, columns, curvatures, vectors, f0)
+            if found is None:
+                return False
+            direction = found
         self.direction = direction
         moving = np.abs(direction) > 1e-12
         self._top = self.SPEED * float(np.min(self.speeds[moving] / np.abs(direction[moving])))
@@ -153,11 +164,48 @@ class SaddleEscape:
         self.escapes += 1
         return True
 
+    def _flat_descent(self, q, rows, columns, curvatures, vectors, f0) -> np.ndarray | None:
+        """A direction of zero curvature along which ``f`` falls at higher order, or ``None``.
+
+        Where H has a zero eigenvalue (a null direction of J whose coupling to the others
+        vanishes), the second-order test cannot tell a minimum from a saddle: UR5 at q = 0 asked
+        to roll about its lost axis is one with a pose task's length L below 0.75 m, where f
+        falls like -t^4 along the null direction once the other joints follow. Each flat
+        direction v is probed at ``q (+) +-PROBE v``, the other free joints brought to the
+        valley floor by ``PROBE_NEWTON`` Newton steps on H's other eigenvectors; a fall of f
+        by more than ``PROBE_DROP`` of its value makes v the escape direction (the sign that
+        falls most). Along the self-motion of a redundant arm f stays flat and nothing fires.
+        """
+        top = float(curvatures[-1])
+        flat = np.abs(curvatures) <= self.FLAT * top
+        if top <= 0.0 or not flat.any() or flat.all():
+            return None
+        keep = ~flat
+        inverse = (vectors[:, keep] / curvatures[keep]) @ vectors[:, keep].T
+        nv = self.model.nv
+        best, found = (1.0 - self.PROBE_DROP) * f0, None
+        for k in np.flatnonzero(flat):
+            for sign in (1.0, -1.0):
+                v = np.zeros(nv)
+                v[columns] = sign * vectors[:, k]
+                qt = pin.integrate(self.model, q, self.PROBE * v)
+                for _ in range(self.PROBE_NEWTON):
+                    J_w, e_w = rows(qt)
+                    step = np.zeros(nv)
+                    step[columns] = inverse @ (e_w @ J_w)[columns]
+                    qt = pin.integrate(self.model, qt, step)
+                _, e_w = rows(qt)
+                f = 0.5 * float(e_w @ e_w)
+                if f < best:
+                    best, found = f, v
+        return found
+
     def velocity(self, regular_speed: float, dt: float, e_sq: float = 0.0
                  ) -> np.ndarray | None:
         """The escape's joint velocity for this step (rad/s, m/s), or ``None`` once it has
         ramped down; ``regular_speed`` is the norm of the regular update's joint velocity and
-        ``e_sq`` the squared task error of the step (the escape yields if it grows)."""
+        ``e_sq`` the squared weighted task error |e_w|^2 of the step (the escape yields if it
+        grows)."""
         if self.direction is None:
             return None
         if self._start_error is None:

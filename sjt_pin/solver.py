@@ -41,7 +41,8 @@ from .limits.position import braking_speed
 from .methods import Method
 from .robot import Robot
 from .stack import TaskStack, normalise_tasks
-from .tasks import PostureTask, Task
+from .tasks import PoseTask, PostureTask, Task
+from .tasks.pose import tasks_length
 from .validation import period, raise_non_finite_targets
 
 _F64 = np.dtype(np.float64)
@@ -123,6 +124,9 @@ class Solver:
             tasks on distinct frames, or a ``{frame: task}`` mapping; with several tasks
             ``step`` takes ``{frame: target}`` mappings.
         posture: a :class:`~sjt_pin.PostureTask` stacked under the tasks (redundant robots).
+        pose_length: the characteristic length L (m) of the pose task made when ``task`` is
+            ``None``: ``PoseTask(length=pose_length)``; ``None`` for the robot's own (see
+            :class:`~sjt_pin.PoseTask`).
         position_limits: keep 1-DoF joints within their URDF position limits (default: on when
             the URDF has them).
         velocity_limits: ``True``/``None`` for the URDF's speed limits, ``False`` for none, or
@@ -158,12 +162,19 @@ class Solver:
         acceleration_limits=None,
         jerk_limits=None,
         limits: Sequence[Limit] = (),
+        pose_length: float | None = None,
     ):
         #: what the solver was made from: a copy is made anew from it (see __reduce__)
         self._arguments = dict(
             gain=gain, dt=dt, task=task, posture=posture, position_limits=position_limits,
             velocity_limits=velocity_limits, escape=escape, check_stability=check_stability,
-            acceleration_limits=acceleration_limits, jerk_limits=jerk_limits, limits=limits)
+            acceleration_limits=acceleration_limits, jerk_limits=jerk_limits, limits=limits,
+            pose_length=pose_length)
+        if pose_length is not None:
+            if task is not None:
+                raise ValueError("pose_length sets the length of the pose task made when task is "
+                                 "None; with a task of your own pass PoseTask(length=...)")
+            task = PoseTask(length=pose_length)
         if not isinstance(robot, Robot):
             raise TypeError(f"robot must be a sjt_pin.Robot, got {type(robot).__name__}")
         if not isinstance(method, Method):
@@ -244,7 +255,9 @@ class Solver:
         self._outcome_count = -1
         work[K.P_ERROR_ROWS] = stack.target_dim
         work[K.P_STALL_RATIO] = -1.0 if self.escape is None else SaddleEscape.STALL_RATIO
-        work[K.P_STALL_ERROR] = SaddleEscape.ERROR_FLOOR ** 2
+        # converged, not stalled: |e_w| below ERROR_FLOOR times the tasks' length (unit-free)
+        work[K.P_STALL_ERROR] = (SaddleEscape.ERROR_FLOOR
+                                  * tasks_length(robot, stack.tasks)) ** 2
         self._step = np.zeros(n)
         self._no_ff = np.zeros(stack.dim)
         self._ff_on = False
@@ -255,6 +268,7 @@ class Solver:
         self._probe: TaskStack | None = None
         self._search = None
         self._gain = as_gain(gain, stack.target_dim)
+        method.scale(tasks_length(robot, stack.tasks))  # its unit-dependent parameters
         self._configure()
         self._count = 0
         self._last: StepInfo | None = None
@@ -386,10 +400,10 @@ class Solver:
         self._escaped = (self._count, escape is not None and escape.active)
         if escape is not None:
             if (status & K.STALLED and not escape.active
-                    and escape.observe(self._count, self._info[K.I_E_SQ])):
+                    and escape.observe(self._count, self._info[K.I_EW_SQ])):
                 escape.test(q, self._weighted_rows(targets))
             velocity = escape.velocity(float(self._info[K.I_REGULAR]), dt,
-                                       float(self._info[K.I_E_SQ]))
+                                       float(self._info[K.I_EW_SQ]))
             if velocity is None:
                 self._work[K.P_ESCAPING] = 0.0
                 self._escape_velocity[:] = 0.0

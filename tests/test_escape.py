@@ -26,11 +26,14 @@ def run(solver, q, target, steps):
 
 @pytest.mark.parametrize("saddle", [0, 1], ids=["q=0 roll", "q5=0 u_min"])
 def test_default_sjt_leaves_exact_saddles_as_fast_as_dls(saddle):
+    """Within 2x DLS's steps; at q = 0 the pose task's length makes the saddle one of fourth
+    order, which DLS never leaves (nothing but round-off moves it): SJT's escape does, in at
+    most 1,000 steps at 2 ms (387 when measured)."""
     label, robot, q0, target = saddle_problems()[saddle]
     dls_steps, _, _ = run(sjt.DLSSolver(robot, dt=2e-3), q0, target, 5000)
     solver = sjt.SJTSolver(robot, dt=2e-3)
     steps, peak, _ = run(solver, q0, target, 5000)
-    assert steps is not None and steps <= 2 * dls_steps, (label, steps, dls_steps)
+    assert steps is not None and steps <= 2 * (dls_steps or 500), (label, steps, dls_steps)
     assert peak <= 1.0 + 1e-9  # never above the URDF speeds
 
 

@@ -739,7 +739,7 @@ static int step_c(int kind, Mat J, const double *e, const double *ff, const doub
     for (Py_ssize_t j = 0; j < n; j++) regular += step[j] * step[j];
     info[I_REGULAR] = sqrt(regular) / dt;
     int status = 0;
-    if (r.stall < work[P_STALL_RATIO] && r.e_sq > work[P_STALL_ERROR]) status = STALLED;
+    if (r.stall < work[P_STALL_RATIO] && r.ew_sq > work[P_STALL_ERROR]) status = STALLED;
     int escaping = work[P_ESCAPING] != 0.0;
     Py_ssize_t extra = (Py_ssize_t)work[P_EXTRA];
     if (escaping)

@@ -37,6 +37,11 @@ class Method(ABC):
         work[K.P_GAIN_MODE] = gain.mode
         work[K.P_GAIN_ARG] = self.gain_argument(gain, n_chain)
 
+    def scale(self, length: float) -> None:  # noqa: B027
+        """Adapt the parameters that carry a length unit to ``length``, the characteristic
+        length (m) of the solver's tasks (the solver calls it once, before :meth:`configure`);
+        nothing by default."""
+
     def gain_argument(self, gain: Gain, n_chain: int) -> float:
         """The kernel's ``P_GAIN_ARG`` for ``gain``: the factor c of "auto"."""
         return gain.factor

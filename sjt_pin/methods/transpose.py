@@ -15,6 +15,9 @@ FEEDBACKS = {"damped": K.FB_DAMPED, "transpose": K.FB_TRANSPOSE}
 LM_WEIGHT = 1.0
 #: mu of the damped feed-forward (dimensionless: the columns it solves on have unit norm).
 FF_DAMPING = 0.01
+#: the default floor l under the column norms, as a fraction of the tasks' characteristic
+#: length (:func:`~sjt_pin.tasks.pose.tasks_length`)
+FLOOR = 0.2
 
 
 class TransposeMethod(Method):
@@ -34,7 +37,9 @@ class TransposeMethod(Method):
         ff_damping: mu of the damped solve (dimensionless, > 0).
         column_tol: squared column norm (task units^2) below which a joint counts as not moving
             the tasks (alpha_i = 0 instead of a division by almost zero).
-        length: characteristic length l (m): ``alpha_i = 1 / max(J_i^T W J_i, l^2)``.
+        length: the floor l (m) under the column norms: ``alpha_i = 1 / max(J_i^T W J_i,
+            l^2)``; ``None``: ``FLOOR`` times the characteristic length of the solver's tasks
+            (set by :meth:`scale`), so that it follows the robot's size and length unit.
     """
 
     stalls = True
@@ -42,7 +47,7 @@ class TransposeMethod(Method):
     scaled = False
 
     def __init__(self, feedforward: str = "damped", ff_damping: float = FF_DAMPING,
-                 column_tol: float = COLUMN_TOL, length: float = 0.0,
+                 column_tol: float = COLUMN_TOL, length: float | None = 0.0,
                  feedback: str = "transpose"):
         if feedforward not in FEEDFORWARDS:
             raise ValueError(f"feedforward must be one of {sorted(FEEDFORWARDS)}, "
@@ -56,9 +61,15 @@ class TransposeMethod(Method):
         self.feedback = feedback
         self.ff_damping = positive(ff_damping, "ff_damping")
         self.column_tol = positive(column_tol, "column_tol", "task units squared")
-        self.length = real_number(length, "length", "m")
+        #: whether ``length`` follows the tasks' characteristic length (see :meth:`scale`)
+        self.relative = length is None
+        self.length = 0.0 if length is None else real_number(length, "length", "m")
         if not 0.0 <= self.length < float("inf"):
-            raise ValueError(f"length must be a finite number >= 0 (m), got {length!r}")
+            raise ValueError(f"length must be a finite number >= 0 (m) or None, got {length!r}")
+
+    def scale(self, length):
+        if self.relative:
+            self.length = FLOOR * length
 
     def configure(self, work, gain, dt, n_chain):
         super().configure(work, gain, dt, n_chain)
