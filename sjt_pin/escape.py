@@ -83,6 +83,7 @@ class SaddleEscape:
         self._travel = 0.0
         self._leaving = False
         self._start_error: float | None = None
+        self._max_travel = self.MAX_TRAVEL
         #: escapes started since construction (or the last reset)
         self.escapes = 0
 
@@ -143,26 +144,47 @@ class SaddleEscape:
         if curvatures[0] < -self.CURVATURE * 2.0 * f0:
             direction = np.zeros(nv)
             direction[columns] = vectors[:, 0]
-            # the sign that lowers f (its third-order term), as seen a little further out
+            # the sign that lowers f (its third-order term), as seen a little further out; when
+            # both do (a symmetric saddle), the one with more room before a position limit
             reach = 1e2 * h
             _, ep = rows(pin.integrate(self.model, q, reach * direction))
             _, em = rows(pin.integrate(self.model, q, -reach * direction))
-            if ep @ ep > em @ em:
+            both = max(ep @ ep, em @ em) < 2.0 * f0
+            if (self._room(q, -direction) > self._room(q, direction) if both
+                    else ep @ ep > em @ em):
                 direction = -direction
         else:
             found = self._flat_descent(q, rows, columns, curvatures, vectors, f0)
             if found is None:
                 return False
             direction = found
+        self._start(direction, self.MAX_TRAVEL)
+        self.escapes += 1
+        return True
+
+    def _room(self, q: np.ndarray, direction: np.ndarray) -> float:
+        """How far (rad or m along the unit ``direction``) q can move before a joint reaches a
+        position limit (inf without limits)."""
+        pl = self.position_limit
+        if pl is None or not pl.active:
+            return float("inf")
+        x, d = q[pl.q_index], direction[pl.v_index]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            room = np.where(d > 0.0, (pl.upper - x) / d, np.where(d < 0.0, (pl.lower - x) / d,
+                                                                   np.inf))
+        return float(np.min(room, initial=np.inf))
+
+    def _start(self, direction: np.ndarray, travel: float) -> None:
+        """Start a ramped motion along the unit ``direction``: at most ``SPEED`` times the URDF
+        speeds, ramping down after ``travel``."""
         self.direction = direction
         moving = np.abs(direction) > 1e-12
         self._top = self.SPEED * float(np.min(self.speeds[moving] / np.abs(direction[moving])))
+        self._max_travel = travel
         self.speed = 0.0
         self._travel = 0.0
         self._leaving = False
         self._start_error = None
-        self.escapes += 1
-        return True
 
     def _flat_descent(self, q, rows, columns, curvatures, vectors, f0) -> np.ndarray | None:
         """A direction of zero curvature along which ``f`` falls at higher order, or ``None``.
@@ -183,19 +205,25 @@ class SaddleEscape:
         keep = ~flat
         inverse = (vectors[:, keep] / curvatures[keep]) @ vectors[:, keep].T
         nv = self.model.nv
-        best, found = (1.0 - self.PROBE_DROP) * f0, None
+
+        def valley(v: np.ndarray) -> float:
+            """f at q (+) PROBE v with the other joints at the valley floor"""
+            qt = pin.integrate(self.model, q, self.PROBE * v)
+            for _ in range(self.PROBE_NEWTON):
+                J_w, e_w = rows(qt)
+                step = np.zeros(nv)
+                step[columns] = inverse @ (e_w @ J_w)[columns]
+                qt = pin.integrate(self.model, qt, step)
+            _, e_w = rows(qt)
+            return 0.5 * float(e_w @ e_w)
+
+        # the floor below q itself: what the regular update reaches without the flat direction
+        best, found = (1.0 - self.PROBE_DROP) * min(f0, valley(np.zeros(nv))), None
         for k in np.flatnonzero(flat):
             for sign in (1.0, -1.0):
                 v = np.zeros(nv)
                 v[columns] = sign * vectors[:, k]
-                qt = pin.integrate(self.model, q, self.PROBE * v)
-                for _ in range(self.PROBE_NEWTON):
-                    J_w, e_w = rows(qt)
-                    step = np.zeros(nv)
-                    step[columns] = inverse @ (e_w @ J_w)[columns]
-                    qt = pin.integrate(self.model, qt, step)
-                _, e_w = rows(qt)
-                f = 0.5 * float(e_w @ e_w)
+                f = valley(v)
                 if f < best:
                     best, found = f, v
         return found
@@ -218,7 +246,7 @@ class SaddleEscape:
             self._leaving = True
         accel = self._top / self.RAMP
         if not self._leaving and (regular_speed >= self.speed > 0.0
-                                  or self._travel >= self.MAX_TRAVEL):
+                                  or self._travel >= self._max_travel):
             self._leaving = True
         if self._leaving:
             self.speed = max(self.speed - accel * dt, 0.0)

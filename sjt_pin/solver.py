@@ -268,7 +268,7 @@ class Solver:
         self._probe: TaskStack | None = None
         self._search = None
         self._gain = as_gain(gain, stack.target_dim)
-        method.scale(tasks_length(robot, stack.tasks))  # its unit-dependent parameters
+        method.adapt(stack.targeted, tasks_length(robot, stack.tasks))  # per the tasks
         self._configure()
         self._count = 0
         self._last: StepInfo | None = None

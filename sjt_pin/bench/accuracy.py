@@ -9,11 +9,15 @@ feed-forward, JT, DLS at this package's damping (0.05) and at the best damping o
 - **tracking** (:func:`tracking`): max and RMS task error (m and rad, log6 norm) and the
   largest joint speed along paths that pass near or through singular configurations, and along
   plain circles and lines;
-- **rest** (:func:`rest`): RMS joint speed over the last second at a target held 0.3 m beyond
-  the reach (an arm that cannot reach must come to rest);
+- **rest** (:func:`rest`): RMS joint speed over the last second of 5 s at a target held 0.3 m
+  beyond the reach (an arm that cannot reach must come to rest), also for a redundant arm
+  (Baxter's left arm, 7 joints);
 - **saddle** (:func:`saddles`): steps from an exact saddle (UR5 at q = 0 asked to roll about
-  the lost axis; UR5 at q5 = 0 asked to move along the lost task direction) until the error is
-  1 % of its start, and the largest joint speed on the way relative to the URDF's.
+  the lost axis; UR5 and Bravo 7 at their wrist singularities and Baxter's redundant arm at a
+  singular configuration, asked to move along the lost task direction) until the error is 1 %
+  of its start, and the largest joint speed on the way relative to the URDF's;
+- **units** (:func:`units`): Baxter's arm in mm and in m, the joint trajectories of the same
+  runs and the ratio of their errors in the scaled unit.
 """
 
 from __future__ import annotations
@@ -140,14 +144,17 @@ class RestRow:
     escapes: int
 
 
-def rest(dts=DTS, variants=tuple(VARIANTS), seconds: float = 3.0, progress=None
+def rest(dts=DTS, variants=tuple(VARIANTS), seconds: float = 5.0, progress=None
          ) -> list[RestRow]:
     """A target 0.3 m beyond the reach (radially from the base), held for ``seconds``: RMS
-    joint speed over the last second."""
+    joint speed over the last second. UR5, Panda and Baxter's left arm (7 joints, redundant)."""
     rows = []
-    for name in ("ur5", "panda"):
-        robot = Robot.from_example(name)
-        q0 = UR5_START if name == "ur5" else robot.q0
+    for name in ("ur5", "panda", "baxter arm"):
+        if name == "baxter arm":
+            robot, q0 = baxter_arm()
+        else:
+            robot = Robot.from_example(name)
+            q0 = UR5_START if name == "ur5" else robot.q0
         pose = robot.fk(q0)
         reach = _reach(robot, pose.translation)
         target = pin.SE3(pose.rotation, (reach + 0.3) * pose.translation
@@ -202,21 +209,41 @@ def lost_direction(robot: Robot, q: np.ndarray) -> np.ndarray:
     return d / np.linalg.norm(d)
 
 
+#: Baxter's left arm at an exactly singular configuration (sigma_min 2e-17): the elbow nearly
+#: straight and the wrist aligned, 0.21 rad or more from every position limit
+BAXTER_SINGULAR = {"left_e0": -0.00669422744323612, "left_e1": 0.16193479126285196,
+                   "left_w1": -0.00196592454542699}
+
+
 def saddle_problems(angle: float = 0.1) -> list[tuple[str, Robot, np.ndarray, pin.SE3]]:
-    """UR5's two exact saddles: at q = 0, a roll about the lost axis; at q5 = 0, a move along
-    the lost task direction u_min (both ``angle`` along :func:`lost_direction`)."""
+    """Exact saddles, each ``angle`` along :func:`lost_direction`: UR5 at q = 0 asked to roll
+    about the lost axis, and at its wrist singularity q5 = 0; Bravo 7 at its wrist singularity
+    q5 = pi; Baxter's left arm (7 joints, redundant) at a singular configuration, pulled
+    inward along the lost direction."""
     ur5 = Robot.from_example("ur5")
+    bravo = Robot.from_example("bravo7_no_ee", ee_frame="end_effector_ball")
+    bravo_wrist = bravo.q0.copy()
+    bravo_wrist[bravo.model.joints[bravo.model.getJointId("joint5")].idx_q] = np.pi
+    baxter, stretched = baxter_arm()
+    for name, value in BAXTER_SINGULAR.items():
+        stretched[baxter.velocity_names.index(name)] = value
     out = []
-    for label, q in (("UR5 q = 0, roll about the lost axis", np.zeros(6)),
-                     ("UR5 q5 = 0, along u_min", np.array([0.3, -1.2, 1.5, -1.8, 0.0, 0.2]))):
-        lost = lost_direction(ur5, q)
-        out.append((label, ur5, q, ur5.fk(q) * pin.exp6(pin.Motion(angle * lost))))
+    for label, robot, q in (("UR5 q = 0, roll about the lost axis", ur5, np.zeros(6)),
+                            ("UR5 q5 = 0, along u_min", ur5,
+                             np.array([0.3, -1.2, 1.5, -1.8, 0.0, 0.2])),
+                            ("Bravo 7 q5 = pi, along u_min", bravo, bravo_wrist),
+                            ("Baxter arm singular, along u_min", baxter, stretched)):
+        lost = lost_direction(robot, q)
+        if robot is baxter and lost[2] > 0.0:
+            lost = -lost  # inward: outward the target is out of reach
+        out.append((label, robot, q, robot.fk(q) * pin.exp6(pin.Motion(angle * lost))))
     return out
 
 
-def saddles(dts=DTS, variants=tuple(VARIANTS), budget: int = 30_000, progress=None
+def saddles(dts=(1e-3, 4e-3), variants=tuple(VARIANTS), seconds: float = 30.0, progress=None
             ) -> list[SaddleRow]:
-    """Steps to 1 % of the start error from each saddle of :func:`saddle_problems`."""
+    """Steps to 1 % of the start error from each saddle of :func:`saddle_problems`, within
+    ``seconds`` of simulated time."""
     rows = []
     for label, robot, q0, target in saddle_problems():
         limits = robot.velocity_limits
@@ -225,7 +252,7 @@ def saddles(dts=DTS, variants=tuple(VARIANTS), budget: int = 30_000, progress=No
                 solver = _solver(variant, robot, dt, 0.05 if VARIANTS[variant][1] is None
                                  else None)
                 q, start, steps, peak = q0.copy(), None, None, 0.0
-                for k in range(budget):
+                for k in range(int(round(seconds / dt))):
                     q = solver.step(q, target)
                     start = solver.error_norm if start is None else start
                     peak = max(peak, float(np.max(np.abs(solver.displacement) / dt / limits)))

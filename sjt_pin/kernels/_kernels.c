@@ -362,7 +362,7 @@ static Core transpose_core(Mat J, const double *e, const double *ff, int has_ff,
             gram(J, sw, s, m <= n, A);
             bound = loop_bound_c(A, p, BOUND_PRODUCTS, A + p * p, A + 2 * p * p);
         }
-        bound += sqrt(r.ew_sq) * curvature;
+        bound += work[P_LM] * sqrt(r.ew_sq) * curvature;
         gain = bound > 0.0 ? work[P_GAIN_ARG] / (dt * bound) : 0.0;
     }
     if (has_ff)
