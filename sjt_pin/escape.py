@@ -55,6 +55,9 @@ class SaddleEscape:
     PROBE = 0.2  #: rad (or m): how far a flat direction is probed
     PROBE_NEWTON = 2  #: Newton steps that bring the other joints to the valley floor
     PROBE_DROP = 1e-3  #: a fall of f by this fraction along a flat direction is a saddle
+    SLOW = 0.1  #: curvatures below this fraction of the largest: what a settling step takes
+    SETTLE = 1e-4  #: rad (or m): the shortest Newton step worth travelling at a minimum
+    TRUST = 0.25  #: ... when f falls by this fraction of what its quadratic model predicts
     RAMP = 0.1  #: s to ramp the escape velocity up, and down
     MAX_TRAVEL = 0.5  #: rad: an escape ends after moving this far along its direction
     #: an escape ramps down once |e| exceeds its value at the start by this fraction, and
@@ -84,8 +87,11 @@ class SaddleEscape:
         self._leaving = False
         self._start_error: float | None = None
         self._max_travel = self.MAX_TRAVEL
+        self._settling, self._tick = False, 0
         #: escapes started since construction (or the last reset)
         self.escapes = 0
+        #: Newton steps travelled at minima (see :meth:`_settle`)
+        self.settles = 0
 
     @property
     def active(self) -> bool:
@@ -156,7 +162,7 @@ class SaddleEscape:
         else:
             found = self._flat_descent(q, rows, columns, curvatures, vectors, f0)
             if found is None:
-                return False
+                return self._settle(q, rows, J_w, e_w, columns, curvatures, vectors, f0)
             direction = found
         self._start(direction, self.MAX_TRAVEL)
         self.escapes += 1
@@ -174,17 +180,57 @@ class SaddleEscape:
                                                                    np.inf))
         return float(np.min(room, initial=np.inf))
 
-    def _start(self, direction: np.ndarray, travel: float) -> None:
+    def _start(self, direction: np.ndarray, travel: float, speed: float = np.inf) -> None:
         """Start a ramped motion along the unit ``direction``: at most ``SPEED`` times the URDF
-        speeds, ramping down after ``travel``."""
+        speeds and ``speed``, ramping down after ``travel``."""
         self.direction = direction
         moving = np.abs(direction) > 1e-12
-        self._top = self.SPEED * float(np.min(self.speeds[moving] / np.abs(direction[moving])))
+        cap = self.SPEED * float(np.min(self.speeds[moving] / np.abs(direction[moving])))
+        self._top = min(cap, speed)
         self._max_travel = travel
+        self._settling = False
         self.speed = 0.0
         self._travel = 0.0
         self._leaving = False
         self._start_error = None
+
+    def _settle(self, q, rows, J_w, e_w, columns, curvatures, vectors, f0) -> bool:
+        """At a minimum (no saddle): the Newton step along its flat directions, if it helps.
+
+        A redundant arm at a target it cannot reach stops at a minimum of f whose Hessian is
+        badly conditioned (Baxter's arm: curvatures 6e-4 to 2.9 on the unit-norm columns): the
+        regular update, a gradient step damped for the largest curvature, creeps along the
+        flattest directions for seconds. The Newton step ``-H^+ grad f`` restricted to the
+        curvatures below ``SLOW`` of the largest (the others the regular update settles within
+        a few steps; those within ``FLAT`` of zero, the self-motion, left out), at most
+        ``MAX_TRAVEL`` long, is travelled with the escape's ramps when it is longer than
+        ``SETTLE`` and f, evaluated there, falls by ``TRUST`` of the model's fall at least.
+        It gives up no error: it goes where f is lower, and yields like an escape if f grows.
+        """
+        top = float(curvatures[-1])
+        slow = (curvatures > self.FLAT * top) & (curvatures < self.SLOW * top)
+        if top <= 0.0 or not slow.any():
+            return False
+        gradient = -(e_w @ J_w)[columns]
+        projected = vectors[:, slow].T @ gradient
+        step = -vectors[:, slow] @ (projected / curvatures[slow])
+        distance = float(np.linalg.norm(step))
+        if distance < self.SETTLE:
+            return False
+        shrink = min(1.0, self.MAX_TRAVEL / distance)
+        distance *= shrink
+        direction = np.zeros(J_w.shape[1])
+        direction[columns] = step / np.linalg.norm(step)
+        # the quadratic model's fall along the (shortened) step, and f's own
+        predicted = shrink * (1.0 - 0.5 * shrink) * float(projected @ (projected
+                                                                      / curvatures[slow]))
+        _, e_far = rows(pin.integrate(self.model, q, distance * direction))
+        if not f0 - 0.5 * float(e_far @ e_far) > self.TRUST * predicted > 0.0:
+            return False
+        self._start(direction, 0.5 * distance, distance / self.RAMP)
+        self._settling, self._tick = True, 0
+        self.settles += 1
+        return True
 
     def _flat_descent(self, q, rows, columns, curvatures, vectors, f0) -> np.ndarray | None:
         """A direction of zero curvature along which ``f`` falls at higher order, or ``None``.
@@ -228,6 +274,21 @@ class SaddleEscape:
                     best, found = f, v
         return found
 
+    def _settling_velocity(self, dt: float) -> np.ndarray | None:
+        """A settling step's velocity: a triangle of 2 RAMP / dt steps that travels the step's
+        length exactly, counted in steps (no threshold on a travelled distance that a round-off
+        could move by a step: the same run in mm and in m settles alike)."""
+        assert self.direction is not None
+        n = max(1, int(round(self.RAMP / dt)))
+        k = self._tick
+        self._tick += 1
+        if k >= 2 * n - 1:
+            self.direction, self.speed = None, 0.0
+            self._count, self._wait = 0, self.WINDOW
+            return None
+        self.speed = self._top * (k + 1 if k < n else 2 * n - 1 - k) / n
+        return self.speed * self.direction
+
     def velocity(self, regular_speed: float, dt: float, e_sq: float = 0.0
                  ) -> np.ndarray | None:
         """The escape's joint velocity for this step (rad/s, m/s), or ``None`` once it has
@@ -244,13 +305,15 @@ class SaddleEscape:
             return None
         elif e_sq > (1.0 + self.GROWTH) ** 2 * self._start_error:
             self._leaving = True
+        if self._settling and not self._leaving:
+            return self._settling_velocity(dt)
         accel = self._top / self.RAMP
         if not self._leaving and (regular_speed >= self.speed > 0.0
                                   or self._travel >= self._max_travel):
             self._leaving = True
         if self._leaving:
             self.speed = max(self.speed - accel * dt, 0.0)
-            if self.speed == 0.0:
+            if self.speed <= 1e-9 * self._top:  # at rest (not a round-off above it)
                 self.direction = None
                 self._count, self._wait = 0, self.WINDOW
                 return None
