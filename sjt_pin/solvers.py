@@ -66,12 +66,13 @@ class SJTSolver(Solver):
 
     - ``feedback="damped"`` (default): ``q_dot = D J^T (J D J^T + lambda I)^-1 (x_dot_d + K e)``
       — SJT's D in a damped least-squares step, the SJT analogue of what DLS is to JT (it
-      tends to D J^T / lambda as the damping grows). ``lambda = mu^2 + |e| sqrt(max alpha)``:
-      a Levenberg-Marquardt term that grows with the error relative to the shortest lever arm
-      (the curvature that the linear model leaves out), so that an arm that cannot reach comes
-      to rest; unit-free like the rest. "auto" is ``K = 1 / dt``. On the accuracy benchmark its
-      max error is at most DLS's (damping 0.05) on every path but UR5's wrist at dt = 2 ms
-      (1.4x), and it rests at unreachable targets, which DLS does not.
+      tends to D J^T / lambda as the damping grows). ``lambda = mu^2 + w |e_w| sqrt(max
+      alpha)``: a Levenberg-Marquardt term that grows with the error relative to the shortest
+      lever arm (the curvature that the linear model leaves out; w = 0.5 with pose and
+      orientation rows only, 1 otherwise, see ``methods.transpose.POSE_LM_WEIGHT``), so that
+      an arm that cannot reach comes to rest; unit-free like the rest. "auto" is
+      ``K = 1 / dt``. On the accuracy benchmark its max error is below DLS's (damping 0.05) on
+      every path (0.03-0.27x), and it rests at unreachable targets, which DLS does not.
     - ``feedback="transpose"``: ``q_dot = D J^T K e`` plus the damped feed-forward: the
       paper's feedback, which corrects slowly along directions J nearly loses.
     - ``feedback="transpose", feedforward="transpose"``: the paper's eq. (21) exactly,

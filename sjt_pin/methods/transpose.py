@@ -42,9 +42,10 @@ class TransposeMethod(Method):
             ``S J^T`` like the feedback, exactly the paper's eq. (10) / (21).
         feedback: ``"transpose"``: ``S J^T K e`` (eq. 10, 21); ``"damped"``: the feedback goes
             through the damped solve too, ``D J^T (J D J^T + lambda I)^-1 (x_dot_d + K e)``,
-            ``lambda = mu^2 + |e| sqrt(max alpha)`` — the damped least squares of the unit-norm
-            columns, with a Levenberg-Marquardt term that grows with the error (needs
-            ``feedforward="damped"``).
+            ``lambda = mu^2 + w |e_w| sqrt(max alpha)`` — the damped least squares of the
+            unit-norm columns, with a Levenberg-Marquardt term that grows with the error (w:
+            ``LM_WEIGHT``, or ``POSE_LM_WEIGHT`` for SJT on pose and orientation rows only;
+            needs ``feedforward="damped"``).
         ff_damping: mu of the damped solve (dimensionless, > 0).
         column_tol: squared column norm (task units^2) below which a joint counts as not moving
             the tasks (alpha_i = 0 instead of a division by almost zero).
