@@ -58,6 +58,7 @@ class SaddleEscape:
     SLOW = 0.1  #: curvatures below this fraction of the largest: what a settling step takes
     SETTLE = 1e-4  #: rad (or m): the shortest Newton step worth travelling at a minimum
     TRUST = 0.25  #: ... when f falls by this fraction of what its quadratic model predicts
+    BACKTRACK = 4  #: halvings of the step tried before giving up
     RAMP = 0.1  #: s to ramp the escape velocity up, and down
     MAX_TRAVEL = 0.5  #: rad: an escape ends after moving this far along its direction
     #: an escape ramps down once |e| exceeds its value at the start by this fraction, and
@@ -203,8 +204,9 @@ class SaddleEscape:
         flattest directions for seconds. The Newton step ``-H^+ grad f`` restricted to the
         curvatures below ``SLOW`` of the largest (the others the regular update settles within
         a few steps; those within ``FLAT`` of zero, the self-motion, left out), at most
-        ``MAX_TRAVEL`` long, is travelled with the escape's ramps when it is longer than
-        ``SETTLE`` and f, evaluated there, falls by ``TRUST`` of the model's fall at least.
+        ``MAX_TRAVEL`` long (halved up to ``BACKTRACK`` times until f, evaluated there, falls by
+        ``TRUST`` of the model's fall at least), is travelled with the escape's ramps when it is
+        still longer than ``SETTLE``.
         It gives up no error: it goes where f is lower, and yields like an escape if f grows.
         """
         top = float(curvatures[-1])
@@ -214,18 +216,24 @@ class SaddleEscape:
         gradient = -(e_w @ J_w)[columns]
         projected = vectors[:, slow].T @ gradient
         step = -vectors[:, slow] @ (projected / curvatures[slow])
-        distance = float(np.linalg.norm(step))
-        if distance < self.SETTLE:
+        full = float(np.linalg.norm(step))
+        if full < self.SETTLE:
             return False
-        shrink = min(1.0, self.MAX_TRAVEL / distance)
-        distance *= shrink
         direction = np.zeros(J_w.shape[1])
-        direction[columns] = step / np.linalg.norm(step)
-        # the quadratic model's fall along the (shortened) step, and f's own
-        predicted = shrink * (1.0 - 0.5 * shrink) * float(projected @ (projected
-                                                                      / curvatures[slow]))
-        _, e_far = rows(pin.integrate(self.model, q, distance * direction))
-        if not f0 - 0.5 * float(e_far @ e_far) > self.TRUST * predicted > 0.0:
+        direction[columns] = step / full
+        model_fall = float(projected @ (projected / curvatures[slow]))
+        shrink = min(1.0, self.MAX_TRAVEL / full)
+        for _ in range(self.BACKTRACK):  # halve the step until f falls as the model says
+            distance = shrink * full
+            # the quadratic model's fall along the shortened step, and f's own
+            predicted = shrink * (1.0 - 0.5 * shrink) * model_fall
+            _, e_far = rows(pin.integrate(self.model, q, distance * direction))
+            if f0 - 0.5 * float(e_far @ e_far) > self.TRUST * predicted > 0.0:
+                break
+            shrink *= 0.5
+        else:
+            return False
+        if distance < self.SETTLE:
             return False
         self._start(direction, 0.5 * distance, distance / self.RAMP)
         self._settling, self._tick = True, 0
