@@ -20,6 +20,14 @@ most (also when the solver's speed limits are off), added to the regular update 
 update moves faster than the escape. At a true minimum (an unreachable target, a target held
 against a joint limit) the curvature is not negative, nothing fires, and the arm rests; the
 test is not repeated until the configuration or the error changes.
+
+Two refinements of the test: a zero curvature is probed further out (a saddle of fourth order,
+:meth:`SaddleEscape._flat_descent`), and of the two signs of a symmetric escape the one with
+more room before a position limit is taken. At a minimum whose curvatures span orders of
+magnitude (a redundant arm at a target out of reach), the escape travels Newton steps along
+the flattest curvatures instead (:meth:`SaddleEscape._settle`), so that the arm comes to rest
+at the bottom rather than creeping towards it for seconds. All thresholds are relative or in
+joint units, so the same run in mm and in m takes the same decisions.
 """
 
 from __future__ import annotations
