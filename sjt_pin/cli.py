@@ -180,11 +180,15 @@ def bench(args: argparse.Namespace) -> int:
         tracking = accuracy.tracking(progress=show)
         rest = accuracy.rest(progress=show)
         saddles = accuracy.saddles(progress=show)
+        units = accuracy.units(progress=show)
         print("\nMax task error (m and rad) along the paths:\n" + accuracy.tracking_table(tracking))
         print("\nRMS joint speed (rad/s) over the last second at a target 0.3 m beyond reach:\n"
               + accuracy.rest_table(rest))
         print("\nSteps to 1 % of the start error from an exact saddle (peak joint speed / URDF "
               "limit):\n" + accuracy.saddle_table(saddles))
+        print("\nThe same runs in mm and in m (URDF and paths x 1000): max |q_mm - q_m| (rad) "
+              "(max position error mm/1000 over m, max orientation error mm over m):\n"
+              + accuracy.unit_table(units))
         from .bench import limits
 
         def shown(row):
@@ -200,6 +204,7 @@ def bench(args: argparse.Namespace) -> int:
                                 "tracking": [asdict(r) for r in tracking],
                                 "rest": [asdict(r) for r in rest],
                                 "saddles": [asdict(r) for r in saddles],
+                                "units": [asdict(r) for r in units],
                                 "saturating": [asdict(r) for r in saturating],
                                 "franka": [asdict(r) for r in franka]})
     else:

@@ -42,7 +42,8 @@ from .limits.position import braking_speed
 from .methods import Method
 from .robot import Robot
 from .stack import TaskStack, normalise_tasks
-from .tasks import PostureTask, Task
+from .tasks import PoseTask, PostureTask, Task
+from .tasks.pose import tasks_length
 from .validation import period, raise_non_finite_targets
 
 _F64 = np.dtype(np.float64)
@@ -130,6 +131,9 @@ class Solver:
             tasks on distinct frames, or a ``{frame: task}`` mapping; with several tasks
             ``step`` takes ``{frame: target}`` mappings.
         posture: a :class:`~sjt_pin.PostureTask` stacked under the tasks (redundant robots).
+        pose_length: the characteristic length L (m) of the pose task made when ``task`` is
+            ``None``: ``PoseTask(length=pose_length)``; ``None`` for the robot's own (see
+            :class:`~sjt_pin.PoseTask`).
         position_limits: keep 1-DoF joints within their URDF position limits (default: on when
             the URDF has them).
         velocity_limits: ``True``/``None`` for the URDF's speed limits, ``False`` for none, or
@@ -165,12 +169,19 @@ class Solver:
         acceleration_limits=None,
         jerk_limits=None,
         limits: Sequence[Limit] = (),
+        pose_length: float | None = None,
     ):
         #: what the solver was made from: a copy is made anew from it (see __reduce__)
         self._arguments = dict(
             gain=gain, dt=dt, task=task, posture=posture, position_limits=position_limits,
             velocity_limits=velocity_limits, escape=escape, check_stability=check_stability,
-            acceleration_limits=acceleration_limits, jerk_limits=jerk_limits, limits=limits)
+            acceleration_limits=acceleration_limits, jerk_limits=jerk_limits, limits=limits,
+            pose_length=pose_length)
+        if pose_length is not None:
+            if task is not None:
+                raise ValueError("pose_length sets the length of the pose task made when task is "
+                                 "None; with a task of your own pass PoseTask(length=...)")
+            task = PoseTask(length=pose_length)
         if not isinstance(robot, Robot):
             raise TypeError(f"robot must be a sjt_pin.Robot, got {type(robot).__name__}")
         if not isinstance(method, Method):
@@ -256,7 +267,9 @@ class Solver:
         self._outcome_count = -1
         work[K.P_ERROR_ROWS] = stack.target_dim
         work[K.P_STALL_RATIO] = -1.0 if self.escape is None else SaddleEscape.STALL_RATIO
-        work[K.P_STALL_ERROR] = SaddleEscape.ERROR_FLOOR ** 2
+        # converged, not stalled: |e_w| below ERROR_FLOOR times the tasks' length (unit-free)
+        work[K.P_STALL_ERROR] = (SaddleEscape.ERROR_FLOOR
+                                  * tasks_length(robot, stack.tasks)) ** 2
         self._step = np.zeros(n)
         self._no_ff = np.zeros(stack.dim)
         self._ff_on = False
@@ -267,6 +280,7 @@ class Solver:
         self._probe: TaskStack | None = None
         self._search = None
         self._gain = as_gain(gain, stack.target_dim)
+        method.adapt(stack.targeted, tasks_length(robot, stack.tasks))  # per the tasks
         self._configure()
         self._count = 0
         self._stepping = False  # a step runs (ConcurrentStepError for a second thread)
@@ -426,13 +440,13 @@ class Solver:
             work = self._work
             if status & K.STALLED and not escape.active:
                 run = float(work[K.P_STALL_RUN])
-                if escape.observe(run, float(self._info[K.I_E_SQ])):
+                if escape.observe(run, float(self._info[K.I_EW_SQ])):
                     escape.test(q, self._weighted_rows(targets))
                 if run > 1.0:  # a window ended: the kernel counts the next one
                     work[K.P_STALL_RUN] = 0.0
                 work[K.P_STALL_WAIT] = escape.wait
             velocity = escape.velocity(float(self._info[K.I_REGULAR]), dt,
-                                       float(self._info[K.I_E_SQ]))
+                                       float(self._info[K.I_EW_SQ]))
             if velocity is None:
                 if work[K.P_ESCAPING]:  # an escape ended: a stall after it is a new run
                     work[K.P_STALL_RUN] = -1.0

@@ -13,7 +13,6 @@ from .gains import Gain
 from .mappings import COLUMN_TOL, JP_RCOND
 from .methods import DLS, JP, JT, SJT
 from .methods.dls import DLS_DAMPING
-from .methods.sjt import SJT_LENGTH
 from .methods.transpose import FF_DAMPING
 from .robot import Robot
 from .solver import Solver
@@ -67,12 +66,13 @@ class SJTSolver(Solver):
 
     - ``feedback="damped"`` (default): ``q_dot = D J^T (J D J^T + lambda I)^-1 (x_dot_d + K e)``
       — SJT's D in a damped least-squares step, the SJT analogue of what DLS is to JT (it
-      tends to D J^T / lambda as the damping grows). ``lambda = mu^2 + |e| sqrt(max alpha)``:
-      a Levenberg-Marquardt term that grows with the error relative to the shortest lever arm
-      (the curvature that the linear model leaves out), so that an arm that cannot reach comes
-      to rest; unit-free like the rest. "auto" is ``K = 1 / dt``. On the accuracy benchmark its
-      max error is at most DLS's (damping 0.05) on every path but UR5's wrist at dt = 2 ms
-      (1.4x), and it rests at unreachable targets, which DLS does not.
+      tends to D J^T / lambda as the damping grows). ``lambda = mu^2 + w |e_w| sqrt(max
+      alpha)``: a Levenberg-Marquardt term that grows with the error relative to the shortest
+      lever arm (the curvature that the linear model leaves out; w = 0.5 with pose and
+      orientation rows only, 1 otherwise, see ``methods.transpose.POSE_LM_WEIGHT``), so that
+      an arm that cannot reach comes to rest; unit-free like the rest. "auto" is
+      ``K = 1 / dt``. On the accuracy benchmark its max error is below DLS's (damping 0.05) on
+      every path (0.03-0.27x), and it rests at unreachable targets, which DLS does not.
     - ``feedback="transpose"``: ``q_dot = D J^T K e`` plus the damped feed-forward: the
       paper's feedback, which corrects slowly along directions J nearly loses.
     - ``feedback="transpose", feedforward="transpose"``: the paper's eq. (21) exactly,
@@ -80,10 +80,13 @@ class SJTSolver(Solver):
 
     SJT's own arguments:
         feedback: ``"damped"`` (default) or ``"transpose"``, see above.
-        length: characteristic length l in m (default 0.1): ``alpha_i = 1 / max(J_i^T W J_i,
-            l^2)``. Rows with an orientation part never reach the floor (``J_i^T J_i >= 1``,
-            eq. 19); position-only rows, whose alpha_i nothing else bounds near a joint axis,
-            get ``|q_dot_i| <= k |e| / l`` instead. 0 is the paper's eq. (18) exactly.
+        length: the floor l in m under the column norms, ``alpha_i = 1 / max(J_i^T W J_i,
+            l^2)``; default ``None``: a fifth of the tasks' characteristic length
+            (:func:`~sjt_pin.tasks.pose.tasks_length`; 0.11 m on Panda, 0.12 m on UR5), so
+            that it scales with the robot and its length unit. Pose rows never reach it
+            (``J_i^T W J_i >= L^2`` for a revolute joint: eq. 19 with the pose task's length
+            L); position-only rows, whose alpha_i nothing else bounds near a joint axis, get
+            ``|q_dot_i| <= k |e| / l`` instead. 0 is the paper's eq. (18) exactly.
         column_tol: squared column norm (task units^2) below which a joint counts as not
             moving the tasks at all (alpha_i = 0; default 1e-10).""" + _TRANSPOSE + _COMMON
 
@@ -97,7 +100,7 @@ class SJTSolver(Solver):
         feedback: str = "damped",
         feedforward: str = "damped",
         ff_damping: float = FF_DAMPING,
-        length: float = SJT_LENGTH,
+        length: float | None = None,
         column_tol: float = COLUMN_TOL,
         escape: bool = True,
         **options,
@@ -130,7 +133,7 @@ class JTSolver(Solver):
         escape: bool = True,
         **options,
     ):
-        super().__init__(robot, JT(feedforward, ff_damping, column_tol, SJT_LENGTH), gain=gain,
+        super().__init__(robot, JT(feedforward, ff_damping, column_tol, None), gain=gain,
                          dt=dt, task=task, escape=escape, **options)
 
 

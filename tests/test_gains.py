@@ -35,7 +35,7 @@ def test_auto_gain_stays_below_the_stability_bound(seed, joints, method, positio
         info = solver.last
         Jw = robot.jacobian(q, reference=pin.LOCAL_WORLD_ALIGNED)[:3] if position \
             else robot.jacobian(q)
-        Jw = Jw * solver.stack.chain
+        Jw = solver.stack.sqrt_weight[:, None] * Jw * solver.stack.chain  # [J_v; L J_w]
         if name == "sjt" and options:  # the transpose loop J D J^T
             M = mappings.sjt_matrix(Jw, length=solver.method.length)
         elif name == "jt":

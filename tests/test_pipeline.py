@@ -14,8 +14,8 @@ from sjt_pin.robots.planar3 import serial_chain, to_xml
 import sjt_pin as sjt
 from sjt_pin import mappings
 from sjt_pin.methods.dls import DLS_DAMPING
-from sjt_pin.methods.sjt import SJT_LENGTH
-from sjt_pin.methods.transpose import FF_DAMPING
+from sjt_pin.methods.transpose import FF_DAMPING, FLOOR, POSE_LM_WEIGHT
+from sjt_pin.tasks.pose import characteristic_length
 
 DT = 1e-3
 
@@ -43,22 +43,33 @@ def reference_rows(robot, q, task, target, velocity):
     return aligned[rows], (target.translation - oMf.translation)[rows], velocity[rows]
 
 
-def reference_step(method, options, J, e, ff, sw, k, mask, target_rows):
-    """dt q_dot of the method from the numpy formulas of ``mappings``."""
+def row_lengths(robot, task):
+    """The rows' length weights: L on the angular rows of pose and orientation tasks."""
+    length = characteristic_length(robot, robot.frame_id(task.frame or robot.ee_frame))
+    if isinstance(task, sjt.PoseTask):
+        return np.array([1.0, 1.0, 1.0, length, length, length]), length
+    if isinstance(task, sjt.OrientationTask):
+        return np.full(3, length), length
+    return np.ones(task.dim), length
+
+
+def reference_step(method, options, J, e, ff, sw, k, mask, target_rows, floor, lm=1.0):
+    """dt q_dot of the method from the numpy formulas of ``mappings``; ``floor`` is SJT's
+    floor l under the column norms (m), ``lm`` the weight of its Levenberg-Marquardt term."""
     Jw = sw[:, None] * J * mask
     ew, ffw = sw * e, sw * ff
     if method == "jp":
         return DT * mappings.jp_matrix(Jw) @ (ffw + k * ew)
     if method == "dls":
         return DT * mappings.dls_matrix(Jw, DLS_DAMPING) @ (ffw + k * ew)
-    alpha = mappings.scaling_factors(Jw, mappings.COLUMN_TOL, SJT_LENGTH)
+    alpha = mappings.scaling_factors(Jw, mappings.COLUMN_TOL, floor)
     if method == "sjt" and options.get("feedback", "damped") == "damped":
-        # Levenberg-Marquardt: mu^2 + |e_w| sqrt(max alpha)
-        damping = FF_DAMPING**2 + np.sqrt(ew[:target_rows] @ ew[:target_rows] * alpha.max())
-        return DT * mappings.damped_sjt_matrix(Jw, damping, length=SJT_LENGTH) @ (ffw + k * ew)
+        # Levenberg-Marquardt: mu^2 + lm |e_w| sqrt(max alpha)
+        damping = FF_DAMPING**2 + lm * np.sqrt(ew[:target_rows] @ ew[:target_rows] * alpha.max())
+        return DT * mappings.damped_sjt_matrix(Jw, damping, length=floor) @ (ffw + k * ew)
     S = alpha if method == "sjt" else mask
     feedforward = (S * (Jw.T @ ffw) if options.get("feedforward") == "transpose"
-                   else mappings.damped_sjt_matrix(Jw, FF_DAMPING**2, length=SJT_LENGTH) @ ffw)
+                   else mappings.damped_sjt_matrix(Jw, FF_DAMPING**2, length=floor) @ ffw)
     return DT * (S * (Jw.T @ (k * ew)) + feedforward)
 
 
@@ -101,7 +112,13 @@ def test_one_step_is_the_reference_formula(seed, joints, combination, method, fe
                 (velocities[frames[0]] if single else velocities) if feedforward else None)
     blocks = [reference_rows(robot, q, t, targets[f], velocities[f] if feedforward
                              else np.zeros(6)) for t, f in zip(tasks, frames, strict=True)]
-    sw = [np.ones(t.dim) if t.sqrt_weight is None else t.sqrt_weight for t in tasks]
+    weights = [row_lengths(robot, t) for t in tasks]
+    sw = [(np.ones(t.dim) if t.sqrt_weight is None else t.sqrt_weight) * w
+          for t, (w, _) in zip(tasks, weights, strict=True)]
+    floor = FLOOR * max(length for _, length in weights)
+    # half the Levenberg-Marquardt term when every target row turns with the frame
+    rotational = all(isinstance(t, (sjt.PoseTask, sjt.OrientationTask)) for t in tasks)
+    lm = POSE_LM_WEIGHT if rotational else 1.0
     target_rows = sum(t.dim for t in tasks)
     mask = solver.stack.chain
     if posture is not None:
@@ -109,7 +126,8 @@ def test_one_step_is_the_reference_formula(seed, joints, combination, method, fe
                        np.zeros(robot.nv)))
         sw.append(np.full(robot.nv, np.sqrt(0.03)))
     J, e, ff = (np.concatenate(part) for part in zip(*blocks, strict=True))
-    expected = reference_step(name, options, J, e, ff, np.concatenate(sw), k, mask, target_rows)
+    expected = reference_step(name, options, J, e, ff, np.concatenate(sw), k, mask, target_rows,
+                              floor, lm)
     np.testing.assert_allclose(solver.displacement, expected, rtol=1e-7,
                                atol=1e-9 * max(1.0, np.abs(expected).max()))
     np.testing.assert_allclose(solver.last.error, e[:target_rows], atol=1e-12)

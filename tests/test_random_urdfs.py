@@ -10,7 +10,6 @@ from hypothesis import strategies as st
 
 import sjt_pin as sjt
 from sjt_pin import mappings
-from sjt_pin.methods.sjt import SJT_LENGTH
 
 TYPES = ["revolute", "revolute", "prismatic", "continuous", "fixed"]
 
@@ -78,13 +77,17 @@ def test_random_trees(seed, joints):
                 continue
             alpha = info.alpha
             assert np.all(alpha >= 0.0)
-            if isinstance(task, sjt.PoseTask):  # eq. 19: J_i^T J_i >= 1 for revolute joints
-                assert np.all(alpha <= 1.0 + 1e-12)
-            else:  # the characteristic length caps what nothing else bounds
-                assert np.all(alpha <= 1.0 / SJT_LENGTH**2 + 1e-9)
+            floor = solver.method.length
+            if isinstance(task, sjt.PoseTask):  # eq. 19 with the length L: J_i^T W J_i >= L^2
+                # for revolute joints, 1 for prismatic ones
+                length = solver.stack.task.length
+                assert np.all(alpha <= max(1.0, 1.0 / length**2) + 1e-12)
+            else:  # the floor caps what nothing else bounds
+                assert np.all(alpha <= 1.0 / floor**2 * (1 + 1e-9))
             J = (robot.jacobian(q) if isinstance(task, sjt.PoseTask) else
                  robot.jacobian(q, reference=pin.LOCAL_WORLD_ALIGNED)[:3]) * solver.stack.chain
-            lam = mappings.max_loop_eigenvalue(J, mappings.sjt_matrix(J, length=SJT_LENGTH))
+            J = solver.stack.sqrt_weight[:, None] * J
+            lam = mappings.max_loop_eigenvalue(J, mappings.sjt_matrix(J, length=floor))
             assert lam <= np.count_nonzero(alpha) + 1e-9  # eq. 25: at most n_active
     # a reachable target is reached (a pose target may need every joint: position suffices)
     solver = sjt.SJTSolver(robot, task=sjt.PositionTask(), dt=1e-2)

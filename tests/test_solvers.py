@@ -159,7 +159,7 @@ def test_auto_gain(panda):
     assert solver.last.gain == pytest.approx(1 / dt)  # damped SJT: loop eigenvalues below 1
     transpose = sjt.SJTSolver(panda, dt=dt, feedback="transpose")
     transpose.step(panda.q0, panda.fk(panda.q0) * pin.SE3(np.eye(3), np.array([0.01, 0, 0])))
-    Jw = panda.jacobian(panda.q0)[:, :7]
+    Jw = transpose.stack.sqrt_weight[:, None] * panda.jacobian(panda.q0)[:, :7]  # [J_v; L J_w]
     lam = np.linalg.eigvalsh(Jw @ transpose.method.matrix(Jw))[-1]
     info = transpose.last
     assert lam <= info.loop_bound <= 1.25 * lam  # a guaranteed, tight upper bound

@@ -362,7 +362,7 @@ static Core transpose_core(Mat J, const double *e, const double *ff, int has_ff,
             gram(J, sw, s, m <= n, A);
             bound = loop_bound_c(A, p, BOUND_PRODUCTS, A + p * p, A + 2 * p * p);
         }
-        bound += sqrt(r.ew_sq) * curvature;
+        bound += work[P_LM] * sqrt(r.ew_sq) * curvature;
         gain = bound > 0.0 ? work[P_GAIN_ARG] / (dt * bound) : 0.0;
     }
     if (has_ff)
@@ -743,7 +743,7 @@ static int step_c(int kind, Mat J, const double *e, const double *ff, const doub
      * is Python's on the first stalled step of a run and when the run reaches P_STALL_WAIT
      * (the escape's window; Python then restarts the count at 0): a lasting stall, such as
      * a target out of reach, stays on the fast path in between */
-    if (r.stall < work[P_STALL_RATIO] && r.e_sq > work[P_STALL_ERROR]) {
+    if (r.stall < work[P_STALL_RATIO] && r.ew_sq > work[P_STALL_ERROR]) {
         if (work[P_STALL_RUN] < 0.0) {
             work[P_STALL_RUN] = 1.0;
             status = STALLED;

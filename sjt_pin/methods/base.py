@@ -12,13 +12,14 @@ joints.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import ClassVar
 
 import numpy as np
 
 from .. import kernels as K
 from ..gains import Gain
+from ..tasks.base import Task
 
 
 class Method(ABC):
@@ -36,6 +37,12 @@ class Method(ABC):
         work[K.P_DT] = dt
         work[K.P_GAIN_MODE] = gain.mode
         work[K.P_GAIN_ARG] = self.gain_argument(gain, n_chain)
+
+    def adapt(self, tasks: Sequence[Task], length: float) -> None:  # noqa: B027
+        """Adapt the parameters that depend on the solver's tasks: ``tasks`` are its bound
+        target-taking tasks and ``length`` their characteristic length (m), see
+        :func:`~sjt_pin.tasks.pose.tasks_length`. The solver calls it once, before
+        :meth:`configure`; nothing by default."""
 
     def gain_argument(self, gain: Gain, n_chain: int) -> float:
         """The kernel's ``P_GAIN_ARG`` for ``gain``: the factor c of "auto"."""

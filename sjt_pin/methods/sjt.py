@@ -5,7 +5,8 @@ from __future__ import annotations
 from .. import mappings
 from .transpose import TransposeMethod
 
-#: SJT's characteristic length l (m): alpha_i = 1 / max(J_i^T W J_i, l^2).
+#: The floor l (m) of SJT's former default, ``alpha_i = 1 / max(J_i^T W J_i, l^2)``; the default
+#: is now relative (``FLOOR`` times the tasks' characteristic length, see ``TransposeMethod``).
 SJT_LENGTH = 0.1
 
 
@@ -14,12 +15,13 @@ class SJT(TransposeMethod):
 
     The alpha_i come from the tasks' own (weighted, stacked) rows and are 0 for joints that do
     not move them: joints outside the frames' kinematic chains, and columns whose squared norm
-    is below ``column_tol``. The characteristic length ``length`` floors the column norm,
-    ``alpha_i = 1 / max(J_i^T W J_i, l^2)``: rows with an orientation part never reach it
-    (``J_i^T J_i >= 1``, eq. 19), position-only rows get ``|q_dot_i| <= k |e| / l`` instead of
-    an alpha without bound near a joint axis. Either way ``alpha_i J_i^T W J_i <= 1``, so the
-    loop matrix ``J D J^T`` has eigenvalues in ``[0, n]`` whatever the robot's size or length
-    unit (eq. 25) and ``gain < 2 / (n dt)`` is stable at every configuration.
+    is below ``column_tol``. The floor ``length`` l under the column norm,
+    ``alpha_i = 1 / max(J_i^T W J_i, l^2)``: pose rows never reach it (``J_i^T W J_i >= L^2``
+    for a revolute joint, eq. 19 with the pose task's length L), position-only rows get
+    ``|q_dot_i| <= k |e| / l`` instead of an alpha without bound near a joint axis. Either way
+    ``alpha_i J_i^T W J_i <= 1``, so the loop matrix ``J D J^T`` has eigenvalues in ``[0, n]``
+    whatever the robot's size or length unit (eq. 25) and ``gain < 2 / (n dt)`` is stable at
+    every configuration.
     """
 
     name = "sjt"

@@ -1,4 +1,4 @@
-"""The orientation of a frame (3 rows)."""
+"""The orientation of a frame (3 rows), weighted by a length."""
 
 from __future__ import annotations
 
@@ -7,19 +7,39 @@ import pinocchio as pin
 
 from ..kernels import frame_velocity
 from .base import Task
+from .pose import characteristic_length, checked_length
 
 
 class OrientationTask(Task):
-    """Orientation of the frame: 3 rows (rad) in the frame's LOCAL axes.
+    """Orientation of the frame: 3 rows ``L e_w`` in the frame's LOCAL axes.
 
-    ``e = log3(R^T R_d)`` with the angular rows of the LOCAL Jacobian; the desired angular
-    velocity (world axes) becomes ``R^T omega_d``. Targets are poses (only the rotation is used).
+    ``e = log3(R^T R_d)`` (rad) with the angular rows of the LOCAL Jacobian; the desired
+    angular velocity (world axes) becomes ``R^T omega_d``. Targets are poses (only the
+    rotation is used).
+
+    Args:
+        frame: name of the task frame; ``None`` for the robot's end effector.
+        weight: a positive number or one per row (dimensionless), see :class:`Task`.
+        length: the characteristic length L (m, > 0) the rows are weighted by, as the angular
+            rows of a :class:`PoseTask`; ``None`` (default): the robot's
+            :func:`~sjt_pin.tasks.pose.characteristic_length` for this frame. Alone, an
+            orientation task is unit-free either way (SJT, JT and JP do not see a common
+            factor of every row); stacked with position or pose rows of other frames, L makes
+            every row a length, so that the stack is unit-free too.
     """
 
     dim = 3
 
+    def __init__(self, frame: str | None = None, weight=None, length: float | None = None):
+        super().__init__(frame, weight)
+        self.length = checked_length(length)
+
     def bind(self, robot):
         bound = super().bind(robot)
+        bound.length = (characteristic_length(robot, bound.frame_id) if self.length is None
+                        else self.length)
+        base = np.ones(3) if self.sqrt_weight is None else self.sqrt_weight
+        bound.sqrt_weight = base * bound.length
         bound._ff = np.zeros(6)
         return bound
 
@@ -32,3 +52,8 @@ class OrientationTask(Task):
             return J, e, None
         frame_velocity(oMf.np, target.np, velocity, self._ff)
         return J, e, self._ff[3:]
+
+    def __repr__(self) -> str:
+        frame = f"frame={self.frame!r}" if self.frame else "end effector"
+        length = "" if self.length is None else f", length={self.length:g}"
+        return f"OrientationTask({frame}{length})"
