@@ -107,12 +107,13 @@ class SaddleEscape:
 
     def observe(self, run: float, e_sq: float) -> bool:
         """A stall seen by the step kernel (a stall ratio below ``STALL_RATIO`` with ``|e_w|``
-        above ``ERROR_FLOOR`` L; ``e_sq`` the squared weighted error), which counts the stalled steps of a run in ``run`` and asks
-        Python only on the first (``run == 1``) and when ``run`` reaches :attr:`wait`. True
-        when the curvature should be tested: a window of stalled steps without progress. After
-        a test that found no saddle the window doubles (up to ``MAX_WAIT`` windows), so a
-        persistent minimum costs a test ever more rarely; a new run starts from ``WINDOW``
-        again. The caller restarts the kernel's count after a window."""
+        above ``ERROR_FLOOR`` L; ``e_sq`` the squared weighted error), which counts the stalled
+        steps of a run in ``run`` and asks Python only on the first (``run == 1``) and when
+        ``run`` reaches :attr:`wait`. True when the curvature should be tested: a window of
+        stalled steps without progress. After a test that found no saddle the window doubles
+        (up to ``MAX_WAIT`` windows), so a persistent minimum costs a test ever more rarely; a
+        new run starts from ``WINDOW`` again. The caller restarts the kernel's count after a
+        window."""
         if run <= 1.0:  # a new run of stalled steps
             self._wait, self._error_start = self.WINDOW, e_sq
             return False
