@@ -217,8 +217,14 @@ def bench(args: argparse.Namespace) -> int:
         many = [many_throughput(name, poses=20 * args.poses) for name in ("ur5", "panda")]
         for m in many:
             print(many_line(m), flush=True)
+        from .bench.random_robots import random_robots, random_table
+
+        random_rows = random_robots()
+        print("\nsolve() with defaults on 200 seeded random robots (1-40 joints, every joint "
+              "type), 5 poses each:\n" + random_table(random_rows))
         _write_json(args.json, {"machine": machine, "rows": [asdict(r) for r in rows],
-                                "solve_many": [asdict(m) for m in many]})
+                                "solve_many": [asdict(m) for m in many],
+                                "random_robots": [asdict(r) for r in random_rows]})
     return 0
 
 

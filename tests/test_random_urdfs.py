@@ -10,39 +10,7 @@ from hypothesis import strategies as st
 
 import sjt_pin as sjt
 from sjt_pin import mappings
-
-TYPES = ["revolute", "revolute", "prismatic", "continuous", "fixed"]
-
-
-def random_urdf(seed: int, joints: int) -> tuple[str, str]:
-    """A random tree: joints of every type, random axes, offsets from 1 mm to 10 m; returns
-    the XML and the name of its deepest link."""
-    rng = np.random.default_rng(seed)
-    links, depth, body = ["base"], {"base": 0}, []
-    for k in range(joints):
-        # mostly a chain, sometimes a branch
-        parent = links[-1] if rng.random() < 0.7 else links[rng.integers(len(links))]
-        kind = TYPES[rng.integers(len(TYPES))]
-        direction = rng.normal(size=3)
-        xyz = direction / np.linalg.norm(direction) * 10 ** rng.uniform(-3, 1)
-        rpy = rng.uniform(-np.pi, np.pi, 3)
-        axis = rng.normal(size=3)
-        axis /= np.linalg.norm(axis)
-        limit = ""
-        if kind in ("revolute", "prismatic"):
-            limit = (f'<limit lower="{-rng.uniform(0.3, 3):.6f}" upper="{rng.uniform(0.3, 3):.6f}"'
-                     ' effort="10" velocity="2"/>')
-        child = f"l{k}"
-        body.append(
-            f'<link name="{child}"/><joint name="j{k}" type="{kind}"><parent link="{parent}"/>'
-            f'<child link="{child}"/><origin xyz="{" ".join(f"{v:.9g}" for v in xyz)}" '
-            f'rpy="{" ".join(f"{v:.9g}" for v in rpy)}"/>'
-            f'<axis xyz="{" ".join(f"{v:.9g}" for v in axis)}"/>{limit}</joint>')
-        links.append(child)
-        depth[child] = depth[parent] + 1
-    xml = '<robot name="random"><link name="base"/>' + "".join(body) + "</robot>"
-    return xml, max(links, key=depth.__getitem__)
-
+from sjt_pin.bench.random_robots import random_urdf  # the bench's random robots, shared
 
 def goal_near(robot, q, rng):
     """A configuration near ``q`` within the limits (so its pose is reachable)."""
