@@ -12,6 +12,7 @@ import sjt_pin as sjt
 from sjt_pin import mappings
 from sjt_pin.bench.random_robots import random_urdf  # the bench's random robots, shared
 
+
 def goal_near(robot, q, rng):
     """A configuration near ``q`` within the limits (so its pose is reachable)."""
     goal = pin.integrate(robot.model, q, rng.normal(scale=0.1, size=robot.nv))
