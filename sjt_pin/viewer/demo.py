@@ -21,13 +21,13 @@ from .viewer import Viewer
 #: How the demo names its robots on the page.
 LABELS = {"planar3": "Planar 3R arm", "ur5": "UR5", "panda": "Franka Panda"}
 #: What each robot's task controls.
-TASKS = {"planar3": "x-y position, the paper's task 3", "ur5": "pose", "panda": "pose"}
+TASKS = {"planar3": "x-y position", "ur5": "pose", "panda": "pose"}
 #: The planar arm stood up: its x axis along world y, its y axis up (world z).
 STAND_UP = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 #: Why SJT is the default though JP tracks these circles best (the README's benchmarks).
 WHY_SJT = ("JP tracks these circles best; SJT is the default because its stable gain does not "
-           "depend on the robot's size or length unit, it rests at targets out of reach and it "
-           "leaves singular saddles.")
+           "depend on the robot's size or unit, it rests at targets out of reach and it leaves "
+           "saddles.")
 GAP = 0.2  # m between the widths of two robots
 MARGIN = 0.1  # m added on each side of a robot's frames and paths for the links' thickness
 FRONT = -1.2  # m along world x from the row to the collision scene's robot (behind it)
@@ -117,11 +117,11 @@ def describe(names: Sequence[str], dt: float, obstacle: bool = False) -> str:
     """The page's description of the demo's runs on the robots ``names``, period ``dt`` (s),
     and of the collision scene if ``obstacle``."""
     tasks = "; ".join(f"{LABELS.get(n, n)}: {TASKS.get(n, 'its task')}" for n in names)
-    text = (f"Each robot tracks a circle with each method in turn ({1e3 * dt:g} ms period; "
-            f"{tasks}). " + WHY_SJT)
+    text = f"Each robot tracks a circle with each method in turn ({1e3 * dt:g} ms; {tasks}). "
+    text += WHY_SJT
     if obstacle:
-        text += (f" {OBSTACLE_LABEL} (behind): a line past a ball, 10 mm margin (47 mm deep "
-                 "without the limit); crimson: the closest points.")
+        text += (" Behind: a Panda passes a ball, 10 mm margin (47 mm deep without the limit); "
+                 "crimson: the closest points.")
     return text
 
 

@@ -55,7 +55,7 @@ class RobotEntry:
 
 #: Height (px) of a robot's error plot: the demo's four robots' blocks and the guide fit a
 #: 900 px window.
-PLOT_HEIGHT = 62
+PLOT_HEIGHT = 76
 #: Width (px) of each of two plots side by side (a robot with a closest-distance plot).
 PLOT_WIDTH_BESIDE = 190
 
@@ -75,6 +75,7 @@ p { margin: 4px 0; }
 .guide b { color: #1d1d1f; }
 .guide span.key { display: inline-block; vertical-align: middle; margin: 0 3px 0 1px; }
 .robot { border-top: 1px solid #e1e4e8; margin-top: 8px; }
+.robot .head { display: flex; flex-wrap: wrap; align-items: baseline; gap: 0 10px; }
 .methods, .legend { list-style: none; margin: 4px 0; padding: 0; font-size: 13px; }
 .methods { display: flex; flex-wrap: wrap; gap: 0 12px; }
 .methods li { white-space: nowrap; }
@@ -197,15 +198,15 @@ def _guide(robots: Sequence[RobotEntry]) -> str:
     return (f'<ul class="methods">{methods}</ul>'
             f'<p class="guide"><span class="key dots" style="color:{css(DESIRED_COLOR)}">'
             "&#8226;&#8226;&#8226;</span> desired path, <span class=\"key dot halo\"></span> "
-            "target; in a method's colour: the path followed and the end effector. "
-            "Highlighted: the run on screen; numbers: each run's largest error.</p>")
+            "target; in a method's colour: its path and end effector; highlighted: the run on "
+            "screen; numbers: largest errors.</p>")
 
 
 def _robot(robot: RobotEntry) -> str:
     """The robot's label, its runs (method, colour, largest error) and their error plot."""
     node = html.escape(robot.node, quote=True)
     parts = [f'<section class="robot" data-robot="{node}">',
-             f"<h2>{html.escape(robot.label)}</h2>"]
+             f'<div class="head"><h2>{html.escape(robot.label)}</h2>']
     if robot.runs:
         items = "".join(
             f'<li data-method="{html.escape(run.label, quote=True)}">'
@@ -214,6 +215,8 @@ def _robot(robot: RobotEntry) -> str:
             f'{"diverged" if run.log.diverged else _short(run.log.max_error)}</span></li>'
             for run in robot.runs)
         parts.append(f'<ul class="legend">{items}</ul>')
+    parts.append("</div>")  # the label and its legend on one line where they fit
+    if robot.runs:
         series = [Series(run.label, run.color, run.log.t - run.log.t[0], run.log.error_norm)
                   for run in robot.runs]
         # a robot with further plots (the closest distance) shows them beside its error plot
