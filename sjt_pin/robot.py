@@ -476,6 +476,13 @@ class Robot:
         """Whether a configuration holds unit-norm blocks (quaternions, (cos, sin) pairs)."""
         return bool(self._units)
 
+    @property
+    def unit_blocks(self) -> np.ndarray:
+        """``(first, size)`` of each unit-norm block of a configuration, flat (float): the
+        quaternions of free flyers and spherical joints, the (cos, sin) pairs of continuous
+        and planar joints; empty when there are none."""
+        return self._units.layout
+
     def check_reach(self, position, q=None, name: str = "target") -> None:
         """Warn when ``position`` (m, world) lies more than :data:`REACH_FACTOR` times the
         robot's reach (:attr:`reach`) from its base: most likely a target in mm, or cm. The

@@ -47,6 +47,8 @@ from .tasks.pose import tasks_length
 from .validation import period, raise_non_finite_targets
 
 _F64 = np.dtype(np.float64)
+#: |squared norm - 1| of a configuration's unit blocks taken as exact (rounding of unit norm)
+_UNIT_EXACT = 4e-14
 #: status bits that need Python: an error to raise, a stall for the escape to look at (joints
 #: held at the position and speed bounds, a task scaled for them: the kernel's own work)
 _PYTHON = K.NON_FINITE | K.STALLED
@@ -196,9 +198,11 @@ class Solver:
         n = robot.nv
         self._model = robot.model
         self._q_shape = (robot.nq,)
-        #: a q with quaternions or (cos, sin) pairs is checked on its manifold unless it is the
-        #: array the last step returned (pin.integrate keeps it there): no cost in a loop
-        self._units = robot.unit_coordinates
+        #: a q with quaternions or (cos, sin) pairs is checked on its manifold (one compiled
+        #: call; Robot.check_q normalises or refuses it when a block is off the unit norm),
+        #: unless it is the array the last step returned (pin.integrate keeps it there)
+        self._unit_blocks = robot.unit_blocks
+        self._units = self._unit_blocks.size > 0
         self._returned: np.ndarray | None = None
         self._first = True  # the first step checks the targets' distance (units)
         self._dt = period(dt)
@@ -381,7 +385,8 @@ class Solver:
     def _control(self, q, target, target_velocity=None) -> np.ndarray:
         """:meth:`step` itself."""
         if not (type(q) is np.ndarray and q.shape == self._q_shape and q.dtype == _F64) or (
-                self._units and q is not self._returned):
+                self._units and q is not self._returned
+                and not K.unit_defect(q, self._unit_blocks) <= _UNIT_EXACT):
             q = self.robot.check_q(q)
         # 1. the task rows at q
         stack = self.stack

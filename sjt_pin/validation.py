@@ -87,6 +87,9 @@ class UnitBlocks:
                                for i in range(first, first + size)], dtype=np.intp)
         self.starts = np.cumsum([0] + [size for *_, size in blocks[:-1]], dtype=np.intp)
         self.sizes = np.array([size for *_, size in blocks], dtype=float)
+        #: (first, size) of each block, flat: what ``kernels.unit_defect`` takes
+        self.layout = np.array([v for _, _, first, size in blocks for v in (first, size)],
+                               dtype=float)
 
     def __bool__(self) -> bool:
         return bool(self.blocks)

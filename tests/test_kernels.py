@@ -253,3 +253,22 @@ def test_posture_rows_solved_linear_in_n_give_the_dense_solution(joints, method,
     assert kernel(J, e, ff, q, work, fast_step) == kernel(J, e, ff, q, dense, dense_step)
     # both to rounding (the dense Cholesky of a 100 x 100 with weights 1e-2 is the worse)
     np.testing.assert_allclose(fast_step, dense_step, atol=1e-8 * np.abs(dense_step).max())
+
+
+def test_unit_defect_is_the_largest_squared_norm_defect(rng):
+    """The door's manifold check of a step: max |sum(q[block]^2) - 1| over the blocks, NaN
+    when a block is NaN, an error for a block outside q."""
+    from sjt_pin.kernels import unit_defect
+
+    q = rng.normal(size=12)
+    blocks = [(0, 4), (5, 2), (9, 2)]
+    expected = max(abs(float(q[a:a + n] @ q[a:a + n]) - 1.0) for a, n in blocks)
+    flat = np.array([v for block in blocks for v in block], dtype=float)
+    assert unit_defect(q, flat) == pytest.approx(expected, rel=1e-15)
+    q[[0, 1, 2, 3]] = [0.5, 0.5, 0.5, 0.5]
+    assert unit_defect(q, np.array([0.0, 4.0])) < 1e-15
+    assert unit_defect(q, np.zeros(0)) == 0.0
+    q[10] = np.nan
+    assert np.isnan(unit_defect(q, flat))
+    with pytest.raises(ValueError, match="outside q"):
+        unit_defect(q, np.array([11.0, 2.0]))

@@ -29,5 +29,6 @@ from ._kernels import (  # noqa: F401
     search_iteration,
     symmetric_eigen,
     transpose_step,
+    unit_defect,
 )
 from .layout import *  # noqa: F403 (the slot names are the kernels' vocabulary)

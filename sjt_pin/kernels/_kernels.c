@@ -1261,6 +1261,36 @@ done:
     return result;
 }
 
+/* unit_defect(q, blocks) -> float: the largest |sum(q[first:first + size]^2) - 1| over the
+ * blocks (first, size) of `blocks` (quaternions, (cos, sin) pairs); NaN if one is NaN */
+static PyObject *py_unit_defect(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (!nargs_ok(nargs, 2, "unit_defect")) return NULL;
+    Arg q = {0}, b = {0};
+    PyObject *result = NULL;
+    if (acquire(args[0], &q, 0, 1, "q") || acquire(args[1], &b, 0, 1, "blocks")) goto done;
+    double *qv = vec(&q, "q"), *bv = vec(&b, "blocks");
+    if (!qv || !bv) goto done;
+    Py_ssize_t n = length(&q), k = length(&b) / 2;
+    double worst = 0.0;
+    for (Py_ssize_t i = 0; i < k; i++) {
+        Py_ssize_t first = (Py_ssize_t)bv[2 * i], size = (Py_ssize_t)bv[2 * i + 1];
+        if (first < 0 || size < 0 || first + size > n) {
+            PyErr_Format(PyExc_ValueError, "block (%zd, %zd) is outside q (%zd,)", first, size, n);
+            goto done;
+        }
+        double sum = 0.0;
+        for (Py_ssize_t j = first; j < first + size; j++) sum += qv[j] * qv[j];
+        double d = fabs(sum - 1.0);
+        if (isnan(d)) { worst = d; break; }
+        if (d > worst) worst = d;
+    }
+    result = PyFloat_FromDouble(worst);
+done:
+    release(&q); release(&b);
+    return result;
+}
+
 /* search_iteration(J, e, q, J_cur, e_cur, q_cur, limits, work, state, step) -> int */
 static PyObject *py_search_iteration(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
@@ -1315,6 +1345,8 @@ static PyMethodDef methods[] = {
      "rotation_defect(M) -> float: max |R^T R - I| of a 4x4 (inf: not rigid, nan: not finite)."},
     {"position_rows", (PyCFunction)(void (*)(void))py_position_rows, METH_FASTCALL,
      "position_rows(J6, oMf, p_d, velocity, out): a position task's rows into out."},
+    {"unit_defect", (PyCFunction)(void (*)(void))py_unit_defect, METH_FASTCALL,
+     "unit_defect(q, blocks) -> float: largest |squared norm - 1| of the unit blocks"},
     {"search_iteration", (PyCFunction)(void (*)(void))py_search_iteration, METH_FASTCALL,
      "search_iteration(J, e, q, J_cur, e_cur, q_cur, limits, work, state, step) -> status: "
      "one Levenberg-Marquardt iteration of solve()."},
