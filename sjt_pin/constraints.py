@@ -401,9 +401,12 @@ def nonnegative_qp(Q: np.ndarray, r: np.ndarray, tol: float = 1e-13) -> np.ndarr
     y = np.zeros(k)
     passive = np.zeros(k, dtype=bool)
     scale = tol * (1.0 + float(np.max(np.abs(r), initial=0.0)))
+    # a row no motion can change (Q_tt = 0: its gradient is zero, e.g. two links that move
+    # together) cannot be corrected: it never enters, instead of stalling every round
+    inert = np.diag(Q) <= 1e-14 * max(float(np.max(np.diag(Q), initial=0.0)), 1e-300)
     for _ in range(3 * k + 10):
         w = -(Q @ y + r)
-        w[passive] = -np.inf
+        w[passive | inert] = -np.inf
         t = int(np.argmax(w)) if k else 0
         if k == 0 or w[t] <= scale:
             break
@@ -416,7 +419,12 @@ def nonnegative_qp(Q: np.ndarray, r: np.ndarray, tol: float = 1e-13) -> np.ndarr
                 y = s
                 break
             negative = idx[s[idx] <= 0]
-            alpha = float(np.min(y[negative] / (y[negative] - s[negative])))
+            # the step toward s stops where the first of them reaches 0; one already at 0 with
+            # s = 0 too (a degenerate passive set: lstsq on a singular Q) stops it at once,
+            # where the ratio 0/0 would have made y NaN
+            gap = y[negative] - s[negative]
+            alpha = float(np.min(np.where(gap > 0, y[negative] / np.where(gap > 0, gap, 1.0),
+                                          0.0)))
             y = y + alpha * (s - y)
             passive &= y > 1e-15
             y[~passive] = 0.0

@@ -230,3 +230,26 @@ def test_franka_conditions_acceleration_and_jerk_limits_hold_on_the_stream(panda
     solver.reset()
     q2 = solver.step(q, targets[0])
     assert np.all(np.abs(q2 - q) / dt <= PANDA_ACCELERATION * dt * 1.0001)  # from rest again
+
+
+def test_the_dual_qp_of_a_degenerate_step_is_finite_and_optimal():
+    """The dual QP of a Panda self-collision step on its meshes (18 rows, Q singular, one row no
+    motion can change, broken) once made y NaN — a 0/0 step ratio — and then stalled on that row, so
+    the correction vanished. Its answer is finite and optimal on every row that motion can
+    change: the KKT conditions of min 1/2 y^T Q y + r^T y over y >= 0 hold there (gradient >= 0,
+    and 0 where y > 0); the inert row keeps y = 0."""
+    from pathlib import Path
+
+    from sjt_pin.constraints import nonnegative_qp
+
+    data = np.load(Path(__file__).parent / "fixtures" / "qp" / "degenerate_panda_meshes.npz")
+    Q, r = data["Q"], data["r"]
+    with np.errstate(all="raise"):
+        y = nonnegative_qp(Q, r)
+    assert np.all(np.isfinite(y)) and np.all(y >= 0)
+    inert = np.diag(Q) <= 1e-14 * np.diag(Q).max()
+    assert np.any(r[inert] < 0) and np.all(y[inert] == 0)  # one broken, nothing to move it
+    gradient = (Q @ y + r)[~inert]
+    scale = 1e-9 * (1.0 + np.abs(r).max())
+    assert np.all(gradient >= -scale)
+    assert np.all(np.abs(gradient[y[~inert] > 1e-12]) <= scale)
