@@ -13,8 +13,9 @@ from .limits import CollisionLimit
 from .reach import ReachMap, reachability
 from .robot import Robot
 from .solve import IKResult
-from .solver import Solver, StepInfo
+from .solver import Solver
 from .solvers import DLSSolver, JPSolver, JTSolver, SJTSolver, make_solver
+from .step_info import StepInfo
 from .tasks import (
     OrientationTask,
     PoseTask,

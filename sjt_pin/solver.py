@@ -11,11 +11,15 @@ limits — runs the same stages:
 1. the :class:`~sjt_pin.stack.TaskStack` evaluates the kinematics of ``q`` once and each task's
    error, Jacobian rows and desired velocity, stacked;
 2. the :class:`~sjt_pin.methods.Method`'s compiled kernel applies the gain
-   (:mod:`~sjt_pin.gains`) and the mapping M, in one call;
-3. a :class:`~sjt_pin.escape.SaddleEscape` adds a smooth escape velocity at a saddle (JT, SJT);
-4. the :class:`~sjt_pin.limits.Limit` objects test the step and, when needed, enforce it;
-5. ``pinocchio.integrate`` moves ``q`` on its manifold (continuous joints, free flyers);
-6. :attr:`Solver.last` builds a :class:`StepInfo` from the step's buffers on first access.
+   (:mod:`~sjt_pin.gains`) and the mapping M, adds the escape velocity of a saddle in progress
+   (:class:`~sjt_pin.escape.SaddleEscape`, JT and SJT), and holds the URDF's position and speed
+   limits by Saturation in the Null Space (:mod:`~sjt_pin.constraints`), in one call;
+3. only when something needs it, Python: an error to raise, the stability check, the escape's
+   curvature test at the end of a stall, and the :class:`~sjt_pin.constraints.ConstraintStage`
+   for acceleration, jerk and user limits (:mod:`~sjt_pin.limits`);
+4. ``pinocchio.integrate`` moves ``q`` on its manifold (continuous joints, free flyers);
+5. :attr:`Solver.last` builds a :class:`~sjt_pin.step_info.StepInfo` from the step's buffers
+   on first access.
 
 Arguments are validated at the door (``step``, ``solve``, the setters); inside, nothing is
 validated twice and the per-step checks are a few float comparisons.
@@ -26,7 +30,6 @@ from __future__ import annotations
 import math
 import warnings
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
@@ -42,6 +45,7 @@ from .limits.position import braking_speed
 from .methods import Method
 from .robot import Robot
 from .stack import TaskStack, normalise_tasks
+from .step_info import StepInfo
 from .tasks import PoseTask, PostureTask, Task
 from .tasks.pose import tasks_length
 from .validation import period, raise_non_finite_targets
@@ -52,68 +56,6 @@ _UNIT_EXACT = 4e-14
 #: status bits that need Python: an error to raise, a stall for the escape to look at (joints
 #: held at the position and speed bounds, a task scaled for them: the kernel's own work)
 _PYTHON = K.NON_FINITE | K.STALLED
-
-
-@dataclass(frozen=True)
-class StepInfo:
-    """What one ``step()`` computed, at the configuration it was given.
-
-    Attributes:
-        error: task error e (the stacked rows of the tasks that take targets, without posture
-            rows; m and rad), before weights and gain.
-        error_norm: Euclidean norm of ``error``.
-        dq: joint velocity q_dot (nv,) in rad/s or m/s, after the escape and the limits (the
-            step integrated is ``dq * dt``).
-        gain: K used in this step (1/s): a number, or one per task row for a per-row gain.
-        loop_bound: the bound of lambda_max(J M) that "auto" divided by (1 when the method's
-            loop eigenvalues are at most 1, or with a fixed gain).
-        pose: world pose of the task frame (``pin.SE3``); with several frames a dict
-            ``{frame: pose}``.
-        alpha: SJT's scaling factors alpha_i (nv,), 0 for joints that do not move the tasks;
-            ``None`` for the other methods.
-        escaped: a saddle escape velocity was added (JT, SJT).
-        clamped: velocity (tangent) indices — columns of J, entries of ``dq`` — of the joints
-            at a bound of the constraint stage (held there while the others take over the
-            task); ``clamped_joints`` are their names.
-        task_scale: the factor s in [0, 1] by which the constraint stage scaled the task
-            velocity (x_dot_d + K e) because no joint velocity within the limits could meet
-            all of it (1: the whole task).
-        active_limits: ``(limit, joint)`` name pairs of the bounds the joint velocity is on
-            (``("velocity", "torso_lift_joint")``, ``("position", "elbow_joint")``, ...).
-        active_rows: names of the limits whose general rows (``A q_dot <= b``) are active.
-        limit_conflicts: joints whose acceleration or jerk limit had to yield to a position or
-            speed limit (a start outside the range, limits changed between steps).
-        outside_limits: joints whose position in the ``q`` given to this step lay outside
-            their URDF range (a seed out of range): the step moves each back toward its range
-            at its recovery speed, ramped within the acceleration and jerk limits — never a
-            jump — if a task moves it (a joint off every task's chain stays put unless a
-            posture task is stacked); ``()`` when ``q`` was within every limit.
-        velocity_scale: the same as ``task_scale`` (its former name).
-    """
-
-    error: np.ndarray
-    error_norm: float
-    dq: np.ndarray
-    gain: float | np.ndarray
-    loop_bound: float
-    pose: pin.SE3 | dict
-    alpha: np.ndarray | None
-    escaped: bool
-    clamped: np.ndarray
-    clamped_joints: tuple[str, ...]
-    task_scale: float = 1.0
-    active_limits: tuple[tuple[str, str], ...] = ()
-    active_rows: tuple[str, ...] = ()
-    limit_conflicts: tuple[str, ...] = ()
-    outside_limits: tuple[str, ...] = ()
-
-    @property
-    def velocity_scale(self) -> float:
-        return self.task_scale
-
-    def __repr__(self) -> str:
-        return (f"StepInfo(error_norm={self.error_norm:.3g}, "
-                f"|dq|={float(np.linalg.norm(self.dq)):.3g} rad/s)")
 
 
 class Solver:
