@@ -237,22 +237,23 @@ class Parser(argparse.ArgumentParser):
 
 def positive_int(text: str) -> int:
     """``type=`` for counts: an integer >= 1."""
+    return _integer_at_least(text, 1, "a positive integer")
+
+
+def _integer_at_least(text: str, low: int, what: str) -> int:
     try:
         value = int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {value}")
+        raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
+    if value < low:
+        raise argparse.ArgumentTypeError(f"expected {what}, got {value}")
     return value
 
 
 def at_least(low: int) -> Callable[[str], int]:
     """``type=`` for counts of at least ``low``."""
     def parse(text: str) -> int:
-        value = positive_int(text)
-        if value < low:
-            raise argparse.ArgumentTypeError(f"expected an integer >= {low}, got {value}")
-        return value
+        return _integer_at_least(text, low, f"an integer >= {low}")
 
     parse.__name__ = f"integer >= {low}"
     return parse
@@ -358,17 +359,6 @@ def _grid_step(text: str) -> float:
     return value
 
 
-def _seed(text: str) -> int:
-    """``type=`` for a seed: an integer >= 0."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {value}")
-    return value
-
-
 def _reach_parser(sub) -> None:
     about = ("reachability map: solve() on a grid of positions x orientations over the "
              "robot's workspace; writes an .npz and a self-contained page")
@@ -382,7 +372,7 @@ def _reach_parser(sub) -> None:
                    help="orientations per point (default 20)")
     p.add_argument("--budget", type=positive_int, default=500,
                    help="solve() iterations per pose (default 500)")
-    p.add_argument("--seed", type=_seed, default=0, help="seed of the random restarts")
+    p.add_argument("--seed", type=at_least(0), default=0, help="seed of the random restarts")
     p.add_argument("--out", default=None, metavar="PATH", type=output_file(parents=False),
                    help="the .npz (default reach_ROBOT.npz); a partial one resumes")
     p.add_argument("--html", default=None, metavar="PATH", type=output_file(parents=False),

@@ -31,3 +31,14 @@ def planar3() -> sjt.Robot:
 @pytest.fixture
 def rng() -> np.random.Generator:
     return np.random.default_rng(12345)
+
+
+@pytest.fixture(scope="module")
+def chromium():
+    """Debian's headless Chromium (tests/browser.py), one per test module; a loud skip where it
+    is not installed."""
+    from .browser import Chromium
+
+    browser = Chromium()
+    yield browser
+    browser.close()

@@ -15,19 +15,11 @@ from sjt_pin.paper import scenarios
 from sjt_pin.viewer import METHOD_COLORS, Viewer
 from sjt_pin.viewer.style import DESIRED_COLOR
 
-from .browser import Chromium, changed_fraction, color_pixels, require_chromium
+from .browser import changed_fraction, color_pixels
 
 ROBOTS = ("planar3", "ur5", "panda")
 METHODS = ("sjt", "jt", "dls", "jp")
 RUN = 4.0  # s, each demo run (the scenarios' circles)
-
-
-@pytest.fixture(scope="module")
-def chromium():
-    require_chromium()
-    browser = Chromium()
-    yield browser
-    browser.close()
 
 
 @pytest.fixture(scope="module")

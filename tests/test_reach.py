@@ -12,7 +12,7 @@ from sjt_pin.cli import main
 from sjt_pin.limits import Limit
 from sjt_pin.viewer import reachmap
 
-from .browser import Chromium, changed_fraction, color_pixels, require_chromium
+from .browser import changed_fraction, color_pixels
 
 STEP, ORIENTATIONS = 0.25, 3  # a coarse map: 171 points x 3 orientations on Panda
 POINTS = 171
@@ -111,14 +111,6 @@ def test_the_map_honours_limits(panda):
     assert m.reached[~low].any()
     free = reach.reachability(panda, 0.4, 2, processes=1, progress=False, budget=200)
     assert free.reached[low].any()  # the floor, not the grid, keeps them out
-
-
-@pytest.fixture(scope="module")
-def chromium():
-    require_chromium()
-    browser = Chromium()
-    yield browser
-    browser.close()
 
 
 def test_the_command_and_its_page(chromium, tmp_path, capsys):
