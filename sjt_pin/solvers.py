@@ -6,17 +6,14 @@ only in the mapping M(J): SJT eq. (21), JT eq. (10), JP eq. (8), DLS (introducti
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
 from typing import cast
 
-from .gains import Gain
 from .mappings import COLUMN_TOL, JP_RCOND
 from .methods import DLS, JP, JT, SJT
 from .methods.dls import DLS_DAMPING
 from .methods.transpose import FF_DAMPING
 from .robot import Robot
 from .solver import Solver
-from .tasks import Task
 
 _COMMON = """
     Common arguments:
@@ -42,7 +39,8 @@ _COMMON = """
         limits: further :class:`~sjt_pin.limits.Limit` objects for the constraint stage (see
             the README's "Extend it").
 
-    Every option is keyword-only: ``SJTSolver(robot, dt=1e-3)``.
+    Every option is keyword-only: ``SJTSolver(robot, dt=1e-3)``. The common ones are
+    :class:`~sjt_pin.solver.Solver`'s, declared there once; each solver adds its method's.
 """
 
 _TRANSPOSE = """
@@ -94,19 +92,15 @@ class SJTSolver(Solver):
         self,
         robot: Robot,
         *,
-        gain: float | str | Sequence[float] | Gain = "auto",
-        dt: float = 1e-3,
-        task: Task | Sequence[Task] | Mapping[str, Task] | None = None,
         feedback: str = "damped",
         feedforward: str = "damped",
         ff_damping: float = FF_DAMPING,
         length: float | None = None,
         column_tol: float = COLUMN_TOL,
-        escape: bool = True,
         **options,
     ):
-        method = SJT(feedforward, ff_damping, column_tol, length, feedback)
-        super().__init__(robot, method, gain=gain, dt=dt, task=task, escape=escape, **options)
+        super().__init__(robot, SJT(feedforward, ff_damping, column_tol, length, feedback),
+                         **options)
 
 
 class JTSolver(Solver):
@@ -124,17 +118,12 @@ class JTSolver(Solver):
         self,
         robot: Robot,
         *,
-        gain: float | str | Sequence[float] | Gain = "auto",
-        dt: float = 1e-3,
-        task: Task | Sequence[Task] | Mapping[str, Task] | None = None,
         feedforward: str = "damped",
         ff_damping: float = FF_DAMPING,
         column_tol: float = COLUMN_TOL,
-        escape: bool = True,
         **options,
     ):
-        super().__init__(robot, JT(feedforward, ff_damping, column_tol, None), gain=gain,
-                         dt=dt, task=task, escape=escape, **options)
+        super().__init__(robot, JT(feedforward, ff_damping, column_tol, None), **options)
 
 
 class JPSolver(Solver):
@@ -151,13 +140,10 @@ class JPSolver(Solver):
         self,
         robot: Robot,
         *,
-        gain: float | str | Sequence[float] | Gain = "auto",
-        dt: float = 1e-3,
-        task: Task | Sequence[Task] | Mapping[str, Task] | None = None,
         rcond: float = JP_RCOND,
         **options,
     ):
-        super().__init__(robot, JP(rcond), gain=gain, dt=dt, task=task, **options)
+        super().__init__(robot, JP(rcond), **options)
 
     @property
     def rcond(self) -> float:
@@ -177,13 +163,10 @@ class DLSSolver(Solver):
         self,
         robot: Robot,
         *,
-        gain: float | str | Sequence[float] | Gain = "auto",
-        dt: float = 1e-3,
-        task: Task | Sequence[Task] | Mapping[str, Task] | None = None,
         damping: float = DLS_DAMPING,
         **options,
     ):
-        super().__init__(robot, DLS(damping), gain=gain, dt=dt, task=task, **options)
+        super().__init__(robot, DLS(damping), **options)
 
     @property
     def damping(self) -> float:
