@@ -408,27 +408,11 @@ class Robot:
         q_ref = self.q0 if q is None else self.check_q(q)
         base, q_base, mimics = model, q_ref, self.mimic_joints
         if mimics:
-            # Pinocchio reduces a model without mimic joints: lock on that one (a joint that
-            # follows a locked one is locked with it), then tie the other relations again
-            locked = set(names)
-            for m in mimics:  # (each relation is on an independent joint: one pass)
-                if m.mimicked in locked:
-                    locked.add(m.joint)
-            base = self._unmimicked
-            if base is None:
+            if self._unmimicked is None:
                 raise TypeError(f"robot {self.name!r} has mimic joints but no model without "
                                 "them to reduce (load it with from_urdf or from_example)")
-            values = joint_values(model, mimics, q_ref)
-            q_base = pin.neutral(base)
-            for j in range(1, base.njoints):
-                joint, own = base.joints[j], model.joints[j]
-                if own.nq:
-                    q_base[joint.idx_q:joint.idx_q + joint.nq] = q_ref[own.idx_q:own.idx_q
-                                                                       + own.nq]
-                elif base.names[j] in values:
-                    q_base[joint.idx_q] = values[base.names[j]]
-            ids = [base.getJointId(name) for name in sorted(locked, key=base.getJointId)]
-            mimics = [m for m in mimics if m.joint not in locked and m.mimicked not in locked]
+            base = self._unmimicked
+            q_base, ids, mimics = _unmimicked_lock(model, base, mimics, names, q_ref)
         geometries = [g for g in (self.visual_model, self.collision_model) if g is not None]
         if geometries:
             reduced, reduced_geometries = pin.buildReducedModel(base, geometries, ids, q_base)
@@ -551,6 +535,29 @@ class Robot:
     def __repr__(self) -> str:
         return f"Robot({self.name!r}, ee_frame={self.ee_frame!r}, nq={self.nq}, nv={self.nv})"
 
+
+
+def _unmimicked_lock(model: pin.Model, base: pin.Model, mimics: Sequence[MimicJoint],
+                     names: Sequence[str], q: np.ndarray
+                     ) -> tuple[np.ndarray, list[int], list[MimicJoint]]:
+    """Locking ``names`` on a robot with mimic joints: Pinocchio reduces ``base``, the model
+    without mimic joints, so the lock is made there (a joint that follows a locked one is
+    locked with it) and the other relations are tied again afterwards. Returns ``q`` on
+    ``base``, the ids of the joints to lock in it, and the relations that remain."""
+    locked = set(names)
+    for m in mimics:  # (each relation is on an independent joint: one pass)
+        if m.mimicked in locked:
+            locked.add(m.joint)
+    values = joint_values(model, mimics, q)
+    q_base = pin.neutral(base)
+    for j in range(1, base.njoints):
+        joint, own = base.joints[j], model.joints[j]
+        if own.nq:
+            q_base[joint.idx_q:joint.idx_q + joint.nq] = q[own.idx_q:own.idx_q + own.nq]
+        elif base.names[j] in values:
+            q_base[joint.idx_q] = values[base.names[j]]
+    ids = [base.getJointId(name) for name in sorted(locked, key=base.getJointId)]
+    return q_base, ids, [m for m in mimics if m.joint not in locked and m.mimicked not in locked]
 
 def _with_mimics(model: pin.Model, q0: np.ndarray, urdf: str | None
                  ) -> tuple[pin.Model, np.ndarray, list[MimicJoint]]:

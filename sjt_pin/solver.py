@@ -149,8 +149,36 @@ class Solver:
         self._first = True  # the first step checks the targets' distance (units)
         self._dt = period(dt)
         self._kernel = method.kernel if method.kernel is not None else method.python_step
-        # the constraint stage: the URDF's position and speed limits, acceleration and jerk
-        # limits when given, and the user's limits
+        speeds = self._build_stage(position_limits, velocity_limits, acceleration_limits,
+                                   jerk_limits, limits)
+        self.escape = (SaddleEscape(robot.model, stack.chain, robot.velocity_limits,
+                                    self.position_limit) if escape and method.stalls else None)
+        self._build_work(speeds)
+        self._step = np.zeros(n)
+        self._no_ff = np.zeros(stack.dim)
+        self._ff_on = False
+        self._escaped = (-1, False)  # (step count, whether that step added the escape)
+        self._v_names = robot.velocity_names
+        self._check_stability = bool(check_stability)
+        self._warned = False
+        self._probe: TaskStack | None = None
+        self._search = None
+        self._gain = as_gain(gain, stack.target_dim)
+        method.adapt(stack.targeted, tasks_length(robot, stack.tasks))  # per the tasks
+        self._configure()
+        self._count = 0
+        self._stepping = False  # a step runs (ConcurrentStepError for a second thread)
+        self._last: StepInfo | None = None
+        #: the last step's rows, error, displacement and status (None before the first)
+        self._record: tuple | None = None
+
+    def _build_stage(self, position_limits, velocity_limits, acceleration_limits, jerk_limits,
+                     limits) -> np.ndarray:
+        """The constraint stage: the URDF's position and speed limits, acceleration and jerk
+        limits when given, and the user's limits; returns the speed limits it enforces (rad/s,
+        m/s; inf for none)."""
+        robot, method, stack = self.robot, self.method, self.stack
+        n = robot.nv
         urdf_speeds = robot.velocity_limits
         moving = stack.chain > 0
         accel = None if acceleration_limits is None else AccelerationLimit(acceleration_limits, n)
@@ -187,9 +215,12 @@ class Solver:
         #: the commanded velocity and acceleration of the last step (the stage's state)
         self._motion = Motion(np.zeros(robot.nq), np.zeros(n), np.zeros(n), 1.0)
         self._tracks_motion = accel is not None or bool(extra)
-        self.escape = (SaddleEscape(robot.model, stack.chain, urdf_speeds, self.position_limit)
-                       if escape and method.stalls else None)
-        # the kernel's work vector: parameters, weights, gains, mask, box, speeds, scratch
+        return speeds
+
+    def _build_work(self, speeds: np.ndarray) -> None:
+        """The kernel's work vector: parameters, weights, gains, mask, box, speeds, scratch."""
+        robot, stack = self.robot, self.stack
+        n = robot.nv
         # the kernel tests the position and speed box, so that a step within them costs nothing
         # more; beyond them (or with limits it cannot test) the stage takes over
         box = self.position_limit if self._kernel_bounds else None
@@ -216,23 +247,6 @@ class Solver:
         # converged, not stalled: |e_w| below ERROR_FLOOR times the tasks' length (unit-free)
         work[K.P_STALL_ERROR] = (SaddleEscape.ERROR_FLOOR
                                   * tasks_length(robot, stack.tasks)) ** 2
-        self._step = np.zeros(n)
-        self._no_ff = np.zeros(stack.dim)
-        self._ff_on = False
-        self._escaped = (-1, False)  # (step count, whether that step added the escape)
-        self._v_names = robot.velocity_names
-        self._check_stability = bool(check_stability)
-        self._warned = False
-        self._probe: TaskStack | None = None
-        self._search = None
-        self._gain = as_gain(gain, stack.target_dim)
-        method.adapt(stack.targeted, tasks_length(robot, stack.tasks))  # per the tasks
-        self._configure()
-        self._count = 0
-        self._stepping = False  # a step runs (ConcurrentStepError for a second thread)
-        self._last: StepInfo | None = None
-        #: the last step's rows, error, displacement and status (None before the first)
-        self._record: tuple | None = None
 
     # -- settings ----------------------------------------------------------------------------
     @property
