@@ -174,14 +174,26 @@ def test_position_rows(rng):
     np.testing.assert_array_equal(ff_out, velocity[[2, 0]])
 
 
-def test_the_compiled_layout_is_the_python_one():
-    """The C kernels were compiled for the slots of kernels/layout.py."""
+def test_the_slots_are_the_compiled_module_s_and_no_python_module_numbers_one():
+    """The slot numbers come from _kernels.c, which names each slot once: the parameters are
+    0..INFO-1, the results and the search's state each 0..size-1, and no module of the package
+    assigns a number to a slot name."""
+    import re
+    from pathlib import Path
+
     from sjt_pin.kernels import _kernels, layout
 
-    assert _kernels.PARAMETER_SLOTS == layout.INFO == _kernels.INFO
-    assert _kernels.INFO_SIZE == layout.INFO_SIZE
-    assert (_kernels.P_HAS_FF, _kernels.P_SCRATCH, _kernels.I_REGULAR) == (
-        layout.P_HAS_FF, layout.P_SCRATCH, layout.I_REGULAR)
+    names = [n for n in dir(_kernels) if re.fullmatch(r"[PIS]_[A-Z0-9_]+", n)]
+    for prefix, size in (("P_", _kernels.INFO), ("I_", _kernels.INFO_SIZE),
+                         ("S_", _kernels.STATE_SIZE)):
+        slots = sorted(getattr(_kernels, n) for n in names if n.startswith(prefix))
+        assert slots == list(range(size)), prefix
+        assert all(getattr(layout, n) == getattr(_kernels, n) for n in names
+                   if n.startswith(prefix) and hasattr(layout, n))
+    source = Path(layout.__file__).parents[1]
+    assignment = re.compile(r"^\s*\(?\s*[PIS]_[A-Z0-9_]+\b[^=\n]*=\s*(range\(|\d)", re.M)
+    for path in source.rglob("*.py"):
+        assert not assignment.search(path.read_text()), path
 
 
 def test_bad_arguments_raise_instead_of_crashing():

@@ -19,15 +19,26 @@
 #define M_PI 3.14159265358979323846
 #endif
 
-/* -- the work vector's slots (sjt_pin/kernels/layout.py) ------------------------------------- */
-enum {
-    P_DT, P_GAIN_MODE, P_GAIN_ARG, P_FF_MODE, P_MU, P_COL_TOL, P_SCALED, P_RCOND, P_LENGTH2,
-    P_FB_MODE, P_LM, P_ERROR_ROWS, P_STALL_RATIO, P_STALL_ERROR, P_ROWS, P_MASK, P_BOX,
-    P_BOX_COUNT, P_SPEED, P_SCRATCH, P_EXTRA, P_CLAMPED, P_ESCAPING, P_HAS_FF,
-    P_IDENTITY_ROWS, P_STALL_RUN, P_STALL_WAIT, P_COUNT
-};
-#define INFO 27
-enum { I_E_SQ, I_FF_SQ, I_GAIN, I_LOOP, I_STALL, I_TRACE, I_EW_SQ, I_SCALE, I_REGULAR, I_COUNT };
+/* -- the work vector's slots: named here once, exported by name to sjt_pin/kernels/layout.py - */
+#define PARAMETERS(X) X(P_DT) X(P_GAIN_MODE) X(P_GAIN_ARG) X(P_FF_MODE) X(P_MU) X(P_COL_TOL) \
+    X(P_SCALED) X(P_RCOND) X(P_LENGTH2) X(P_FB_MODE) X(P_LM) X(P_ERROR_ROWS) X(P_STALL_RATIO) \
+    X(P_STALL_ERROR) X(P_ROWS) X(P_MASK) X(P_BOX) X(P_BOX_COUNT) X(P_SPEED) X(P_SCRATCH) \
+    X(P_EXTRA) X(P_CLAMPED) X(P_ESCAPING) X(P_HAS_FF) X(P_IDENTITY_ROWS) X(P_STALL_RUN) \
+    X(P_STALL_WAIT)
+#define RESULTS(X) X(I_E_SQ) X(I_FF_SQ) X(I_GAIN) X(I_LOOP) X(I_STALL) X(I_TRACE) X(I_EW_SQ) \
+    X(I_SCALE) X(I_REGULAR)
+#define SEARCH_STATE(X) X(S_F) X(S_NU) X(S_ITER) X(S_BEST) X(S_STALE) X(S_TOL_SQ) \
+    X(S_MAX_STEP) X(S_ERROR_ROWS)
+#define SLOT_ENUM(name) name,
+#define SLOT_NAME(name) #name,
+enum { PARAMETERS(SLOT_ENUM) P_COUNT };
+enum { RESULTS(SLOT_ENUM) I_COUNT };
+enum { SEARCH_STATE(SLOT_ENUM) S_COUNT };
+static const char *const PARAMETER_NAMES[] = { PARAMETERS(SLOT_NAME) };
+static const char *const RESULT_NAMES[] = { RESULTS(SLOT_NAME) };
+static const char *const SEARCH_STATE_NAMES[] = { SEARCH_STATE(SLOT_NAME) };
+/* the results follow the parameters */
+#define INFO P_COUNT
 #define GAIN_FIXED 0
 #define FF_TRANSPOSE 1
 #define FF_DAMPED 2
@@ -40,8 +51,6 @@ enum { I_E_SQ, I_FF_SQ, I_GAIN, I_LOOP, I_STALL, I_TRACE, I_EW_SQ, I_SCALE, I_RE
 #define EIGEN_FLOOR (1e3 * 2.220446049250313e-16)
 #define TRANSPOSE 0
 #define LEAST_SQUARES 1
-/* the search's state slots (sjt_pin/kernels/search.py) */
-enum { S_F, S_NU, S_ITER, S_BEST, S_STALE, S_TOL_SQ, S_MAX_STEP, S_ERROR_ROWS };
 #define CONTINUE 0
 #define CONVERGED 1
 #define SEARCH_STALLED 2
@@ -1362,15 +1371,20 @@ PyMODINIT_FUNC PyInit__kernels(void)
 {
     PyObject *m = PyModule_Create(&module);
     if (!m) return NULL;
-    /* the layout this file was compiled for, checked against kernels/layout.py by a test */
-    if (PyModule_AddIntConstant(m, "PARAMETER_SLOTS", P_COUNT) < 0
-        || PyModule_AddIntConstant(m, "INFO", INFO) < 0
+    /* every slot by its name: kernels/layout.py takes them from here (no Python module holds
+     * a slot's number) */
+    for (int i = 0; i < P_COUNT; i++)
+        if (PyModule_AddIntConstant(m, PARAMETER_NAMES[i], i) < 0) goto fail;
+    for (int i = 0; i < I_COUNT; i++)
+        if (PyModule_AddIntConstant(m, RESULT_NAMES[i], i) < 0) goto fail;
+    for (int i = 0; i < S_COUNT; i++)
+        if (PyModule_AddIntConstant(m, SEARCH_STATE_NAMES[i], i) < 0) goto fail;
+    if (PyModule_AddIntConstant(m, "INFO", INFO) < 0
         || PyModule_AddIntConstant(m, "INFO_SIZE", I_COUNT) < 0
-        || PyModule_AddIntConstant(m, "P_HAS_FF", P_HAS_FF) < 0
-        || PyModule_AddIntConstant(m, "P_SCRATCH", P_SCRATCH) < 0
-        || PyModule_AddIntConstant(m, "I_REGULAR", I_REGULAR) < 0) {
-        Py_DECREF(m);
-        return NULL;
-    }
+        || PyModule_AddIntConstant(m, "STATE_SIZE", S_COUNT) < 0)
+        goto fail;
     return m;
+fail:
+    Py_DECREF(m);
+    return NULL;
 }

@@ -3,22 +3,65 @@
 A method kernel takes ``(J, e, ff, q, work, step)``: everything that stays fixed between steps
 (the parameters, the row weights and gains, the joint mask, the limit box) lives in ``work``,
 so a step pays for six arguments, not fifteen. :class:`Layout` says where each part starts;
-the kernels read those offsets from the ``P_*`` parameter slots.
+the kernels read those offsets from the ``P_*`` parameter slots. The slots' numbers come from
+the compiled module, which names each slot once: no Python module holds a slot's number.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-# -- parameter slots (work[P_*]) ----------------------------------------------------------------
-(P_DT, P_GAIN_MODE, P_GAIN_ARG, P_FF_MODE, P_MU, P_COL_TOL, P_SCALED, P_RCOND, P_LENGTH2,
- P_FB_MODE, P_LM, P_ERROR_ROWS, P_STALL_RATIO, P_STALL_ERROR, P_ROWS, P_MASK, P_BOX,
- P_BOX_COUNT, P_SPEED, P_SCRATCH, P_EXTRA, P_CLAMPED, P_ESCAPING, P_HAS_FF,
- P_IDENTITY_ROWS, P_STALL_RUN, P_STALL_WAIT) = range(27)
-#: results (work[INFO + I_*])
-INFO = 27
-I_E_SQ, I_FF_SQ, I_GAIN, I_LOOP, I_STALL, I_TRACE, I_EW_SQ, I_SCALE, I_REGULAR = range(9)
-INFO_SIZE = 9
+# -- slots: their numbers are the compiled module's (_kernels.c names each slot once) ---------
+from ._kernels import (  # noqa: F401 (re-exported: the kernels' vocabulary)
+    I_E_SQ,
+    I_EW_SQ,
+    I_FF_SQ,
+    I_GAIN,
+    I_LOOP,
+    I_REGULAR,
+    I_SCALE,
+    I_STALL,
+    I_TRACE,
+    INFO,  # where the results start: after the parameters
+    INFO_SIZE,
+    P_BOX,
+    P_BOX_COUNT,
+    P_CLAMPED,
+    P_COL_TOL,
+    P_DT,
+    P_ERROR_ROWS,
+    P_ESCAPING,
+    P_EXTRA,
+    P_FB_MODE,
+    P_FF_MODE,
+    P_GAIN_ARG,
+    P_GAIN_MODE,
+    P_HAS_FF,
+    P_IDENTITY_ROWS,
+    P_LENGTH2,
+    P_LM,
+    P_MASK,
+    P_MU,
+    P_RCOND,
+    P_ROWS,
+    P_SCALED,
+    P_SCRATCH,
+    P_SPEED,
+    P_STALL_ERROR,
+    P_STALL_RATIO,
+    P_STALL_RUN,
+    P_STALL_WAIT,
+    S_BEST,
+    S_ERROR_ROWS,
+    S_F,
+    S_ITER,
+    S_MAX_STEP,
+    S_NU,
+    S_STALE,
+    S_TOL_SQ,
+    STATE_SIZE,
+)
+
 HEADER = INFO + INFO_SIZE
 
 #: gain modes: K as given; "auto": c K / (dt lambda_hat), lambda_hat >= lambda_max(J M)
@@ -98,8 +141,6 @@ class Layout:
         """1 for the joints the last step held at a position or speed bound."""
         return work[self.clamped:self.clamped + self.n]
 
-# -- the set-point search's state vector (search_iteration) -------------------------------------
-S_F, S_NU, S_ITER, S_BEST, S_STALE, S_TOL_SQ, S_MAX_STEP, S_ERROR_ROWS = range(8)
-STATE_SIZE = 8
+# -- the set-point search (search_iteration): its state slots (S_*) are imported above ----------
 #: what an iteration reports
 CONTINUE, CONVERGED, SEARCH_STALLED = 0, 1, 2
