@@ -183,7 +183,7 @@ class Solver:
         moving = stack.chain > 0
         accel = None if acceleration_limits is None else AccelerationLimit(acceleration_limits, n)
         jerk = None if jerk_limits is None else JerkLimit(
-            jerk_limits, n, _speed_limits(velocity_limits, robot.velocity_limits, n))
+            jerk_limits, n, _speed_limits(velocity_limits, urdf_speeds, n))
         if jerk is not None and accel is None:
             raise ValueError("jerk_limits need acceleration_limits (the braking distance of a "
                              "jerk-limited stop depends on both)")

@@ -134,7 +134,8 @@ def test_one_step_is_the_reference_formula(seed, joints, combination, method, fe
 
 
 def test_import_leaves_the_heavy_optional_modules_out():
-    code = ("import sys, sjt_pin; heavy = {'matplotlib', 'tqdm', 'meshcat', 'pink'}; "
+    code = ("import sys, sjt_pin; heavy = {'matplotlib', 'tqdm', 'meshcat', 'pink', 'dask', "
+            "'distributed'}; "
             "print(sorted(m for m in heavy if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True)
