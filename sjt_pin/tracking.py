@@ -101,59 +101,84 @@ def track(
     A diverging run (non-finite state, ``max_step`` or ``max_error`` exceeded) stops there with
     ``diverged=True`` and the reason, instead of raising.
     """
+    max_step, max_error = _check(solver, trajectory, max_step, max_error)
+    q = solver.robot.check_q(q0, "q0").copy()
+    if trajectory.position_only:  # no rotation= given: hold the frame's start orientation
+        frame = solver.stack.task.frame_id
+        trajectory = trajectory.holding(solver.robot.fk(q, frame if frame >= 0 else None).rotation)
+    times = trajectory.times(solver.dt, duration)
+    run = _Run(solver, times.size)
+    end, reason = run.go(q, times, *trajectory.samples(times), feedforward, max_error)
+    # a step above max_step ends the run there (tested once, after the loop)
+    jumps = np.flatnonzero(np.abs(run.steps[:end]).max(axis=1, initial=0.0) > max_step)
+    if jumps.size:
+        end = int(jumps[0]) + 1
+        reason = (f"a joint moved more than {max_step:g} in one step at "
+                  f"t = {times[end - 1]:.4g} s")
+    return run.log(times, end, reason)
+
+
+def _check(solver, trajectory, max_step, max_error) -> tuple[float, float]:
+    """The arguments of :func:`track`, checked once at the door."""
     if not isinstance(solver, Solver):
         raise TypeError(f"solver must be a sjt_pin Solver, got {type(solver).__name__}")
     if len(solver.stack.targeted) != 1:
         raise TypeError("track drives one task frame; step() takes several (see the README)")
     if not isinstance(trajectory, Trajectory):
         raise TypeError(f"trajectory must be a Trajectory, got {type(trajectory).__name__}")
-    max_step = positive(max_step, "max_step", "rad")
-    max_error = positive(max_error, "max_error", "task units")
-    q = solver.robot.check_q(q0, "q0").copy()
-    if trajectory.position_only:  # no rotation= given: hold the frame's start orientation
-        frame = solver.stack.task.frame_id
-        trajectory = trajectory.holding(solver.robot.fk(q, frame if frame >= 0 else None).rotation)
-    dt = solver.dt
-    times = trajectory.times(dt, duration)
-    positions_d, rotations_d, velocities_d = trajectory.samples(times)
-    n, nq, nv, m = times.size, solver.robot.nq, solver.robot.nv, solver.stack.target_dim
-    qs, steps = np.empty((n, nq)), np.empty((n, nv))
-    positions, errors, norms = np.empty((n, 3)), np.empty((n, m)), np.empty(n)
-    scales = np.ones(n)
-    target = pin.SE3(np.array(rotations_d[0]), np.array(positions_d[0]))
-    task = solver.stack.task
-    step = solver.step
-    diverged, reason, k = False, "", -1
-    with np.errstate(all="ignore"):
-        for k in range(n):
-            target.translation = positions_d[k]
-            target.rotation = rotations_d[k]
-            try:
-                q_next = step(q, target, velocities_d[k] if feedforward else None)
-            except ValueError as exc:  # a non-finite state or error: the run blew up
-                if np.all(np.isfinite(q)):
-                    raise
-                diverged, reason = True, f"non-finite state at t = {times[k]:.4g} s ({exc})"
-                break
-            qs[k], steps[k], errors[k] = q, solver.displacement, solver.error
-            norms[k] = norm = solver.error_norm
-            scales[k] = solver.task_scale
-            positions[k] = task.placement.translation  # type: ignore[union-attr]
-            if not norm < max_error:
-                diverged, reason = True, (f"error above {max_error:g} at t = {times[k]:.4g} s"
-                                          if np.isfinite(norm) else
-                                          f"non-finite state at t = {times[k]:.4g} s")
-                break
-            q = q_next
-    end = k + 1
-    # a step above max_step ends the run there (tested once, after the loop)
-    jumps = np.flatnonzero(np.abs(steps[:end]).max(axis=1, initial=0.0) > max_step)
-    if jumps.size:
-        end = int(jumps[0]) + 1
-        diverged, reason = True, (f"a joint moved more than {max_step:g} in one step at "
-                                  f"t = {times[end - 1]:.4g} s")
-    return TrackingLog(
-        t=times[:end], q=qs[:end], dq=steps[:end] / dt, position=positions[:end],
-        target=np.array(positions_d[:end]), error=errors[:end], error_norm=norms[:end],
-        task_scale=scales[:end],
-        diverged=diverged, reason=reason, method=solver.method.name, dt=dt, gain=solver.gain)
+    return (positive(max_step, "max_step", "rad"),
+            positive(max_error, "max_error", "task units"))
+
+
+class _Run:
+    """The preallocated arrays of one :func:`track` run and its loop."""
+
+    def __init__(self, solver: Solver, n: int):
+        robot, m = solver.robot, solver.stack.target_dim
+        self.solver = solver
+        self.qs, self.steps = np.empty((n, robot.nq)), np.empty((n, robot.nv))
+        self.positions, self.errors, self.norms = np.empty((n, 3)), np.empty((n, m)), np.empty(n)
+        self.scales = np.ones(n)
+        self.positions_d = np.empty((n, 3))
+
+    def go(self, q, times, positions_d, rotations_d, velocities_d, feedforward: bool,
+           max_error: float) -> tuple[int, str]:
+        """Step along the samples; returns how many steps were logged and why the run
+        stopped early ("" when it did not)."""
+        solver = self.solver
+        qs, steps, errors, norms = self.qs, self.steps, self.errors, self.norms
+        positions, scales = self.positions, self.scales
+        self.positions_d[:] = positions_d
+        target = pin.SE3(np.array(rotations_d[0]), np.array(positions_d[0]))
+        task, step = solver.stack.task, solver.step
+        k = -1
+        with np.errstate(all="ignore"):
+            for k in range(times.size):
+                target.translation = positions_d[k]
+                target.rotation = rotations_d[k]
+                try:
+                    q_next = step(q, target, velocities_d[k] if feedforward else None)
+                except ValueError as exc:  # a non-finite state or error: the run blew up
+                    if np.all(np.isfinite(q)):
+                        raise
+                    return k, f"non-finite state at t = {times[k]:.4g} s ({exc})"
+                qs[k], steps[k], errors[k] = q, solver.displacement, solver.error
+                norms[k] = norm = solver.error_norm
+                scales[k] = solver.task_scale
+                positions[k] = task.placement.translation  # type: ignore[union-attr]
+                if not norm < max_error:
+                    return k + 1, (f"error above {max_error:g} at t = {times[k]:.4g} s"
+                                   if np.isfinite(norm) else
+                                   f"non-finite state at t = {times[k]:.4g} s")
+                q = q_next
+        return k + 1, ""
+
+    def log(self, times: np.ndarray, end: int, reason: str) -> TrackingLog:
+        """The first ``end`` rows as a :class:`TrackingLog`."""
+        solver = self.solver
+        return TrackingLog(
+            t=times[:end], q=self.qs[:end], dq=self.steps[:end] / solver.dt,
+            position=self.positions[:end], target=self.positions_d[:end],
+            error=self.errors[:end], error_norm=self.norms[:end], task_scale=self.scales[:end],
+            diverged=bool(reason), reason=reason, method=solver.method.name, dt=solver.dt,
+            gain=solver.gain)
