@@ -274,20 +274,7 @@ class Robot:
         """
         source = read_urdf(path_or_xml)
         content = check_urdf(source)
-        if isinstance(package_dirs, (str, Path)):
-            package_dirs = [package_dirs]  # one folder, not a sequence of characters
-        dirs = [str(p) for p in (package_dirs or [])]
-        for folder in dirs:
-            if not os.path.isdir(folder):
-                raise URDFError(f"package_dirs: {folder!r} is not a folder")
-        urdf_dir = None
-        if source.path is not None:
-            urdf_dir = source.path.resolve().parent
-            references = mesh_paths.mesh_references(source.data)
-            dirs += mesh_paths.guess_package_dirs(source.path, references, dirs)
-            dirs.append(str(urdf_dir))
-        mesh_paths.check_references(source.label, source.data, urdf_dir, dirs,
-                                    allow_outside_meshes, must_exist=load_visuals)
+        dirs = _mesh_dirs(source, package_dirs, allow_outside_meshes, load_visuals)
         model, mimics, unmimicked = load_model(source, content)
         _check_memory(model, source.label, memory_budget)
         if ee_frame is None:
@@ -535,6 +522,28 @@ class Robot:
     def __repr__(self) -> str:
         return f"Robot({self.name!r}, ee_frame={self.ee_frame!r}, nq={self.nq}, nv={self.nv})"
 
+
+
+def _mesh_dirs(source: URDFSource, package_dirs, allow_outside: bool, must_exist: bool
+               ) -> list[str]:
+    """The folders meshes are read from (see :meth:`Robot.from_urdf`): ``package_dirs``, the
+    package roots found above a URDF file, its own folder; every mesh reference is checked
+    against them."""
+    if isinstance(package_dirs, (str, Path)):
+        package_dirs = [package_dirs]  # one folder, not a sequence of characters
+    dirs = [str(p) for p in (package_dirs or [])]
+    for folder in dirs:
+        if not os.path.isdir(folder):
+            raise URDFError(f"package_dirs: {folder!r} is not a folder")
+    urdf_dir = None
+    if source.path is not None:
+        urdf_dir = source.path.resolve().parent
+        references = mesh_paths.mesh_references(source.data)
+        dirs += mesh_paths.guess_package_dirs(source.path, references, dirs)
+        dirs.append(str(urdf_dir))
+    mesh_paths.check_references(source.label, source.data, urdf_dir, dirs, allow_outside,
+                                must_exist=must_exist)
+    return dirs
 
 
 def _unmimicked_lock(model: pin.Model, base: pin.Model, mimics: Sequence[MimicJoint],
