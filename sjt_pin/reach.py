@@ -277,20 +277,8 @@ def reachability(robot: Robot, step: float = STEP, orientations: int = ORIENTATI
         raise ValueError("pass limits= or solver=, not both (the solver carries its limits)")
     task = solver.stack.tasks[0]
     frame = getattr(task, "frame", None) or robot.ee_frame
-    centre, radius = reach_sphere(robot, frame)
-    positions = grid(centre, radius, step)
-    quaternions = spread_rotations(orientations)
-    rotations = [pin.Quaternion(w, x, y, z).toRotationMatrix() for x, y, z, w in quaternions]
-    shape = (len(positions), len(quaternions))
-    fresh = ReachMap(robot.name, frame, float(step), centre, radius, int(seed), int(budget),
-                     positions, quaternions, np.zeros(shape, dtype=bool),
-                     np.full(shape + (robot.nq,), np.nan), np.full(shape, np.nan))
-    result = fresh
-    if out is not None and Path(out).exists():
-        result = ReachMap.load(out)
-        if result._settings() != fresh._settings():
-            raise ValueError(f"out: {out} holds a map with other settings "
-                             f"({result._settings()}); remove it or choose another path")
+    fresh, rotations = _empty_map(robot, frame, step, orientations, seed, budget)
+    result = _resumed(out, fresh)
     if result.complete:
         return result
     reached, q, error = (a.reshape(-1, *a.shape[2:]) for a in (result.reached, result.q,
@@ -298,7 +286,7 @@ def reachability(robot: Robot, step: float = STEP, orientations: int = ORIENTATI
     start, last = result.done, time.monotonic()
     began = time.perf_counter() - result.seconds
     try:
-        for part in solve_chunks(solver, _Poses(positions, rotations, start), robot.q0,
+        for part in solve_chunks(solver, _Poses(result.positions, rotations, start), robot.q0,
                                  processes=processes, executor=executor, progress=progress,
                                  seed=seed, first=start, budget=budget):
             a, b = start + part.start, start + part.start + len(part)
@@ -315,6 +303,31 @@ def reachability(robot: Robot, step: float = STEP, orientations: int = ORIENTATI
         result.seconds = time.perf_counter() - began
         if out is not None:
             result.save(out)
+    return result
+
+
+def _empty_map(robot: Robot, frame: str, step: float, orientations: int, seed: int,
+               budget: int) -> tuple[ReachMap, list[np.ndarray]]:
+    """A map with nothing solved yet (see the module docstring for the sampling), and the
+    rotation matrix of each of its orientations."""
+    centre, radius = reach_sphere(robot, frame)
+    positions = grid(centre, radius, step)
+    quaternions = spread_rotations(orientations)
+    rotations = [pin.Quaternion(w, x, y, z).toRotationMatrix() for x, y, z, w in quaternions]
+    shape = (len(positions), len(quaternions))
+    return ReachMap(robot.name, frame, float(step), centre, radius, int(seed), int(budget),
+                    positions, quaternions, np.zeros(shape, dtype=bool),
+                    np.full(shape + (robot.nq,), np.nan), np.full(shape, np.nan)), rotations
+
+
+def _resumed(out: str | Path | None, fresh: ReachMap) -> ReachMap:
+    """The partial map in ``out`` when it has ``fresh``'s settings, else ``fresh``."""
+    if out is None or not Path(out).exists():
+        return fresh
+    result = ReachMap.load(out)
+    if result._settings() != fresh._settings():
+        raise ValueError(f"out: {out} holds a map with other settings "
+                         f"({result._settings()}); remove it or choose another path")
     return result
 
 
