@@ -28,7 +28,6 @@ validated twice and the per-step checks are a few float comparisons.
 from __future__ import annotations
 
 import math
-import warnings
 from collections.abc import Mapping, Sequence
 
 import numpy as np
@@ -37,13 +36,14 @@ import pinocchio as pin
 from . import kernels as K
 from .constraints import ConstraintStage, Outcome
 from .escape import SaddleEscape
-from .exceptions import ConcurrentStepError, GainWarning
+from .exceptions import ConcurrentStepError
 from .gains import FixedGain, Gain, as_gain
 from .joint_ranges import outside
 from .limits import AccelerationLimit, JerkLimit, Limit, Motion, PositionLimit, VelocityLimit
 from .limits.position import braking_speed
 from .methods import Method
 from .robot import Robot
+from .stability import StabilityCheck
 from .stack import TaskStack, normalise_tasks
 from .step_info import StepInfo
 from .tasks import PoseTask, PostureTask, Task
@@ -159,8 +159,7 @@ class Solver:
         self._ff_on = False
         self._escaped = (-1, False)  # (step count, whether that step added the escape)
         self._v_names = robot.velocity_names
-        self._check_stability = bool(check_stability)
-        self._warned = False
+        self._stability = StabilityCheck(method, stack.n_chain, check_stability)
         self._probe: TaskStack | None = None
         self._search = None
         self._gain = as_gain(gain, stack.target_dim)
@@ -272,11 +271,11 @@ class Solver:
     @property
     def check_stability(self) -> bool:
         """Warn once when a fixed gain exceeds the stability bound (see the class docstring)."""
-        return self._check_stability
+        return self._stability.enabled
 
     @check_stability.setter
     def check_stability(self, value: bool) -> None:
-        self._check_stability = bool(value)
+        self._stability.enabled = bool(value)
         self._configure()
 
     def _configure(self) -> None:
@@ -285,19 +284,14 @@ class Solver:
         self.method.configure(work, gain, self._dt, stack.n_chain)
         work[K.P_FF_MODE] = self.method.feedforward_mode()
         self._layout.gains(work)[:] = gain.rows(stack.target_dim, stack.posture_dim)
-        self._k_dt = gain.largest * self._dt
-        bound = self.method.bound(stack.n_chain)
-        # the check can only fire when k dt times a bound of lambda_max reaches 2
-        self._gain_check = (self._check_stability and not self._warned
-                            and gain.mode == K.GAIN_FIXED
-                            and (bound is None or self._k_dt * bound >= 2.0))
+        self._stability.arm(gain.mode == K.GAIN_FIXED, gain.largest * self._dt)
         self._motion.dt = self._dt
         self._update_slow()
 
     def _update_slow(self) -> None:
         """Whether every step must take the slow path (an escape in progress, a pending
         stability check, limits outside the kernel's box)."""
-        self._always = (self._first or self._gain_check or self._staged
+        self._always = (self._first or self._stability.armed or self._staged
                         or (self.escape is not None and self.escape.active))
 
     def reset(self) -> None:
@@ -392,8 +386,9 @@ class Solver:
                 position = target.translation if isinstance(target, pin.SE3) else target
                 if isinstance(position, np.ndarray) and position.shape == (3,):
                     self.robot.check_reach(position, q)
-        if self._gain_check:
-            self._check_gain(J)
+        if self._stability.armed:
+            self._stability.check(self.stack.sqrt_weight[:, None] * J * self.stack.chain,
+                                  float(self._info[K.I_TRACE]), self._gain.largest, self._dt)
         step, dt = self._step, self._dt
         escape = self.escape
         self._escaped = (self._count, escape is not None and escape.active)
@@ -609,25 +604,6 @@ class Solver:
         return Outcome(dq, scale, self._clamped != 0.0, tuple(pairs))
 
     # -- safeguards ----------------------------------------------------------------------------
-    def _check_gain(self, J: np.ndarray) -> None:
-        """Warn once if ``k_max dt lambda_max(J M) >= 2`` at this configuration."""
-        bound = self.method.bound(self.stack.n_chain)
-        if bound is None:
-            bound = float(self._info[K.I_TRACE])
-        if self._k_dt * bound < 2.0:
-            return
-        Jw = self.stack.sqrt_weight[:, None] * J * self.stack.chain
-        JM = Jw @ self.method.matrix(Jw)
-        lam = float(np.linalg.eigvalsh(0.5 * (JM + JM.T))[-1]) if JM.size else 0.0
-        if lam <= 0.0 or self._gain.largest * self._dt * lam < 2.0:
-            return
-        self._warned, self._gain_check = True, False
-        warnings.warn(
-            f"{self.method.name.upper()} gain {self._gain.largest:g} 1/s exceeds the stability "
-            f"bound 2 / (dt lambda_max(J M)) = {2.0 / (self._dt * lam):.4g} 1/s at the current "
-            f"configuration (dt = {self._dt:g} s); the closed loop will oscillate or diverge",
-            GainWarning, stacklevel=5)
-
     def _raise_non_finite(self, q: np.ndarray, targets) -> None:
         self.robot.check_q(q)  # names q if it holds NaN or inf
         if not math.isfinite(self._info[K.I_E_SQ]):
@@ -661,10 +637,10 @@ class Solver:
         mid-escape) and the stability warning. Its next steps are this one's, bitwise; it has
         no :attr:`last` step until it makes one."""
         arguments = dict(self._arguments, gain=self._gain, dt=self._dt,
-                         check_stability=self._check_stability)
+                         check_stability=self._stability.enabled)
         state = {"motion": (self._motion.dq.copy(), self._motion.ddq.copy()),
                  "escape": self.escape, "escaping": float(self._work[K.P_ESCAPING]),
-                 "escape_velocity": self._escape_velocity.copy(), "warned": self._warned,
+                 "escape_velocity": self._escape_velocity.copy(), "warned": self._stability.warned,
                  "count": self._count, "stall": (float(self._work[K.P_STALL_RUN]),
                                                   float(self._work[K.P_STALL_WAIT]))}
         return (_rebuild, (type(self), self.robot, self.method, arguments), state)
@@ -674,7 +650,7 @@ class Solver:
         self.escape = state["escape"]
         self._work[K.P_ESCAPING] = state["escaping"]
         self._escape_velocity[:] = state["escape_velocity"]
-        self._warned, self._count = state["warned"], state["count"]
+        self._stability.warned, self._count = state["warned"], state["count"]
         self._work[K.P_STALL_RUN], self._work[K.P_STALL_WAIT] = state["stall"]
         self._configure()
 
