@@ -11,6 +11,7 @@ from .gains import AutoGain, FixedGain, Gain
 from .kinematics import Kinematics
 from .limits import CollisionLimit
 from .reach import ReachMap, reachability
+from .options import SolverOptions
 from .robot import Robot
 from .solve import IKResult
 from .solver import Solver
@@ -58,6 +59,7 @@ __all__ = [
     "Robot",
     "SJTSolver",
     "Solver",
+    "SolverOptions",
     "StepInfo",
     "Task",
     "Trajectory",

@@ -28,7 +28,7 @@ validated twice and the per-step checks are a few float comparisons.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -42,11 +42,12 @@ from .joint_ranges import outside
 from .limits import AccelerationLimit, JerkLimit, Limit, Motion, PositionLimit, VelocityLimit
 from .limits.position import braking_speed
 from .methods import Method
+from .options import SolverOptions
 from .robot import Robot
 from .stability import StabilityCheck
 from .stack import TaskStack, normalise_tasks
 from .step_info import StepInfo
-from .tasks import PoseTask, PostureTask, Task
+from .tasks import PoseTask
 from .tasks.pose import tasks_length
 from .validation import period, raise_non_finite_targets
 
@@ -68,78 +69,17 @@ class Solver:
     Args:
         robot: the :class:`~sjt_pin.Robot` to move.
         method: the mapping M(J), a :class:`~sjt_pin.methods.Method`.
-        gain: K in 1/s: a number, one number per task row, ``"auto"`` or a
-            :class:`~sjt_pin.gains.Gain` (see :mod:`~sjt_pin.gains`).
-        dt: control period in s (the integration step), > 0.
-        task: a :class:`~sjt_pin.Task` (default: a pose task on the end effector), a list of
-            tasks on distinct frames, or a ``{frame: task}`` mapping; with several tasks
-            ``step`` takes ``{frame: target}`` mappings.
-        posture: a :class:`~sjt_pin.PostureTask` stacked under the tasks (redundant robots).
-        pose_length: the characteristic length L (m) of the pose task made when ``task`` is
-            ``None``: ``PoseTask(length=pose_length)``; ``None`` for the robot's own (see
-            :class:`~sjt_pin.PoseTask`).
-        position_limits: keep 1-DoF joints within their URDF position limits (default: on when
-            the URDF has them).
-        velocity_limits: ``True``/``None`` for the URDF's speed limits, ``False`` for none, or
-            an (nv,) array in rad/s or m/s (``inf`` for none).
-        escape: add a smooth escape at the saddles of singular configurations (JT, SJT).
-        check_stability: warn (:class:`~sjt_pin.GainWarning`, once) when a fixed gain exceeds
-            the linear stability bound ``2 / (dt lambda_max(J M))`` at the current q.
-        acceleration_limits: joint acceleration limits (rad/s^2 or m/s^2; one number or one
-            per velocity coordinate, ``inf`` for none), or ``None`` (the default: URDFs do not
-            carry them).
-        jerk_limits: joint jerk limits (rad/s^3 or m/s^3), or ``None``.
-        limits: further :class:`~sjt_pin.limits.Limit` objects for the constraint stage.
-
-    With acceleration or jerk limits the solver keeps the velocity and acceleration it
-    commanded last as its state (a run starts from rest); :meth:`reset` returns to rest. The
-    state belongs to the command stream, not to the ``q`` passed in: feeding back a measured
-    ``q`` near the last output is fine; after a jump of the robot elsewhere, call ``reset()``.
+        **options: the common options, :class:`~sjt_pin.options.SolverOptions` (gain, dt,
+            task, posture, limits, ...).
     """
 
-    def __init__(
-        self,
-        robot: Robot,
-        method: Method,
-        *,
-        gain: float | str | Sequence[float] | Gain = "auto",
-        dt: float = 1e-3,
-        task: Task | Sequence[Task] | Mapping[str, Task] | None = None,
-        posture: PostureTask | None = None,
-        position_limits: bool | None = None,
-        velocity_limits: bool | np.ndarray | None = None,
-        escape: bool = True,
-        check_stability: bool = True,
-        acceleration_limits=None,
-        jerk_limits=None,
-        limits: Sequence[Limit] = (),
-        pose_length: float | None = None,
-    ):
-        #: what the solver was made from: a copy is made anew from it (see __reduce__)
-        self._arguments = dict(
-            gain=gain, dt=dt, task=task, posture=posture, position_limits=position_limits,
-            velocity_limits=velocity_limits, escape=escape, check_stability=check_stability,
-            acceleration_limits=acceleration_limits, jerk_limits=jerk_limits, limits=limits,
-            pose_length=pose_length)
-        if pose_length is not None:
-            if task is not None:
-                raise ValueError("pose_length sets the length of the pose task made when task is "
-                                 "None; with a task of your own pass PoseTask(length=...)")
-            task = PoseTask(length=pose_length)
-        if not isinstance(robot, Robot):
-            raise TypeError(f"robot must be a sjt_pin.Robot, got {type(robot).__name__}")
-        if not isinstance(method, Method):
-            raise TypeError(f"method must be a sjt_pin Method, got {type(method).__name__}")
-        if robot.nv == 0:
-            raise ValueError(f"robot {robot.name!r} has no moving joint: there is nothing to "
-                             "solve for")
-        self.robot = robot
-        self.method = method
-        self.stack = TaskStack(robot, normalise_tasks(task, posture))
-        stack = self.stack
-        n = robot.nv
-        self._model = robot.model
-        self._q_shape = (robot.nq,)
+    def __init__(self, robot: Robot, method: Method, **options: Any):
+        #: the options it was made with (a copy is made anew from them, see __reduce__)
+        self.options = opts = SolverOptions.of(type(self).__name__, options)
+        _check_parts(robot, method)
+        self.robot, self.method = robot, method
+        self.stack = stack = TaskStack(robot, normalise_tasks(_task(opts), opts.posture))
+        self._model, self._q_shape = robot.model, (robot.nq,)
         #: a q with quaternions or (cos, sin) pairs is checked on its manifold (one compiled
         #: call; Robot.check_q normalises or refuses it when a block is off the unit norm),
         #: unless it is the array the last step returned (pin.integrate keeps it there)
@@ -147,22 +87,20 @@ class Solver:
         self._units = self._unit_blocks.size > 0
         self._returned: np.ndarray | None = None
         self._first = True  # the first step checks the targets' distance (units)
-        self._dt = period(dt)
+        self._dt = period(opts.dt)
         self._kernel = method.kernel if method.kernel is not None else method.python_step
-        speeds = self._build_stage(position_limits, velocity_limits, acceleration_limits,
-                                   jerk_limits, limits)
+        speeds = self._build_stage(opts)
         self.escape = (SaddleEscape(robot.model, stack.chain, robot.velocity_limits,
-                                    self.position_limit) if escape and method.stalls else None)
+                                    self.position_limit) if opts.escape and method.stalls
+                       else None)
         self._build_work(speeds)
-        self._step = np.zeros(n)
-        self._no_ff = np.zeros(stack.dim)
-        self._ff_on = False
+        self._step, self._no_ff, self._ff_on = np.zeros(robot.nv), np.zeros(stack.dim), False
         self._escaped = (-1, False)  # (step count, whether that step added the escape)
         self._v_names = robot.velocity_names
-        self._stability = StabilityCheck(method, stack.n_chain, check_stability)
+        self._stability = StabilityCheck(method, stack.n_chain, opts.check_stability)
         self._probe: TaskStack | None = None
         self._search = None
-        self._gain = as_gain(gain, stack.target_dim)
+        self._gain = as_gain(opts.gain, stack.target_dim)
         method.adapt(stack.targeted, tasks_length(robot, stack.tasks))  # per the tasks
         self._configure()
         self._count = 0
@@ -171,14 +109,15 @@ class Solver:
         #: the last step's rows, error, displacement and status (None before the first)
         self._record: tuple | None = None
 
-    def _build_stage(self, position_limits, velocity_limits, acceleration_limits, jerk_limits,
-                     limits) -> np.ndarray:
+    def _build_stage(self, opts: SolverOptions) -> np.ndarray:
         """The constraint stage: the URDF's position and speed limits, acceleration and jerk
         limits when given, and the user's limits; returns the speed limits it enforces (rad/s,
         m/s; inf for none)."""
         robot, method, stack = self.robot, self.method, self.stack
         n = robot.nv
         urdf_speeds = robot.velocity_limits
+        acceleration_limits, jerk_limits = opts.acceleration_limits, opts.jerk_limits
+        position_limits, velocity_limits = opts.position_limits, opts.velocity_limits
         moving = stack.chain > 0
         accel = None if acceleration_limits is None else AccelerationLimit(acceleration_limits, n)
         jerk = None if jerk_limits is None else JerkLimit(
@@ -196,7 +135,7 @@ class Solver:
         speeds = np.where(moving, _speed_limits(velocity_limits, urdf_speeds, n), np.inf)
         velocity = VelocityLimit(speeds)
         self.velocity_limit = velocity if velocity.active else None
-        extra = list(limits)
+        extra = list(opts.limits)
         for limit in extra:
             if not isinstance(limit, Limit):
                 raise TypeError(f"limits must hold sjt_pin Limit objects, got {limit!r}")
@@ -636,8 +575,8 @@ class Solver:
         period as set now, the commanded velocity and acceleration, the saddle escape (also
         mid-escape) and the stability warning. Its next steps are this one's, bitwise; it has
         no :attr:`last` step until it makes one."""
-        arguments = dict(self._arguments, gain=self._gain, dt=self._dt,
-                         check_stability=self._stability.enabled)
+        arguments = self.options.replace(gain=self._gain, dt=self._dt,
+                                         check_stability=self._stability.enabled)
         state = {"motion": (self._motion.dq.copy(), self._motion.ddq.copy()),
                  "escape": self.escape, "escaping": float(self._work[K.P_ESCAPING]),
                  "escape_velocity": self._escape_velocity.copy(), "warned": self._stability.warned,
@@ -660,11 +599,32 @@ class Solver:
                 f"dt={self._dt:g}, task={tasks!r})")
 
 
-def _rebuild(cls, robot: Robot, method: Method, arguments: dict) -> Solver:
+def _rebuild(cls, robot: Robot, method: Method, options: SolverOptions) -> Solver:
     """A solver of class ``cls`` made anew (the unpickling half of ``Solver.__reduce__``)."""
     solver = Solver.__new__(cls)
-    Solver.__init__(solver, robot, method, **arguments)
+    Solver.__init__(solver, robot, method, **options.keywords())
     return solver
+
+
+def _check_parts(robot, method) -> None:
+    """A solver's robot and method, checked at the door."""
+    if not isinstance(robot, Robot):
+        raise TypeError(f"robot must be a sjt_pin.Robot, got {type(robot).__name__}")
+    if not isinstance(method, Method):
+        raise TypeError(f"method must be a sjt_pin Method, got {type(method).__name__}")
+    if robot.nv == 0:
+        raise ValueError(f"robot {robot.name!r} has no moving joint: there is nothing to "
+                         "solve for")
+
+
+def _task(options: SolverOptions):
+    """The task(s) of ``options``: ``task``, or the pose task of length ``pose_length``."""
+    if options.pose_length is None:
+        return options.task
+    if options.task is not None:
+        raise ValueError("pose_length sets the length of the pose task made when task is "
+                         "None; with a task of your own pass PoseTask(length=...)")
+    return PoseTask(length=options.pose_length)
 
 
 def _speed_limits(velocity_limits, urdf: np.ndarray, nv: int) -> np.ndarray:

@@ -12,35 +12,14 @@ from .mappings import COLUMN_TOL, JP_RCOND
 from .methods import DLS, JP, JT, SJT
 from .methods.dls import DLS_DAMPING
 from .methods.transpose import FF_DAMPING
+from .options import SolverOptions
 from .robot import Robot
 from .solver import Solver
 
-_COMMON = """
-    Common arguments:
-        robot: the :class:`~sjt_pin.Robot` to move.
-        gain: K in 1/s: a number (K = k I), one number per task row, ``"auto"`` (the default:
-            ``1 / (dt lambda_hat)`` at every step, lambda_hat >= lambda_max(J M), so the
-            fastest mode of the loop settles in one step, at half the stability bound; see
-            :mod:`sjt_pin.gains`) or a :class:`~sjt_pin.gains.Gain`.
-        dt: control period in s (the integration step), > 0.
-        task: a :class:`~sjt_pin.Task` (default: ``PoseTask()`` on the end effector), a list
-            of tasks on distinct frames, or a ``{frame: task}`` mapping; with several tasks
-            ``step`` takes ``{frame: target}`` mappings.
-        posture: a :class:`~sjt_pin.PostureTask` stacked under the tasks (redundant arms).
-        position_limits: keep 1-DoF joints within their URDF position limits (default: on
-            when the URDF has them).
-        velocity_limits: ``True``/``None`` (the URDF's speed limits, the default), ``False``
-            (none), or an (nv,) array in rad/s or m/s (``inf`` for none).
-        check_stability: warn once (:class:`~sjt_pin.GainWarning`) when a fixed gain exceeds
-            the stability bound ``2 / (dt lambda_max(J M))`` at the current configuration.
-        acceleration_limits: joint acceleration limits (rad/s^2 or m/s^2; a number or one
-            per velocity coordinate, ``inf`` for none; default ``None``: URDFs have none).
-        jerk_limits: joint jerk limits (rad/s^3 or m/s^3; needs ``acceleration_limits``).
-        limits: further :class:`~sjt_pin.limits.Limit` objects for the constraint stage (see
-            the README's "Extend it").
-
-    Every option is keyword-only: ``SJTSolver(robot, dt=1e-3)``. The common ones are
-    :class:`~sjt_pin.solver.Solver`'s, declared there once; each solver adds its method's.
+#: the common options' documentation, from the one place they are declared
+_COMMON = (SolverOptions.__doc__ or "") + """
+    The common options are :class:`~sjt_pin.options.SolverOptions`, declared there once; each
+    solver adds its method's.
 """
 
 _TRANSPOSE = """
@@ -49,8 +28,6 @@ _TRANSPOSE = """
             ``J sqrt(D)``, unit-free, damped by ``ff_damping`` near singularities;
             ``"transpose"``: through the same transpose as the feedback (the paper's eq. 10/21).
         ff_damping: mu of the damped solve (dimensionless, > 0; default 0.01).
-        escape: add a smooth escape velocity at the saddles of exactly singular configurations
-            (default True; see :mod:`sjt_pin.escape`).
 """
 
 

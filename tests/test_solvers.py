@@ -193,3 +193,25 @@ def test_make_solver_names_and_options(ur5):
     assert sjt.make_solver("dls", ur5, damping=0.2).damping == 0.2
     with pytest.raises(ValueError, match="one of"):
         sjt.make_solver("newton", ur5)
+
+
+def test_every_common_option_is_declared_once(ur5):
+    """SolverOptions is the one place a common option lives: each field is documented there,
+    every public solver's documentation carries it and takes it, copies keep it, and an
+    unknown name is refused naming the solver."""
+    import copy
+    import dataclasses
+
+    names = [field.name for field in dataclasses.fields(sjt.SolverOptions)]
+    assert {"gain", "dt", "task", "posture", "limits", "acceleration_limits"} <= set(names)
+    for name in names:
+        assert f"\n        {name}:" in sjt.SolverOptions.__doc__
+    for cls in sjt.solvers.SOLVERS.values():
+        for name in names:
+            assert f"\n        {name}:" in cls.__doc__
+        solver = cls(ur5, dt=2e-3, check_stability=False, velocity_limits=False)
+        assert solver.options.dt == 2e-3 and solver.options.velocity_limits is False
+        twin = copy.deepcopy(solver)
+        assert twin.options.dt == 2e-3 and twin.options.check_stability is False
+        with pytest.raises(TypeError, match=rf"{cls.__name__}.*\['dtt'\]"):
+            cls(ur5, dtt=1e-3)
