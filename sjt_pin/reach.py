@@ -281,14 +281,24 @@ def reachability(robot: Robot, step: float = STEP, orientations: int = ORIENTATI
     result = _resumed(out, fresh)
     if result.complete:
         return result
+    parts = solve_chunks(solver, _Poses(result.positions, rotations, result.done), robot.q0,
+                         processes=processes, executor=executor, progress=progress, seed=seed,
+                         first=result.done, budget=budget)
+    _fill(result, parts, out, report, checkpoint)
+    return result
+
+
+def _fill(result: ReachMap, parts, out: str | Path | None,
+          report: Callable[[ReachMap], object] | None, checkpoint: float) -> None:
+    """Write the solved ``parts`` (:class:`~sjt_pin.batch.BatchPart`, from ``result.done``
+    on) into ``result``, saving it to ``out`` and calling ``report`` every ``checkpoint``
+    seconds, and saving it at the end (also when interrupted)."""
     reached, q, error = (a.reshape(-1, *a.shape[2:]) for a in (result.reached, result.q,
                                                                result.error))
     start, last = result.done, time.monotonic()
     began = time.perf_counter() - result.seconds
     try:
-        for part in solve_chunks(solver, _Poses(result.positions, rotations, start), robot.q0,
-                                 processes=processes, executor=executor, progress=progress,
-                                 seed=seed, first=start, budget=budget):
+        for part in parts:
             a, b = start + part.start, start + part.start + len(part)
             reached[a:b], q[a:b], error[a:b] = part.success, part.q, part.error
             result.done = b
@@ -303,8 +313,6 @@ def reachability(robot: Robot, step: float = STEP, orientations: int = ORIENTATI
         result.seconds = time.perf_counter() - began
         if out is not None:
             result.save(out)
-    return result
-
 
 def _empty_map(robot: Robot, frame: str, step: float, orientations: int, seed: int,
                budget: int) -> tuple[ReachMap, list[np.ndarray]]:
