@@ -45,7 +45,7 @@ from .limits.position import braking_speed
 from .methods import Method
 from .robot import Robot
 from .stack import TaskStack, normalise_tasks
-from .step_info import StepInfo
+from .step_info import StepInfo, makes_no_progress
 from .tasks import PoseTask, PostureTask, Task
 from .tasks.pose import tasks_length
 from .validation import period, raise_non_finite_targets
@@ -371,7 +371,7 @@ class Solver:
         if status & _PYTHON or self._always:
             step = self._slow(status, q, J, e, ff, targets)
         # 4. integrate on the manifold; the record of the step (StepInfo) is built on demand
-        self._record, self._last = (J, e, step, status, q), None
+        self._record, self._last = (J, e, step, status, q, ff), None
         if self._tracks_motion:
             motion, dt = self._motion, self._dt
             dq = step / dt
@@ -561,7 +561,7 @@ class Solver:
         """The :class:`StepInfo` of the last step (``None`` before the first)."""
         if self._last is None and self._record is not None:
             info, stack = self._info, self.stack
-            J, _, step, status, q = self._record
+            J, e, step, status, q, ff = self._record
             gain = self._gain
             k = gain.argument if isinstance(gain, FixedGain) else float(info[K.I_GAIN])
             Jw = stack.sqrt_weight[:, None] * J * stack.chain
@@ -575,6 +575,10 @@ class Solver:
             names: tuple[str, ...] = tuple(dict.fromkeys(joint for _, joint in outcome.active))
             index = {name: i for i, name in enumerate(self._v_names)}
             clamped = np.array([index[name] for name in names], dtype=np.int64)
+            rows, sw = stack.target_dim, stack.sqrt_weight[:stack.target_dim]
+            stalled = not escaped and makes_no_progress(
+                Jw[:rows], sw * e[:rows], step / self._dt, sw * ff[:rows],
+                float(self._work[K.P_STALL_ERROR]))
             self._last = StepInfo(
                 error=np.array(self.error, dtype=float), error_norm=math.sqrt(info[K.I_E_SQ]),
                 dq=step / self._dt, gain=k, loop_bound=float(info[K.I_LOOP]),
@@ -583,7 +587,8 @@ class Solver:
                 active_limits=outcome.active, active_rows=outcome.rows,
                 limit_conflicts=outcome.conflict,
                 outside_limits=outside(self._model, q, self.robot.lower_limits,
-                                       self.robot.upper_limits))
+                                       self.robot.upper_limits),
+                stalled=stalled)
         return self._last
 
     def _kernel_outcome(self, q: np.ndarray, step: np.ndarray, status: int) -> Outcome:
