@@ -9,10 +9,9 @@ import numpy as np
 import pinocchio as pin
 
 #: 1/s: a step whose motion lowers 1/2 |e_w|^2 by less than this fraction of itself per second
-#: makes no progress (see :attr:`StepInfo.stalled`); unit-free, the same in mm and in m. An arm
-#: at rest short of its target rounds it to 1e-9 or below; an arm still on its way (at its
-#: speed limits toward a target metres away, or converging along a flat valley) lies orders of
-#: magnitude above it.
+#: makes no progress (see :attr:`StepInfo.stalled`); unit-free, the same in mm and in m. Measured
+#: on UR5 and UR10 at rest short of their targets: 3e-29 to 4e-26 1/s (zero when limits hold
+#: the arm); JT on its way to a target out of reach: 5e-5 1/s and more.
 STALL_RATE = 1e-6
 
 
