@@ -392,6 +392,7 @@ class Solver:
                 position = target.translation if isinstance(target, pin.SE3) else target
                 if isinstance(position, np.ndarray) and position.shape == (3,):
                     self.robot.check_reach(position, q)
+            self._warn_idle_outside(q)
         if self._gain_check:
             self._check_gain(J)
         step, dt = self._step, self._dt
@@ -420,6 +421,20 @@ class Solver:
             step = self._constrain(q, J, e, ff, status, step)
         self._update_slow()
         return step
+
+    def _warn_idle_outside(self, q: np.ndarray) -> None:
+        """Warn (first step) about joints outside their range that no task moves: the step
+        brings a joint back only if a task moves it, so these stay where they are (a gripper's
+        finger and the mimic joint that follows it, for instance); ``StepInfo.outside_limits``
+        names them on every step."""
+        robot, model = self.robot, self._model
+        names = outside(model, q, robot.lower_limits, robot.upper_limits, robot.mimic_joints)
+        idle = [name for name in names
+                if not self.stack.chain[model.joints[model.getJointId(name)].idx_v]]
+        if idle:
+            warnings.warn(f"joints {idle} start outside their URDF position range and no task "
+                          "moves them: they stay there (stack a PostureTask within the range "
+                          "to bring them back)", UserWarning, stacklevel=5)
 
     # -- the constraint stage ------------------------------------------------------------------
     def _constrain(self, q, J, e, ff, status, step) -> np.ndarray:
@@ -587,7 +602,7 @@ class Solver:
                 active_limits=outcome.active, active_rows=outcome.rows,
                 limit_conflicts=outcome.conflict,
                 outside_limits=outside(self._model, q, self.robot.lower_limits,
-                                       self.robot.upper_limits),
+                                       self.robot.upper_limits, self.robot.mimic_joints),
                 stalled=stalled)
         return self._last
 
