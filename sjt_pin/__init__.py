@@ -10,8 +10,8 @@ from .exceptions import ConcurrentStepError, FrameNotFound, GainWarning, URDFErr
 from .gains import AutoGain, FixedGain, Gain
 from .kinematics import Kinematics
 from .limits import CollisionLimit
-from .reach import ReachMap, reachability
 from .options import SolverOptions
+from .reach import ReachMap, reachability
 from .robot import Robot
 from .solve import IKResult
 from .solver import Solver

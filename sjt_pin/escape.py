@@ -18,8 +18,11 @@ negative curvature starts an escape: a joint velocity along the most negative di
 ramped up and later down within ``RAMP`` seconds, at ``SPEED`` times the URDF speed limits at
 most (also when the solver's speed limits are off), added to the regular update until that
 update moves faster than the escape. At a true minimum (an unreachable target, a target held
-against a joint limit) the curvature is not negative, nothing fires, and the arm rests; the
-test is not repeated until the configuration or the error changes.
+against a joint limit, or one reachable only on another branch of the inverse kinematics: UR10
+with its elbow exactly straight and the error along the direction the stretched arm cannot
+move in, pointing outward — bending the elbow raises the error) the curvature is not negative,
+nothing fires, and the arm rests (``StepInfo.stalled``); the test is not repeated until the
+configuration or the error changes.
 
 Two refinements of the test: a zero curvature is probed further out (a saddle of fourth order,
 :meth:`SaddleEscape._flat_descent`), and of the two signs of a symmetric escape the one with

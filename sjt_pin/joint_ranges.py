@@ -12,6 +12,8 @@ fixed here once:
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 import pinocchio as pin
 
@@ -36,11 +38,22 @@ def position_ranges(model: pin.Model) -> tuple[np.ndarray, np.ndarray]:
     return lower, upper
 
 
-def outside(model: pin.Model, q: np.ndarray, lower: np.ndarray, upper: np.ndarray
-            ) -> tuple[str, ...]:
-    """Names of the 1-DoF joints whose position in ``q`` lies outside ``[lower, upper]``."""
+def outside(model: pin.Model, q: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+            mimics: Sequence = ()) -> tuple[str, ...]:
+    """Names of the 1-DoF joints whose position in ``q`` lies outside ``[lower, upper]``, then
+    of the mimic joints (``mimics``: :class:`~sjt_pin.mimic.MimicJoint` relations as applied)
+    whose position by their relation lies outside their own range. A joint that mimic joints
+    follow has the range they leave it (``lower``, ``upper`` of the model), so a mimic joint
+    out of its range names both."""
     out = (q < lower) | (q > upper)
     if not out.any():
         return ()
-    return tuple(model.names[j] for j in range(1, model.njoints)
-                 if model.joints[j].nq == 1 and out[model.joints[j].idx_q])
+    names = [model.names[j] for j in range(1, model.njoints)
+             if model.joints[j].nq == 1 and out[model.joints[j].idx_q]]
+    for mimic in mimics:
+        joint = model.joints[model.getJointId(mimic.mimicked)]
+        if joint.nq == 1 and out[joint.idx_q]:
+            value = mimic.multiplier * q[joint.idx_q] + mimic.offset
+            if not mimic.lower <= value <= mimic.upper:
+                names.append(mimic.joint)
+    return tuple(names)

@@ -43,6 +43,10 @@ class MimicJoint:
     mimicked: str  #: the joint it follows (an independent coordinate after apply_mimics)
     multiplier: float
     offset: float  #: rad or m
+    #: the mimicking joint's own position range (rad or m) from its URDF ``<limit>``, as
+    #: :func:`apply_mimics` applied the relation (``-inf``/``inf``: none, or not yet read)
+    lower: float = -math.inf
+    upper: float = math.inf
 
 
 def read_mimics(joints: Sequence, error: Callable[[str], URDFError]) -> list[MimicJoint]:
@@ -173,8 +177,11 @@ def apply_mimics(model: pin.Model, mimics: Sequence[MimicJoint],
                 continue
             k = a_x / a0  # q_x = k q_first + o
             o = b_x - k * b0
-            applied.append((index[first], index[name], MimicJoint(name, first, k, o)))
             own = model.joints[index[name]]
+            own_range = ((float(lower[own.idx_q]), float(upper[own.idx_q])) if own.nq == 1
+                         else (-math.inf, math.inf))
+            applied.append((index[first], index[name], MimicJoint(name, first, k, o,
+                                                                  *own_range)))
             if own.nq == 1 and np.isfinite(lower[own.idx_q]):
                 ends = sorted(((lower[own.idx_q] - o) / k, (upper[own.idx_q] - o) / k))
                 lo, hi = max(lo, ends[0]), min(hi, ends[1])

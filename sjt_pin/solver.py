@@ -28,6 +28,7 @@ validated twice and the per-step checks are a few float comparisons.
 from __future__ import annotations
 
 import math
+import warnings
 from typing import Any
 
 import numpy as np
@@ -46,7 +47,7 @@ from .options import SolverOptions
 from .robot import Robot
 from .stability import StabilityCheck
 from .stack import TaskStack, normalise_tasks
-from .step_info import StepInfo
+from .step_info import StepInfo, makes_no_progress
 from .tasks import PoseTask
 from .tasks.pose import tasks_length
 from .validation import period, raise_non_finite_targets
@@ -304,7 +305,7 @@ class Solver:
         if status & _PYTHON or self._always:
             step = self._slow(status, q, J, e, ff, targets)
         # 4. integrate on the manifold; the record of the step (StepInfo) is built on demand
-        self._record, self._last = (J, e, step, status, q), None
+        self._record, self._last = (J, e, step, status, q, ff), None
         if self._tracks_motion:
             motion, dt = self._motion, self._dt
             dq = step / dt
@@ -325,6 +326,7 @@ class Solver:
                 position = target.translation if isinstance(target, pin.SE3) else target
                 if isinstance(position, np.ndarray) and position.shape == (3,):
                     self.robot.check_reach(position, q)
+            self._warn_idle_outside(q)
         if self._stability.armed:
             self._stability.check(self.stack.sqrt_weight[:, None] * J * self.stack.chain,
                                   float(self._info[K.I_TRACE]), self._gain.largest, self._dt)
@@ -354,6 +356,20 @@ class Solver:
             step = self._constrain(q, J, e, ff, status, step)
         self._update_slow()
         return step
+
+    def _warn_idle_outside(self, q: np.ndarray) -> None:
+        """Warn (first step) about joints outside their range that no task moves: the step
+        brings a joint back only if a task moves it, so these stay where they are (a gripper's
+        finger and the mimic joint that follows it, for instance); ``StepInfo.outside_limits``
+        names them on every step."""
+        robot, model = self.robot, self._model
+        names = outside(model, q, robot.lower_limits, robot.upper_limits, robot.mimic_joints)
+        idle = [name for name in names
+                if not self.stack.chain[model.joints[model.getJointId(name)].idx_v]]
+        if idle:
+            warnings.warn(f"joints {idle} start outside their URDF position range and no task "
+                          "moves them: they stay there (stack a PostureTask within the range "
+                          "to bring them back)", UserWarning, stacklevel=5)
 
     # -- the constraint stage ------------------------------------------------------------------
     def _constrain(self, q, J, e, ff, status, step) -> np.ndarray:
@@ -495,7 +511,7 @@ class Solver:
         """The :class:`StepInfo` of the last step (``None`` before the first)."""
         if self._last is None and self._record is not None:
             info, stack = self._info, self.stack
-            J, _, step, status, q = self._record
+            J, e, step, status, q, ff = self._record
             gain = self._gain
             k = gain.argument if isinstance(gain, FixedGain) else float(info[K.I_GAIN])
             Jw = stack.sqrt_weight[:, None] * J * stack.chain
@@ -509,6 +525,10 @@ class Solver:
             names: tuple[str, ...] = tuple(dict.fromkeys(joint for _, joint in outcome.active))
             index = {name: i for i, name in enumerate(self._v_names)}
             clamped = np.array([index[name] for name in names], dtype=np.int64)
+            rows, sw = stack.target_dim, stack.sqrt_weight[:stack.target_dim]
+            stalled = not escaped and makes_no_progress(
+                Jw[:rows], sw * e[:rows], step / self._dt, sw * ff[:rows],
+                float(self._work[K.P_STALL_ERROR]))
             self._last = StepInfo(
                 error=np.array(self.error, dtype=float), error_norm=math.sqrt(info[K.I_E_SQ]),
                 dq=step / self._dt, gain=k, loop_bound=float(info[K.I_LOOP]),
@@ -517,7 +537,8 @@ class Solver:
                 active_limits=outcome.active, active_rows=outcome.rows,
                 limit_conflicts=outcome.conflict,
                 outside_limits=outside(self._model, q, self.robot.lower_limits,
-                                       self.robot.upper_limits))
+                                       self.robot.upper_limits, self.robot.mimic_joints),
+                stalled=stalled)
         return self._last
 
     def _kernel_outcome(self, q: np.ndarray, step: np.ndarray, status: int) -> Outcome:

@@ -263,3 +263,51 @@ def test_a_robot_with_pinocchio_mimic_joints_alone_refuses_to_pickle():
     model = pin.transformJointIntoMimic(pin.buildModelFromUrdf(str(GRIPPER)), 4, 5, -1.0, 0.0)
     with pytest.raises(TypeError, match="mimic joints but no model without them"):
         pickle.dumps(sjt.Robot(model, "tcp"))
+
+
+def test_a_mimic_joint_outside_its_range_is_named_and_brought_back(gripper):
+    """wrist = 1.0 puts tool_tilt (0.5 wrist + 0.1) at 0.6, past its own limit 0.4, while the
+    wrist is within its own +-2: the step names tool_tilt (before: only the wrist) and brings
+    the wrist back into the range tool_tilt leaves it, at its recovery speed (no jump)."""
+    solver = sjt.SJTSolver(gripper, dt=1e-3)
+    target = gripper.fk(np.array([0.3, 0.5, 0.2, 0.02]))
+    q = np.array([0.0, 0.0, 1.0, 0.02])
+    q = solver.step(q, target)
+    assert solver.last.outside_limits == ("wrist", "tool_tilt")
+    for _ in range(3000):
+        previous = q
+        q = solver.step(q, target)
+        assert abs(q[2] - previous[2]) <= 0.25 / 0.5 * solver.dt * (1 + 1e-9)  # tool_tilt's
+        # speed through its relation
+    assert -0.2 <= gripper.joint_values(q)["tool_tilt"] <= 0.4
+    assert solver.last.outside_limits == () and solver.error_norm < 1e-9
+
+
+@pytest.mark.parametrize("robot_name", ["gripper", "panda"])
+def test_a_mimic_joint_that_no_task_moves_says_it_stays_outside(robot_name, gripper):
+    """A finger outside its range and off every task's chain stays there, as any joint no task
+    moves: the first step warns and names the finger and its mimic, every step's StepInfo too;
+    a posture task within the range brings both back."""
+    robot = gripper if robot_name == "gripper" else sjt.Robot.from_example("panda")
+    finger, mimic = (("left_finger", "right_finger") if robot_name == "gripper"
+                     else ("panda_finger_joint1", "panda_finger_joint2"))
+    index = robot.velocity_names.index(finger)
+    q0 = robot.q0.copy() if robot_name == "panda" else np.array([0.1, 0.2, 0.1, 0.02])
+    target = robot.fk(q0)
+    q0[index] = 0.05  # both fingers 1 cm past their 4 cm
+    solver = sjt.SJTSolver(robot, dt=1e-3)
+    with pytest.warns(UserWarning, match=f"{finger}.*{mimic}.*no task moves them"):
+        q = solver.step(q0, target)
+    for _ in range(200):
+        q = solver.step(q, target)
+        assert solver.last.outside_limits == (finger, mimic)
+    assert q[index] == 0.05
+    posture = q0.copy()
+    posture[index] = 0.02
+    solver = sjt.SJTSolver(robot, dt=1e-3, posture=sjt.PostureTask(posture, weight=0.1))
+    q = q0
+    for _ in range(2000):
+        q = solver.step(q, target)
+    assert solver.last.outside_limits == ()
+    values = robot.joint_values(q)
+    assert abs(values[finger]) <= 0.04 and abs(values[mimic]) <= 0.04

@@ -1,0 +1,109 @@
+"""StepInfo.stalled: a solver that comes to rest short of its target says so, and says why
+(limits, or a minimum of the error); one on its way or at the target does not."""
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+import sjt_pin as sjt
+
+#: UR10 with its elbow exactly straight, and a pose 6.6 cm off along the direction the
+#: stretched arm cannot move in (``fk(Q_STRETCHED) * exp6(TWIST)``): a true minimum of the
+#: error there (the Hessian of 1/2 |e_w|^2 is positive definite, smallest eigenvalue 0.0125 on
+#: the solver's columns), the pose reachable only on another branch of the inverse kinematics
+Q_STRETCHED = np.array([3.262729092196741, 4.024037875477934, 0.0, 1.779163105587596,
+                        -0.855391043348777, -2.6077009270651046])
+TWIST = np.array([-0.03458026054141369, -0.05230447601438341, 0.01537230502673318,
+                  -0.01005255087355244, 0.00481348349846092, 0.00181223011624114])
+
+
+def far_target(robot, q):
+    pose = robot.fk(q)
+    return pin.SE3(pose.rotation,
+                   pose.translation * (1.0 + 1.3 / np.linalg.norm(pose.translation)))
+
+
+@pytest.mark.parametrize("method, options", [("sjt", {}), ("sjt", {"feedback": "transpose"}),
+                                             ("jt", {})], ids=["sjt", "sjt transpose", "jt"])
+def test_an_arm_at_rest_short_of_a_target_out_of_reach_says_it_stalled(method, options):
+    ur5 = sjt.Robot.from_example("ur5")
+    q = np.array([0.3, -1.2, 1.5, -1.8, -1.5, 0.2])
+    solver = sjt.make_solver(method, ur5, dt=2e-3, **options)
+    far = far_target(ur5, q)
+    for _ in range(1500):  # 3 s
+        q = solver.step(q, far)
+    info = solver.last
+    assert info.error_norm > 1.0  # metres short of the target
+    assert np.abs(info.dq).max() < 1e-6  # at rest
+    # why: no limit holds it (the whole task, no bound), no escape: a minimum of the error
+    assert info.stalled and not info.escaped
+    assert info.task_scale == 1.0 and info.active_limits == ()
+
+
+@pytest.mark.parametrize("method", ["sjt", "jt", "dls", "jp"])
+def test_an_arm_on_its_way_or_at_its_target_has_not_stalled(method):
+    ur5 = sjt.Robot.from_example("ur5")
+    q = np.array([0.3, -1.2, 1.5, -1.8, -1.5, 0.2])
+    target = ur5.fk(q) * pin.exp6(pin.Motion(np.array([0.05, 0.02, -0.03, 0.1, 0.0, 0.2])))
+    solver = sjt.make_solver(method, ur5, dt=1e-3)
+    for _ in range(1500):
+        q = solver.step(q, target)
+        assert not solver.last.stalled, solver.last
+    assert solver.error_norm < 1e-9  # converged: below the floor, not a stall
+
+
+def test_tracking_a_moving_target_is_not_a_stall():
+    """The rate counts the motion beyond the target's own velocity: following a circle with a
+    steady lag is progress, not a stall."""
+    ur5 = sjt.Robot.from_example("ur5")
+    q = np.array([0.3, -1.2, 1.5, -1.8, -1.5, 0.2])
+    start = ur5.fk(q)
+    solver = sjt.JTSolver(ur5, dt=1e-3)
+    radius, omega = 0.05, 2.0
+    for k in range(2000):
+        t = k * solver.dt
+        offset = radius * np.array([np.cos(omega * t) - 1.0, np.sin(omega * t), 0.0])
+        speed = radius * omega * np.array([-np.sin(omega * t), np.cos(omega * t), 0.0])
+        target = pin.SE3(start.rotation, start.translation + offset)
+        q = solver.step(q, target, np.concatenate([speed, np.zeros(3)]))
+        assert not solver.last.stalled
+    assert solver.error_norm > 1e-7  # JT lags the circle: the error is steady, not converged
+
+
+def test_a_stretched_elbow_at_a_minimum_rests_and_says_so():
+    """The straight-elbow stall of UR10: not a saddle the escape misses but a minimum, so the
+    escape rightly stays off; the step says it stalled, and solve() (restarts from other
+    configurations) finds the pose on another branch."""
+    ur10 = sjt.Robot.from_example("ur10")
+    target = ur10.fk(Q_STRETCHED) * pin.exp6(pin.Motion(TWIST))
+    for method, options in (("sjt", {}), ("sjt", {"feedback": "transpose"}), ("jt", {})):
+        solver = sjt.make_solver(method, ur10, dt=1e-3, **options)
+        q = Q_STRETCHED.copy()
+        for _ in range(3000):
+            q = solver.step(q, target)
+        assert abs(q[2]) < 1e-6  # the elbow still straight
+        assert solver.escape.escapes == 0
+        assert 0.06 < solver.error_norm < 0.07
+        assert solver.last.stalled and solver.last.task_scale == 1.0
+    found = sjt.SJTSolver(ur10).solve(target, Q_STRETCHED)
+    assert found.success and found.restarts >= 1 and abs(found.q[2]) > 0.5
+
+
+@pytest.mark.parametrize("options", [{}, {"acceleration_limits": 10.0, "jerk_limits": 5000.0}],
+                         ids=["kernel", "stage"])
+def test_an_arm_held_by_a_position_limit_says_it_stalled_and_which_limit(options):
+    """UR5 whose wrist 1 starts 2 mrad inside its lower limit, asked for a pose that the limit
+    blocks on the way: the constraint stage cannot move the task along its own direction
+    (six joints, one held), scales it to zero, and the step says so."""
+    ur5 = sjt.Robot.from_example("ur5")
+    q_target = np.array([-6.072386126449824, 5.387477139779545, -3.068270570368208,
+                         -6.281078043905902, 3.6155887483706675, 0.10398509194774963])
+    q = q_target.copy()
+    q[2] = 0.0
+    solver = sjt.SJTSolver(ur5, dt=1e-3, **options)
+    for _ in range(1000):
+        q = solver.step(q, ur5.fk(q_target))
+    info = solver.last
+    assert info.error_norm > 1.0 and np.abs(info.dq).max() < 1e-12  # at rest
+    assert info.stalled and info.task_scale == 0.0
+    assert ("position", "wrist_1_joint") in info.active_limits
