@@ -12,7 +12,7 @@ from .kinematics import Kinematics
 from .limits import CollisionLimit
 from .reach import ReachMap, reachability
 from .robot import Robot
-from .solve import IKResult
+from .ik import IKResult
 from .solver import Solver
 from .solvers import DLSSolver, JPSolver, JTSolver, SJTSolver, make_solver
 from .step_info import StepInfo

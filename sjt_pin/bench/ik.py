@@ -35,7 +35,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..robot import Robot
-from ..solve import TOL
+from ..ik import TOL
 from ..solvers import make_solver
 
 ROBOTS = ("ur5", "ur10", "panda", "kinova", "xarm7", "baxter")
