@@ -35,10 +35,12 @@ from .kernels import (
     S_TOL_SQ,
     STATE_SIZE,
     search_iteration,
+    search_pose,
 )
 from .kinematics import Kinematics
 from .limits.base import Motion
 from .mappings import COLUMN_TOL
+from .tasks import PoseTask
 from .validation import integer, positive, raise_non_finite_targets
 
 #: |e| (m and rad, the target rows) below which a pose counts as solved
@@ -103,6 +105,7 @@ class Search:
         self.q = np.zeros(robot.nq)
         self.step = np.zeros(n)
         self._sampler = _Sampler(robot)
+        self.pose = None if self.user_limits is not None else _PoseLoop.of(robot, stack)
 
     def start(self, q: np.ndarray, target_rows: int, tol: float) -> None:
         state = self.state
@@ -118,6 +121,8 @@ class Search:
         self.start(q0, stack.target_dim, tol)
         q, iterations = q0, 0
         limit = min(max_iters, budget)
+        if self.pose is not None:
+            return self.pose.run(self, q0, targets[0], limit, deadline)
         clock = time.perf_counter
         while iterations < limit:
             J, e, _ = stack.evaluate(q, targets, None)
@@ -162,6 +167,94 @@ class Search:
 
     def random(self, seed: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         return self._sampler(seed, rng)
+
+
+class _PoseLoop:
+    """The iterations of one start on a single :class:`~sjt_pin.tasks.PoseTask` in one compiled
+    call (``sjt_pin.kernels.search_pose``): per iteration, one Pinocchio call
+    (``computeFrameJacobian``, LOCAL_WORLD_ALIGNED: forward kinematics, the frame's Jacobian
+    and its placement ``data.oMf``), then the pose error (``log6``), the Levenberg-Marquardt
+    update, the limits and ``integrate``, compiled. The rows are the pose task's rotated into
+    world axes at the frame: the same search, as its rows' weights are equal within the linear
+    and within the angular block. For the robots whose joints all have one coordinate or a
+    (cos, sin) pair, and no user limits (see :meth:`of`)."""
+
+    def __init__(self, robot, frame_id: int, joints: np.ndarray):
+        model = robot.model
+        self.data = data = model.createData()
+        self.placement = placement = data.oMf[frame_id]  # views into data, kept alive here
+        self.rotation, self.translation = placement.rotation, placement.translation
+        self.trial = np.zeros(model.nq)
+        self.arguments = (model, data, self.trial, frame_id, pin.LOCAL_WORLD_ALIGNED)
+        self.joints = joints
+        self.e = np.zeros(6)
+
+    @classmethod
+    def of(cls, robot, stack) -> _PoseLoop | None:
+        """The loop for ``stack``, or ``None`` when it takes the general path: not one pose
+        task, rows weighted unequally within a block, or a joint other than a revolute,
+        prismatic or continuous one (a floating base), or a mimic joint on the frame's chain."""
+        task = stack.task
+        w = stack.sqrt_weight
+        if not (stack.single and type(task) is PoseTask and np.all(w[:3] == w[0])
+                and np.all(w[3:] == w[3])):
+            return None
+        joints = _joint_table(robot.model)
+        model = robot.model
+        support = model.supports[model.frames[task.frame_id].parentJoint]
+        if joints is None or any(model.joints[j].nv == 0 for j in support[1:]):
+            return None  # another joint type, or a mimic joint moves the frame
+        loop = cls(robot, task.frame_id, joints)
+        return loop if loop.tracks(robot, task.frame_id) else None
+
+    def tracks(self, robot, frame_id: int) -> bool:
+        """Whether the placement's views follow Pinocchio's data (checked once)."""
+        for q in (pin.neutral(robot.model), robot.random_configuration(np.random.default_rng(0))):
+            self.trial[:] = q
+            pin.computeFrameJacobian(*self.arguments)
+            expected = robot.fk(q, frame_id)
+            if not (np.allclose(self.rotation, expected.rotation, rtol=0.0, atol=1e-12)
+                    and np.allclose(self.translation, expected.translation, rtol=0.0,
+                                    atol=1e-12)):
+                return False
+        return True
+
+    def run(self, search: Search, q0: np.ndarray, target: pin.SE3, limit: int,
+            deadline: float) -> tuple[bool, int]:
+        """One start of ``search`` from ``q0``: (converged, iterations used)."""
+        self.trial[:] = q0
+        goal = target.homogeneous
+        chunk = limit if deadline == math.inf else 16  # the clock between chunks
+        iterations = 0
+        while iterations < limit:
+            status, used = search_pose(
+                pin.computeFrameJacobian, self.arguments, self.rotation, self.translation, goal,
+                self.joints, self.trial, search.q, search.J, self.e, search.e, search.limits,
+                search.work, search.state, search.step, min(chunk, limit - iterations))
+            iterations += used
+            if status:
+                return status == CONVERGED, iterations
+            if time.perf_counter() > deadline:
+                break
+        return False, iterations
+
+
+def _joint_table(model: pin.Model) -> np.ndarray | None:
+    """(3, k): q index, v index and kind (0: one coordinate, q + v; 1: a continuous joint's
+    (cos, sin) pair) of every joint with coordinates, or ``None`` if a joint is of another
+    kind."""
+    rows = []
+    for j in range(1, model.njoints):
+        joint = model.joints[j]
+        if joint.nq == 0 and joint.nv == 0:  # a mimic joint: no coordinate of its own
+            continue
+        if joint.nq == 1 and joint.nv == 1:
+            rows.append((joint.idx_q, joint.idx_v, 0))
+        elif joint.nq == 2 and joint.nv == 1 and "RevoluteUnbounded" in joint.shortname():
+            rows.append((joint.idx_q, joint.idx_v, 1))
+        else:
+            return None
+    return np.array(rows, dtype=float).reshape(-1, 3).T.copy()
 
 
 class _Sampler:
