@@ -29,6 +29,7 @@ from .joint_ranges import outside
 from .kernels import (
     CONVERGED,
     S_BEST,
+    S_E_SQ,
     S_ERROR_ROWS,
     S_MAX_STEP,
     S_NU,
@@ -160,10 +161,8 @@ class Search:
         step[:] = self.user_limits.project(step, rows, self.kinematics, motion)
 
     def error(self) -> float:
-        """|e| of the target rows at the current configuration."""
-        rows = self.stack.target_dim
-        with np.errstate(over="ignore"):
-            return float(np.sqrt(self.e[:rows] @ self.e[:rows]))
+        """|e| of the target rows at the current configuration (the kernel's |e|^2 there)."""
+        return math.sqrt(self.state[S_E_SQ])
 
     def random(self, seed: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         return self._sampler(seed, rng)
@@ -250,7 +249,8 @@ def _joint_table(model: pin.Model) -> np.ndarray | None:
             continue
         if joint.nq == 1 and joint.nv == 1:
             rows.append((joint.idx_q, joint.idx_v, 0))
-        elif joint.nq == 2 and joint.nv == 1 and "RevoluteUnbounded" in joint.shortname():
+        elif joint.nq == 2 and joint.nv == 1 and ("RUB" in joint.shortname()
+                                                   or "RevoluteUnbounded" in joint.shortname()):
             rows.append((joint.idx_q, joint.idx_v, 1))
         else:
             return None
@@ -315,31 +315,22 @@ def solve(solver, target, q0, *, tol: float = TOL, max_iters: int = MAX_ITERS,
     Returns the first start that succeeds, or the best one (lowest error) when none did.
     """
     search = solver.search()
-    tol = positive(tol, "tol", "task units")
-    max_iters, budget = integer(max_iters, "max_iters"), integer(budget, "budget")
-    if restarts is not None:
-        restarts = integer(restarts, "restarts", 0)
-    robot = solver.robot
-    q = robot.check_q(q0, "q0").copy()
-    clipped = outside(robot.model, q, robot.lower_limits, robot.upper_limits)
-    if clipped:  # a seed out of range starts at its nearest point within the limits
-        np.clip(q, robot.lower_limits, robot.upper_limits, out=q)
-    targets, _ = search.stack.targets(target, None)
-    for goal in targets:  # a target in mm by mistake: warn, as step() does
-        position = goal.translation if isinstance(goal, pin.SE3) else goal
-        if isinstance(position, np.ndarray) and position.shape == (3,):
-            solver.robot.check_reach(position, q)
-    if not isinstance(rng, np.random.Generator):
-        rng = np.random.default_rng(0 if rng is None else rng)
+    tol, max_iters, budget, restarts = _options(tol, max_iters, budget, restarts)
+    q, clipped = _seed(solver.robot, q0)
+    targets = _targets(search, solver.robot, target, q)
     if timeout is None:
         deadline = math.inf
     else:
         timeout = positive(timeout, "timeout", "s")
         search.stack.evaluate(q, targets, None)  # anything loaded on first use: before the clock
         deadline = time.perf_counter() + timeout
-    total, best, attempt = 0, None, 0
+    total, best, attempt, generator = 0, None, 0, None
     while True:
-        start = q if attempt == 0 else search.random(q, rng)
+        if attempt == 0:
+            start = q
+        else:  # the generator only when a restart needs it (it costs as much as a start)
+            generator = _generator(rng) if generator is None else generator
+            start = search.random(q, generator)
         success, used = search.run(start, targets, tol, max_iters, budget - total, deadline)
         total += used
         error = search.error()
@@ -348,8 +339,45 @@ def solve(solver, target, q0, *, tol: float = TOL, max_iters: int = MAX_ITERS,
         if best is None or error < best[1]:
             best = (search.q.copy(), error)
         if success:
-            return IKResult(search.q.copy(), True, total, error, attempt, clipped)
+            return IKResult(best[0], True, total, error, attempt, clipped)
         out_of_starts = restarts is not None and attempt >= restarts
         if out_of_starts or total >= budget or time.perf_counter() > deadline:
             return IKResult(best[0], False, total, best[1], attempt, clipped)
         attempt += 1
+
+
+def _options(tol, max_iters, budget, restarts) -> tuple[float, int, int, int | None]:
+    """The options of :func:`solve` validated (the defaults are valid as they are)."""
+    tol = tol if tol is TOL else positive(tol, "tol", "task units")
+    max_iters = max_iters if max_iters is MAX_ITERS else integer(max_iters, "max_iters")
+    budget = budget if budget is BUDGET else integer(budget, "budget")
+    if restarts is not None:
+        restarts = integer(restarts, "restarts", 0)
+    return tol, max_iters, budget, restarts
+
+
+def _seed(robot, q0) -> tuple[np.ndarray, tuple[str, ...]]:
+    """``q0`` validated, and clipped into the position limits: (q, the joints clipped)."""
+    q = robot.check_q(q0, "q0").copy()
+    clipped = outside(robot.model, q, robot.lower_limits, robot.upper_limits)
+    if clipped:  # a seed out of range starts at its nearest point within the limits
+        np.clip(q, robot.lower_limits, robot.upper_limits, out=q)
+    return q, clipped
+
+
+def _targets(search: Search, robot, target, q: np.ndarray) -> list:
+    """``target`` per task, validated; a position far out of reach (in mm by mistake?) warns,
+    as ``step()`` does."""
+    targets, _ = search.stack.targets(target, None)
+    for goal in targets:
+        position = goal.translation if isinstance(goal, pin.SE3) else goal
+        if isinstance(position, np.ndarray) and position.shape == (3,):
+            robot.check_reach(position, q)
+    return targets
+
+
+def _generator(rng) -> np.random.Generator:
+    """``rng`` as a generator of random starts (``None``: seed 0)."""
+    if isinstance(rng, np.random.Generator):
+        return rng
+    return np.random.default_rng(0 if rng is None else rng)

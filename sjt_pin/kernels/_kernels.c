@@ -28,7 +28,7 @@
 #define RESULTS(X) X(I_E_SQ) X(I_FF_SQ) X(I_GAIN) X(I_LOOP) X(I_STALL) X(I_TRACE) X(I_EW_SQ) \
     X(I_SCALE) X(I_REGULAR)
 #define SEARCH_STATE(X) X(S_F) X(S_NU) X(S_ITER) X(S_BEST) X(S_STALE) X(S_TOL_SQ) \
-    X(S_MAX_STEP) X(S_ERROR_ROWS)
+    X(S_MAX_STEP) X(S_ERROR_ROWS) X(S_E_SQ)
 #define SLOT_ENUM(name) name,
 #define SLOT_NAME(name) #name,
 enum { PARAMETERS(SLOT_ENUM) P_COUNT };
@@ -870,6 +870,7 @@ static int search_iteration_c(Mat J, const double *e, const double *q, Py_ssize_
         }
         memcpy(q_cur, q, (size_t)nq * sizeof(double));
         state[S_F] = f;
+        state[S_E_SQ] = e_sq;
         if (!first) state[S_NU] = dmax(state[S_NU] / NU_DOWN, NU_MIN);
         if (e_sq <= state[S_TOL_SQ]) return CONVERGED;
     } else {

@@ -52,6 +52,7 @@ from ._kernels import (  # noqa: F401 (re-exported: the kernels' vocabulary)
     P_STALL_RUN,
     P_STALL_WAIT,
     S_BEST,
+    S_E_SQ,
     S_ERROR_ROWS,
     S_F,
     S_ITER,
