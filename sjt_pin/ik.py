@@ -101,29 +101,35 @@ class Search:
         self.user_limits = solver.stage.user_limits()
         self.kinematics = Kinematics(robot.model)
         self.state = np.zeros(STATE_SIZE)
+        self._initial = np.zeros(STATE_SIZE)  # the state at every start (see aim)
+        self.targets: list = []
         self.J = np.zeros((m, n))
         self.e = np.zeros(m)
         self.q = np.zeros(robot.nq)
         self.step = np.zeros(n)
         self._sampler = _Sampler(robot)
+        self._seed: tuple | None = None  # (seed, its generator, its first state)
         self.pose = None if self.user_limits is not None else _PoseLoop.of(robot, stack)
 
-    def start(self, q: np.ndarray, target_rows: int, tol: float) -> None:
-        state = self.state
-        state[:] = 0.0
-        state[S_NU], state[S_BEST] = NU_START, math.inf
-        state[S_TOL_SQ], state[S_MAX_STEP] = tol * tol, MAX_STEP
-        state[S_ERROR_ROWS] = target_rows
-
-    def run(self, q0: np.ndarray, targets: list, tol: float, max_iters: int, budget: int,
-            deadline: float) -> tuple[bool, int]:
-        """One start from ``q0``: (converged, iterations used)."""
-        stack, model = self.stack, self.robot.model
-        self.start(q0, stack.target_dim, tol)
-        q, iterations = q0, 0
-        limit = min(max_iters, budget)
+    def aim(self, targets: list, tol: float) -> None:
+        """Set up one solve: its targets (validated) and tolerance (|e|, task units)."""
+        self.targets = targets
+        initial = self._initial
+        initial[:] = 0.0
+        initial[S_NU], initial[S_BEST] = NU_START, math.inf
+        initial[S_TOL_SQ], initial[S_MAX_STEP] = tol * tol, MAX_STEP
+        initial[S_ERROR_ROWS] = self.stack.target_dim
         if self.pose is not None:
-            return self.pose.run(self, q0, targets[0], limit, deadline)
+            self.pose.aim(self, targets[0])
+
+    def run(self, q0: np.ndarray, limit: int, deadline: float) -> tuple[bool, int]:
+        """One start from ``q0`` towards the targets of :meth:`aim`, of at most ``limit``
+        iterations: (converged, iterations used)."""
+        self.state[:] = self._initial
+        if self.pose is not None:
+            return self.pose.run(q0, limit, deadline)
+        stack, model, targets = self.stack, self.robot.model, self.targets
+        q, iterations = q0, 0
         clock = time.perf_counter
         while iterations < limit:
             J, e, _ = stack.evaluate(q, targets, None)
@@ -167,6 +173,22 @@ class Search:
     def random(self, seed: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         return self._sampler(seed, rng)
 
+    def generator(self, rng) -> np.random.Generator:
+        """``rng`` as a generator of random starts (``None``: seed 0). An int seed's generator
+        is this search's own, reset to the seed's first state: the numbers of
+        ``numpy.random.default_rng(seed)`` at a seventh of its cost."""
+        if isinstance(rng, np.random.Generator):
+            return rng
+        seed = 0 if rng is None else rng
+        if type(seed) is not int:
+            return np.random.default_rng(seed)
+        if self._seed is None or self._seed[0] != seed:
+            generator = np.random.default_rng(seed)
+            self._seed = (seed, generator, generator.bit_generator.state)
+        else:
+            self._seed[1].bit_generator.state = self._seed[2]
+        return self._seed[1]
+
 
 class _PoseLoop:
     """The iterations of one start on a single :class:`~sjt_pin.tasks.PoseTask` in one compiled
@@ -187,6 +209,7 @@ class _PoseLoop:
         self.arguments = (model, data, self.trial, frame_id, pin.LOCAL_WORLD_ALIGNED)
         self.joints = joints
         self.e = np.zeros(6)
+        self.call: tuple = ()
 
     @classmethod
     def of(cls, robot, stack) -> _PoseLoop | None:
@@ -218,18 +241,20 @@ class _PoseLoop:
                 return False
         return True
 
-    def run(self, search: Search, q0: np.ndarray, target: pin.SE3, limit: int,
-            deadline: float) -> tuple[bool, int]:
-        """One start of ``search`` from ``q0``: (converged, iterations used)."""
+    def aim(self, search: Search, target: pin.SE3) -> None:
+        """The kernel's arguments for the starts of one solve of ``search`` to ``target``."""
+        self.call = (pin.computeFrameJacobian, self.arguments, self.rotation, self.translation,
+                     target.homogeneous, self.joints, self.trial, search.q, search.J, self.e,
+                     search.e, search.limits, search.work, search.state, search.step)
+
+    def run(self, q0: np.ndarray, limit: int, deadline: float) -> tuple[bool, int]:
+        """One start from ``q0`` (the search's state already reset): (converged, iterations
+        used)."""
         self.trial[:] = q0
-        goal = target.homogeneous
         chunk = limit if deadline == math.inf else 16  # the clock between chunks
         iterations = 0
         while iterations < limit:
-            status, used = search_pose(
-                pin.computeFrameJacobian, self.arguments, self.rotation, self.translation, goal,
-                self.joints, self.trial, search.q, search.J, self.e, search.e, search.limits,
-                search.work, search.state, search.step, min(chunk, limit - iterations))
+            status, used = search_pose(*self.call, min(chunk, limit - iterations))
             iterations += used
             if status:
                 return status == CONVERGED, iterations
@@ -257,6 +282,10 @@ def _joint_table(model: pin.Model) -> np.ndarray | None:
     return np.array(rows, dtype=float).reshape(-1, 3).T.copy()
 
 
+#: the width of a uniform angle in [-pi, pi) (rad), as numpy's uniform computes it
+_TURN = np.pi - (-np.pi)
+
+
 class _Sampler:
     """Random starts: limited joints uniform within their limits, unlimited revolute and
     continuous joints a random angle (about the seed's), the rest (a floating base, prismatic
@@ -281,13 +310,22 @@ class _Sampler:
         self.lower, self.upper = lower[self.limited], upper[self.limited]
         self.turning = np.array(self.turning, dtype=np.int64)
         self.circle = np.array(self.circle, dtype=np.int64)
+        self.span = self.upper - self.lower
+        self.draws = self.limited.size + self.turning.size + self.circle.size
 
     def __call__(self, seed: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """The numbers of ``rng.uniform(lower, upper)`` for the limited joints, then of
+        ``rng.uniform(-pi, pi)`` for the others, bitwise (``low + (high - low) u`` on one draw
+        of ``rng.random``: numpy's uniform checks array bounds at 10 us a call)."""
         q = seed.copy()
-        q[self.limited] = rng.uniform(self.lower, self.upper)
-        q[self.turning] += rng.uniform(-np.pi, np.pi, self.turning.size)
-        angles = rng.uniform(-np.pi, np.pi, self.circle.size)
-        q[self.circle], q[self.circle + 1] = np.cos(angles), np.sin(angles)
+        u = rng.random(self.draws)
+        k, t = self.limited.size, self.limited.size + self.turning.size
+        q[self.limited] = self.lower + self.span * u[:k]
+        if t > k:
+            q[self.turning] += -np.pi + _TURN * u[k:t]
+        if self.circle.size:
+            angles = -np.pi + _TURN * u[t:]
+            q[self.circle], q[self.circle + 1] = np.cos(angles), np.sin(angles)
         return q
 
 
@@ -318,6 +356,7 @@ def solve(solver, target, q0, *, tol: float = TOL, max_iters: int = MAX_ITERS,
     tol, max_iters, budget, restarts = _options(tol, max_iters, budget, restarts)
     q, clipped = _seed(solver.robot, q0)
     targets = _targets(search, solver.robot, target, q)
+    search.aim(targets, tol)
     if timeout is None:
         deadline = math.inf
     else:
@@ -329,9 +368,9 @@ def solve(solver, target, q0, *, tol: float = TOL, max_iters: int = MAX_ITERS,
         if attempt == 0:
             start = q
         else:  # the generator only when a restart needs it (it costs as much as a start)
-            generator = _generator(rng) if generator is None else generator
+            generator = search.generator(rng) if generator is None else generator
             start = search.random(q, generator)
-        success, used = search.run(start, targets, tol, max_iters, budget - total, deadline)
+        success, used = search.run(start, min(max_iters, budget - total), deadline)
         total += used
         error = search.error()
         if not math.isfinite(error):  # a NaN target, or one so far that |e|^2 overflows
@@ -375,9 +414,3 @@ def _targets(search: Search, robot, target, q: np.ndarray) -> list:
             robot.check_reach(position, q)
     return targets
 
-
-def _generator(rng) -> np.random.Generator:
-    """``rng`` as a generator of random starts (``None``: seed 0)."""
-    if isinstance(rng, np.random.Generator):
-        return rng
-    return np.random.default_rng(0 if rng is None else rng)

@@ -28,7 +28,8 @@
 #define RESULTS(X) X(I_E_SQ) X(I_FF_SQ) X(I_GAIN) X(I_LOOP) X(I_STALL) X(I_TRACE) X(I_EW_SQ) \
     X(I_SCALE) X(I_REGULAR)
 #define SEARCH_STATE(X) X(S_F) X(S_NU) X(S_ITER) X(S_BEST) X(S_STALE) X(S_TOL_SQ) \
-    X(S_MAX_STEP) X(S_ERROR_ROWS) X(S_E_SQ)
+    X(S_MAX_STEP) X(S_ERROR_ROWS) X(S_E_SQ) \
+    X(S_STALE_LIMIT) X(S_PROGRESS)
 #define SLOT_ENUM(name) name,
 #define SLOT_NAME(name) #name,
 enum { PARAMETERS(SLOT_ENUM) P_COUNT };
@@ -876,13 +877,15 @@ static int search_iteration_c(Mat J, const double *e, const double *q, Py_ssize_
     } else {
         state[S_NU] *= NU_UP;
     }
-    if (f < 0.99 * state[S_BEST] || first) {
+    double progress = state[S_PROGRESS] > 0.0 ? state[S_PROGRESS] : 0.99;
+    double stale_limit = state[S_STALE_LIMIT] > 0.0 ? state[S_STALE_LIMIT] : STALE_LIMIT;
+    if (f < progress * state[S_BEST] || first) {
         state[S_BEST] = dmin(f, state[S_F]);
         state[S_STALE] = 0.0;
     } else {
         state[S_STALE] += 1.0;
     }
-    if (state[S_STALE] >= STALE_LIMIT || state[S_NU] > NU_MAX || !isfinite(f))
+    if (state[S_STALE] >= stale_limit || state[S_NU] > NU_MAX || !isfinite(f))
         return SEARCH_STALLED;
     Mat cur = {J_cur, m, n, n, 1};
     limited_step(cur, e_cur, q_cur, limits, c, work, state, step);

@@ -58,7 +58,9 @@ from ._kernels import (  # noqa: F401 (re-exported: the kernels' vocabulary)
     S_ITER,
     S_MAX_STEP,
     S_NU,
+    S_PROGRESS,
     S_STALE,
+    S_STALE_LIMIT,
     S_TOL_SQ,
     STATE_SIZE,
 )
