@@ -29,7 +29,8 @@
     X(I_SCALE) X(I_REGULAR)
 #define SEARCH_STATE(X) X(S_F) X(S_NU) X(S_ITER) X(S_BEST) X(S_STALE) X(S_TOL_SQ) \
     X(S_MAX_STEP) X(S_ERROR_ROWS) X(S_E_SQ) \
-    X(S_STALE_LIMIT) X(S_PROGRESS)
+    X(S_STALE_LIMIT) X(S_PROGRESS) \
+    X(S_HELD_BEST) X(S_HELD_STALE) X(S_HELD_LIMIT) X(S_HELD_PROGRESS)
 #define SLOT_ENUM(name) name,
 #define SLOT_NAME(name) #name,
 enum { PARAMETERS(SLOT_ENUM) P_COUNT };
@@ -59,7 +60,6 @@ static const char *const SEARCH_STATE_NAMES[] = { SEARCH_STATE(SLOT_NAME) };
 #define NU_UP 4.0
 #define NU_MIN 1e-6
 #define NU_MAX 1e8
-#define STALE_LIMIT 12
 
 /* a read-only matrix with element strides */
 typedef struct { const double *p; Py_ssize_t m, n, s0, s1; } Mat;
@@ -850,6 +850,16 @@ static void limited_step(Mat J, const double *e, const double *q, const double *
     }
 }
 
+/* whether a joint of q sits on one of its position limits (to 1e-9) */
+static int search_held(const double *q, const double *limits, Py_ssize_t c)
+{
+    for (Py_ssize_t k = 0; k < c; k++) {
+        double x = q[(Py_ssize_t)limits[k]];
+        if (x <= limits[2 * c + k] + 1e-9 || x >= limits[3 * c + k] - 1e-9) return 1;
+    }
+    return 0;
+}
+
 static int search_iteration_c(Mat J, const double *e, const double *q, Py_ssize_t nq,
                               double *J_cur, double *e_cur, double *q_cur, const double *limits,
                               Py_ssize_t c, double *work, double *state, double *step)
@@ -877,15 +887,23 @@ static int search_iteration_c(Mat J, const double *e, const double *q, Py_ssize_
     } else {
         state[S_NU] *= NU_UP;
     }
-    double progress = state[S_PROGRESS] > 0.0 ? state[S_PROGRESS] : 0.99;
-    double stale_limit = state[S_STALE_LIMIT] > 0.0 ? state[S_STALE_LIMIT] : STALE_LIMIT;
-    if (f < progress * state[S_BEST] || first) {
+    if (f < state[S_PROGRESS] * state[S_BEST] || first) {
         state[S_BEST] = dmin(f, state[S_F]);
         state[S_STALE] = 0.0;
     } else {
         state[S_STALE] += 1.0;
     }
-    if (state[S_STALE] >= stale_limit || state[S_NU] > NU_MAX || !isfinite(f))
+    if (state[S_STALE] >= state[S_STALE_LIMIT] || state[S_NU] > NU_MAX || !isfinite(f))
+        return SEARCH_STALLED;
+    /* with a joint held at its limit the start is heading for a minimum on the boundary of the
+     * box: it stalls sooner (a stricter progress over fewer iterations) */
+    if (f < state[S_HELD_PROGRESS] * state[S_HELD_BEST] || first) {
+        state[S_HELD_BEST] = dmin(f, state[S_F]);
+        state[S_HELD_STALE] = 0.0;
+    } else {
+        state[S_HELD_STALE] += 1.0;
+    }
+    if (state[S_HELD_STALE] >= state[S_HELD_LIMIT] && search_held(q_cur, limits, c))
         return SEARCH_STALLED;
     Mat cur = {J_cur, m, n, n, 1};
     limited_step(cur, e_cur, q_cur, limits, c, work, state, step);
@@ -1458,11 +1476,17 @@ static PyObject *py_search_pose(PyObject *self, PyObject *const *args, Py_ssize_
         PyObject *J = PyObject_Call(jacobian, arguments, NULL);
         if (!J) goto done;
         Arg Ja = {0};
-        if (acquire(J, &Ja, 0, 2, "the Jacobian")) {
+        if (acquire(J, &Ja, 0, -1, "the Jacobian")) {
             Py_DECREF(J);
             goto done;
         }
-        Mat Jm = mat(&Ja);
+        Mat Jm = {(const double *)Ja.view.buf, 0, 0, 0, 0};
+        if (Ja.view.ndim == 2)
+            Jm = mat(&Ja);
+        else if (Ja.view.ndim == 1) {  /* Pinocchio's Jacobian of a robot with one joint */
+            Mat column = {(const double *)Ja.view.buf, Ja.view.shape[0], 1, Ja.view.strides[0] / 8, 1};
+            Jm = column;
+        }
         if (Jm.m != 6 || Jm.n != n) {
             PyErr_SetString(PyExc_ValueError, "search_pose: the Jacobian is not 6 x nv");
             release(&Ja);
