@@ -119,13 +119,13 @@ class Search:
         self.kinematics = Kinematics(robot.model)
         self.state = np.zeros(STATE_SIZE)
         self._initial = np.zeros(STATE_SIZE)  # the state at every start (see aim)
-        self.targets: list = []
+        self.targets = []  # of the solve set up by aim
         self.J = np.zeros((m, n))
         self.e = np.zeros(m)
         self.q = np.zeros(robot.nq)
         self.step = np.zeros(n)
         self._sampler = _Sampler(robot)
-        self._seed: tuple | None = None  # (seed, its generator, its first state)
+        self._seed = None  # (seed, its generator, its first state)
         self.pose = None if self.user_limits is not None else _PoseLoop.of(robot, stack)
 
     def aim(self, targets: list, tol: float) -> None:
