@@ -18,7 +18,7 @@ a joint is held at a limit): then a new start.
 On a single :class:`~sjt_pin.tasks.PoseTask` (the usual case) every iteration of a start runs
 in one compiled call (``sjt_pin.kernels.search_pose``): per iteration one Pinocchio call for the
 kinematics and the frame's Jacobian, then the error (log6), the update, the limits and
-``integrate`` in C, about 1.2 us on a 6-joint arm. Other task stacks, and user limits (the
+``integrate`` in C, about 1 us on a 6-joint arm. Other task stacks, and user limits (the
 constraint stage's, which hold at every iteration too), make one Python round trip per
 iteration: the stack's rows, then one compiled call (``sjt_pin.kernels.search_iteration``).
 """
@@ -364,8 +364,8 @@ def solve(solver, target, q0, *, tol: float = TOL, max_iters: int = MAX_ITERS,
         timeout: no new iteration once this many seconds have passed (default ``None``: no
             time limit, so the result depends only on the inputs and ``rng``, never on the
             machine's speed or load; the clock starts after the search is set up).
-        budget: iterations over all starts (the default limit: 2000, about 9 ms on Panda at
-            4.5 us per iteration).
+        budget: iterations over all starts (the default limit: 2000, about 2.5 ms on Panda at
+            1.2 us per iteration).
         rng: a ``numpy.random.Generator`` or a seed for the random starts (``None``: seed 0,
             so a call repeats).
 
