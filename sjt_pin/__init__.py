@@ -8,12 +8,12 @@ transpose baselines share the same interface.
 from .batch import BatchError, BatchPart, solve_chunks, solve_many
 from .exceptions import ConcurrentStepError, FrameNotFound, GainWarning, URDFError
 from .gains import AutoGain, FixedGain, Gain
+from .ik import IKResult
 from .kinematics import Kinematics
 from .limits import CollisionLimit
 from .options import SolverOptions
 from .reach import ReachMap, reachability
 from .robot import Robot
-from .solve import IKResult
 from .solver import Solver
 from .solvers import DLSSolver, JPSolver, JTSolver, SJTSolver, make_solver
 from .step_info import StepInfo

@@ -3,7 +3,7 @@
 
 The targets are cut into chunks of consecutive targets; each chunk is one task. Target ``k``
 (counting from ``first``) is solved with ``rng = numpy.random.default_rng([seed, first + k])``
-and, by default, an iteration budget only (:data:`sjt_pin.solve.BUDGET`, no time limit), so a
+and, by default, an iteration budget only (:data:`sjt_pin.ik.BUDGET`, no time limit), so a
 result depends on the target, its start, ``seed`` and ``first + k`` alone: not on the process,
 the machine, the chunking or the executor.
 
@@ -39,7 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from .solve import IKResult
+from .ik import IKResult
 from .validation import integer
 
 #: targets per chunk: in this process and the pool, and on another executor (fewer, larger

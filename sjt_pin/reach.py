@@ -1,4 +1,4 @@
-"""Reachability map: which poses of a grid over a robot's workspace :func:`~sjt_pin.solve.solve`
+"""Reachability map: which poses of a grid over a robot's workspace :func:`~sjt_pin.ik.solve`
 reaches, within the limits.
 
 The sampling (:func:`reachability`):
@@ -19,7 +19,7 @@ The sampling (:func:`reachability`):
   every run.
 - **Solve.** Pose ``k = point * orientations + orientation`` is solved from the robot's reference
   configuration ``q0`` with ``rng = default_rng([seed, k])`` and an iteration budget of
-  ``budget`` (default 500, against :func:`~sjt_pin.solve.solve`'s 2000: of 1,500 random poses
+  ``budget`` (default 500, against :func:`~sjt_pin.ik.solve`'s 2000: of 1,500 random poses
   within 0.99 m of Panda's shoulder, every one solved within 2000 iterations was solved within
   500). A pose
   counts as reached when ``solve`` succeeds (``|e| < 1e-6``, within the position limits and any

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import difflib
 import importlib.resources
+import math
 import os
 import threading
 import warnings
@@ -465,8 +466,8 @@ class Robot:
             if q is None:
                 return
             origin = np.asarray(q, dtype=float)[self._base_q:self._base_q + 3]
-        with np.errstate(over="ignore", invalid="ignore"):
-            distance = float(np.linalg.norm(np.asarray(position, dtype=float) - origin))
+        # math.hypot: no overflow (it scales), NaN and inf pass through, no numpy warning state
+        distance = math.hypot(*(np.asarray(position, dtype=float) - origin).tolist())
         # NaN, inf or an overflowing distance: the task error cannot be finite, step() raises
         if np.isfinite(distance) and distance > REACH_FACTOR * self.reach:
             where = "the origin" if self._base_q is None else "the robot's base"

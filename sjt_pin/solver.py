@@ -575,16 +575,16 @@ class Solver:
         """Solve to ``target`` from ``q0`` (set-point IK): Levenberg-Marquardt on this
         method's columns (SJT's normalised ones for SJT) within the limits, restarted from
         random configurations until it succeeds or its budget (2000 iterations) runs out; see
-        :func:`sjt_pin.solve.solve` for the options. Returns an :class:`~sjt_pin.IKResult`."""
-        from .solve import solve
+        :func:`sjt_pin.ik.solve` for the options. Returns an :class:`~sjt_pin.IKResult`."""
+        from .ik import solve
 
         return solve(self, target, q0, **options)
 
     def search(self):
-        """The set-point IK state of this solver (:class:`~sjt_pin.solve.Search`, created on
+        """The set-point IK state of this solver (:class:`~sjt_pin.ik.Search`, created on
         first use; its buffers are its own)."""
         if self._search is None:
-            from .solve import Search
+            from .ik import Search
 
             self._search = Search(self)
         return self._search

@@ -34,8 +34,8 @@ from typing import NamedTuple
 import numpy as np
 import pinocchio as pin
 
+from ..ik import TOL
 from ..robot import Robot
-from ..solve import TOL
 from ..solvers import make_solver
 
 ROBOTS = ("ur5", "ur10", "panda", "kinova", "xarm7", "baxter")

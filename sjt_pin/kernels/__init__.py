@@ -13,7 +13,8 @@ against the numpy reference formulas of :mod:`sjt_pin.mappings` and against Pino
   the position box and speed test; ``least_squares_step``: the pseudoinverse (eq. 8) or damped
   least squares; both return the status bits of :mod:`.layout`;
 - ``search_iteration(...)``: one Levenberg-Marquardt iteration of ``solve()`` on SJT's
-  normalised columns, within the joint limits;
+  normalised columns, within the joint limits; ``search_pose(...)``: every iteration of one
+  start on a single pose task in one call (it calls Pinocchio's Jacobian once per iteration);
 - ``frame_velocity``, ``position_rows``, ``rotation_defect``: the tasks' small transforms;
 - ``cholesky_solve``, ``loop_bound``, ``symmetric_eigen``: the small dense linear algebra,
   exposed for the tests.
@@ -27,6 +28,7 @@ from ._kernels import (  # noqa: F401
     position_rows,
     rotation_defect,
     search_iteration,
+    search_pose,
     symmetric_eigen,
     transpose_step,
     unit_defect,

@@ -28,7 +28,9 @@
 #define RESULTS(X) X(I_E_SQ) X(I_FF_SQ) X(I_GAIN) X(I_LOOP) X(I_STALL) X(I_TRACE) X(I_EW_SQ) \
     X(I_SCALE) X(I_REGULAR)
 #define SEARCH_STATE(X) X(S_F) X(S_NU) X(S_ITER) X(S_BEST) X(S_STALE) X(S_TOL_SQ) \
-    X(S_MAX_STEP) X(S_ERROR_ROWS)
+    X(S_MAX_STEP) X(S_ERROR_ROWS) X(S_E_SQ) \
+    X(S_STALE_LIMIT) X(S_PROGRESS) \
+    X(S_HELD_BEST) X(S_HELD_STALE) X(S_HELD_LIMIT) X(S_HELD_PROGRESS)
 #define SLOT_ENUM(name) name,
 #define SLOT_NAME(name) #name,
 enum { PARAMETERS(SLOT_ENUM) P_COUNT };
@@ -58,7 +60,6 @@ static const char *const SEARCH_STATE_NAMES[] = { SEARCH_STATE(SLOT_NAME) };
 #define NU_UP 4.0
 #define NU_MIN 1e-6
 #define NU_MAX 1e8
-#define STALE_LIMIT 12
 
 /* a read-only matrix with element strides */
 typedef struct { const double *p; Py_ssize_t m, n, s0, s1; } Mat;
@@ -849,6 +850,16 @@ static void limited_step(Mat J, const double *e, const double *q, const double *
     }
 }
 
+/* whether a joint of q sits on one of its position limits (to 1e-9) */
+static int search_held(const double *q, const double *limits, Py_ssize_t c)
+{
+    for (Py_ssize_t k = 0; k < c; k++) {
+        double x = q[(Py_ssize_t)limits[k]];
+        if (x <= limits[2 * c + k] + 1e-9 || x >= limits[3 * c + k] - 1e-9) return 1;
+    }
+    return 0;
+}
+
 static int search_iteration_c(Mat J, const double *e, const double *q, Py_ssize_t nq,
                               double *J_cur, double *e_cur, double *q_cur, const double *limits,
                               Py_ssize_t c, double *work, double *state, double *step)
@@ -870,22 +881,105 @@ static int search_iteration_c(Mat J, const double *e, const double *q, Py_ssize_
         }
         memcpy(q_cur, q, (size_t)nq * sizeof(double));
         state[S_F] = f;
+        state[S_E_SQ] = e_sq;
         if (!first) state[S_NU] = dmax(state[S_NU] / NU_DOWN, NU_MIN);
         if (e_sq <= state[S_TOL_SQ]) return CONVERGED;
     } else {
         state[S_NU] *= NU_UP;
     }
-    if (f < 0.99 * state[S_BEST] || first) {
+    if (f < state[S_PROGRESS] * state[S_BEST] || first) {
         state[S_BEST] = dmin(f, state[S_F]);
         state[S_STALE] = 0.0;
     } else {
         state[S_STALE] += 1.0;
     }
-    if (state[S_STALE] >= STALE_LIMIT || state[S_NU] > NU_MAX || !isfinite(f))
+    if (state[S_STALE] >= state[S_STALE_LIMIT] || state[S_NU] > NU_MAX || !isfinite(f))
+        return SEARCH_STALLED;
+    /* with a joint held at its limit the start is heading for a minimum on the boundary of the
+     * box: it stalls sooner (a stricter progress over fewer iterations) */
+    if (f < state[S_HELD_PROGRESS] * state[S_HELD_BEST] || first) {
+        state[S_HELD_BEST] = dmin(f, state[S_F]);
+        state[S_HELD_STALE] = 0.0;
+    } else {
+        state[S_HELD_STALE] += 1.0;
+    }
+    if (state[S_HELD_STALE] >= state[S_HELD_LIMIT] && search_held(q_cur, limits, c))
         return SEARCH_STALLED;
     Mat cur = {J_cur, m, n, n, 1};
     limited_step(cur, e_cur, q_cur, limits, c, work, state, step);
     return CONTINUE;
+}
+
+/* -- the set-point search on one pose task: every iteration of a start in one call ------------- */
+
+/* w = log3(R) (rad), R row-major 3 x 3: (theta / sin theta) vee(R - R^T) / 2 below 120 degrees,
+ * the axis from the symmetric part R + R^T above (where sin theta no longer carries it) */
+static void search_log3(const double *R, double *w)
+{
+    double a0 = 0.5 * (R[7] - R[5]), a1 = 0.5 * (R[2] - R[6]), a2 = 0.5 * (R[3] - R[1]);
+    double s = sqrt(a0 * a0 + a1 * a1 + a2 * a2), c = 0.5 * (R[0] + R[4] + R[8] - 1.0);
+    double theta = atan2(s, c);
+    if (c > -0.5) {
+        double k = s > 0.0 ? theta / s : 1.0;
+        w[0] = k * a0, w[1] = k * a1, w[2] = k * a2;
+        return;
+    }
+    int k = 0;  /* (R + R^T) / 2 - c I = (1 - c) u u^T: its largest diagonal entry's column */
+    for (int i = 1; i < 3; i++)
+        if (R[4 * i] > R[4 * k]) k = i;
+    double u[3];
+    for (int i = 0; i < 3; i++) u[i] = 0.5 * (R[3 * i + k] + R[3 * k + i]) - (i == k ? c : 0.0);
+    double scale = theta / sqrt(u[k] * (1.0 - c));
+    if (u[0] * a0 + u[1] * a1 + u[2] * a2 < 0.0) scale = -scale;
+    for (int i = 0; i < 3; i++) w[i] = scale * u[i];
+}
+
+/* The pose error [e_p; e_w] = log6(oMf^-1 oMd) of a frame at (R, p) to the target Md (4 x 4),
+ * in world axes at the frame (the rows of the LOCAL_WORLD_ALIGNED Jacobian): with
+ * w = log3(R_d R^T) and d = p_d - p, e_w = w and e_p = a d - w x d / 2 + b (w.d) w, where
+ * a = (t / 2) / tan(t / 2), b = (1 - a) / t^2, t = |w| (the SE(3) logarithm's V^-1). */
+static void search_pose_error(Mat R, const double *p, Py_ssize_t p_stride, Mat Md, double *e)
+{
+    double Rerr[9];
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++)
+            Rerr[3 * i + j] = AT(Md, i, 0) * AT(R, j, 0) + AT(Md, i, 1) * AT(R, j, 1)
+                              + AT(Md, i, 2) * AT(R, j, 2);
+    double w[3], d[3];
+    search_log3(Rerr, w);
+    for (int i = 0; i < 3; i++) d[i] = AT(Md, i, 3) - p[i * p_stride];
+    double t2 = w[0] * w[0] + w[1] * w[1] + w[2] * w[2], t = sqrt(t2), a, b;
+    if (t < 1e-3) {
+        a = 1.0 - t2 / 12.0 - t2 * t2 / 720.0;
+        b = 1.0 / 12.0 + t2 / 720.0;
+    } else {
+        a = 0.5 * t / tan(0.5 * t);
+        b = (1.0 - a) / t2;
+    }
+    double wd = b * (w[0] * d[0] + w[1] * d[1] + w[2] * d[2]);
+    e[0] = a * d[0] - 0.5 * (w[1] * d[2] - w[2] * d[1]) + wd * w[0];
+    e[1] = a * d[1] - 0.5 * (w[2] * d[0] - w[0] * d[2]) + wd * w[1];
+    e[2] = a * d[2] - 0.5 * (w[0] * d[1] - w[1] * d[0]) + wd * w[2];
+    e[3] = w[0], e[4] = w[1], e[5] = w[2];
+}
+
+/* q = q_cur (+) step, Pinocchio's integrate on the joints of the table (3 x k: q index,
+ * v index, kind): kind 0 adds (revolute, prismatic), kind 1 turns a (cos, sin) pair by the
+ * angle and renormalises it to first order (a continuous joint) */
+static void search_integrate(const double *q_cur, const double *step, const double *joints,
+                             Py_ssize_t k, Py_ssize_t nq, double *q)
+{
+    memcpy(q, q_cur, (size_t)nq * sizeof(double));
+    for (Py_ssize_t r = 0; r < k; r++) {
+        Py_ssize_t qi = (Py_ssize_t)joints[r], vi = (Py_ssize_t)joints[k + r];
+        if (joints[2 * k + r] == 0.0) {
+            q[qi] = q_cur[qi] + step[vi];
+            continue;
+        }
+        double ca = q_cur[qi], sa = q_cur[qi + 1], co = cos(step[vi]), si = sin(step[vi]);
+        double c = co * ca - si * sa, s = si * ca + co * sa, scale = 0.5 * (3.0 - c * c - s * s);
+        q[qi] = scale * c, q[qi + 1] = scale * s;
+    }
 }
 
 /* -- the tasks' transforms ---------------------------------------------------------------------- */
@@ -1335,6 +1429,87 @@ done:
     return result;
 }
 
+/* search_pose(jacobian, arguments, rotation, translation, target, joints, q, q_cur, J_cur, e,
+ *             e_cur, limits, work, state, step, count) -> (status, iterations) */
+static PyObject *py_search_pose(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (!nargs_ok(nargs, 16, "search_pose")) return NULL;
+    PyObject *jacobian = args[0], *arguments = args[1];
+    if (!PyCallable_Check(jacobian) || !PyTuple_Check(arguments)) {
+        PyErr_SetString(PyExc_TypeError, "search_pose: jacobian must be callable and arguments "
+                        "a tuple");
+        return NULL;
+    }
+    Arg R = {0}, p = {0}, Md = {0}, tab = {0}, q = {0}, qc = {0}, Jc = {0}, e = {0}, ec = {0},
+        lim = {0}, work = {0}, state = {0}, step = {0};
+    PyObject *result = NULL;
+    long count = PyLong_AsLong(args[15]);
+    if (count == -1 && PyErr_Occurred()) return NULL;
+    if (acquire(args[2], &R, 0, 2, "rotation") || acquire(args[3], &p, 0, 1, "translation")
+        || acquire(args[4], &Md, 0, 2, "target") || acquire(args[5], &tab, 0, 2, "joints")
+        || acquire(args[6], &q, 1, 1, "q") || acquire(args[7], &qc, 1, 1, "q_cur")
+        || acquire(args[8], &Jc, 1, 2, "J_cur") || acquire(args[9], &e, 1, 1, "e")
+        || acquire(args[10], &ec, 1, 1, "e_cur") || acquire(args[11], &lim, 0, 2, "limits")
+        || acquire(args[12], &work, 1, 1, "work") || acquire(args[13], &state, 1, 1, "state")
+        || acquire(args[14], &step, 1, 1, "step"))
+        goto done;
+    double *tabv = out_mat(&tab, "joints"), *qv = out_vec(&q, "q"), *qcv = out_vec(&qc, "q_cur");
+    double *Jcv = out_mat(&Jc, "J_cur"), *ev = out_vec(&e, "e"), *ecv = out_vec(&ec, "e_cur");
+    double *limv = out_mat(&lim, "limits"), *wv = out_vec(&work, "work");
+    double *sv = out_vec(&state, "state"), *stv = out_vec(&step, "step");
+    if (!tabv || !qv || !qcv || !Jcv || !ev || !ecv || !limv || !wv || !sv || !stv) goto done;
+    Mat Rm = mat(&R), Mm = mat(&Md);
+    Py_ssize_t n = length(&step), nq = length(&q), k = tab.view.shape[1];
+    if (Rm.m != 3 || Rm.n != 3 || length(&p) != 3 || Mm.m != 4 || Mm.n != 4
+        || tab.view.shape[0] != 3 || Jc.view.shape[0] != 6 || Jc.view.shape[1] != n
+        || length(&e) != 6 || length(&ec) != 6 || length(&qc) != nq
+        || lim.view.shape[0] != 4 || length(&state) < S_COUNT) {
+        PyErr_SetString(PyExc_ValueError, "search_pose: the arrays do not fit a pose task");
+        goto done;
+    }
+    if (check_work(&work, 6, n)) goto done;
+    const double *pv = (const double *)p.view.buf;
+    Py_ssize_t p_stride = p.view.strides[0] / 8;
+    int status = CONTINUE;
+    long done_ = 0;
+    while (done_ < count) {
+        PyObject *J = PyObject_Call(jacobian, arguments, NULL);
+        if (!J) goto done;
+        Arg Ja = {0};
+        if (acquire(J, &Ja, 0, -1, "the Jacobian")) {
+            Py_DECREF(J);
+            goto done;
+        }
+        Mat Jm = {(const double *)Ja.view.buf, 0, 0, 0, 0};
+        if (Ja.view.ndim == 2)
+            Jm = mat(&Ja);
+        else if (Ja.view.ndim == 1) {  /* Pinocchio's Jacobian of a robot with one joint */
+            Mat column = {(const double *)Ja.view.buf, Ja.view.shape[0], 1, Ja.view.strides[0] / 8, 1};
+            Jm = column;
+        }
+        if (Jm.m != 6 || Jm.n != n) {
+            PyErr_SetString(PyExc_ValueError, "search_pose: the Jacobian is not 6 x nv");
+            release(&Ja);
+            Py_DECREF(J);
+            goto done;
+        }
+        search_pose_error(Rm, pv, p_stride, Mm, ev);
+        status = search_iteration_c(Jm, ev, qv, nq, Jcv, ecv, qcv, limv, lim.view.shape[1], wv,
+                                    sv, stv);
+        release(&Ja);
+        Py_DECREF(J);
+        done_++;
+        if (status != CONTINUE) break;
+        search_integrate(qcv, stv, tabv, k, nq, qv);
+    }
+    result = Py_BuildValue("(il)", status, done_);
+done:
+    release(&R); release(&p); release(&Md); release(&tab); release(&q); release(&qc);
+    release(&Jc); release(&e); release(&ec); release(&lim); release(&work); release(&state);
+    release(&step);
+    return result;
+}
+
 static PyMethodDef methods[] = {
     {"transpose_step", (PyCFunction)(void (*)(void))py_transpose_step, METH_FASTCALL,
      "transpose_step(J, e, ff, q, work, step) -> status: one step of a Jacobian-transpose-type "
@@ -1359,6 +1534,10 @@ static PyMethodDef methods[] = {
     {"search_iteration", (PyCFunction)(void (*)(void))py_search_iteration, METH_FASTCALL,
      "search_iteration(J, e, q, J_cur, e_cur, q_cur, limits, work, state, step) -> status: "
      "one Levenberg-Marquardt iteration of solve()."},
+    {"search_pose", (PyCFunction)(void (*)(void))py_search_pose, METH_FASTCALL,
+     "search_pose(jacobian, arguments, rotation, translation, target, joints, q, q_cur, J_cur, "
+     "e, e_cur, limits, work, state, step, count) -> (status, iterations): up to count "
+     "iterations of solve() on one pose task, each calling jacobian(*arguments) once."},
     {NULL, NULL, 0, NULL},
 };
 

@@ -1,0 +1,435 @@
+"""Solve to a pose (set-point IK): Levenberg-Marquardt on SJT's normalised columns, restarted
+from random configurations within the limits until it succeeds or its budget runs out.
+
+Each iteration evaluates the task rows once, at the trial configuration, accepts or rejects the
+trial and computes the next step ``S J^T (J S J^T + lambda I)^-1 e`` — S = D for SJT (the
+paper's scaling factors as the preconditioner: as lambda grows the step turns into SJT's
+direction ``D J^T e``, a descent direction everywhere, eq. 24-25; as it shrinks, into the
+Gauss-Newton step, which converges quadratically) and S = I for the other methods (plain
+Levenberg-Marquardt: DLS's damping is for tracking; a search that kept it as a floor would stall
+short of the tolerance). ``lambda = mu^2 + nu |e_w|^2`` grows with the error (Sugihara's
+damping), with ``nu`` adapted as in Levenberg-Marquardt. Joint limits hold at every iteration: a
+joint that would leave its range is fixed onto its limit and the others solved again; a joint
+whose range spans a full turn wraps by 2 pi instead; no joint moves more than ``MAX_STEP`` in
+one iteration. A start ends when the error is below ``tol`` (success), or when it stops falling
+(a local minimum: its best |e_w|^2 has not fallen by 1 % in 6 iterations, or by 10 % in 4 while
+a joint is held at a limit): then a new start.
+
+On a single :class:`~sjt_pin.tasks.PoseTask` (the usual case) every iteration of a start runs
+in one compiled call (``sjt_pin.kernels.search_pose``): per iteration one Pinocchio call for the
+kinematics and the frame's Jacobian, then the error (log6), the update, the limits and
+``integrate`` in C, about 1 us on a 6-joint arm. Other task stacks, and user limits (the
+constraint stage's, which hold at every iteration too), make one Python round trip per
+iteration: the stack's rows, then one compiled call (``sjt_pin.kernels.search_iteration``).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from . import kernels as K
+from .joint_ranges import outside
+from .kernels import (
+    CONVERGED,
+    S_BEST,
+    S_E_SQ,
+    S_ERROR_ROWS,
+    S_HELD_LIMIT,
+    S_HELD_PROGRESS,
+    S_MAX_STEP,
+    S_NU,
+    S_PROGRESS,
+    S_STALE_LIMIT,
+    S_TOL_SQ,
+    STATE_SIZE,
+    search_iteration,
+    search_pose,
+)
+from .kinematics import Kinematics
+from .limits.base import Motion
+from .mappings import COLUMN_TOL
+from .tasks import PoseTask
+from .validation import integer, positive, raise_non_finite_targets
+
+#: |e| (m and rad, the target rows) below which a pose counts as solved
+TOL = 1e-6
+#: iterations of one start before it gives up
+MAX_ITERS = 100
+#: the search's budget: iterations over all starts (the default, so that a result depends on
+#: the inputs only), and, only when asked for, seconds of wall-clock time
+BUDGET = 2000
+TIMEOUT: float | None = None
+#: the largest joint motion of one iteration (rad or m): a trust region
+MAX_STEP = 2.0
+#: a start has stalled (a local minimum) when its best error has not fallen below ``PROGRESS``
+#: times itself (in |e_w|^2 / 2) for ``STALE_ITERS`` iterations; with a joint held at one of
+#: its limits (heading for a minimum on the boundary), ``HELD_PROGRESS`` in ``HELD_ITERS``
+STALE_ITERS, PROGRESS = 6, 0.99
+HELD_ITERS, HELD_PROGRESS = 4, 0.9
+#: the initial nu of the damping lambda = mu^2 + nu |e_w|^2, and its floor mu^2
+NU_START, MU = 1.0, 1e-6
+
+
+@dataclass
+class IKResult:
+    """Outcome of :func:`solve`: the configuration, whether ``|e| < tol``, the iterations used
+    (over all starts), the final error norm (task units), the restarts made, and ``clipped``:
+    the joints whose seed ``q0`` lay outside their position limits and was clipped into them
+    before the search (``()`` for a seed within the limits). ``q`` is always within the
+    limits."""
+
+    q: np.ndarray
+    success: bool
+    iterations: int
+    error: float
+    restarts: int = 0
+    clipped: tuple[str, ...] = ()
+
+
+class Search:
+    """The set-point IK of one solver: a task stack of its own (a search never touches the
+    buffers of the solver's steps), its work vectors and its restart sampler."""
+
+    def __init__(self, solver):
+        self.robot = robot = solver.robot
+        self.stack = stack = solver.stack.copy()
+        method = solver.method
+        m, n = stack.dim, robot.nv
+        self.layout = layout = K.Layout(m, n, 0)
+        self.work = work = layout.allocate()
+        layout.sqrt_weight(work)[:] = stack.sqrt_weight
+        work[K.P_IDENTITY_ROWS] = stack.identity_rows
+        layout.joint_mask(work)[:] = stack.chain
+        work[K.P_MU] = MU  # the search's own damping: DLS's tracking damping would stall it
+        work[K.P_COL_TOL] = getattr(method, "column_tol", COLUMN_TOL)
+        work[K.P_LENGTH2] = getattr(method, "length", 0.0) ** 2
+        work[K.P_SCALED] = 1.0 if getattr(method, "scaled", False) else 0.0
+        limit = solver.position_limit
+        self.limits = (np.zeros((4, 0)) if limit is None else
+                       np.vstack([limit.q_index, limit.v_index, limit.lower, limit.upper])
+                       .astype(float))
+        # the user's limits hold at every iteration too (the URDF's position limits are the
+        # search kernel's own): each displacement is a velocity over a period of 1
+        self.user_limits = solver.stage.user_limits()
+        self.kinematics = Kinematics(robot.model)
+        self.state = np.zeros(STATE_SIZE)
+        self._initial = np.zeros(STATE_SIZE)  # the state at every start (see aim)
+        self.targets = []  # of the solve set up by aim
+        self.J = np.zeros((m, n))
+        self.e = np.zeros(m)
+        self.q = np.zeros(robot.nq)
+        self.step = np.zeros(n)
+        self._sampler = _Sampler(robot)
+        self._seed = None  # (seed, its generator, its first state)
+        self.pose = None if self.user_limits is not None else _PoseLoop.of(robot, stack)
+
+    def aim(self, targets: list, tol: float) -> None:
+        """Set up one solve: its targets (validated) and tolerance (|e|, task units)."""
+        self.targets = targets
+        initial = self._initial
+        initial[:] = 0.0
+        initial[S_NU], initial[S_BEST] = NU_START, math.inf
+        initial[S_TOL_SQ], initial[S_MAX_STEP] = tol * tol, MAX_STEP
+        initial[S_ERROR_ROWS] = self.stack.target_dim
+        initial[S_STALE_LIMIT], initial[S_PROGRESS] = STALE_ITERS, PROGRESS
+        initial[S_HELD_LIMIT], initial[S_HELD_PROGRESS] = HELD_ITERS, HELD_PROGRESS
+        if self.pose is not None:
+            self.pose.aim(self, targets[0])
+
+    def run(self, q0: np.ndarray, limit: int, deadline: float) -> tuple[bool, int]:
+        """One start from ``q0`` towards the targets of :meth:`aim`, of at most ``limit``
+        iterations: (converged, iterations used)."""
+        self.state[:] = self._initial
+        if self.pose is not None:
+            return self.pose.run(q0, limit, deadline)
+        stack, model, targets = self.stack, self.robot.model, self.targets
+        q, iterations = q0, 0
+        clock = time.perf_counter
+        while iterations < limit:
+            J, e, _ = stack.evaluate(q, targets, None)
+            status = search_iteration(J, e, q, self.J, self.e, self.q, self.limits, self.work,
+                                      self.state, self.step)
+            iterations += 1
+            if status == CONVERGED and self.user_limits is not None:
+                if not self.admissible(self.q):
+                    return False, iterations  # converged outside a limit: another start
+            if status:
+                return status == CONVERGED, iterations
+            if iterations % 16 == 0 and clock() > deadline:
+                break
+            if self.user_limits is not None:
+                self.limit(self.step, J)
+            q = pin.integrate(model, self.q, self.step)
+        return False, iterations
+
+    def _motion(self, q: np.ndarray) -> Motion:
+        self.kinematics.update(q)
+        nv = self.robot.nv
+        return Motion(q, np.zeros(nv), np.zeros(nv), 1.0)
+
+    def admissible(self, q: np.ndarray) -> bool:
+        """Whether ``q`` is within the user's limits (standing still there is admissible)."""
+        motion = self._motion(q)
+        return self.user_limits.admits_rest(self.kinematics, motion)
+
+    def limit(self, step: np.ndarray, J: np.ndarray) -> None:
+        """Keep the next displacement from the current configuration within the user's limits
+        (in place): the smallest change in the metric of the task rows (see
+        :func:`~sjt_pin.constraints.project`)."""
+        motion = self._motion(self.q)
+        rows = self.stack.sqrt_weight[:, None] * self.J * self.stack.chain
+        step[:] = self.user_limits.project(step, rows, self.kinematics, motion)
+
+    def error(self) -> float:
+        """|e| of the target rows at the current configuration (the kernel's |e|^2 there)."""
+        return math.sqrt(self.state[S_E_SQ])
+
+    def random(self, seed: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        return self._sampler(seed, rng)
+
+    def generator(self, rng) -> np.random.Generator:
+        """``rng`` as a generator of random starts (``None``: seed 0). An int seed's generator
+        is this search's own, reset to the seed's first state: the numbers of
+        ``numpy.random.default_rng(seed)`` at a seventh of its cost."""
+        if isinstance(rng, np.random.Generator):
+            return rng
+        seed = 0 if rng is None else rng
+        if type(seed) is not int:
+            return np.random.default_rng(seed)
+        if self._seed is None or self._seed[0] != seed:
+            generator = np.random.default_rng(seed)
+            self._seed = (seed, generator, generator.bit_generator.state)
+        else:
+            self._seed[1].bit_generator.state = self._seed[2]
+        return self._seed[1]
+
+
+class _PoseLoop:
+    """The iterations of one start on a single :class:`~sjt_pin.tasks.PoseTask` in one compiled
+    call (``sjt_pin.kernels.search_pose``): per iteration, one Pinocchio call
+    (``computeFrameJacobian``, LOCAL_WORLD_ALIGNED: forward kinematics, the frame's Jacobian
+    and its placement ``data.oMf``), then the pose error (``log6``), the Levenberg-Marquardt
+    update, the limits and ``integrate``, compiled. The rows are the pose task's rotated into
+    world axes at the frame: the same search, as its rows' weights are equal within the linear
+    and within the angular block. For the robots whose joints all have one coordinate or a
+    (cos, sin) pair, and no user limits (see :meth:`of`)."""
+
+    def __init__(self, robot, frame_id: int, joints: np.ndarray):
+        model = robot.model
+        self.data = data = model.createData()
+        self.placement = placement = data.oMf[frame_id]  # views into data, kept alive here
+        self.rotation, self.translation = placement.rotation, placement.translation
+        self.trial = np.zeros(model.nq)
+        self.arguments = (model, data, self.trial, frame_id, pin.LOCAL_WORLD_ALIGNED)
+        self.joints = joints
+        self.e = np.zeros(6)
+        self.call: tuple = ()
+
+    @classmethod
+    def of(cls, robot, stack) -> _PoseLoop | None:
+        """The loop for ``stack``, or ``None`` when it takes the general path: not one pose
+        task, rows weighted unequally within a block, or a joint other than a revolute,
+        prismatic or continuous one (a floating base), or a mimic joint on the frame's chain."""
+        task = stack.task
+        w = stack.sqrt_weight
+        if not (stack.single and type(task) is PoseTask and np.all(w[:3] == w[0])
+                and np.all(w[3:] == w[3])):
+            return None
+        joints = _joint_table(robot.model)
+        model = robot.model
+        support = model.supports[model.frames[task.frame_id].parentJoint]
+        if joints is None or any(model.joints[j].nv == 0 for j in support[1:]):
+            return None  # another joint type, or a mimic joint moves the frame
+        loop = cls(robot, task.frame_id, joints)
+        return loop if loop.tracks(robot, task.frame_id) else None
+
+    def tracks(self, robot, frame_id: int) -> bool:
+        """Whether the placement's views follow Pinocchio's data (checked once)."""
+        for q in (pin.neutral(robot.model), robot.random_configuration(np.random.default_rng(0))):
+            self.trial[:] = q
+            pin.computeFrameJacobian(*self.arguments)
+            expected = robot.fk(q, frame_id)
+            if not (np.allclose(self.rotation, expected.rotation, rtol=0.0, atol=1e-12)
+                    and np.allclose(self.translation, expected.translation, rtol=0.0,
+                                    atol=1e-12)):
+                return False
+        return True
+
+    def aim(self, search: Search, target: pin.SE3) -> None:
+        """The kernel's arguments for the starts of one solve of ``search`` to ``target``."""
+        self.call = (pin.computeFrameJacobian, self.arguments, self.rotation, self.translation,
+                     target.homogeneous, self.joints, self.trial, search.q, search.J, self.e,
+                     search.e, search.limits, search.work, search.state, search.step)
+
+    def run(self, q0: np.ndarray, limit: int, deadline: float) -> tuple[bool, int]:
+        """One start from ``q0`` (the search's state already reset): (converged, iterations
+        used)."""
+        self.trial[:] = q0
+        chunk = limit if deadline == math.inf else 16  # the clock between chunks
+        iterations = 0
+        while iterations < limit:
+            status, used = search_pose(*self.call, min(chunk, limit - iterations))
+            iterations += used
+            if status:
+                return status == CONVERGED, iterations
+            if time.perf_counter() > deadline:
+                break
+        return False, iterations
+
+
+def _joint_table(model: pin.Model) -> np.ndarray | None:
+    """(3, k): q index, v index and kind (0: one coordinate, q + v; 1: a continuous joint's
+    (cos, sin) pair) of every joint with coordinates, or ``None`` if a joint is of another
+    kind."""
+    rows = []
+    for j in range(1, model.njoints):
+        joint = model.joints[j]
+        if joint.nq == 0 and joint.nv == 0:  # a mimic joint: no coordinate of its own
+            continue
+        if joint.nq == 1 and joint.nv == 1:
+            rows.append((joint.idx_q, joint.idx_v, 0))
+        elif joint.nq == 2 and joint.nv == 1 and ("RUB" in joint.shortname()
+                                                   or "RevoluteUnbounded" in joint.shortname()):
+            rows.append((joint.idx_q, joint.idx_v, 1))
+        else:
+            return None
+    return np.array(rows, dtype=float).reshape(-1, 3).T.copy()
+
+
+#: the width of a uniform angle in [-pi, pi) (rad), as numpy's uniform computes it
+_TURN = np.pi - (-np.pi)
+
+
+class _Sampler:
+    """Random starts: limited joints uniform within their limits, unlimited revolute and
+    continuous joints a random angle (about the seed's), the rest (a floating base, prismatic
+    joints without limits) as in the seed."""
+
+    def __init__(self, robot):
+        model = robot.model
+        lower, upper = robot.lower_limits, robot.upper_limits
+        self.limited, self.turning, self.circle = [], [], []
+        for j in range(1, model.njoints):
+            joint = model.joints[j]
+            kind = joint.shortname()
+            if joint.nq == 1 and joint.nv == 1:
+                i = joint.idx_q
+                if np.isfinite(lower[i]) and np.isfinite(upper[i]):
+                    self.limited.append(i)
+                elif "Revolute" in kind:
+                    self.turning.append(i)
+            elif joint.nq == 2 and joint.nv == 1:  # continuous: (cos, sin)
+                self.circle.append(joint.idx_q)
+        self.limited = np.array(self.limited, dtype=np.int64)
+        self.lower, self.upper = lower[self.limited], upper[self.limited]
+        self.turning = np.array(self.turning, dtype=np.int64)
+        self.circle = np.array(self.circle, dtype=np.int64)
+        self.span = self.upper - self.lower
+        self.draws = self.limited.size + self.turning.size + self.circle.size
+
+    def __call__(self, seed: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """The numbers of ``rng.uniform(lower, upper)`` for the limited joints, then of
+        ``rng.uniform(-pi, pi)`` for the others, bitwise (``low + (high - low) u`` on one draw
+        of ``rng.random``: numpy's uniform checks array bounds at 10 us a call)."""
+        q = seed.copy()
+        u = rng.random(self.draws)
+        k, t = self.limited.size, self.limited.size + self.turning.size
+        q[self.limited] = self.lower + self.span * u[:k]
+        if t > k:
+            q[self.turning] += -np.pi + _TURN * u[k:t]
+        if self.circle.size:
+            angles = -np.pi + _TURN * u[t:]
+            q[self.circle], q[self.circle + 1] = np.cos(angles), np.sin(angles)
+        return q
+
+
+def solve(solver, target, q0, *, tol: float = TOL, max_iters: int = MAX_ITERS,
+          restarts: int | None = None, timeout: float | None = TIMEOUT, budget: int = BUDGET,
+          rng: np.random.Generator | int | None = None) -> IKResult:
+    """Drive ``solver``'s tasks to ``target`` from ``q0``; see the module docstring.
+
+    Args:
+        target: as for ``step`` (a pose, or ``{frame: target}`` with several tasks).
+        q0: the first start (nq,), clipped into the position limits first (``IKResult.clipped``
+            names the joints moved); later starts are random within the limits (a floating
+            base and prismatic joints without limits keep ``q0``'s values).
+        tol: success when the tasks' error norm is below ``tol`` (m and rad; > 0).
+        max_iters: iterations of one start.
+        restarts: most restarts after the first start (``None``: as many as the budget allows).
+        timeout: no new iteration once this many seconds have passed (default ``None``: no
+            time limit, so the result depends only on the inputs and ``rng``, never on the
+            machine's speed or load; the clock starts after the search is set up).
+        budget: iterations over all starts (the default limit: 2000, about 2.5 ms on Panda at
+            1.2 us per iteration).
+        rng: a ``numpy.random.Generator`` or a seed for the random starts (``None``: seed 0,
+            so a call repeats).
+
+    Returns the first start that succeeds, or the best one (lowest error) when none did.
+    """
+    search = solver.search()
+    tol, max_iters, budget, restarts = _options(tol, max_iters, budget, restarts)
+    q, clipped = _seed(solver.robot, q0)
+    targets = _targets(search, solver.robot, target, q)
+    search.aim(targets, tol)
+    if timeout is None:
+        deadline = math.inf
+    else:
+        timeout = positive(timeout, "timeout", "s")
+        search.stack.evaluate(q, targets, None)  # anything loaded on first use: before the clock
+        deadline = time.perf_counter() + timeout
+    total, best, attempt, generator = 0, None, 0, None
+    while True:
+        if attempt == 0:
+            start = q
+        else:  # the generator only when a restart needs it (it costs as much as a start)
+            generator = search.generator(rng) if generator is None else generator
+            start = search.random(q, generator)
+        success, used = search.run(start, min(max_iters, budget - total), deadline)
+        total += used
+        error = search.error()
+        if not math.isfinite(error):  # a NaN target, or one so far that |e|^2 overflows
+            raise_non_finite_targets(targets)  # as step() says it
+        if best is None or error < best[1]:
+            best = (search.q.copy(), error)
+        if success:
+            return IKResult(best[0], True, total, error, attempt, clipped)
+        out_of_starts = restarts is not None and attempt >= restarts
+        if out_of_starts or total >= budget or time.perf_counter() > deadline:
+            return IKResult(best[0], False, total, best[1], attempt, clipped)
+        attempt += 1
+
+
+def _options(tol, max_iters, budget, restarts) -> tuple[float, int, int, int | None]:
+    """The options of :func:`solve` validated (the defaults are valid as they are)."""
+    tol = tol if tol is TOL else positive(tol, "tol", "task units")
+    max_iters = max_iters if max_iters is MAX_ITERS else integer(max_iters, "max_iters")
+    budget = budget if budget is BUDGET else integer(budget, "budget")
+    if restarts is not None:
+        restarts = integer(restarts, "restarts", 0)
+    return tol, max_iters, budget, restarts
+
+
+def _seed(robot, q0) -> tuple[np.ndarray, tuple[str, ...]]:
+    """``q0`` validated, and clipped into the position limits: (q, the joints clipped)."""
+    q = robot.check_q(q0, "q0").copy()
+    clipped = outside(robot.model, q, robot.lower_limits, robot.upper_limits)
+    if clipped:  # a seed out of range starts at its nearest point within the limits
+        np.clip(q, robot.lower_limits, robot.upper_limits, out=q)
+    return q, clipped
+
+
+def _targets(search: Search, robot, target, q: np.ndarray) -> list:
+    """``target`` per task, validated; a position far out of reach (in mm by mistake?) warns,
+    as ``step()`` does."""
+    targets, _ = search.stack.targets(target, None)
+    for goal in targets:
+        position = goal.translation if isinstance(goal, pin.SE3) else goal
+        if isinstance(position, np.ndarray) and position.shape == (3,):
+            robot.check_reach(position, q)
+    return targets
+
