@@ -92,9 +92,12 @@ class PositionLimit(Limit):
             push = A
             if J is not None:  # the acceleration ramps, and ramps down before the cap
                 gap = np.maximum(cap - toward, 0.0)
-                push = np.minimum(np.minimum(A, np.maximum(np.where(above, -a, a), 0.0)
-                                             + J * dt),
-                                  np.sqrt((0.5 * J * dt) ** 2 + 2.0 * J * gap) - 0.5 * J * dt)
+                with np.errstate(invalid="ignore"):  # a joint without a jerk limit: A
+                    ramp = np.minimum(np.minimum(A, np.maximum(np.where(above, -a, a), 0.0)
+                                                 + J * dt),
+                                      np.sqrt((0.5 * J * dt) ** 2 + 2.0 * J * gap)
+                                      - 0.5 * J * dt)
+                push = np.where(np.isfinite(J), ramp, A)
             back = np.minimum(cap, toward + push * dt)
         lower = np.where(above, -back, np.where(below, back, lower))
         upper = np.where(above, -back, np.where(below, back, upper))
