@@ -884,7 +884,11 @@ static int smooth_stage_c(int kind, Mat J, const double *e, const double *ff, in
     for (Py_ssize_t j = 0; j < n; j++) out[j] = step[j] / dt;
     /* 1. the feedback, slowed so that a stop at the target fits the acceleration limits */
     double factor = 1.0;
-    core_scaled(kind, J, e, ff, has_ff, mask, work, dqff, 0.0, save);
+    if (has_ff) {  /* (without a feed-forward the method maps 0 to 0: no solve) */
+        core_scaled(kind, J, e, ff, has_ff, mask, work, dqff, 0.0, save);
+    } else {
+        for (Py_ssize_t j = 0; j < n; j++) dqff[j] = 0.0;
+    }
     for (Py_ssize_t j = 0; j < n; j++)
         dqff[j] = escaping ? (dqff[j] + dt * work[extra + j]) / dt : dqff[j] / dt;
     Py_ssize_t rows_e = (Py_ssize_t)work[P_ERROR_ROWS];
