@@ -23,6 +23,10 @@ The box of each joint is the intersection of every limit's bounds. *Hard* limits
 speeds, collisions) win over *smoothness* limits (acceleration, jerk) when both cannot hold —
 a start outside the range, limits changed between steps: the velocity is then the point of the
 hard box nearest the smoothness box, and the step reports it.
+
+A solver with only the built-in limits (position, speed, acceleration, jerk) and a built-in
+method runs this stage inside its step kernel (``smooth_stage_c`` in ``kernels/_kernels.c``);
+this module is its reference, and ``tests/test_smooth_kernel.py`` holds the two equal.
 """
 
 from __future__ import annotations

@@ -13,10 +13,14 @@ limits — runs the same stages:
 2. the :class:`~sjt_pin.methods.Method`'s compiled kernel applies the gain
    (:mod:`~sjt_pin.gains`) and the mapping M, adds the escape velocity of a saddle in progress
    (:class:`~sjt_pin.escape.SaddleEscape`, JT and SJT), and holds the URDF's position and speed
-   limits by Saturation in the Null Space (:mod:`~sjt_pin.constraints`), in one call;
+   limits by Saturation in the Null Space (:mod:`~sjt_pin.constraints`), in one call; with
+   acceleration (and jerk) limits the same call runs their whole stage — the feedback's and
+   the position limits' braking, SNS on the hard box, the smoothing, and the motion state
+   (the previous velocity and acceleration, kept in the kernel's work vector);
 3. only when something needs it, Python: an error to raise, the stability check, the escape's
    curvature test at the end of a stall, and the :class:`~sjt_pin.constraints.ConstraintStage`
-   for acceleration, jerk and user limits (:mod:`~sjt_pin.limits`);
+   for user limits (:mod:`~sjt_pin.limits`), or for every limit of a method without a kernel
+   (the stage in Python is the compiled one's reference);
 4. ``pinocchio.integrate`` moves ``q`` on its manifold (continuous joints, free flyers);
 5. :attr:`Solver.last` builds a :class:`~sjt_pin.step_info.StepInfo` from the step's buffers
    on first access.
