@@ -544,8 +544,9 @@ static Core core(int kind, Mat J, const double *e, const double *ff, int has_ff,
 /* the free joints span the task space while the smallest singular value of their normalised
  * task columns is above this fraction of the largest (Flacco's rank test) */
 #define RANK_TOL 1e-6
-/* halvings of the bisection of braking_speed (sjt_pin/limits/position.py, BRAKING_HALVINGS) */
-#define BRAKING_HALVINGS 40
+/* the braking speed's root search (sjt_pin/limits/position.py, BRAKING_TOL, BRAKING_STEPS) */
+#define BRAKING_TOL 9.094947017729282e-13
+#define BRAKING_STEPS 60
 
 /* The largest s in [0, 1] with lower <= b + s a <= upper on the free joints, and the joint
  * that limits it (*k; -1 when s = 1 fits); -1 when no s fits (constraints.task_scale). */
@@ -807,32 +808,39 @@ static double stopping_distance_c(double w, double a0, double A, double J)
     double d0 = w * t0 + up * t0 * t0 / 3.0;
     w = w + 0.5 * up * up * inv_j;
     double beta = dmax(-a0, 0.0);  /* already braking at beta */
-    double t1 = (A - beta) * inv_j;
-    double d1 = w * t1 - 0.5 * beta * t1 * t1 - jerk * (t1 * t1 * t1) / 6.0;
-    double v1 = w - 0.5 * (A * A - beta * beta) * inv_j;
+    if (beta * beta >= 2.0 * jerk * w) {  /* the velocity reaches 0 while it ramps down */
+        double ts = (beta - sqrt(dmax(beta * beta - 2.0 * jerk * w, 0.0))) * inv_j;
+        return d0 + (w * ts - 0.5 * beta * ts * ts + jerk * ts * ts * ts / 6.0);
+    }
+    /* trapezoid: move beta to A, hold A, ramp A -> 0 */
+    double sign = beta > A ? 1.0 : -1.0;
+    double t1 = fabs(A - beta) * inv_j;
+    double d1 = w * t1 - 0.5 * beta * t1 * t1 + sign * jerk * t1 * t1 * t1 / 6.0;
+    double v1 = w - beta * t1 + 0.5 * sign * jerk * t1 * t1;
     double v2 = 0.5 * A * A * inv_j;
-    if (v1 >= v2) {  /* trapezoid: ramp beta -> A, hold A, ramp A -> 0 */
+    if (v1 >= v2) {
         double t2 = dmax(v1 - v2, 0.0) / A;
-        return d0 + (d1 + v1 * t2 - 0.5 * A * t2 * t2 + (A * A * A) * inv_j * inv_j / 6.0);
+        return d0 + (d1 + v1 * t2 - 0.5 * A * t2 * t2 + A * A * A * inv_j * inv_j / 6.0);
     }
     /* triangle: a peak a_p, then back to 0 */
     double a_p = sqrt(dmax(w * jerk + 0.5 * beta * beta, 0.0));
     double ta = (a_p - beta) * inv_j;
-    if (a_p >= beta)
-        return d0 + (w * ta - 0.5 * beta * ta * ta - jerk * (ta * ta * ta) / 6.0
-                     + (a_p * a_p * a_p) * inv_j * inv_j / 6.0);
-    return d0 + w * beta * inv_j;
+    return d0 + (w * ta - 0.5 * beta * ta * ta - jerk * ta * ta * ta / 6.0
+                 + a_p * a_p * a_p * inv_j * inv_j / 6.0);
 }
 
-static int braking_fits(double x, double v, double room, double dt, double A, double J)
+/* x dt + stopping_distance(x, (x - v) / dt) - room: > 0 where a velocity x toward a point
+ * room away cannot stop before it (sjt_pin/limits/position.py, _overshoot) */
+static double overshoot_c(double x, double v, double room, double dt, double A, double J)
 {
     double d = x > 0.0 ? stopping_distance_c(dmax(x, 0.0), (x - v) / dt, A, J) : 0.0;
-    return x * dt + d <= room;
+    return x * dt + d - room;
 }
 
 /* The largest velocity toward a point `room` away after which a joint can still stop before it
  * within the acceleration limit A and (with has_jerk) the jerk limit J; v is its previous
- * velocity toward that point (sjt_pin/limits/position.py, braking_speed). */
+ * velocity toward that point: the root of the overshoot by regula falsi with the Illinois
+ * modification (sjt_pin/limits/position.py, braking_speed). */
 static double braking_speed_c(double room, double v, double dt, double A, double J,
                               int has_jerk)
 {
@@ -842,15 +850,35 @@ static double braking_speed_c(double room, double v, double dt, double A, double
     double top = fabs(v) + 2.0 * A * dt;
     if (!(room < top * dt + stopping_distance_c(top, 2.0 * A, A, J))) return INFINITY;
     double low = v - 2.0 * A * dt, high = v + 2.0 * A * dt;
-    if (braking_fits(high, v, room, dt, A, J)) return INFINITY;
-    for (int i = 0; i < BRAKING_HALVINGS; i++) {
-        double middle = 0.5 * (low + high);
-        if (braking_fits(middle, v, room, dt, A, J))
-            low = middle;
-        else
-            high = middle;
+    double f_hi = overshoot_c(high, v, room, dt, A, J);
+    if (f_hi <= 0.0) return INFINITY;  /* the fastest step fits: no bound */
+    double f_lo = overshoot_c(low, v, room, dt, A, J);
+    if (f_lo > 0.0) return low;  /* nothing fits: the slowest step */
+    double lo = low, hi = high;
+    if (low <= 0.0 && high > 0.0) {  /* x <= 0 fits; just above 0 the overshoot may jump */
+        double f_zero = stopping_distance_c(0.0, -v / dt, A, J) - room;
+        if (f_zero > 0.0) return 0.0;
+        lo = 0.0;
+        f_lo = f_zero;
     }
-    return low;
+    double tol = (high - low) * BRAKING_TOL, side = 0.0;
+    for (int i = 0; i < BRAKING_STEPS && hi - lo > tol; i++) {
+        double x = lo - f_lo * (hi - lo) / (f_hi - f_lo);
+        if (!(x > lo && x < hi)) x = 0.5 * (lo + hi);
+        double fx = overshoot_c(x, v, room, dt, A, J);
+        if (fx <= 0.0) {
+            if (side < 0.0) f_hi = 0.5 * f_hi;
+            lo = x;
+            f_lo = fx;
+            side = -1.0;
+        } else {
+            if (side > 0.0) f_lo = 0.5 * f_lo;
+            hi = x;
+            f_hi = fx;
+            side = 1.0;
+        }
+    }
+    return lo;
 }
 
 /* The acceleration/jerk stage on the method's step (rad, overwritten): the feedback slowed so
