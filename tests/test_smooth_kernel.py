@@ -14,6 +14,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import sjt_pin as sjt
+import sjt_pin.kernels as K
 from sjt_pin.bench.limits import PANDA_ACCELERATION, PANDA_JERK
 from sjt_pin.limits import Limit
 
@@ -156,3 +157,15 @@ def test_an_arm_at_rest_reports_no_smoothness_limit(panda, jerk):
     solver.step(q, far)
     names = {name for name, _ in solver.last.active_limits}
     assert names & {"acceleration", "jerk"}
+
+
+def test_a_work_vector_whose_stage_part_overlaps_the_scratch_is_refused():
+    """The kernel checks the acceleration/jerk stage's part of ``work`` before it writes there:
+    an offset that runs into the scratch space is a ValueError, not memory overwritten."""
+    layout = K.Layout(6, 7, 0, smooth=True)
+    work = layout.allocate()
+    J, e, q, step = np.ones((6, 7)), np.ones(6), np.zeros(7), np.zeros(7)
+    K.transpose_step(J, e, e, q, work, step)  # as laid out: accepted
+    work[K.P_SMOOTH] = work[K.P_SCRATCH] - 3
+    with pytest.raises(ValueError, match="work does not fit"):
+        K.transpose_step(J, e, e, q, work, step)

@@ -1412,6 +1412,9 @@ static int check_work(const Arg *work, Py_ssize_t m, Py_ssize_t n)
     double scratch = w[P_SCRATCH];
     Py_ssize_t p = m < n ? m : n;
     if (!(scratch >= 0 && scratch + 4 * m + 6 * n + 3 * p * p <= size)) goto bad;
+    double smooth = w[P_SMOOTH];  /* the acceleration/jerk stage's part: before the scratch */
+    if (!(smooth == 0.0 || (smooth >= INFO + I_COUNT
+                            && smooth + (SM_COUNT - 1) * n + m <= scratch))) goto bad;
     return 0;
 bad:
     PyErr_Format(PyExc_ValueError, "work does not fit rows of shape (%zd, %zd): make it with "
