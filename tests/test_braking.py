@@ -46,7 +46,10 @@ def test_the_overshoot_grows_with_the_velocity(v, A, J, dt):
     f = x * dt + stopping_distance(x, (x - v) / dt, np.full(x.size, A), np.full(x.size, J))
     d = np.diff(f)
     assert np.all(d >= -1e-12 * (1.0 + np.abs(f[1:])))
-    assert d.max() <= 50.0 * max(np.median(d), 1e-300) + 1e-12  # no jump
+    # no jump: a step across one is far larger than both its neighbours (across a kink of a
+    # continuous function it lies between them)
+    neighbours = np.maximum(d[:-2], d[2:])
+    assert np.all(d[1:-1] <= 2.0 * neighbours + 1e-12 * (1.0 + np.abs(f[2:-1])))
 
 
 @settings(max_examples=100, deadline=None)
