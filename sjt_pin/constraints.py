@@ -23,11 +23,15 @@ The box of each joint is the intersection of every limit's bounds. *Hard* limits
 speeds, collisions) win over *smoothness* limits (acceleration, jerk) when both cannot hold —
 a start outside the range, limits changed between steps: the velocity is then the point of the
 hard box nearest the smoothness box, and the step reports it.
+
+A solver with only the built-in limits (position, speed, acceleration, jerk) and a built-in
+method runs this stage inside its step kernel (``smooth_stage_c`` in ``kernels/_kernels.c``);
+this module is its reference, and ``tests/test_smooth_kernel.py`` holds the two equal.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -171,6 +175,7 @@ class ConstraintStage:
             return rows_w[0]
 
         outcome = Outcome(dq)
+        desired = None
         if box is not None and not _inside(dq, box.lower, box.upper):
             outcome = saturate(dq, solve, box.lower, box.upper, self.moving,
                                lambda: weighted()[:self.task_rows])
@@ -182,6 +187,7 @@ class ConstraintStage:
                     lo, hi = approach(outcome.dq, motion)
                     np.maximum(soft.lower, np.minimum(lo, soft.upper), out=soft.lower)
                     np.minimum(soft.upper, np.maximum(hi, soft.lower), out=soft.upper)
+            desired = outcome.dq
             outcome.dq, torn = smooth(outcome.dq, box.hard, soft)
             outcome.conflict = tuple(self.names[j] for j in np.flatnonzero(torn))
         if rows is not None:
@@ -195,7 +201,8 @@ class ConstraintStage:
             tight = slack > -1e-9 * (1.0 + np.abs(b))
             outcome.rows = tuple(sorted({owners[i] for i in np.flatnonzero(tight)}))
         if box is not None:
-            outcome.active = self._active(outcome.dq, box)
+            outcome.active = active_limits(outcome.dq, box, [x.name for x in self.limits],
+                                           self.names, desired)
         return outcome
 
     def user_limits(self) -> ConstraintStage | None:
@@ -239,22 +246,33 @@ class ConstraintStage:
             return dq
         return project(dq, Jw, A, b, lower, upper, self.moving)
 
-    def _active(self, dq: np.ndarray, box: Box) -> tuple[tuple[str, str], ...]:
-        """(limit name, joint name) for each joint at one of its bounds."""
-        pairs = []
-        for bounds in (box.hard, box.smooth):
-            if bounds is None:
-                continue
-            lower, upper, lower_by, upper_by = (bounds.lower, bounds.upper, bounds.lower_by,
-                                                bounds.upper_by)
-            at_lower = (dq <= lower + TOLERANCE) & (lower_by >= 0)
-            at_upper = (dq >= upper - TOLERANCE) & (upper_by >= 0)
-            for j in np.flatnonzero(at_lower | at_upper):
-                k = upper_by[j] if at_upper[j] else lower_by[j]
-                pair = (self.limits[k].name, self.names[j])
-                if pair not in pairs:
-                    pairs.append(pair)
-        return tuple(pairs)
+
+def active_limits(dq: np.ndarray, box: Box, limit_names: Mapping[int, str] | Sequence[str],
+                  joint_names: Sequence[str],
+                  desired: np.ndarray | None = None) -> tuple[tuple[str, str], ...]:
+    """(limit name, joint name) for each joint of ``dq`` (rad/s) at one of its bounds, the hard
+    box's first: ``limit_names[k]`` names the limit ``k`` of the boxes' ``*_by`` indices. A
+    smoothness bound counts only where it cut the velocity the smoothing started from,
+    ``desired`` (a bound that merely contains a velocity, such as the narrow jerk bounds
+    around an arm at rest, is not active)."""
+    pairs = []
+    for bounds in (box.hard, box.smooth):
+        if bounds is None:
+            continue
+        lower, upper, lower_by, upper_by = (bounds.lower, bounds.upper, bounds.lower_by,
+                                            bounds.upper_by)
+        at_lower = (dq <= lower + TOLERANCE) & (lower_by >= 0)
+        at_upper = (dq >= upper - TOLERANCE) & (upper_by >= 0)
+        if bounds is box.smooth and desired is not None:
+            cut = np.abs(dq - desired) > TOLERANCE
+            at_lower &= cut
+            at_upper &= cut
+        for j in np.flatnonzero(at_lower | at_upper):
+            k = upper_by[j] if at_upper[j] else lower_by[j]
+            pair = (limit_names[int(k)], joint_names[int(j)])
+            if pair not in pairs:
+                pairs.append(pair)
+    return tuple(pairs)
 
 
 def _inside(dq, lower, upper) -> bool:
@@ -282,7 +300,8 @@ def task_scale(a: np.ndarray, b: np.ndarray, lower: np.ndarray, upper: np.ndarra
 
 
 #: the free joints still span the task space while the smallest singular value of their
-#: normalised task columns is above this fraction of the largest (Flacco's rank test)
+#: normalised task columns is above this fraction of their root-sum-square (of the largest,
+#: within a factor sqrt(m); Flacco's rank test, the compiled kernels' test)
 RANK_TOL = 1e-6
 
 
@@ -342,7 +361,8 @@ def _spans(J: np.ndarray) -> bool:
     if Jn.shape[1] < m:
         return False
     sv = np.linalg.svd(Jn, compute_uv=False)
-    return bool(sv[m - 1] > RANK_TOL * sv[0])
+    # lambda_min(Jn Jn^T) > RANK_TOL^2 tr(Jn Jn^T), as the kernels test it (one Cholesky)
+    return bool(sv[m - 1] ** 2 > RANK_TOL**2 * float(sv @ sv))
 
 
 def smooth(dq: np.ndarray, hard: Bounds, soft: Bounds) -> tuple[np.ndarray, np.ndarray]:

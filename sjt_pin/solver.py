@@ -13,10 +13,14 @@ limits — runs the same stages:
 2. the :class:`~sjt_pin.methods.Method`'s compiled kernel applies the gain
    (:mod:`~sjt_pin.gains`) and the mapping M, adds the escape velocity of a saddle in progress
    (:class:`~sjt_pin.escape.SaddleEscape`, JT and SJT), and holds the URDF's position and speed
-   limits by Saturation in the Null Space (:mod:`~sjt_pin.constraints`), in one call;
+   limits by Saturation in the Null Space (:mod:`~sjt_pin.constraints`), in one call; with
+   acceleration (and jerk) limits the same call runs their whole stage — the feedback's and
+   the position limits' braking, SNS on the hard box, the smoothing, and the motion state
+   (the previous velocity and acceleration, kept in the kernel's work vector);
 3. only when something needs it, Python: an error to raise, the stability check, the escape's
    curvature test at the end of a stall, and the :class:`~sjt_pin.constraints.ConstraintStage`
-   for acceleration, jerk and user limits (:mod:`~sjt_pin.limits`);
+   for user limits (:mod:`~sjt_pin.limits`), or for every limit of a method without a kernel
+   (the stage in Python is the compiled one's reference);
 4. ``pinocchio.integrate`` moves ``q`` on its manifold (continuous joints, free flyers);
 5. :attr:`Solver.last` builds a :class:`~sjt_pin.step_info.StepInfo` from the step's buffers
    on first access.
@@ -35,13 +39,13 @@ import numpy as np
 import pinocchio as pin
 
 from . import kernels as K
-from .constraints import ConstraintStage, Outcome
+from .constraints import Bounds, Box, ConstraintStage, Outcome, active_limits
 from .escape import SaddleEscape
 from .exceptions import ConcurrentStepError
 from .gains import FixedGain, Gain, as_gain
 from .joint_ranges import outside
 from .limits import AccelerationLimit, JerkLimit, Limit, Motion, PositionLimit, VelocityLimit
-from .limits.position import braking_speed
+from .limits.position import BRAKING_RESERVE, braking_speed
 from .methods import Method
 from .options import SolverOptions
 from .robot import Robot
@@ -144,16 +148,22 @@ class Solver:
         self.stage = ConstraintStage(
             [x for x in (self.position_limit, self.velocity_limit, accel, jerk, *extra)
              if x is not None], moving, robot.velocity_names, stack.target_dim)
+        #: the compiled kernel runs the acceleration/jerk stage itself (built-in limits only, a
+        #: built-in method): one call per step, its motion state kept in the work vector
+        self._compiled_smooth = accel is not None and not extra and method.kernel is not None
         #: limits the kernel cannot test for the stage: every step goes through it
-        self._staged = bool(extra) or accel is not None or method.kernel is None
-        #: the compiled kernel holds the position and speed bounds itself (no acceleration
-        #: limits, a built-in method): the stage then only checks the user's limits first
-        self._kernel_bounds = accel is None and method.kernel is not None
+        self._staged = bool(extra) or method.kernel is None or (
+            accel is not None and not self._compiled_smooth)
+        #: the compiled kernel holds the position and speed bounds itself (a built-in method,
+        #: and no acceleration limits or the compiled stage for them): the stage then only
+        #: checks the user's limits first
+        self._kernel_bounds = method.kernel is not None and (accel is None
+                                                             or self._compiled_smooth)
         self._user_stage = (ConstraintStage(extra, moving, robot.velocity_names, stack.target_dim)
                             if extra else None)
         #: the commanded velocity and acceleration of the last step (the stage's state)
         self._motion = Motion(np.zeros(robot.nq), np.zeros(n), np.zeros(n), 1.0)
-        self._tracks_motion = accel is not None or bool(extra)
+        self._tracks_motion = (accel is not None or bool(extra)) and not self._compiled_smooth
         return speeds
 
     def _build_work(self, speeds: np.ndarray) -> None:
@@ -163,7 +173,8 @@ class Solver:
         # the kernel tests the position and speed box, so that a step within them costs nothing
         # more; beyond them (or with limits it cannot test) the stage takes over
         box = self.position_limit if self._kernel_bounds else None
-        self._layout = layout = K.Layout(stack.dim, n, 0 if box is None else box.q_index.size)
+        self._layout = layout = K.Layout(stack.dim, n, 0 if box is None else box.q_index.size,
+                                         smooth=self._compiled_smooth)
         self._work = work = layout.allocate()
         self._info = layout.info(work)
         layout.sqrt_weight(work)[:] = stack.sqrt_weight
@@ -178,6 +189,8 @@ class Solver:
         self._clamped = layout.clamped_joints(work)
         if self._kernel_bounds:
             layout.inverse_speeds(work)[:] = np.where(np.isfinite(speeds), 1.0 / speeds, 0.0)
+        if self._compiled_smooth:
+            self._fill_smooth(layout, work)
         self._raw_work = work.copy()  # the method alone, for the stage's solves
         self._outcome: Outcome | None = None
         self._outcome_count = -1
@@ -186,6 +199,23 @@ class Solver:
         # converged, not stalled: |e_w| below ERROR_FLOOR times the tasks' length (unit-free)
         work[K.P_STALL_ERROR] = (SaddleEscape.ERROR_FLOOR
                                   * tasks_length(robot, stack.tasks)) ** 2
+
+    def _fill_smooth(self, layout: K.Layout, work: np.ndarray) -> None:
+        """The compiled acceleration/jerk stage's limits; the solver's motion state becomes
+        views on the kernel's (it updates them on every step)."""
+        accel, jerk = self.acceleration_limit, self.jerk_limit
+        assert accel is not None  # the compiled stage is for acceleration limits
+        n = self.robot.nv
+        jerks = np.full(n, np.inf) if jerk is None else jerk.limits
+        work[K.P_JERK] = 0.0 if jerk is None else 1.0
+        for part, values in ((K.SM_ACC, accel.limits), (K.SM_JERK, jerks),
+                             (K.SM_JERK_SPEED, np.full(n, np.inf) if jerk is None
+                              else jerk.speeds),
+                             (K.SM_BRAKE_ACC, (1.0 - BRAKING_RESERVE) * accel.limits),
+                             (K.SM_BRAKE_JERK, (1.0 - BRAKING_RESERVE) * jerks)):
+            layout.smooth_part(work, part)[:] = values
+        self._motion.dq = layout.smooth_part(work, K.SM_DQ)
+        self._motion.ddq = layout.smooth_part(work, K.SM_DDQ)
 
     # -- settings ----------------------------------------------------------------------------
     @property
@@ -331,6 +361,8 @@ class Solver:
             self._stability.check(self.stack.sqrt_weight[:, None] * J * self.stack.chain,
                                   float(self._info[K.I_TRACE]), self._gain.largest, self._dt)
         step, dt = self._step, self._dt
+        if self._staged:  # with this step's escape velocity, as the kernel's step has it
+            step = self._constrain(q, J, e, ff, status, step)
         escape = self.escape
         self._escaped = (self._count, escape is not None and escape.active)
         if escape is not None:
@@ -352,8 +384,6 @@ class Solver:
             else:  # the kernel adds it, within the limits, from the next step on
                 self._work[K.P_ESCAPING] = 1.0
                 self._escape_velocity[:] = velocity
-        if self._staged:
-            step = self._constrain(q, J, e, ff, status, step)
         self._update_slow()
         return step
 
@@ -498,6 +528,8 @@ class Solver:
         see :attr:`StepInfo.task_scale`), without building :attr:`last`."""
         if self._outcome is not None and self._outcome_count == self._count:
             return float(self._outcome.scale)
+        if self._compiled_smooth and self._record is not None:
+            return float(self._info[K.I_SCALE])
         return 1.0
 
     @property
@@ -518,7 +550,9 @@ class Solver:
             alpha = self.method.scaling_factors(Jw)
             escaped = self._escaped[1] and self._escaped[0] == self._count
             outcome = self._outcome if self._outcome_count == self._count else None
-            if outcome is None and status & (K.CLAMPED | K.SCALED):
+            if outcome is None and self._compiled_smooth and not status & K.NON_FINITE:
+                outcome = self._smooth_outcome()
+            elif outcome is None and status & (K.CLAMPED | K.SCALED):
                 outcome = self._kernel_outcome(q, step, status)
             if outcome is None:
                 outcome = Outcome(step / self._dt)
@@ -562,6 +596,28 @@ class Solver:
             elif velocity is not None and abs(dq[j]) >= velocity.limits[j] * (1 - 1e-12):
                 pairs.append(("velocity", self._v_names[j]))
         return Outcome(dq, scale, self._clamped != 0.0, tuple(pairs))
+
+    def _smooth_outcome(self) -> Outcome:
+        """What the compiled acceleration/jerk stage did (its boxes and the limits that set
+        them, left in the work vector), in the stage's terms (see
+        :meth:`~sjt_pin.constraints.ConstraintStage.enforce`)."""
+        layout, work = self._layout, self._work
+
+        def part(k):
+            return layout.smooth_part(work, k)
+
+        hard = Bounds(part(K.SM_HARD_LO), part(K.SM_HARD_HI),
+                      part(K.SM_HARD_LO_BY).astype(np.int64),
+                      part(K.SM_HARD_HI_BY).astype(np.int64))
+        soft = Bounds(part(K.SM_SOFT_LO), part(K.SM_SOFT_HI),
+                      part(K.SM_SOFT_LO_BY).astype(np.int64),
+                      part(K.SM_SOFT_HI_BY).astype(np.int64))
+        dq = part(K.SM_OUT).copy()
+        active = active_limits(dq, Box(hard, soft), K.LIMIT_NAMES, self._v_names,
+                               part(K.SM_DESIRED))
+        torn = np.flatnonzero(part(K.SM_TORN))
+        return Outcome(dq, float(self._info[K.I_SCALE]), self._clamped != 0.0, active,
+                       conflict=tuple(self._v_names[j] for j in torn))
 
     # -- safeguards ----------------------------------------------------------------------------
     def _raise_non_finite(self, q: np.ndarray, targets) -> None:

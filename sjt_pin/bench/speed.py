@@ -26,6 +26,10 @@ from ..tracking import track
 from ..trajectories import Circle
 
 ROBOTS = ("ur5", "panda", "kinova")
+#: a pose with acceleration (and jerk) limits: the constraint stage's compiled smoothing
+ACCELERATION_PATHS = (("SJT pose, acceleration limits", {"acceleration_limits": 10.0}),
+                      ("SJT pose, acceleration and jerk limits",
+                       {"acceleration_limits": 10.0, "jerk_limits": 5000.0}))
 #: serial chains (random axes, seeded) timed with a pose task plus a posture task
 CHAIN_JOINTS = (30, 100)
 #: Start configurations inside the limits and away from singularities.
@@ -301,9 +305,8 @@ def speed(robots=ROBOTS, steps: int = 5000, warmup: int = 500, peers: bool = Fal
             add(time_path(robot, q0, Path(label, options=options, feedforward=ff), steps,
                           warmup, frames=TWO_FRAMES[name]))
         add(time_track(robot, q0, steps))
-        add(time_path(robot, q0, Path("SJT pose, acceleration limits (Python stage)",
-                                      options={"acceleration_limits": 10.0}),
-                      steps // 5, warmup // 5))
+        for label, options in ACCELERATION_PATHS:
+            add(time_path(robot, q0, Path(label, options=options), steps, warmup))
         if peers:
             add(time_pink(robot, q0, steps, warmup))
     for joints in CHAIN_JOINTS:

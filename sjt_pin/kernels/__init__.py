@@ -11,7 +11,9 @@ against the numpy reference formulas of :mod:`sjt_pin.mappings` and against Pino
 - ``transpose_step(J, e, ff, q, work, step)``: one step of a Jacobian-transpose-type CLIK law
   (JT eq. 10, SJT eq. 21, and the damped forms: ``D J_w^T (J_w D J_w^T + lambda I)^-1``), then
   the position box and speed test; ``least_squares_step``: the pseudoinverse (eq. 8) or damped
-  least squares; both return the status bits of :mod:`.layout`;
+  least squares; both return the status bits of :mod:`.layout`. A work vector laid out with
+  ``Layout(..., smooth=True)`` makes them run the acceleration/jerk constraint stage too (its
+  reference: :mod:`sjt_pin.constraints` and :mod:`sjt_pin.limits`);
 - ``search_iteration(...)``: one Levenberg-Marquardt iteration of ``solve()`` on SJT's
   normalised columns, within the joint limits; ``search_pose(...)``: every iteration of one
   start on a single pose task in one call (it calls Pinocchio's Jacobian once per iteration);

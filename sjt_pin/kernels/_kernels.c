@@ -24,21 +24,33 @@
     X(P_SCALED) X(P_RCOND) X(P_LENGTH2) X(P_FB_MODE) X(P_LM) X(P_ERROR_ROWS) X(P_STALL_RATIO) \
     X(P_STALL_ERROR) X(P_ROWS) X(P_MASK) X(P_BOX) X(P_BOX_COUNT) X(P_SPEED) X(P_SCRATCH) \
     X(P_EXTRA) X(P_CLAMPED) X(P_ESCAPING) X(P_HAS_FF) X(P_IDENTITY_ROWS) X(P_STALL_RUN) \
-    X(P_STALL_WAIT)
+    X(P_STALL_WAIT) X(P_SMOOTH) X(P_JERK)
 #define RESULTS(X) X(I_E_SQ) X(I_FF_SQ) X(I_GAIN) X(I_LOOP) X(I_STALL) X(I_TRACE) X(I_EW_SQ) \
     X(I_SCALE) X(I_REGULAR)
 #define SEARCH_STATE(X) X(S_F) X(S_NU) X(S_ITER) X(S_BEST) X(S_STALE) X(S_TOL_SQ) \
     X(S_MAX_STEP) X(S_ERROR_ROWS) X(S_E_SQ) \
     X(S_STALE_LIMIT) X(S_PROGRESS) \
     X(S_HELD_BEST) X(S_HELD_STALE) X(S_HELD_LIMIT) X(S_HELD_PROGRESS)
+/* the acceleration/jerk stage's part of work (at P_SMOOTH; n numbers each, then m): the
+ * motion state, the limits, the step's boxes and what they did (see smooth_stage_c) */
+#define SMOOTH_PARTS(X) X(SM_DQ) X(SM_DDQ) X(SM_ACC) X(SM_JERK) X(SM_JERK_SPEED) \
+    X(SM_BRAKE_ACC) X(SM_BRAKE_JERK) X(SM_HARD_LO) X(SM_HARD_HI) X(SM_SOFT_LO) X(SM_SOFT_HI) \
+    X(SM_HARD_LO_BY) X(SM_HARD_HI_BY) X(SM_SOFT_LO_BY) X(SM_SOFT_HI_BY) X(SM_DESIRED) \
+    X(SM_OUT) X(SM_TORN) X(SM_FF) X(SM_GAINS)
+/* which limit set a bound of the acceleration/jerk stage's boxes (its *_BY parts) */
+#define LIMIT_CODES(X) X(L_POSITION) X(L_VELOCITY) X(L_ACCELERATION) X(L_JERK)
 #define SLOT_ENUM(name) name,
 #define SLOT_NAME(name) #name,
 enum { PARAMETERS(SLOT_ENUM) P_COUNT };
 enum { RESULTS(SLOT_ENUM) I_COUNT };
 enum { SEARCH_STATE(SLOT_ENUM) S_COUNT };
+enum { SMOOTH_PARTS(SLOT_ENUM) SM_COUNT };
+enum { LIMIT_CODES(SLOT_ENUM) L_COUNT };
 static const char *const PARAMETER_NAMES[] = { PARAMETERS(SLOT_NAME) };
 static const char *const RESULT_NAMES[] = { RESULTS(SLOT_NAME) };
 static const char *const SEARCH_STATE_NAMES[] = { SEARCH_STATE(SLOT_NAME) };
+static const char *const SMOOTH_PART_NAMES[] = { SMOOTH_PARTS(SLOT_NAME) };
+static const char *const LIMIT_CODE_NAMES[] = { LIMIT_CODES(SLOT_NAME) };
 /* the results follow the parameters */
 #define INFO P_COUNT
 #define GAIN_FIXED 0
@@ -533,6 +545,9 @@ static Core core(int kind, Mat J, const double *e, const double *ff, int has_ff,
 /* the free joints span the task space while the smallest singular value of their normalised
  * task columns is above this fraction of the largest (Flacco's rank test) */
 #define RANK_TOL 1e-6
+/* the braking speed's root search (sjt_pin/limits/position.py, BRAKING_TOL, BRAKING_STEPS) */
+#define BRAKING_TOL 9.094947017729282e-13
+#define BRAKING_STEPS 60
 
 /* The largest s in [0, 1] with lower <= b + s a <= upper on the free joints, and the joint
  * that limits it (*k; -1 when s = 1 fits); -1 when no s fits (constraints.task_scale). */
@@ -610,62 +625,58 @@ static void exact_position(const double *q, const double *work, double *step)
     }
 }
 
-/* The position (onto the range, or back into it at the recovery speed) and speed bounds of
- * this step, then Saturation in the Null Space on them (sjt_pin/constraints.py, step 1): the
- * joint that limits the task most is held at its bound and the method solved again on the
- * others; when the free joints no longer span the task, the best candidate so far wins (the
- * method's own velocity scaled down as a whole is the first). Writes step; returns CLAMPED
- * when joints are held and SCALED when the task was scaled, 0 when nothing bounded it. */
-static int saturate_c(int kind, Mat J, const double *e, const double *ff, int has_ff,
-                      const double *q, const double *mask, double *work, double *step,
-                      int escaping)
+/* core() with the gain of the feedback K e times `factor` (1: the step's own, recomputed on the
+ * joints of mask for "auto"; else the fixed gain factor K, times the step's "auto" gain
+ * info[I_GAIN]): the stage's re-solves after the feedback was slowed (Solver._constrain's
+ * solve(free, held, scale)). `save` holds m numbers while the gains are changed. */
+static void core_scaled(int kind, Mat J, const double *e, const double *ff, int has_ff,
+                        const double *mask, double *work, double *step, double factor,
+                        double *save)
+{
+    if (factor == 1.0) {
+        core(kind, J, e, ff, has_ff, mask, work, step);
+        return;
+    }
+    Py_ssize_t m = J.m;
+    double *k = work + (Py_ssize_t)work[P_ROWS] + m;
+    double mode = work[P_GAIN_MODE];
+    memcpy(save, k, (size_t)m * sizeof(double));
+    for (Py_ssize_t i = 0; i < m; i++) {
+        k[i] = k[i] * factor;
+        if (mode != GAIN_FIXED) k[i] *= work[INFO + I_GAIN];
+    }
+    work[P_GAIN_MODE] = GAIN_FIXED;
+    core(kind, J, e, ff, has_ff, mask, work, step);
+    work[P_GAIN_MODE] = mode;
+    memcpy(k, save, (size_t)m * sizeof(double));
+}
+
+/* Saturation in the Null Space (sjt_pin/constraints.py, saturate) on the box [lo, hi] (rad/s):
+ * the joint that limits the task most is held at its bound and the method solved again on the
+ * others (gain factor `factor`, see core_scaled); when the free joints no longer span the task,
+ * the best candidate so far wins (the velocity `dq` scaled down as a whole is the first). `dq`
+ * (rad/s) is overwritten with the result; the held joints are left in work's clamped part.
+ * Returns CLAMPED when joints are held and SCALED when the task was scaled; *scale_out is the
+ * task scale. */
+static int sns_c(int kind, Mat J, const double *e, const double *ff, int has_ff,
+                 const double *mask, double *work, const double *lo, const double *hi,
+                 double *dq, double factor, double *save, int escaping, double *scale_out)
 {
     Py_ssize_t m = J.m, n = J.n;
     double dt = work[P_DT];
-    Py_ssize_t box = (Py_ssize_t)work[P_BOX], count = (Py_ssize_t)work[P_BOX_COUNT];
-    Py_ssize_t speed = (Py_ssize_t)work[P_SPEED], extra = (Py_ssize_t)work[P_EXTRA];
+    Py_ssize_t extra = (Py_ssize_t)work[P_EXTRA];
     double *held = work + (Py_ssize_t)work[P_CLAMPED];
-    double *lo = held + n, *hi = lo + n, *a = hi + n, *b = a + n, *hv = b + n, *free_ = hv + n;
+    double *a = held + 3 * n, *b = a + n, *hv = b + n, *free_ = hv + n;
     double *best_a = free_ + n, *best_b = best_a + n, *best_hv = best_b + n;
     double *best_held = best_hv + n, *ff2 = best_held + n, *G = ff2 + m, *norm = G + m * m;
     const double *sw = work + (Py_ssize_t)work[P_ROWS];
     Py_ssize_t rows = (Py_ssize_t)work[P_ERROR_ROWS];
     for (Py_ssize_t j = 0; j < n; j++) {
-        double inv = work[speed + j], vmax = inv > 0.0 ? 1.0 / inv : INFINITY;
-        lo[j] = -vmax;
-        hi[j] = vmax;
-        held[j] = 0.0;
-    }
-    for (Py_ssize_t c = 0; c < count; c++) {
-        Py_ssize_t v = (Py_ssize_t)work[box + count + c];
-        double x = q[(Py_ssize_t)work[box + c]];
-        double lower = work[box + 2 * count + c], upper = work[box + 3 * count + c];
-        double back = work[box + 4 * count + c];
-        if (x > upper) {
-            lo[v] = hi[v] = -dmin(back, (x - upper) / dt);
-        } else if (x < lower) {
-            lo[v] = hi[v] = dmin(back, (lower - x) / dt);
-        } else {
-            lo[v] = dmax(lo[v], (lower - x) / dt);
-            hi[v] = dmin(hi[v], (upper - x) / dt);
-        }
-    }
-    int inside = 1;
-    for (Py_ssize_t j = 0; j < n; j++) {
-        if (mask[j] == 0.0) {
-            lo[j] = dmin(lo[j], 0.0);
-            hi[j] = dmax(hi[j], 0.0);
-        }
-        a[j] = step[j] / dt;
+        a[j] = dq[j];
         b[j] = 0.0;
         hv[j] = 0.0;
+        held[j] = 0.0;
         free_[j] = mask[j] != 0.0 ? mask[j] : 0.0;
-        if (a[j] < lo[j] - BOUND_TOL || a[j] > hi[j] + BOUND_TOL) inside = 0;
-    }
-    work[INFO + I_SCALE] = 1.0;
-    if (inside) {
-        exact_position(q, work, step);
-        return 0;
     }
     Py_ssize_t k;
     double best = task_scale_c(a, b, lo, hi, free_, n, &k);
@@ -694,7 +705,7 @@ static int saturate_c(int kind, Mat J, const double *e, const double *ff, int ha
         for (Py_ssize_t j = 0; j < n; j++) left |= free_[j] != 0.0;
         if (!left) break;
         /* a = M_free(v); b = M_free(v - J hv) - a */
-        core(kind, J, e, ff, has_ff, free_, work, a);
+        core_scaled(kind, J, e, ff, has_ff, free_, work, a, factor, save);
         int moving = 0;  /* held joints at rest leave the others nothing to make up for */
         for (Py_ssize_t j = 0; j < n; j++) moving |= hv[j] != 0.0;
         if (moving) {
@@ -703,7 +714,7 @@ static int saturate_c(int kind, Mat J, const double *e, const double *ff, int ha
                 for (Py_ssize_t j = 0; j < n; j++) acc -= AT(J, i, j) * hv[j];
                 ff2[i] = acc;
             }
-            core(kind, J, e, ff2, 1, free_, work, b);
+            core_scaled(kind, J, e, ff2, 1, free_, work, b, factor, save);
         }
         for (Py_ssize_t j = 0; j < n; j++) {
             a[j] /= dt;
@@ -716,14 +727,363 @@ static int saturate_c(int kind, Mat J, const double *e, const double *ff, int ha
     for (Py_ssize_t j = 0; j < n; j++) {
         double v = best_held[j] != 0.0 ? best_hv[j] : best_b[j] + scale * best_a[j];
         if (mask[j] == 0.0) v = 0.0;
-        v = dmin(dmax(v, lo[j]), hi[j]);
-        step[j] = v * dt;
+        dq[j] = dmin(dmax(v, lo[j]), hi[j]);
         held[j] = best_held[j];
         if (held[j] != 0.0) status |= CLAMPED;
     }
-    exact_position(q, work, step);
-    work[INFO + I_SCALE] = best >= 0.0 ? scale : 0.0;
+    *scale_out = best >= 0.0 ? scale : 0.0;
     if (scale < 1.0) status |= SCALED;
+    return status;
+}
+
+/* The position (onto the range, or back into it at the recovery speed) and speed bounds of
+ * this step, then Saturation in the Null Space on them (sns_c). Writes step; returns CLAMPED
+ * when joints are held and SCALED when the task was scaled, 0 when nothing bounded it. */
+static int saturate_c(int kind, Mat J, const double *e, const double *ff, int has_ff,
+                      const double *q, const double *mask, double *work, double *step,
+                      int escaping)
+{
+    Py_ssize_t n = J.n;
+    double dt = work[P_DT];
+    Py_ssize_t box = (Py_ssize_t)work[P_BOX], count = (Py_ssize_t)work[P_BOX_COUNT];
+    Py_ssize_t speed = (Py_ssize_t)work[P_SPEED];
+    double *held = work + (Py_ssize_t)work[P_CLAMPED];
+    double *lo = held + n, *hi = lo + n, *a = hi + n;
+    for (Py_ssize_t j = 0; j < n; j++) {
+        double inv = work[speed + j], vmax = inv > 0.0 ? 1.0 / inv : INFINITY;
+        lo[j] = -vmax;
+        hi[j] = vmax;
+        held[j] = 0.0;
+    }
+    for (Py_ssize_t c = 0; c < count; c++) {
+        Py_ssize_t v = (Py_ssize_t)work[box + count + c];
+        double x = q[(Py_ssize_t)work[box + c]];
+        double lower = work[box + 2 * count + c], upper = work[box + 3 * count + c];
+        double back = work[box + 4 * count + c];
+        if (x > upper) {
+            lo[v] = hi[v] = -dmin(back, (x - upper) / dt);
+        } else if (x < lower) {
+            lo[v] = hi[v] = dmin(back, (lower - x) / dt);
+        } else {
+            lo[v] = dmax(lo[v], (lower - x) / dt);
+            hi[v] = dmin(hi[v], (upper - x) / dt);
+        }
+    }
+    int inside = 1;
+    for (Py_ssize_t j = 0; j < n; j++) {
+        if (mask[j] == 0.0) {
+            lo[j] = dmin(lo[j], 0.0);
+            hi[j] = dmax(hi[j], 0.0);
+        }
+        a[j] = step[j] / dt;
+        if (a[j] < lo[j] - BOUND_TOL || a[j] > hi[j] + BOUND_TOL) inside = 0;
+    }
+    work[INFO + I_SCALE] = 1.0;
+    if (inside) {
+        exact_position(q, work, step);
+        return 0;
+    }
+    /* a is sns_c's first candidate, and its result */
+    double scale;
+    int status = sns_c(kind, J, e, ff, has_ff, mask, work, lo, hi, a, 1.0, NULL, escaping,
+                       &scale);
+    for (Py_ssize_t j = 0; j < n; j++) step[j] = a[j] * dt;
+    exact_position(q, work, step);
+    work[INFO + I_SCALE] = scale;
+    return status;
+}
+
+/* -- the acceleration and jerk stage, compiled (sjt_pin/constraints.py and sjt_pin/limits are
+ * its reference: Solver._constrain, _brake_feedback, ConstraintStage.box/enforce, smooth,
+ * PositionLimit.bounds, braking_speed, stopping_distance, AccelerationLimit, JerkLimit) --- */
+
+/* Distance (rad or m) to stop from velocity w > 0 with acceleration a0 along it, braking at the
+ * acceleration limit A reached and left at the jerk limit J (inf: instantly); see
+ * sjt_pin/limits/position.py, stopping_distance. */
+static double stopping_distance_c(double w, double a0, double A, double J)
+{
+    int finite = isfinite(J);
+    double inv_j = finite ? 1.0 / J : 0.0, jerk = finite ? J : 0.0;
+    double up = dmax(a0, 0.0);  /* speeding up: ramp a0 down to 0 first */
+    double t0 = up * inv_j;
+    double d0 = w * t0 + up * t0 * t0 / 3.0;
+    w = w + 0.5 * up * up * inv_j;
+    double beta = dmax(-a0, 0.0);  /* already braking at beta */
+    if (beta * beta >= 2.0 * jerk * w) {  /* the velocity reaches 0 while it ramps down */
+        double ts = (beta - sqrt(dmax(beta * beta - 2.0 * jerk * w, 0.0))) * inv_j;
+        return d0 + (w * ts - 0.5 * beta * ts * ts + jerk * ts * ts * ts / 6.0);
+    }
+    /* trapezoid: move beta to A, hold A, ramp A -> 0 */
+    double sign = beta > A ? 1.0 : -1.0;
+    double t1 = fabs(A - beta) * inv_j;
+    double d1 = w * t1 - 0.5 * beta * t1 * t1 + sign * jerk * t1 * t1 * t1 / 6.0;
+    double v1 = w - beta * t1 + 0.5 * sign * jerk * t1 * t1;
+    double v2 = 0.5 * A * A * inv_j;
+    if (v1 >= v2) {
+        double t2 = dmax(v1 - v2, 0.0) / A;
+        return d0 + (d1 + v1 * t2 - 0.5 * A * t2 * t2 + A * A * A * inv_j * inv_j / 6.0);
+    }
+    /* triangle: a peak a_p, then back to 0 */
+    double a_p = sqrt(dmax(w * jerk + 0.5 * beta * beta, 0.0));
+    double ta = (a_p - beta) * inv_j;
+    return d0 + (w * ta - 0.5 * beta * ta * ta - jerk * ta * ta * ta / 6.0
+                 + a_p * a_p * a_p * inv_j * inv_j / 6.0);
+}
+
+/* x dt + stopping_distance(x, (x - v) / dt) - room: > 0 where a velocity x toward a point
+ * room away cannot stop before it (sjt_pin/limits/position.py, _overshoot) */
+static double overshoot_c(double x, double v, double room, double dt, double A, double J)
+{
+    double d = x > 0.0 ? stopping_distance_c(dmax(x, 0.0), (x - v) / dt, A, J) : 0.0;
+    return x * dt + d - room;
+}
+
+/* The largest velocity toward a point `room` away after which a joint can still stop before it
+ * within the acceleration limit A and (with has_jerk) the jerk limit J; v is its previous
+ * velocity toward that point: the root of the overshoot by regula falsi with the Illinois
+ * modification (sjt_pin/limits/position.py, braking_speed). */
+static double braking_speed_c(double room, double v, double dt, double A, double J,
+                              int has_jerk)
+{
+    if (!isfinite(A)) return INFINITY;
+    room = dmax(room, 0.0);
+    if (!has_jerk) return A * (-dt + sqrt(dt * dt + 2.0 * room / A));
+    double top = fabs(v) + 2.0 * A * dt;
+    if (!(room < top * dt + stopping_distance_c(top, 2.0 * A, A, J))) return INFINITY;
+    double low = v - 2.0 * A * dt, high = v + 2.0 * A * dt;
+    double f_hi = overshoot_c(high, v, room, dt, A, J);
+    if (f_hi <= 0.0) return INFINITY;  /* the fastest step fits: no bound */
+    double f_lo = overshoot_c(low, v, room, dt, A, J);
+    if (f_lo > 0.0) return low;  /* nothing fits: the slowest step */
+    double lo = low, hi = high;
+    if (low <= 0.0 && high > 0.0) {  /* x <= 0 fits; just above 0 the overshoot may jump */
+        double f_zero = stopping_distance_c(0.0, -v / dt, A, J) - room;
+        if (f_zero > 0.0) return 0.0;
+        lo = 0.0;
+        f_lo = f_zero;
+    }
+    double tol = (high - low) * BRAKING_TOL, side = 0.0;
+    for (int i = 0; i < BRAKING_STEPS && hi - lo > tol; i++) {
+        double x = lo - f_lo * (hi - lo) / (f_hi - f_lo);
+        if (!(x > lo && x < hi)) x = 0.5 * (lo + hi);
+        double fx = overshoot_c(x, v, room, dt, A, J);
+        if (fx <= 0.0) {
+            if (side < 0.0) f_hi = 0.5 * f_hi;
+            lo = x;
+            f_lo = fx;
+            side = -1.0;
+        } else {
+            if (side > 0.0) f_lo = 0.5 * f_lo;
+            hi = x;
+            f_hi = fx;
+            side = 1.0;
+        }
+    }
+    return lo;
+}
+
+/* The acceleration/jerk stage on the method's step (rad, overwritten): the feedback slowed so
+ * that every joint can stop where the error says the target is; the hard box (position braking
+ * within the acceleration and jerk limits, speeds) and the smoothness box (acceleration, jerk,
+ * the jerk's approach to the speed limits); SNS on the hard box; the move from the previous
+ * velocity toward the result along a line as far as the smoothness box allows, the hard box
+ * winning; exactly onto a position limit; and the motion state (previous velocity and
+ * acceleration) updated. The boxes, the limits that set them (L_* codes, -1 none), the
+ * velocity before smoothing and the joints where the hard box won stay in work for StepInfo.
+ * Returns CLAMPED / SCALED as saturate_c. */
+static int smooth_stage_c(int kind, Mat J, const double *e, const double *ff, int has_ff,
+                          const double *q, const double *mask, double *work, double *step,
+                          int escaping)
+{
+    Py_ssize_t n = J.n, m = J.m;
+    double dt = work[P_DT];
+    double *S = work + (Py_ssize_t)work[P_SMOOTH];
+    double *pdq = S + SM_DQ * n, *pddq = S + SM_DDQ * n, *A = S + SM_ACC * n;
+    double *Jk = S + SM_JERK * n, *vj = S + SM_JERK_SPEED * n, *BA = S + SM_BRAKE_ACC * n;
+    double *BJ = S + SM_BRAKE_JERK * n, *hlo = S + SM_HARD_LO * n, *hhi = S + SM_HARD_HI * n;
+    double *slo = S + SM_SOFT_LO * n, *shi = S + SM_SOFT_HI * n;
+    double *hlb = S + SM_HARD_LO_BY * n, *hhb = S + SM_HARD_HI_BY * n;
+    double *slb = S + SM_SOFT_LO_BY * n, *shb = S + SM_SOFT_HI_BY * n;
+    double *desired = S + SM_DESIRED * n, *out = S + SM_OUT * n, *torn = S + SM_TORN * n;
+    double *dqff = S + SM_FF * n, *save = S + SM_GAINS * n;
+    double *held = work + (Py_ssize_t)work[P_CLAMPED];
+    int has_jerk = work[P_JERK] != 0.0;
+    Py_ssize_t extra = (Py_ssize_t)work[P_EXTRA], speed = (Py_ssize_t)work[P_SPEED];
+    Py_ssize_t box = (Py_ssize_t)work[P_BOX], count = (Py_ssize_t)work[P_BOX_COUNT];
+    for (Py_ssize_t j = 0; j < n; j++) out[j] = step[j] / dt;
+    /* 1. the feedback, slowed so that a stop at the target fits the acceleration limits */
+    double factor = 1.0;
+    if (has_ff) {  /* (without a feed-forward the method maps 0 to 0: no solve) */
+        core_scaled(kind, J, e, ff, has_ff, mask, work, dqff, 0.0, save);
+    } else {
+        for (Py_ssize_t j = 0; j < n; j++) dqff[j] = 0.0;
+    }
+    for (Py_ssize_t j = 0; j < n; j++)
+        dqff[j] = escaping ? (dqff[j] + dt * work[extra + j]) / dt : dqff[j] / dt;
+    Py_ssize_t rows_e = (Py_ssize_t)work[P_ERROR_ROWS];
+    const double *gains = work + (Py_ssize_t)work[P_ROWS] + m;
+    double k = 0.0;
+    for (Py_ssize_t i = 0; i < rows_e; i++) k += gains[i];
+    k /= (double)rows_e;
+    if (work[P_GAIN_MODE] != GAIN_FIXED) k *= work[INFO + I_GAIN];
+    if (k > 0.0) {
+        double size = 0.0, dot = 0.0, a_min = INFINITY;
+        for (Py_ssize_t j = 0; j < n; j++) {
+            double fb = out[j] - dqff[j], d = fb / k;
+            size += d * d;
+            dot += fb * d;
+            if (fabs(d) > 0.0) a_min = dmin(a_min, A[j] / fabs(d));
+        }
+        double rate = size > 0.0 ? dot / size : 0.0;
+        if (rate > 0.0) {
+            double allowed = isfinite(a_min) ? a_min * (-dt + sqrt(dt * dt + 2.0 * 1.0 / a_min))
+                                             : INFINITY;
+            double sigma = dmin(1.0, dmax(allowed, 0.0) / rate);
+            if (sigma < 1.0) {
+                for (Py_ssize_t j = 0; j < n; j++) out[j] = dqff[j] + sigma * (out[j] - dqff[j]);
+                factor = sigma;
+            }
+        }
+    }
+    /* 2. the hard box: position braking (or the way back into the range), speeds */
+    for (Py_ssize_t j = 0; j < n; j++) {
+        hlo[j] = -INFINITY;
+        hhi[j] = INFINITY;
+        hlb[j] = hhb[j] = -1.0;
+    }
+    for (Py_ssize_t c = 0; c < count; c++) {
+        Py_ssize_t v = (Py_ssize_t)work[box + count + c];
+        double x = q[(Py_ssize_t)work[box + c]];
+        double lower = work[box + 2 * count + c], upper = work[box + 3 * count + c];
+        double room_up = upper - x, room_down = x - lower, vv = pdq[v], aa = pddq[v];
+        double up = dmin(braking_speed_c(room_up, vv, dt, BA[v], BJ[v], has_jerk), room_up / dt);
+        double lw = -dmin(braking_speed_c(room_down, -vv, dt, BA[v], BJ[v], has_jerk),
+                          room_down / dt);
+        int above = room_up < 0.0, below = room_down < 0.0;
+        if (above || below) {  /* back toward the range, a ramp within the limits */
+            double rec = work[box + 4 * count + c];
+            double toward = above ? -vv : vv;
+            double cap = dmin(rec, (above ? room_down : room_up) / dt);
+            double push = BA[v], Jb = BJ[v];
+            if (has_jerk && isfinite(Jb)) {
+                double gap = dmax(cap - toward, 0.0);
+                push = dmin(dmin(BA[v], dmax(above ? -aa : aa, 0.0) + Jb * dt),
+                            sqrt((0.5 * Jb * dt) * (0.5 * Jb * dt) + 2.0 * Jb * gap)
+                            - 0.5 * Jb * dt);
+            }
+            double back = dmin(cap, toward + push * dt);
+            lw = up = above ? -back : back;
+        }
+        if (lw > hlo[v]) {
+            hlo[v] = lw;
+            hlb[v] = L_POSITION;
+        }
+        if (up < hhi[v]) {
+            hhi[v] = up;
+            hhb[v] = L_POSITION;
+        }
+    }
+    int inside = 1;
+    for (Py_ssize_t j = 0; j < n; j++) {
+        double inv = work[speed + j];
+        if (inv > 0.0) {
+            double vmax = 1.0 / inv;
+            if (-vmax > hlo[j]) {
+                hlo[j] = -vmax;
+                hlb[j] = L_VELOCITY;
+            }
+            if (vmax < hhi[j]) {
+                hhi[j] = vmax;
+                hhb[j] = L_VELOCITY;
+            }
+        }
+        if (mask[j] == 0.0) {  /* joints the solver does not move stay at rest */
+            hlo[j] = dmin(hlo[j], 0.0);
+            hhi[j] = dmax(hhi[j], 0.0);
+        }
+        if (out[j] < hlo[j] - BOUND_TOL || out[j] > hhi[j] + BOUND_TOL) inside = 0;
+        /* 3. the smoothness box: acceleration, jerk (and its approach to the speed limit) */
+        double change = A[j] * dt, lo = pdq[j] - change, hi = pdq[j] + change;
+        slo[j] = -INFINITY;
+        shi[j] = INFINITY;
+        slb[j] = shb[j] = -1.0;
+        if (lo > slo[j]) {
+            slo[j] = lo;
+            slb[j] = L_ACCELERATION;
+        }
+        if (hi < shi[j]) {
+            shi[j] = hi;
+            shb[j] = L_ACCELERATION;
+        }
+        if (has_jerk && isfinite(Jk[j])) {
+            change = Jk[j] * dt;
+            lo = pdq[j] + dt * (pddq[j] - change);
+            hi = pdq[j] + dt * (pddq[j] + change);
+            double left = dmax(vj[j] - pdq[j], 0.0);
+            double bound = pdq[j] + dt * (Jk[j] * (-dt + sqrt(dt * dt + 2.0 * left / Jk[j])));
+            if (isfinite(bound)) hi = dmin(hi, bound);
+            left = dmax(vj[j] + pdq[j], 0.0);
+            bound = pdq[j] - dt * (Jk[j] * (-dt + sqrt(dt * dt + 2.0 * left / Jk[j])));
+            if (isfinite(bound)) lo = dmax(lo, bound);
+            if (lo > slo[j]) {
+                slo[j] = lo;
+                slb[j] = L_JERK;
+            }
+            if (hi < shi[j]) {
+                shi[j] = hi;
+                shb[j] = L_JERK;
+            }
+        }
+        if (slo[j] > shi[j])  /* limits that contradict each other: the middle */
+            slo[j] = shi[j] = 0.5 * (slo[j] + shi[j]);
+        held[j] = 0.0;
+    }
+    /* 4. SNS on the hard box */
+    double scale = 1.0;
+    int status = 0;
+    if (!inside)
+        status = sns_c(kind, J, e, ff, has_ff, mask, work, hlo, hhi, out, factor, save,
+                       escaping, &scale);
+    work[INFO + I_SCALE] = scale;
+    /* 5. reach the wanted velocity without overshooting it (the jerk's approach bounds),
+     * then along the line from the smoothness box's centre, the hard box winning */
+    double tau = 1.0;
+    for (Py_ssize_t j = 0; j < n; j++) {
+        desired[j] = out[j];
+        if (has_jerk && isfinite(Jk[j])) {
+            double gap = out[j] - pdq[j];
+            double a_max = Jk[j] * (-dt + sqrt(dt * dt + 2.0 * fabs(gap) / Jk[j]));
+            double room = isfinite(a_max) ? dt * a_max : INFINITY;
+            double lo = gap < 0.0 ? pdq[j] - room : -INFINITY;
+            double hi = gap > 0.0 ? pdq[j] + room : INFINITY;
+            slo[j] = dmax(slo[j], dmin(lo, shi[j]));
+            shi[j] = dmin(shi[j], dmax(hi, slo[j]));
+        }
+        double l = isfinite(slo[j]) ? slo[j] : shi[j], u = isfinite(shi[j]) ? shi[j] : slo[j];
+        double base = 0.5 * (l + u);
+        if (!isfinite(base)) base = out[j];
+        double both_lo = dmax(slo[j], hlo[j]), both_hi = dmin(shi[j], hhi[j]);
+        if (both_lo <= both_hi) base = dmin(dmax(base, both_lo), both_hi);
+        dqff[j] = base;
+        double change = out[j] - base;
+        double room = change > 0.0 ? (shi[j] - base) / change
+                      : change < 0.0 ? (slo[j] - base) / change : INFINITY;
+        tau = dmin(tau, room);
+    }
+    tau = dmin(dmax(tau, 0.0), 1.0);
+    for (Py_ssize_t j = 0; j < n; j++) {
+        double v = dqff[j] + tau * (out[j] - dqff[j]);
+        torn[j] = v < hlo[j] || v > hhi[j] ? 1.0 : 0.0;
+        out[j] = dmin(dmax(v, hlo[j]), hhi[j]);
+        step[j] = out[j] * dt;
+    }
+    /* 6. exactly onto a position limit; the motion state for the next step */
+    exact_position(q, work, step);
+    for (Py_ssize_t j = 0; j < n; j++) {
+        double v = step[j] / dt;
+        pddq[j] = (v - pdq[j]) / dt;
+        pdq[j] = v;
+    }
     return status;
 }
 
@@ -767,7 +1127,10 @@ static int step_c(int kind, Mat J, const double *e, const double *ff, const doub
     Py_ssize_t extra = (Py_ssize_t)work[P_EXTRA];
     if (escaping)
         for (Py_ssize_t j = 0; j < n; j++) step[j] += dt * work[extra + j];
-    status |= saturate_c(kind, J, e, ff, has_ff, q, mask, work, step, escaping);
+    if (work[P_SMOOTH] > 0.0)  /* acceleration (and jerk) limits: their stage, compiled */
+        status |= smooth_stage_c(kind, J, e, ff, has_ff, q, mask, work, step, escaping);
+    else
+        status |= saturate_c(kind, J, e, ff, has_ff, q, mask, work, step, escaping);
     return status;
 }
 
@@ -1143,6 +1506,9 @@ static int check_work(const Arg *work, Py_ssize_t m, Py_ssize_t n)
     double scratch = w[P_SCRATCH];
     Py_ssize_t p = m < n ? m : n;
     if (!(scratch >= 0 && scratch + 4 * m + 6 * n + 3 * p * p <= size)) goto bad;
+    double smooth = w[P_SMOOTH];  /* the acceleration/jerk stage's part: before the scratch */
+    if (!(smooth == 0.0 || (smooth >= INFO + I_COUNT
+                            && smooth + (SM_COUNT - 1) * n + m <= scratch))) goto bad;
     return 0;
 bad:
     PyErr_Format(PyExc_ValueError, "work does not fit rows of shape (%zd, %zd): make it with "
@@ -1558,6 +1924,11 @@ PyMODINIT_FUNC PyInit__kernels(void)
         if (PyModule_AddIntConstant(m, RESULT_NAMES[i], i) < 0) goto fail;
     for (int i = 0; i < S_COUNT; i++)
         if (PyModule_AddIntConstant(m, SEARCH_STATE_NAMES[i], i) < 0) goto fail;
+    for (int i = 0; i < SM_COUNT; i++)
+        if (PyModule_AddIntConstant(m, SMOOTH_PART_NAMES[i], i) < 0) goto fail;
+    for (int i = 0; i < L_COUNT; i++)
+        if (PyModule_AddIntConstant(m, LIMIT_CODE_NAMES[i], i) < 0) goto fail;
+    if (PyModule_AddIntConstant(m, "SMOOTH_SIZE", SM_COUNT) < 0) goto fail;
     if (PyModule_AddIntConstant(m, "INFO", INFO) < 0
         || PyModule_AddIntConstant(m, "INFO_SIZE", I_COUNT) < 0
         || PyModule_AddIntConstant(m, "STATE_SIZE", S_COUNT) < 0)

@@ -24,6 +24,10 @@ from ._kernels import (  # noqa: F401 (re-exported: the kernels' vocabulary)
     I_TRACE,
     INFO,  # where the results start: after the parameters
     INFO_SIZE,
+    L_ACCELERATION,
+    L_JERK,
+    L_POSITION,
+    L_VELOCITY,
     P_BOX,
     P_BOX_COUNT,
     P_CLAMPED,
@@ -38,6 +42,7 @@ from ._kernels import (  # noqa: F401 (re-exported: the kernels' vocabulary)
     P_GAIN_MODE,
     P_HAS_FF,
     P_IDENTITY_ROWS,
+    P_JERK,
     P_LENGTH2,
     P_LM,
     P_MASK,
@@ -46,6 +51,7 @@ from ._kernels import (  # noqa: F401 (re-exported: the kernels' vocabulary)
     P_ROWS,
     P_SCALED,
     P_SCRATCH,
+    P_SMOOTH,
     P_SPEED,
     P_STALL_ERROR,
     P_STALL_RATIO,
@@ -66,6 +72,27 @@ from ._kernels import (  # noqa: F401 (re-exported: the kernels' vocabulary)
     S_STALE,
     S_STALE_LIMIT,
     S_TOL_SQ,
+    SM_ACC,
+    SM_BRAKE_ACC,
+    SM_BRAKE_JERK,
+    SM_DDQ,
+    SM_DESIRED,
+    SM_DQ,
+    SM_FF,
+    SM_GAINS,
+    SM_HARD_HI,
+    SM_HARD_HI_BY,
+    SM_HARD_LO,
+    SM_HARD_LO_BY,
+    SM_JERK,
+    SM_JERK_SPEED,
+    SM_OUT,
+    SM_SOFT_HI,
+    SM_SOFT_HI_BY,
+    SM_SOFT_LO,
+    SM_SOFT_LO_BY,
+    SM_TORN,
+    SMOOTH_SIZE,
     STATE_SIZE,
 )
 
@@ -88,14 +115,21 @@ BOUND_PRODUCTS = 2
 EIGEN_FLOOR = 1e3 * 2.220446049250313e-16
 
 
+#: the limit that set a bound of the compiled acceleration/jerk stage (its ``SM_*_BY`` parts)
+LIMIT_NAMES = {L_POSITION: "position", L_VELOCITY: "velocity", L_ACCELERATION: "acceleration",
+               L_JERK: "jerk"}
+
+
 class Layout:
     """Offsets of the parts of ``work`` for m task rows, n joints and c position-limited
     joints, and views on them: the header (parameters, results), the rows' weights and gains,
     the joint mask, the position box (q and v indices, lower and upper limits, return speeds),
     the inverse speed limits, an extra joint velocity (the escape's), the clamped joints of the
-    last step, and the scratch space (the clamping's vectors, then the methods')."""
+    last step, with ``smooth`` the compiled acceleration/jerk stage's part (its motion state,
+    limits and the last step's boxes: :meth:`smooth_part`), and the scratch space (the
+    clamping's vectors, then the methods')."""
 
-    def __init__(self, m: int, n: int, c: int):
+    def __init__(self, m: int, n: int, c: int, smooth: bool = False):
         self.m, self.n, self.c = m, n, c
         self.rows = HEADER
         self.mask = self.rows + 2 * m
@@ -105,7 +139,9 @@ class Layout:
         # the held joints of the last step, then the saturation's scratch (bounds, candidates,
         # the re-solve's task velocity, the rank test's Gram matrix)
         self.clamped = self.extra + n
-        self.scratch = self.clamped + 12 * n + m + m * m
+        self.smooth = self.clamped + 12 * n + m + m * m if smooth else 0
+        self.scratch = (self.smooth + (SMOOTH_SIZE - 1) * n + m if smooth
+                        else self.clamped + 12 * n + m + m * m)
         p = min(m, n)
         self.size = self.scratch + 4 * m + 6 * n + 3 * p * p
 
@@ -115,6 +151,7 @@ class Layout:
         work[P_ROWS], work[P_MASK], work[P_BOX] = self.rows, self.mask, self.box
         work[P_BOX_COUNT], work[P_SPEED], work[P_SCRATCH] = self.c, self.speed, self.scratch
         work[P_EXTRA], work[P_CLAMPED] = self.extra, self.clamped
+        work[P_SMOOTH] = self.smooth  # 0: no compiled acceleration/jerk stage
         work[P_STALL_RUN], work[P_STALL_WAIT] = -1.0, np.inf  # no stall counted yet
         return work
 
@@ -147,6 +184,18 @@ class Layout:
     def clamped_joints(self, work: np.ndarray) -> np.ndarray:
         """1 for the joints the last step held at a position or speed bound."""
         return work[self.clamped:self.clamped + self.n]
+
+    def smooth_part(self, work: np.ndarray, part: int) -> np.ndarray:
+        """Part ``part`` (an ``SM_*`` name) of the acceleration/jerk stage's space, (n,) (the
+        saved gains ``SM_GAINS``: (m,)): the previous velocity and acceleration (the state),
+        the acceleration, jerk and jerk-speed limits, the position braking's limits, the last
+        step's hard and smoothness boxes and the limits that set them (``L_*`` codes, -1: none),
+        its velocity before and after smoothing (rad/s), and 1 where the hard box won."""
+        if not self.smooth:
+            raise ValueError("this layout has no acceleration/jerk stage "
+                             "(Layout(..., smooth=True))")
+        start = self.smooth + part * self.n
+        return work[start:start + (self.m if part == SM_GAINS else self.n)]
 
 # -- the set-point search (search_iteration): its state slots (S_*) are imported above ----------
 #: what an iteration reports

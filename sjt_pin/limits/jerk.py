@@ -48,7 +48,8 @@ class JerkLimit(Limit):
         limit before it is reached, ``a^2 / (2 J) + a dt <= |desired - dq|``."""
         dt, J = motion.dt, self.limits
         gap = desired - motion.dq
-        a_max = J * (-dt + np.sqrt(dt * dt + 2.0 * np.abs(gap) / J))
+        with np.errstate(invalid="ignore"):  # inf * 0 where a joint has no jerk limit
+            a_max = J * (-dt + np.sqrt(dt * dt + 2.0 * np.abs(gap) / J))
         step = np.where(np.isfinite(a_max), dt * a_max, np.inf)
         return (np.where(gap < 0, motion.dq - step, -np.inf),
                 np.where(gap > 0, motion.dq + step, np.inf))

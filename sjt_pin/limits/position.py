@@ -16,10 +16,10 @@ class PositionLimit(Limit):
     Bounds each limited joint's velocity so that the step ends inside the range,
     ``q_dot <= (upper - q) / dt``, and — when the solver has acceleration (and jerk) limits —
     so that the joint can still stop before the limit: ``q_dot dt + s(q_dot) <= upper - q``
-    with the stopping distance ``s(v) = v^2 / (2 a) + v a / (2 j)`` of a braking at the
-    acceleration limit ``a`` reached at the jerk limit ``j`` (an upper bound of the exact
-    jerk-limited distance; with the joint still accelerating toward the limit, the distance
-    that ramping that acceleration down adds is counted too). A joint approaching its limit
+    with the exact distance ``s`` of a braking at the acceleration limit reached and left at the
+    jerk limit, from this step's velocity and acceleration (:func:`stopping_distance`; with the
+    joint still accelerating toward the limit, ramping that acceleration down is counted too),
+    planned with :data:`BRAKING_RESERVE` of the limits in reserve. A joint approaching its limit
     thus brakes in time; it never stops in one step. A joint that starts outside its range
     (a start configuration out of range) returns at ``recovery_speeds`` (rad/s or m/s), never
     jumps: with acceleration (and jerk) limits its speed back ramps up within them.
@@ -92,9 +92,12 @@ class PositionLimit(Limit):
             push = A
             if J is not None:  # the acceleration ramps, and ramps down before the cap
                 gap = np.maximum(cap - toward, 0.0)
-                push = np.minimum(np.minimum(A, np.maximum(np.where(above, -a, a), 0.0)
-                                             + J * dt),
-                                  np.sqrt((0.5 * J * dt) ** 2 + 2.0 * J * gap) - 0.5 * J * dt)
+                with np.errstate(invalid="ignore"):  # a joint without a jerk limit: A
+                    ramp = np.minimum(np.minimum(A, np.maximum(np.where(above, -a, a), 0.0)
+                                                 + J * dt),
+                                      np.sqrt((0.5 * J * dt) ** 2 + 2.0 * J * gap)
+                                      - 0.5 * J * dt)
+                push = np.where(np.isfinite(J), ramp, A)
             back = np.minimum(cap, toward + push * dt)
         lower = np.where(above, -back, np.where(below, back, lower))
         upper = np.where(above, -back, np.where(below, back, upper))
@@ -108,9 +111,11 @@ def stopping_distance(w: np.ndarray, a0: np.ndarray, A: np.ndarray, J: np.ndarra
     """Distance (rad or m) to stop from velocity ``w > 0`` with acceleration ``a0`` along it
     (positive: still speeding up), braking at the acceleration limit ``A`` reached and left
     at the jerk limit ``J`` (``inf``: instantly). Phases: ramp ``a0`` down to 0 if positive;
-    ramp the deceleration to ``A`` (or to the peak of a triangular profile when ``A`` is not
-    reached); hold it; ramp back to 0. When the deceleration ``-a0`` is already more than the
-    velocity needs, ``w`` times the time to ramp it down bounds the distance."""
+    move the deceleration ``beta = -a0`` to ``A`` (up at ``J``, or down at ``J`` when it is
+    beyond ``A``) or to the peak of a triangular profile when ``A`` is not reached; hold it;
+    ramp back to 0. When the deceleration is already more than the velocity needs
+    (``beta^2 >= 2 J w``), the joint stops while it ramps down, after ``t`` with
+    ``w - beta t + J t^2 / 2 = 0``. Continuous and increasing in ``w`` and ``a0``."""
     finite = np.isfinite(J)
     inv_j = np.where(finite, 1.0 / np.where(finite, J, 1.0), 0.0)
     jerk = np.where(finite, J, 0.0)
@@ -119,21 +124,38 @@ def stopping_distance(w: np.ndarray, a0: np.ndarray, A: np.ndarray, J: np.ndarra
     d0 = w * t0 + up * t0 * t0 / 3.0
     w = w + 0.5 * up * up * inv_j
     beta = np.maximum(-a0, 0.0)  # already braking at beta
-    # trapezoid: ramp beta -> A, hold A, ramp A -> 0
-    t1 = (A - beta) * inv_j
-    d1 = w * t1 - 0.5 * beta * t1 * t1 - jerk * t1 ** 3 / 6.0
-    v1 = w - 0.5 * (A * A - beta * beta) * inv_j
+    # trapezoid: move beta to A (jerk -J up to it, +J down to it), hold A, ramp A -> 0
+    sign = np.where(beta > A, 1.0, -1.0)
+    t1 = np.abs(A - beta) * inv_j
+    d1 = w * t1 - 0.5 * beta * t1 * t1 + sign * jerk * t1 * t1 * t1 / 6.0
+    v1 = w - beta * t1 + 0.5 * sign * jerk * t1 * t1
     v2 = 0.5 * A * A * inv_j
     t2 = np.maximum(v1 - v2, 0.0) / A
-    trapezoid = d1 + v1 * t2 - 0.5 * A * t2 * t2 + A ** 3 * inv_j * inv_j / 6.0
+    trapezoid = d1 + v1 * t2 - 0.5 * A * t2 * t2 + A * A * A * inv_j * inv_j / 6.0
     # triangle: peak a_p with (a_p^2 - beta^2) / 2J + a_p^2 / 2J = w, then back to 0
     a_p = np.sqrt(np.maximum(w * jerk + 0.5 * beta * beta, 0.0))
     ta = (a_p - beta) * inv_j
-    triangle = np.where(a_p >= beta,
-                        w * ta - 0.5 * beta * ta * ta - jerk * ta ** 3 / 6.0
-                        + a_p ** 3 * inv_j * inv_j / 6.0,
-                        w * beta * inv_j)
-    return d0 + np.where(v1 >= v2, trapezoid, triangle)
+    triangle = (w * ta - 0.5 * beta * ta * ta - jerk * ta * ta * ta / 6.0
+                + a_p * a_p * a_p * inv_j * inv_j / 6.0)
+    # more deceleration than needed: the velocity reaches 0 while it ramps down
+    ts = (beta - np.sqrt(np.maximum(beta * beta - 2.0 * jerk * w, 0.0))) * inv_j
+    over = w * ts - 0.5 * beta * ts * ts + jerk * ts * ts * ts / 6.0
+    return d0 + np.where(beta * beta >= 2.0 * jerk * w, over,
+                         np.where(v1 >= v2, trapezoid, triangle))
+
+
+#: the braking speed's root is found to this fraction of its bracket (that of 40 halvings)
+BRAKING_TOL = 2.0**-40
+#: at most this many steps of the root search (it takes 5-15)
+BRAKING_STEPS = 60
+
+
+def _overshoot(x, v, room, dt, A, J):
+    """``x dt + stopping_distance(x, (x - v) / dt) - room``: > 0 where a velocity ``x`` toward
+    a point ``room`` away cannot stop before it."""
+    positive = np.maximum(x, 0.0)
+    return x * dt + np.where(x > 0, stopping_distance(positive, (x - v) / dt, A, J),
+                             0.0) - room
 
 
 def braking_speed(room: np.ndarray, v: np.ndarray, a: np.ndarray, dt: float,
@@ -144,9 +166,12 @@ def braking_speed(room: np.ndarray, v: np.ndarray, a: np.ndarray, dt: float,
     previous velocity toward that point (rad/s), so this step's acceleration is
     ``(x - v) / dt`` (``a``, the previous acceleration, is not needed).
 
-    The condition ``x dt + stopping_distance(x, (x - v) / dt) <= room`` grows with x; it is
-    solved by bisection (40 halvings) between ``v - A dt`` and ``v + A dt`` (what one step can
-    reach), and without a jerk limit in closed form, ``x dt + x^2 / (2 A) <= room``.
+    Without a jerk limit it is the closed form of ``x dt + x^2 / (2 A) <= room``. With one, the
+    overshoot ``x dt + stopping_distance(x, (x - v) / dt) - room`` grows with x (continuously
+    for x > 0; at 0 it may jump up, when the joint must first stop speeding up): its root is
+    found between ``v - 2 A dt`` and ``v + 2 A dt`` (what one step can reach) by regula falsi
+    with the Illinois modification (a bisection step when it leaves the bracket), to
+    :data:`BRAKING_TOL` of that bracket — the compiled kernel runs the same search.
     """
     if acceleration is None:
         return np.full(np.shape(room), np.inf)
@@ -158,25 +183,43 @@ def braking_speed(room: np.ndarray, v: np.ndarray, a: np.ndarray, dt: float,
             return np.where(np.isfinite(A), speed, np.inf)
         J = jerk
         # only joints within the distance a stop from the highest speed one step can reach
-        # needs can be bounded by it: the others are left free (bisection is the cost here)
+        # needs can be bounded by it: the others are left free
         top = np.abs(v) + 2.0 * A * dt
-        near = room < top * dt + stopping_distance(top, 2.0 * A, A, J)
-        if not np.any(near):
-            return np.full(np.shape(room), np.inf)
+        near = (room < top * dt + stopping_distance(top, 2.0 * A, A, J)) & np.isfinite(A)
         full = np.full(np.shape(room), np.inf)
+        if not np.any(near):
+            return full
         room, v, A, J = room[near], v[near], A[near], J[near]
-
-        def fits(x):
-            positive = np.maximum(x, 0.0)
-            return x * dt + np.where(x > 0, stopping_distance(
-                positive, (x - v) / dt, A, J), 0.0) <= room
-
         low, high = v - 2.0 * A * dt, v + 2.0 * A * dt
-        ok_high = fits(high)
-        for _ in range(40):
-            middle = 0.5 * (low + high)
-            good = fits(middle)
-            low = np.where(good, middle, low)
-            high = np.where(good, high, middle)
-        full[near] = np.where(ok_high | ~np.isfinite(A), np.inf, low)
+        f_hi = _overshoot(high, v, room, dt, A, J)
+        f_lo = _overshoot(low, v, room, dt, A, J)
+        # x <= 0 always fits; just above 0 the overshoot may jump to > 0: then 0 is the answer
+        f_zero = stopping_distance(np.zeros_like(v), -v / dt, A, J) - room
+        straddles = (low <= 0.0) & (high > 0.0)
+        done_inf = f_hi <= 0.0  # the fastest step fits: no bound
+        done_low = ~done_inf & (f_lo > 0.0)  # nothing fits: the slowest step
+        done_zero = ~done_inf & ~done_low & straddles & (f_zero > 0.0)
+        searching = ~(done_inf | done_low | done_zero)
+        lo = np.where(straddles, 0.0, low)
+        f_lo = np.where(straddles, f_zero, f_lo)
+        hi = high.copy()
+        tol = (high - low) * BRAKING_TOL
+        side = np.zeros(v.shape)  # the end the last step moved (-1 lo, 1 hi)
+        for _ in range(BRAKING_STEPS):
+            searching &= hi - lo > tol
+            if not np.any(searching):
+                break
+            x = lo - f_lo * (hi - lo) / (f_hi - f_lo)
+            x = np.where((x > lo) & (x < hi), x, 0.5 * (lo + hi))
+            fx = _overshoot(x, v, room, dt, A, J)
+            fits = searching & (fx <= 0.0)
+            breaks = searching & ~(fx <= 0.0)
+            f_hi = np.where(fits & (side < 0), 0.5 * f_hi, f_hi)
+            f_lo = np.where(breaks & (side > 0), 0.5 * f_lo, f_lo)
+            lo, f_lo = np.where(fits, x, lo), np.where(fits, fx, f_lo)
+            hi, f_hi = np.where(breaks, x, hi), np.where(breaks, fx, f_hi)
+            side = np.where(fits, -1.0, np.where(breaks, 1.0, side))
+        result = np.where(done_inf, np.inf, np.where(done_low, low,
+                                                     np.where(done_zero, 0.0, lo)))
+        full[near] = result
         return full
