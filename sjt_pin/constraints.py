@@ -32,6 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .kernels import project_rows
 from .limits.base import Limit, Motion
 
 #: ``solve(free, held)``: the method's joint velocity (nv,; rad/s) with only the ``free``
@@ -372,8 +373,25 @@ def smooth(dq: np.ndarray, hard: Bounds, soft: Bounds) -> tuple[np.ndarray, np.n
 
 def project(dq: np.ndarray, Jw: np.ndarray, A: np.ndarray, b: np.ndarray, lower: np.ndarray,
             upper: np.ndarray, moving: np.ndarray) -> np.ndarray:
-    """``argmin (x - dq)^T H (x - dq)`` with ``H = Jw^T Jw + rho I`` over the ``moving`` joints,
-    subject to ``A x <= b`` and ``lower <= x <= upper`` (module docstring, step 2)."""
+    """``argmin (x - dq)^T H (x - dq)`` with ``H = Jw^T Jw + rho I`` over the ``moving`` joints
+    (``rho``: the mean of ``Jw^T Jw``'s diagonal), subject to ``A x <= b`` and
+    ``lower <= x <= upper`` (module docstring, step 2); the others keep ``dq``. Compiled
+    (``kernels.project_rows``, a few microseconds); :func:`project_reference` is the same in
+    numpy."""
+    out = np.empty(dq.size)
+    project_rows(np.asarray(dq, dtype=float), np.asarray(Jw, dtype=float),
+                 np.asarray(A, dtype=float), np.asarray(b, dtype=float),
+                 np.asarray(lower, dtype=float), np.asarray(upper, dtype=float),
+                 np.asarray(moving, dtype=float), out)
+    return out
+
+
+def project_reference(dq: np.ndarray, Jw: np.ndarray, A: np.ndarray, b: np.ndarray,
+                      lower: np.ndarray, upper: np.ndarray, moving: np.ndarray) -> np.ndarray:
+    """:func:`project` in numpy: the whitened problem ``z = L^T (x - x0)``, ``H = L L^T``, has
+    the dual ``min 1/2 y^T (C C^T) y + r^T y`` over ``y >= 0`` with ``C = G L^-T`` and
+    ``r = h - G x0`` (``G x <= h``: the rows and the finite bounds), solved by
+    :func:`nonnegative_qp`; then ``z = -C^T y``."""
     cols = np.flatnonzero(moving)
     x0 = dq[cols]
     H = Jw[:, cols].T @ Jw[:, cols] if Jw.size else np.zeros((cols.size, cols.size))

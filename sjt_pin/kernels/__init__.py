@@ -15,6 +15,10 @@ against the numpy reference formulas of :mod:`sjt_pin.mappings` and against Pino
 - ``search_iteration(...)``: one Levenberg-Marquardt iteration of ``solve()`` on SJT's
   normalised columns, within the joint limits;
 - ``frame_velocity``, ``position_rows``, ``rotation_defect``: the tasks' small transforms;
+- ``project_rows(dq, Jw, A, b, lower, upper, moving, out)``: the constraint stage's smallest
+  correction onto general rows and a box (:func:`sjt_pin.constraints.project`), on its dual by
+  ``nonnegative_qp(Q, r, y)`` (Lawson and Hanson's NNLS, as
+  :func:`sjt_pin.constraints.nonnegative_qp`);
 - ``cholesky_solve``, ``loop_bound``, ``symmetric_eigen``: the small dense linear algebra,
   exposed for the tests.
 """
@@ -24,7 +28,9 @@ from ._kernels import (  # noqa: F401
     frame_velocity,
     least_squares_step,
     loop_bound,
+    nonnegative_qp,
     position_rows,
+    project_rows,
     rotation_defect,
     search_iteration,
     symmetric_eigen,
