@@ -42,6 +42,7 @@ Solve = Callable[[np.ndarray, np.ndarray | None], np.ndarray]
 
 #: a bound counts as reached within this many rad/s (m/s) of it
 TOLERANCE = 1e-12
+_F64 = np.dtype(np.float64)
 
 
 @dataclass
@@ -145,8 +146,11 @@ class ConstraintStage:
             rows = limit.rows(kinematics, motion)
             if rows is None:
                 continue
-            A, b = np.atleast_2d(np.asarray(rows[0], dtype=float)), np.atleast_1d(
-                np.asarray(rows[1], dtype=float))
+            A, b = rows
+            if not (type(A) is np.ndarray and type(b) is np.ndarray and A.dtype == _F64
+                    and b.dtype == _F64 and A.ndim == 2 and b.ndim == 1):
+                A, b = np.atleast_2d(np.asarray(A, dtype=float)), np.atleast_1d(
+                    np.asarray(b, dtype=float))
             if A.shape != (b.size, self.nv):
                 raise ValueError(f"{limit!r}.rows() must return A of shape (k, {self.nv}) and "
                                  f"b of shape (k,), got {A.shape} and {b.shape}")
@@ -154,7 +158,44 @@ class ConstraintStage:
             owners += [limit.name] * b.size
         if not blocks:
             return None
+        if len(blocks) == 1:
+            return blocks[0][0], blocks[0][1], owners
         return np.vstack([a for a, _ in blocks]), np.concatenate([b for _, b in blocks]), owners
+
+    def settle(self, dq: np.ndarray, lower: np.ndarray, upper: np.ndarray, kinematics,
+               motion: Motion, metric: Callable[[], np.ndarray]
+               ) -> tuple[np.ndarray, tuple[str, ...]] | None:
+        """This stage's limits on a ``dq`` (rad/s) that already meets the box
+        ``[lower, upper]`` (the solver's position and speed bounds, saturated by the kernel):
+        ``(dq, ())`` itself when it meets every limit too (only ``A @ dq`` computed), else the
+        correction of :func:`project` onto the rows within both boxes and the names of the
+        limits whose rows are tight; ``None`` when ``dq`` breaks one of these limits' bounds
+        (or a soft limit has some), which :meth:`enforce` must then saturate first."""
+        lo: np.ndarray | None = None
+        hi: np.ndarray | None = None
+        for limit in self.limits:
+            bounds = limit.bounds(kinematics, motion)
+            if bounds is None:
+                continue
+            if not limit.hard:
+                return None
+            lo_k, hi_k = bounds
+            if not _inside(dq, lo_k, hi_k):
+                return None
+            lo = lo_k if lo is None else np.maximum(lo, lo_k)
+            hi = hi_k if hi is None else np.minimum(hi, hi_k)
+        rows = self.general_rows(kinematics, motion)
+        if rows is None:
+            return dq, ()
+        A, b, owners = rows
+        slack = A @ dq - b
+        if not np.any(slack > TOLERANCE * (1.0 + np.abs(b))):
+            return dq, ()
+        if lo is not None and hi is not None:
+            lower, upper = np.maximum(lower, lo), np.minimum(upper, hi)
+        out = project(dq, metric(), A, b, lower, upper, self.moving)
+        tight = A @ out - b > -1e-9 * (1.0 + np.abs(b))
+        return out, tuple(sorted({owners[i] for i in np.flatnonzero(tight)}))
 
     # -- enforcing ---------------------------------------------------------------------------
     def enforce(self, dq: np.ndarray, solve: Solve, kinematics, motion: Motion,

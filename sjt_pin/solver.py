@@ -242,6 +242,8 @@ class Solver:
         self._raw_work = work.copy()  # the method alone, for the stage's solves
         self._outcome: Outcome | None = None
         self._outcome_count = -1
+        #: (step count, limits with tight rows) of a kernel step the user's rows corrected
+        self._projected: tuple[int, tuple[str, ...]] = (-1, ())
         work[K.P_ERROR_ROWS] = stack.target_dim
         work[K.P_STALL_RATIO] = -1.0 if self.escape is None else SaddleEscape.STALL_RATIO
         # converged, not stalled: |e_w| below ERROR_FLOOR times the tasks' length (unit-free)
@@ -427,9 +429,22 @@ class Solver:
         dt, layout, raw = self._dt, self._layout, self._raw_work
         motion, stack = self._motion, self.stack
         motion.q = q
-        if (self._user_stage is not None and self._kernel_bounds
-                and self._user_stage.admits(step / dt, stack.kinematics, motion)):
-            return step  # the kernel kept the position and speed bounds; the user's hold too
+        if self._user_stage is not None and self._kernel_bounds:
+            # the kernel kept the position and speed bounds; the user's limits are checked on
+            # its step, and their broken rows corrected within all the bounds (the kernel's
+            # saturation stands: the same as the whole stage's while the user's bounds do not
+            # cut the step)
+            v = step / dt
+            lower, upper = layout.step_box(self._work)
+            settled = self._user_stage.settle(
+                v, lower, upper, stack.kinematics, motion,
+                lambda: stack.sqrt_weight[:, None] * J * stack.chain)
+            if settled is not None:
+                if settled[0] is v:
+                    return step
+                np.multiply(settled[0], dt, out=self._step)
+                self._projected = (self._count, settled[1])
+                return self._exact_position(q, self._step)
         np.copyto(raw, self._work)
         raw[K.P_BOX_COUNT] = 0.0
         layout.inverse_speeds(raw)[:] = 0.0
@@ -464,9 +479,13 @@ class Solver:
         outcome = self.stage.enforce(dq, solve, stack.kinematics, motion,
                                      lambda: stack.sqrt_weight[:, None] * J * chain)
         self._outcome, self._outcome_count = outcome, self._count
-        step = np.multiply(outcome.dq, dt, out=self._step)
+        return self._exact_position(q, np.multiply(outcome.dq, dt, out=self._step))
+
+    def _exact_position(self, q: np.ndarray, step: np.ndarray) -> np.ndarray:
+        """``step`` (in place) with every joint inside its range moved exactly onto a limit it
+        reaches, not a rounding error past it."""
         limit = self.position_limit
-        if limit is not None:  # exactly onto a limit, not a rounding error past it
+        if limit is not None:
             x = q[limit.q_index]
             inside = (x >= limit.lower) & (x <= limit.upper)
             v = limit.v_index[inside]
@@ -572,6 +591,8 @@ class Solver:
                 outcome = self._kernel_outcome(q, step, status)
             if outcome is None:
                 outcome = Outcome(step / self._dt)
+            if self._projected[0] == self._count:
+                outcome.rows = self._projected[1]
             names: tuple[str, ...] = tuple(dict.fromkeys(joint for _, joint in outcome.active))
             index = {name: i for i, name in enumerate(self._v_names)}
             clamped = np.array([index[name] for name in names], dtype=np.int64)

@@ -369,6 +369,43 @@ class CollisionLimit(Limit):
         self._cache: tuple | None = None
         self._lever = self._levers()
         self._bounds: tuple[float, tuple[np.ndarray, np.ndarray]] | None = None
+        self._skip_lever, self._flat = self._motion_levers()
+        #: the last broad phase: (obstacles' version, q, its pairs, its least gap)
+        self._reference: tuple[int, np.ndarray, np.ndarray, float] | None = None
+
+    def _motion_levers(self) -> tuple[np.ndarray | None, bool]:
+        """For each velocity coordinate, a bound (m per unit) on how far it moves any point of
+        the geometry, summed over the joints it drives (a mimic joint's times its multiplier),
+        and whether ``q`` is its own tangent space (revolute and prismatic joints only);
+        ``None`` for joints whose coordinates are not rates of a motion (Euler angles)."""
+        model = self.model
+        reach = self._reaches()
+        ext = np.zeros(model.nvExtended)
+        flat = model.nq == model.nv
+        for j in range(1, model.njoints):
+            kind = model.joints[j].shortname()
+            if "ZYX" in kind:
+                return None, False
+            flat = flat and model.nqs[j] == model.nvs[j] == 1
+            start = model.idx_vExtendeds[j]
+            ext[start:start + model.nvExtendeds[j]] = max(reach[j], 1.0) if _translates(kind) \
+                else reach[j]
+        lever = ext if self._mimic is None else np.abs(self._mimic).T @ ext
+        return lever, flat
+
+    def _reaches(self) -> np.ndarray:
+        """Per joint, the longest chain of joint offsets from it to a bounding sphere's far
+        side of a geometry it moves (m)."""
+        model = self.model
+        reach = np.zeros(model.njoints)
+        for g in range(self.n_robot):
+            k = int(self._joint[g])
+            length = float(np.linalg.norm(self._center_local[g, :3]) + self._radius[g])
+            while k > 0:
+                reach[k] = max(reach[k], length)
+                length += float(np.linalg.norm(model.jointPlacements[k].translation))
+                k = model.parents[k]
+        return reach
 
     def _levers(self) -> np.ndarray:
         """For each velocity coordinate, a bound (m per unit) on the speed it gives any point of
@@ -445,19 +482,49 @@ class CollisionLimit(Limit):
         First the spheres of both (for every pair), then, where exact distances are dear
         (meshes), for the few pairs left, the sphere of either one against the other's box:
         volumes contain their geometry, so neither test drops a pair within ``influence``."""
+        return self._broad_phase(data)[0]
+
+    def _broad_phase(self, data) -> tuple[np.ndarray, float]:
+        """:meth:`_candidates` and the least gap (m) by which a pair it leaves out misses
+        ``influence`` (``inf`` when it leaves none out)."""
         oMi = data.oMi.tolist()
         H = np.concatenate([oMi[j].homogeneous for j in self._joints] + [self._world])
         center = (H @ self._centers_in).take(self._pick)
         diff = self._difference @ center
-        near = np.flatnonzero(np.einsum("ij,ij->i", diff, diff) < self._reach2)
+        gap2 = np.einsum("ij,ij->i", diff, diff)
+        close = gap2 < self._reach2
+        near = np.flatnonzero(close)
+        far = np.sqrt(gap2[~close]) - np.sqrt(self._reach2[~close])
+        slack = float(far.min()) if far.size else math.inf
         if near.size == 0 or not self._refine:
-            return near
+            return near, slack
         # both directions at once: the sphere of a against b's box, and of b against a's box
         one = np.concatenate((self._pa[near], self._pb[near]))
         other = np.concatenate((self._pb[near], self._pa[near]))
         poses = H.reshape(-1, 4, 4)[self._slot[other]] @ self._placement[other]
         gap = (self._sphere_box(center[one], poses, other) - self._radius[one]).reshape(2, -1)
-        return near[np.maximum(gap[0], gap[1]) < self.influence]
+        gap = np.maximum(gap[0], gap[1]) - self.influence
+        if np.any(gap >= 0):
+            slack = min(slack, float(gap[gap >= 0].min()))
+        return near[gap < 0], slack
+
+    def _near(self, data, q: np.ndarray | None) -> np.ndarray:
+        """:meth:`_candidates` at ``q``, from the last broad phase while ``q`` is close to
+        where it ran: no point of a geometry moves farther than ``sum_j lever_j |dq_j|`` (the
+        displacement ``dq`` from there; :meth:`_levers`), so no pair it left out can reach
+        ``influence`` before twice that exceeds the least gap it left them at."""
+        ref = self._reference
+        if q is not None and ref is not None and ref[0] == self._version:
+            if self._flat:
+                moved = float(np.abs(q - ref[1]) @ self._skip_lever)
+            else:
+                moved = float(np.abs(pin.difference(self.model, ref[1], q)) @ self._skip_lever)
+            if 2.0 * moved < ref[3]:
+                return ref[2]
+        near, slack = self._broad_phase(data)
+        if q is not None and self._skip_lever is not None:
+            self._reference = (self._version, q.copy(), near, slack)
+        return near
 
     def _sphere_box(self, points, poses, g) -> np.ndarray:
         """Distance of world ``points`` (k, 3) to the local boxes of geometries ``g``."""
@@ -565,12 +632,13 @@ class CollisionLimit(Limit):
             return cache[3]
         if not self._checked:
             self._check(model, data)
-        out = self._rows(model, data, dt)
+        out = self._rows(model, data, dt, q)
         self._cache = (data, key, tuple(self.active), out)
         return out
 
-    def _rows(self, model, data, dt: float) -> tuple[np.ndarray, np.ndarray] | None:
-        near = self._candidates(data)
+    def _rows(self, model, data, dt: float, q: np.ndarray | None = None
+              ) -> tuple[np.ndarray, np.ndarray] | None:
+        near = self._near(data, q)
         self.active = []  # indices into self.pairs / self.pair_names of the rows returned
         if near.size == 0:
             return None
@@ -609,6 +677,13 @@ class CollisionLimit(Limit):
         A.setflags(write=False)
         b.setflags(write=False)
         return A, b
+
+
+def _translates(kind: str) -> bool:
+    """Whether a joint of this ``shortname()`` translates (its coordinates move points by at
+    least a metre per unit)."""
+    return any(t in kind for t in ("Prismatic", "FreeFlyer", "Planar", "Translation",
+                                   "JointModelP"))
 
 
 def _mimic_map(model: pin.Model, mimic_joints) -> np.ndarray | None:
