@@ -162,40 +162,24 @@ class ConstraintStage:
             return blocks[0][0], blocks[0][1], owners
         return np.vstack([a for a, _ in blocks]), np.concatenate([b for _, b in blocks]), owners
 
-    def settle(self, dq: np.ndarray, lower: np.ndarray, upper: np.ndarray, kinematics,
-               motion: Motion, metric: Callable[[], np.ndarray]
-               ) -> tuple[np.ndarray, tuple[str, ...]] | None:
-        """This stage's limits on a ``dq`` (rad/s) that already meets the box
-        ``[lower, upper]`` (the solver's position and speed bounds, saturated by the kernel):
-        ``(dq, ())`` itself when it meets every limit too (only ``A @ dq`` computed), else the
-        correction of :func:`project` onto the rows within both boxes and the names of the
-        limits whose rows are tight; ``None`` when ``dq`` breaks one of these limits' bounds
-        (or a soft limit has some), which :meth:`enforce` must then saturate first."""
-        lo: np.ndarray | None = None
-        hi: np.ndarray | None = None
+    def hard_parts(self, kinematics, motion: Motion):
+        """This stage's bounds and rows at this step, for a step that the solver's kernel
+        checks and corrects itself (``kernels.rows_step``): ``(lower, upper, rows)`` with the
+        intersection of the limits' bounds (rad/s; ``None`` when none bounds) and
+        :meth:`general_rows`; ``None`` when a smoothness limit bounds the step (only
+        :meth:`enforce` weighs those)."""
+        lower = upper = None
         for limit in self.limits:
             bounds = limit.bounds(kinematics, motion)
             if bounds is None:
                 continue
             if not limit.hard:
                 return None
-            lo_k, hi_k = bounds
-            if not _inside(dq, lo_k, hi_k):
-                return None
-            lo = lo_k if lo is None else np.maximum(lo, lo_k)
-            hi = hi_k if hi is None else np.minimum(hi, hi_k)
-        rows = self.general_rows(kinematics, motion)
-        if rows is None:
-            return dq, ()
-        A, b, owners = rows
-        slack = A @ dq - b
-        if not np.any(slack > TOLERANCE * (1.0 + np.abs(b))):
-            return dq, ()
-        if lo is not None and hi is not None:
-            lower, upper = np.maximum(lower, lo), np.minimum(upper, hi)
-        out = project(dq, metric(), A, b, lower, upper, self.moving)
-        tight = A @ out - b > -1e-9 * (1.0 + np.abs(b))
-        return out, tuple(sorted({owners[i] for i in np.flatnonzero(tight)}))
+            if lower is None or upper is None:
+                lower, upper = bounds
+            else:
+                lower, upper = np.maximum(lower, bounds[0]), np.minimum(upper, bounds[1])
+        return lower, upper, self.general_rows(kinematics, motion)
 
     # -- enforcing ---------------------------------------------------------------------------
     def enforce(self, dq: np.ndarray, solve: Solve, kinematics, motion: Motion,

@@ -242,8 +242,10 @@ class Solver:
         self._raw_work = work.copy()  # the method alone, for the stage's solves
         self._outcome: Outcome | None = None
         self._outcome_count = -1
-        #: (step count, limits with tight rows) of a kernel step the user's rows corrected
-        self._projected: tuple[int, tuple[str, ...]] = (-1, ())
+        #: (step count, the user's rows) of a kernel step those rows corrected
+        self._projected: tuple[int, tuple | None] = (-1, None)
+        self._no_rows = (np.zeros((0, n)), np.zeros(0))
+        self._no_bounds = (np.full(n, -np.inf), np.full(n, np.inf))
         work[K.P_ERROR_ROWS] = stack.target_dim
         work[K.P_STALL_RATIO] = -1.0 if self.escape is None else SaddleEscape.STALL_RATIO
         # converged, not stalled: |e_w| below ERROR_FLOOR times the tasks' length (unit-free)
@@ -430,21 +432,23 @@ class Solver:
         motion, stack = self._motion, self.stack
         motion.q = q
         if self._user_stage is not None and self._kernel_bounds:
-            # the kernel kept the position and speed bounds; the user's limits are checked on
-            # its step, and their broken rows corrected within all the bounds (the kernel's
-            # saturation stands: the same as the whole stage's while the user's bounds do not
-            # cut the step)
-            v = step / dt
-            lower, upper = layout.step_box(self._work)
-            settled = self._user_stage.settle(
-                v, lower, upper, stack.kinematics, motion,
-                lambda: stack.sqrt_weight[:, None] * J * stack.chain)
-            if settled is not None:
-                if settled[0] is v:
+            # the kernel kept the position and speed bounds; its step is checked against the
+            # user's limits and, when it breaks a row, projected onto the rows within every
+            # bound, in one compiled call (the kernel's saturation stands: the same as the
+            # whole stage's while the user's bounds do not cut the step)
+            parts = self._user_stage.hard_parts(stack.kinematics, motion)
+            if parts is not None:
+                lower, upper, rows = parts
+                if rows is None and lower is None:
                     return step
-                np.multiply(settled[0], dt, out=self._step)
-                self._projected = (self._count, settled[1])
-                return self._exact_position(q, self._step)
+                A, b = (rows[0], rows[1]) if rows is not None else self._no_rows
+                done = K.rows_step(J, q, A, b, self._no_bounds[0] if lower is None else lower,
+                                   self._no_bounds[1] if upper is None else upper, self._work,
+                                   step)
+                if done >= 0:
+                    if done:
+                        self._projected = (self._count, rows)
+                    return step
         np.copyto(raw, self._work)
         raw[K.P_BOX_COUNT] = 0.0
         layout.inverse_speeds(raw)[:] = 0.0
@@ -591,8 +595,10 @@ class Solver:
                 outcome = self._kernel_outcome(q, step, status)
             if outcome is None:
                 outcome = Outcome(step / self._dt)
-            if self._projected[0] == self._count:
-                outcome.rows = self._projected[1]
+            if self._projected[0] == self._count and self._projected[1] is not None:
+                A, b, owners = self._projected[1]
+                tight = A @ (step / self._dt) - b > -1e-9 * (1.0 + np.abs(b))
+                outcome.rows = tuple(sorted({owners[i] for i in np.flatnonzero(tight)}))
             names: tuple[str, ...] = tuple(dict.fromkeys(joint for _, joint in outcome.active))
             index = {name: i for i, name in enumerate(self._v_names)}
             clamped = np.array([index[name] for name in names], dtype=np.int64)

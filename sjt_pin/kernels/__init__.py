@@ -18,7 +18,9 @@ against the numpy reference formulas of :mod:`sjt_pin.mappings` and against Pino
 - ``project_rows(dq, Jw, A, b, lower, upper, moving, out)``: the constraint stage's smallest
   correction onto general rows and a box (:func:`sjt_pin.constraints.project`), on its dual by
   ``nonnegative_qp(Q, r, y)`` (Lawson and Hanson's NNLS, as
-  :func:`sjt_pin.constraints.nonnegative_qp`);
+  :func:`sjt_pin.constraints.nonnegative_qp`); ``rows_step(J, q, A, b, lower, upper, work,
+  step)``: a kernel step checked against a user's rows and bounds, projected in place when
+  it breaks a row (the solver's path for collision dampers);
 - ``cholesky_solve``, ``loop_bound``, ``symmetric_eigen``: the small dense linear algebra,
   exposed for the tests.
 """
@@ -32,6 +34,7 @@ from ._kernels import (  # noqa: F401
     position_rows,
     project_rows,
     rotation_defect,
+    rows_step,
     search_iteration,
     symmetric_eigen,
     transpose_step,

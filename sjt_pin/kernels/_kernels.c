@@ -1587,6 +1587,94 @@ done:
     return result;
 }
 
+/* A kernel step (step, written by step_c) against a user's general rows A q_dot <= b and
+ * bounds [lower, upper] (rad/s; -inf/inf where none): 0 when it meets them all (step
+ * untouched), -1 when it breaks one of the bounds (the caller's whole constraint stage must
+ * saturate it), else 1 with step projected onto the rows within those bounds and the kernel's
+ * own box of this step (project_c in the metric of the weighted task rows, the moving joints
+ * of the mask; every joint inside its range exactly onto a limit it reaches); -2 when out of
+ * memory. */
+static int rows_step_c(Mat J, const double *q, Mat A, const double *b, const double *lower,
+                       const double *upper, double *work, double *step)
+{
+    Py_ssize_t m = J.m, n = J.n, k = A.m;
+    double dt = work[P_DT];
+    const double *mask = work + (Py_ssize_t)work[P_MASK];
+    const double *sw = work + (Py_ssize_t)work[P_ROWS];
+    const double *box_lo = work + (Py_ssize_t)work[P_CLAMPED] + n, *box_hi = box_lo + n;
+    for (Py_ssize_t j = 0; j < n; j++) {
+        double v = step[j] / dt;
+        if (v < lower[j] - BOUND_TOL || v > upper[j] + BOUND_TOL) return -1;
+    }
+    int broken = 0;
+    for (Py_ssize_t i = 0; i < k && !broken; i++) {
+        double acc = -b[i];
+        for (Py_ssize_t j = 0; j < n; j++) acc += AT(A, i, j) * step[j] / dt;
+        if (acc > BOUND_TOL * (1.0 + fabs(b[i]))) broken = 1;
+    }
+    if (!broken) return 0;
+    double *mem = (double *)malloc((size_t)(m * n + 5 * n + 1) * sizeof(double));
+    if (!mem) return -2;
+    double *Jw = mem, *dq = Jw + m * n, *lo = dq + n, *hi = lo + n, *moving = hi + n;
+    double *out = moving + n;
+    for (Py_ssize_t i = 0; i < m; i++)
+        for (Py_ssize_t j = 0; j < n; j++) Jw[i * n + j] = sw[i] * AT(J, i, j) * mask[j];
+    for (Py_ssize_t j = 0; j < n; j++) {
+        dq[j] = step[j] / dt;
+        lo[j] = dmax(box_lo[j], lower[j]);
+        hi[j] = dmin(box_hi[j], upper[j]);
+        moving[j] = mask[j] != 0.0 ? 1.0 : 0.0;
+    }
+    Mat Jm = {Jw, m, n, n, 1};
+    int solves = project_c(dq, Jm, A, b, lo, hi, moving, out);
+    if (solves < 0) {
+        free(mem);
+        return -2;
+    }
+    for (Py_ssize_t j = 0; j < n; j++) step[j] = out[j] * dt;
+    exact_position(q, work, step);
+    free(mem);
+    return 1;
+}
+
+/* rows_step(J, q, A, b, lower, upper, work, step) -> int (rows_step_c) */
+static PyObject *py_rows_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (!nargs_ok(nargs, 8, "rows_step")) return NULL;
+    Arg J = {0}, q = {0}, A = {0}, b = {0}, lo = {0}, hi = {0}, work = {0}, step = {0};
+    PyObject *result = NULL;
+    if (acquire(args[0], &J, 0, 2, "J") || acquire(args[1], &q, 0, 1, "q")
+        || acquire(args[2], &A, 0, 2, "A") || acquire(args[3], &b, 0, 1, "b")
+        || acquire(args[4], &lo, 0, 1, "lower") || acquire(args[5], &hi, 0, 1, "upper")
+        || acquire(args[6], &work, 1, 1, "work") || acquire(args[7], &step, 1, 1, "step"))
+        goto done;
+    Mat Jm = mat(&J), Am = mat(&A);
+    Py_ssize_t n = Jm.n;
+    if (Am.n != n || length(&b) != Am.m || length(&lo) != n || length(&hi) != n
+        || length(&step) != n) {
+        PyErr_Format(PyExc_ValueError, "J (%zd, %zd), A (%zd, %zd), b (%zd,), lower, upper and "
+                     "step (n,) do not fit", Jm.m, n, Am.m, Am.n, length(&b));
+        goto done;
+    }
+    if (check_work(&work, Jm.m, n)) goto done;
+    double *qv = vec(&q, "q"), *bv = vec(&b, "b"), *lv = vec(&lo, "lower");
+    double *hv = vec(&hi, "upper"), *wv = out_vec(&work, "work"), *sv = out_vec(&step, "step");
+    if (!qv || !bv || !lv || !hv || !wv || !sv) goto done;
+    int status;
+    Py_BEGIN_ALLOW_THREADS
+    status = rows_step_c(Jm, qv, Am, bv, lv, hv, wv, sv);
+    Py_END_ALLOW_THREADS
+    if (status == -2) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    result = PyLong_FromLong(status);
+done:
+    release(&J); release(&q); release(&A); release(&b); release(&lo); release(&hi);
+    release(&work); release(&step);
+    return result;
+}
+
 static PyMethodDef methods[] = {
     {"transpose_step", (PyCFunction)(void (*)(void))py_transpose_step, METH_FASTCALL,
      "transpose_step(J, e, ff, q, work, step) -> status: one step of a Jacobian-transpose-type "
@@ -1616,6 +1704,9 @@ static PyMethodDef methods[] = {
     {"project_rows", (PyCFunction)(void (*)(void))py_project_rows, METH_FASTCALL,
      "project_rows(dq, Jw, A, b, lower, upper, moving, out) -> int: the constraint stage's "
      "smallest correction of dq onto A x <= b and the box (constraints.project)."},
+    {"rows_step", (PyCFunction)(void (*)(void))py_rows_step, METH_FASTCALL,
+     "rows_step(J, q, A, b, lower, upper, work, step) -> int: a kernel step against general "
+     "rows and bounds: 0 kept, 1 projected in place, -1 outside the bounds."},
     {NULL, NULL, 0, NULL},
 };
 
