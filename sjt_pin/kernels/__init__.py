@@ -14,6 +14,7 @@ against the numpy reference formulas of :mod:`sjt_pin.mappings` and against Pino
   least squares; both return the status bits of :mod:`.layout`;
 - ``search_iteration(...)``: one Levenberg-Marquardt iteration of ``solve()`` on SJT's
   normalised columns, within the joint limits;
+- ``damper_rows``: the collision limit's velocity-damper rows from its pairs' closest points;
 - ``frame_velocity``, ``position_rows``, ``rotation_defect``: the tasks' small transforms;
 - ``project_rows(dq, Jw, A, b, lower, upper, moving, out)``: the constraint stage's smallest
   correction onto general rows and a box (:func:`sjt_pin.constraints.project`), on its dual by
@@ -27,6 +28,7 @@ against the numpy reference formulas of :mod:`sjt_pin.mappings` and against Pino
 
 from ._kernels import (  # noqa: F401
     cholesky_solve,
+    damper_rows,
     frame_velocity,
     least_squares_step,
     loop_bound,

@@ -1675,6 +1675,81 @@ done:
     return result;
 }
 
+/* -- collision dampers (sjt_pin/limits/collision.py) ------------------------------------------ */
+
+/* damper_rows(J, support, pairs, gain_rate, A, b): one velocity-damper row per pair. J (6, N):
+ * Pinocchio's WORLD joint Jacobians (data.J, rows linear then angular); support (njoints, N):
+ * 1 where a column moves a joint's frame; pairs (k, 13): distance d, margin, the joints of
+ * the two geometries (a, b), the unit normal n from a to b (coal's), the closest points p_a
+ * and p_b (world). Row i: A_i = (u_a^T J) support[a] - (u_b^T J) support[b] with
+ * u_x = [n; p_x x n], and b_i = gain_rate (d - margin); A (k, N) and b (k,) are written. */
+static void damper_rows_c(Mat J, Mat support, Mat pairs, double rate, double *A, double *b)
+{
+    Py_ssize_t N = J.n;
+    for (Py_ssize_t i = 0; i < pairs.m; i++) {
+        double u[2][6];
+        Py_ssize_t joint[2];
+        double nx = AT(pairs, i, 4), ny = AT(pairs, i, 5), nz = AT(pairs, i, 6);
+        for (int side = 0; side < 2; side++) {
+            double px = AT(pairs, i, 7 + 3 * side), py = AT(pairs, i, 8 + 3 * side);
+            double pz = AT(pairs, i, 9 + 3 * side);
+            u[side][0] = nx;
+            u[side][1] = ny;
+            u[side][2] = nz;
+            u[side][3] = py * nz - pz * ny;
+            u[side][4] = pz * nx - px * nz;
+            u[side][5] = px * ny - py * nx;
+            joint[side] = (Py_ssize_t)AT(pairs, i, 2 + side);
+        }
+        for (Py_ssize_t c = 0; c < N; c++) {
+            double va = 0.0, vb = 0.0;
+            for (int r = 0; r < 6; r++) {
+                va += u[0][r] * AT(J, r, c);
+                vb += u[1][r] * AT(J, r, c);
+            }
+            A[i * N + c] = va * AT(support, joint[0], c) - vb * AT(support, joint[1], c);
+        }
+        b[i] = rate * (AT(pairs, i, 0) - AT(pairs, i, 1));
+    }
+}
+
+static PyObject *py_damper_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (!nargs_ok(nargs, 6, "damper_rows")) return NULL;
+    double rate = PyFloat_AsDouble(args[3]);
+    if (rate == -1.0 && PyErr_Occurred()) return NULL;
+    Arg J = {0}, sup = {0}, pairs = {0}, A = {0}, b = {0};
+    PyObject *result = NULL;
+    if (acquire(args[0], &J, 0, 2, "J") || acquire(args[1], &sup, 0, 2, "support")
+        || acquire(args[2], &pairs, 0, 2, "pairs") || acquire(args[4], &A, 1, 2, "A")
+        || acquire(args[5], &b, 1, 1, "b"))
+        goto done;
+    Mat Jm = mat(&J), Sm = mat(&sup), Pm = mat(&pairs);
+    double *Av = out_mat(&A, "A"), *bv = out_vec(&b, "b");
+    if (!Av || !bv) goto done;
+    if (Jm.m != 6 || Sm.n != Jm.n || Pm.n != 13 || A.view.shape[0] != Pm.m
+        || A.view.shape[1] != Jm.n || length(&b) != Pm.m) {
+        PyErr_Format(PyExc_ValueError, "J (6, N), support (njoints, N), pairs (k, 13), A (k, N) "
+                     "and b (k,) do not fit: J (%zd, %zd), support (%zd, %zd), pairs (%zd, %zd)",
+                     Jm.m, Jm.n, Sm.m, Sm.n, Pm.m, Pm.n);
+        goto done;
+    }
+    for (Py_ssize_t i = 0; i < Pm.m; i++)
+        for (int side = 0; side < 2; side++) {
+            double j = AT(Pm, i, 2 + side);
+            if (!(j >= 0.0 && j < (double)Sm.m)) {
+                PyErr_Format(PyExc_ValueError, "pairs[%zd] names joint %g of %zd", i, j, Sm.m);
+                goto done;
+            }
+        }
+    damper_rows_c(Jm, Sm, Pm, rate, Av, bv);
+    result = Py_None;
+    Py_INCREF(result);
+done:
+    release(&J); release(&sup); release(&pairs); release(&A); release(&b);
+    return result;
+}
+
 static PyMethodDef methods[] = {
     {"transpose_step", (PyCFunction)(void (*)(void))py_transpose_step, METH_FASTCALL,
      "transpose_step(J, e, ff, q, work, step) -> status: one step of a Jacobian-transpose-type "
@@ -1707,6 +1782,9 @@ static PyMethodDef methods[] = {
     {"rows_step", (PyCFunction)(void (*)(void))py_rows_step, METH_FASTCALL,
      "rows_step(J, q, A, b, lower, upper, work, step) -> int: a kernel step against general "
      "rows and bounds: 0 kept, 1 projected in place, -1 outside the bounds."},
+    {"damper_rows", (PyCFunction)(void (*)(void))py_damper_rows, METH_FASTCALL,
+     "damper_rows(J, support, pairs, gain_rate, A, b): the collision limit's velocity-damper "
+     "rows of the pairs (d, margin, joint a, joint b, normal, p_a, p_b) into A and b."},
     {NULL, NULL, 0, NULL},
 };
 

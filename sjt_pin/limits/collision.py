@@ -33,6 +33,7 @@ except ImportError:  # pragma: no cover - the pin wheel ships coal
     coal = None
 
 from ..exceptions import SJTError
+from ..kernels import damper_rows
 from .base import Limit, Motion
 
 __all__ = ["ClosestPoints", "CollisionLimit", "CollisionError", "PairDistance"]
@@ -40,9 +41,6 @@ __all__ = ["ClosestPoints", "CollisionLimit", "CollisionError", "PairDistance"]
 #: the precision (m) of coal's GJK and EPA on convex shapes (its default is 1e-6)
 GJK_TOLERANCE = 1e-9
 
-_LEVI_CIVITA = np.zeros((3, 3, 3))
-_LEVI_CIVITA[0, 1, 2] = _LEVI_CIVITA[1, 2, 0] = _LEVI_CIVITA[2, 0, 1] = 1.0
-_LEVI_CIVITA[0, 2, 1] = _LEVI_CIVITA[2, 1, 0] = _LEVI_CIVITA[1, 0, 2] = -1.0
 
 
 class CollisionError(SJTError, ValueError):
@@ -334,6 +332,11 @@ class CollisionLimit(Limit):
             self._placement[i] = g.placement.homogeneous
         self._pa, self._pb = self.pairs[:, 0].copy(), self.pairs[:, 1].copy()
         self._ja, self._jb = self._joint[self._pa], self._joint[self._pb]
+        #: per pair: (0, 0, the joints of a and b), and the rows of a step in the form of
+        #: kernels.damper_rows (distance, margin, those joints, the normal, closest points)
+        self._pair_info = np.zeros((len(self.pairs), 4))
+        self._pair_info[:, 2], self._pair_info[:, 3] = self._ja, self._jb
+        self._pair_rows = np.zeros((max(len(self.pairs), 1), 13))
         self._reach2 = (self._radius[self._pa] + self._radius[self._pb] + self.influence) ** 2
         # sphere centres: in the parent joint's frame (homogeneous) and in the world
         local = self._placement @ np.append(self._box_center, np.ones((n, 1)), axis=1)[:, :, None]
@@ -645,38 +648,46 @@ class CollisionLimit(Limit):
         pin.updateGeometryPlacements(model, data, self.geometry, self.geometry_data)
         geometry, gdata, influence = self.geometry, self.geometry_data, self.influence
         compute = pin.computeDistance
-        found, distance, normal, point_a, point_b = [], [], [], [], []
+        found = []
+        pairs, info, margins = self._pair_rows, self._pair_info, self.margins
         for k in near.tolist():
             res = compute(geometry, gdata, k)
             d = res.min_distance
             if not -math.inf < d < influence:  # beyond, or coal failed (EPA: -inf)
                 continue
+            row = pairs[len(found)]
+            row[:4] = info[k]
+            row[0], row[1] = d, margins[k]
+            row[4:7] = res.normal
+            row[7:10] = res.getNearestPoint1()
+            row[10:] = res.getNearestPoint2()
             found.append(k)
-            distance.append(d)
-            normal.append(res.normal)
-            point_a.append(res.getNearestPoint1())
-            point_b.append(res.getNearestPoint2())
         if not found:
             return None
         self.active = found
-        k = np.array(found)
-        # coal's normal points from the first object to the second; the row wants b -> a;
-        # the WORLD Jacobian of joint j (its supports' columns) moves a point p fixed to it at
-        # v_O + w x p, so n.v(p) = n.v_O + (p x n).w: one product for both ends of every pair
-        n = np.array(normal)
-        u = np.empty((2 * len(found), 6))
-        u[:, :3] = np.concatenate((-n, n))
-        p = np.concatenate((point_b, point_a))
-        u[:, 3:] = np.einsum("ijk,pj,pk->pi", _LEVI_CIVITA, p, u[:, :3])
-        U = u @ data.J
-        U *= self._support[np.concatenate((self._jb[k], self._ja[k]))]
-        A = U[:len(found)] + U[len(found):]
+        count = len(found)
+        A = np.empty((count, self._support.shape[1]))
+        b = np.empty(count)
+        damper_rows(data.J, self._support, pairs[:count], self.gain / dt, A, b)
         if self._mimic is not None:
             A = A @ self._mimic
-        b = self.gain / dt * (np.array(distance) - self.margins[k])
         A.setflags(write=False)
         b.setflags(write=False)
         return A, b
+
+
+def damper_rows_reference(J: np.ndarray, support: np.ndarray, pairs: np.ndarray, rate: float
+                          ) -> tuple[np.ndarray, np.ndarray]:
+    """``kernels.damper_rows`` in numpy: coal's normal ``n`` points from geometry a to b, so
+    ``n^T (v_a - v_b) = -d_dot``; the WORLD Jacobian of joint j (its supports' columns) moves
+    a point p fixed to it at ``v_O + w x p``, so ``n.v(p) = n.v_O + (p x n).w``."""
+    pairs = np.atleast_2d(pairs)
+    n = pairs[:, 4:7]
+    ends = []
+    for side, joints in ((pairs[:, 7:10], pairs[:, 2]), (pairs[:, 10:13], pairs[:, 3])):
+        u = np.hstack([n, np.cross(side, n)])
+        ends.append((u @ J) * support[joints.astype(int)])
+    return ends[0] - ends[1], rate * (pairs[:, 0] - pairs[:, 1])
 
 
 def _translates(kind: str) -> bool:
