@@ -337,7 +337,7 @@ class CollisionLimit(Limit):
         self._pair_info = np.zeros((len(self.pairs), 4))
         self._pair_info[:, 2], self._pair_info[:, 3] = self._ja, self._jb
         self._pair_rows = np.zeros((max(len(self.pairs), 1), 13))
-        self._reach2 = (self._radius[self._pa] + self._radius[self._pb] + self.influence) ** 2
+        self._reach = self._radius[self._pa] + self._radius[self._pb] + self.influence
         # sphere centres: in the parent joint's frame (homogeneous) and in the world
         local = self._placement @ np.append(self._box_center, np.ones((n, 1)), axis=1)[:, :, None]
         self._center_local = local[:, :, 0]
@@ -372,43 +372,43 @@ class CollisionLimit(Limit):
         self._cache: tuple | None = None
         self._lever = self._levers()
         self._bounds: tuple[float, tuple[np.ndarray, np.ndarray]] | None = None
-        self._skip_lever, self._flat = self._motion_levers()
-        #: the last broad phase: (obstacles' version, q, its pairs, its least gap)
-        self._reference: tuple[int, np.ndarray, np.ndarray, float] | None = None
+        self._pair_lever, self._flat = self._pair_levers()
+        #: the last broad phase: (obstacles' version, q, its pairs, each pair's gap)
+        self._reference: tuple[int, np.ndarray, np.ndarray, np.ndarray] | None = None
 
-    def _motion_levers(self) -> tuple[np.ndarray | None, bool]:
-        """For each velocity coordinate, a bound (m per unit) on how far it moves any point of
-        the geometry, summed over the joints it drives (a mimic joint's times its multiplier),
-        and whether ``q`` is its own tangent space (revolute and prismatic joints only);
-        ``None`` for joints whose coordinates are not rates of a motion (Euler angles)."""
+    def _pair_levers(self) -> tuple[np.ndarray | None, bool]:
+        """For each pair and velocity coordinate, a bound (m per unit) on how much the
+        coordinate changes the distance between any two points of the pair's bounding
+        spheres: the chain of joint offsets from its joint to the far side of either sphere
+        when it moves only one of them (at least 1 m for a joint that translates), 0 when it
+        moves both (rigidly together), summed over the joints it drives (a mimic joint's
+        times its multiplier); and whether ``q`` is its own tangent space (revolute and
+        prismatic joints, mimic joints following them). ``None`` for joints whose coordinates are not rates of a
+        motion (Euler angles)."""
         model = self.model
-        reach = self._reaches()
-        ext = np.zeros(model.nvExtended)
-        flat = model.nq == model.nv
-        for j in range(1, model.njoints):
-            kind = model.joints[j].shortname()
-            if "ZYX" in kind:
-                return None, False
-            flat = flat and model.nqs[j] == model.nvs[j] == 1
-            start = model.idx_vExtendeds[j]
-            ext[start:start + model.nvExtendeds[j]] = max(reach[j], 1.0) if _translates(kind) \
-                else reach[j]
-        lever = ext if self._mimic is None else np.abs(self._mimic).T @ ext
-        return lever, flat
-
-    def _reaches(self) -> np.ndarray:
-        """Per joint, the longest chain of joint offsets from it to a bounding sphere's far
-        side of a geometry it moves (m)."""
-        model = self.model
-        reach = np.zeros(model.njoints)
-        for g in range(self.n_robot):
+        n = len(self.geometry.geometryObjects)
+        kinds = [model.joints[j].shortname() for j in range(model.njoints)]
+        if any("ZYX" in kind for kind in kinds[1:]):
+            return None, False
+        flat = model.nq == model.nv and all(model.nqs[j] == model.nvs[j] <= 1
+                                             for j in range(1, model.njoints))
+        lever = np.zeros((n, model.nvExtended))  # per geometry, per joint coordinate
+        moves = np.zeros((n, model.nvExtended), dtype=bool)
+        for g in range(n):
             k = int(self._joint[g])
             length = float(np.linalg.norm(self._center_local[g, :3]) + self._radius[g])
             while k > 0:
-                reach[k] = max(reach[k], length)
+                start = model.idx_vExtendeds[k]
+                span = slice(start, start + model.nvExtendeds[k])
+                lever[g, span] = max(length, 1.0) if _translates(kinds[k]) else length
+                moves[g, span] = True
                 length += float(np.linalg.norm(model.jointPlacements[k].translation))
                 k = model.parents[k]
-        return reach
+        pair = np.where(moves[self._pa] & moves[self._pb], 0.0,
+                        lever[self._pa] + lever[self._pb])
+        if self._mimic is not None:
+            pair = pair @ np.abs(self._mimic)
+        return pair, flat
 
     def _levers(self) -> np.ndarray:
         """For each velocity coordinate, a bound (m per unit) on the speed it gives any point of
@@ -487,18 +487,15 @@ class CollisionLimit(Limit):
         volumes contain their geometry, so neither test drops a pair within ``influence``."""
         return self._broad_phase(data)[0]
 
-    def _broad_phase(self, data) -> tuple[np.ndarray, float]:
-        """:meth:`_candidates` and the least gap (m) by which a pair it leaves out misses
-        ``influence`` (``inf`` when it leaves none out)."""
+    def _broad_phase(self, data) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`_candidates`, and for each pair the gap (m) by which its bounding volumes
+        miss ``influence`` (negative for the candidates)."""
         oMi = data.oMi.tolist()
         H = np.concatenate([oMi[j].homogeneous for j in self._joints] + [self._world])
         center = (H @ self._centers_in).take(self._pick)
         diff = self._difference @ center
-        gap2 = np.einsum("ij,ij->i", diff, diff)
-        close = gap2 < self._reach2
-        near = np.flatnonzero(close)
-        far = np.sqrt(gap2[~close]) - np.sqrt(self._reach2[~close])
-        slack = float(far.min()) if far.size else math.inf
+        slack = np.sqrt(np.einsum("ij,ij->i", diff, diff)) - self._reach
+        near = np.flatnonzero(slack < 0)
         if near.size == 0 or not self._refine:
             return near, slack
         # both directions at once: the sphere of a against b's box, and of b against a's box
@@ -506,26 +503,22 @@ class CollisionLimit(Limit):
         other = np.concatenate((self._pb[near], self._pa[near]))
         poses = H.reshape(-1, 4, 4)[self._slot[other]] @ self._placement[other]
         gap = (self._sphere_box(center[one], poses, other) - self._radius[one]).reshape(2, -1)
-        gap = np.maximum(gap[0], gap[1]) - self.influence
-        if np.any(gap >= 0):
-            slack = min(slack, float(gap[gap >= 0].min()))
-        return near[gap < 0], slack
+        slack[near] = np.maximum(gap[0], gap[1]) - self.influence
+        return np.flatnonzero(slack < 0), slack
 
     def _near(self, data, q: np.ndarray | None) -> np.ndarray:
         """:meth:`_candidates` at ``q``, from the last broad phase while ``q`` is close to
-        where it ran: no point of a geometry moves farther than ``sum_j lever_j |dq_j|`` (the
-        displacement ``dq`` from there; :meth:`_levers`), so no pair it left out can reach
-        ``influence`` before twice that exceeds the least gap it left them at."""
+        where it ran: a displacement ``dq`` from there changes the distance of a pair's
+        bounding spheres by at most ``sum_j lever_j |dq_j|`` (:meth:`_pair_levers`), so a
+        pair it left out stays out until that reaches the gap it left the pair at."""
         ref = self._reference
         if q is not None and ref is not None and ref[0] == self._version:
-            if self._flat:
-                moved = float(np.abs(q - ref[1]) @ self._skip_lever)
-            else:
-                moved = float(np.abs(pin.difference(self.model, ref[1], q)) @ self._skip_lever)
-            if 2.0 * moved < ref[3]:
+            moved = np.abs(q - ref[1] if self._flat else pin.difference(self.model, ref[1], q))
+            if np.all(self._pair_lever @ moved < ref[3]):
                 return ref[2]
         near, slack = self._broad_phase(data)
-        if q is not None and self._skip_lever is not None:
+        if q is not None and self._pair_lever is not None:
+            slack[near] = np.inf  # a candidate stays one
             self._reference = (self._version, q.copy(), near, slack)
         return near
 
