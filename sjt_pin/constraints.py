@@ -307,6 +307,10 @@ def task_scale(a: np.ndarray, b: np.ndarray, lower: np.ndarray, upper: np.ndarra
     return max(min(s_max, 1.0), 0.0), k
 
 
+#: the ridge of the stage's dual QP, relative to its largest diagonal entry (see
+#: :func:`nonnegative_qp`)
+DUAL_RIDGE = 1e-13
+
 #: the free joints still span the task space while the smallest singular value of their
 #: normalised task columns is above this fraction of the largest (Flacco's rank test)
 RANK_TOL = 1e-6
@@ -439,14 +443,23 @@ def project_reference(dq: np.ndarray, Jw: np.ndarray, A: np.ndarray, b: np.ndarr
 
 def nonnegative_qp(Q: np.ndarray, r: np.ndarray, tol: float = 1e-13) -> np.ndarray:
     """``argmin 1/2 y^T Q y + r^T y`` over ``y >= 0`` for a symmetric PSD ``Q``: the active-set
-    method of Lawson and Hanson's NNLS, on the normal equations of the passive set."""
+    method of Lawson and Hanson's NNLS, on the normal equations of the passive set.
+
+    ``Q`` gets a ridge of :data:`DUAL_RIDGE` times its largest diagonal entry: on a singular
+    ``Q`` (a row twice, more rows than joints) a passive set's system has many solutions, and
+    the one it picks may give the entering row a zero weight, so that the method cycles on it
+    and stops short of the optimum. With the ridge the dual is strictly convex and the method
+    finite; in the primal a row may then be broken by ``ridge * y``, where ``y`` is its weight
+    (the dual of rows softened by a quadratic penalty), far below the stage's tolerances."""
     k = r.size
     y = np.zeros(k)
     passive = np.zeros(k, dtype=bool)
     scale = tol * (1.0 + float(np.max(np.abs(r), initial=0.0)))
     # a row no motion can change (Q_tt = 0: its gradient is zero, e.g. two links that move
     # together) cannot be corrected: it never enters, instead of stalling every round
-    inert = np.diag(Q) <= 1e-14 * max(float(np.max(np.diag(Q), initial=0.0)), 1e-300)
+    top = float(np.max(np.diag(Q), initial=0.0))
+    inert = np.diag(Q) <= 1e-14 * max(top, 1e-300)
+    Q = Q + DUAL_RIDGE * top * np.eye(k)
     for _ in range(3 * k + 10):
         w = -(Q @ y + r)
         w[passive | inert] = -np.inf

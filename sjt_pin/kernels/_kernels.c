@@ -1337,11 +1337,14 @@ done:
 
 /* -- the constraint stage's correction (sjt_pin/constraints.py: project, nonnegative_qp) -------- */
 
-/* argmin 1/2 y^T Q y + r^T y over y >= 0 for the symmetric PSD Q (k x k, row-major): the
- * active-set method of Lawson and Hanson's NNLS on the normal equations of the passive set,
- * step for step as constraints.nonnegative_qp (the reference; the passive set's system by
- * pseudo_solve where numpy's lstsq solves it). scratch: 3 k + 2 k k doubles and k + k
- * passive/inert flags after them. Returns the number of passive-set solves. */
+/* the dual's ridge relative to its largest diagonal entry (constraints.DUAL_RIDGE) */
+#define DUAL_RIDGE 1e-13
+
+/* argmin 1/2 y^T Q y + r^T y over y >= 0 for the symmetric PSD Q (k x k, row-major) plus
+ * DUAL_RIDGE max(diag Q) I: the active-set method of Lawson and Hanson's NNLS on the normal
+ * equations of the passive set, step for step as constraints.nonnegative_qp (the reference;
+ * the passive set's system by Cholesky where numpy's lstsq solves it). scratch: 3 k + 2 k k
+ * doubles, then k + k passive/inert flags and k indices. Returns the passive-set solves. */
 static int nonnegative_qp_c(const double *Q, const double *r, Py_ssize_t k, double tol,
                             double *y, double *scratch)
 {
@@ -1354,7 +1357,7 @@ static int nonnegative_qp_c(const double *Q, const double *r, Py_ssize_t k, doub
         top = dmax(top, Q[i * k + i]);
         rmax = dmax(rmax, fabs(r[i]));
     }
-    double scale = tol * (1.0 + rmax);
+    double scale = tol * (1.0 + rmax), ridge = DUAL_RIDGE * top;
     for (Py_ssize_t i = 0; i < k; i++)
         inert[i] = Q[i * k + i] <= 1e-14 * dmax(top, 1e-300) ? 1.0 : 0.0;
     int solves = 0;
@@ -1363,7 +1366,7 @@ static int nonnegative_qp_c(const double *Q, const double *r, Py_ssize_t k, doub
         double best = -INFINITY;
         for (Py_ssize_t i = 0; i < k; i++) {
             if (passive[i] != 0.0 || inert[i] != 0.0) continue;
-            double acc = -r[i];
+            double acc = -r[i] - ridge * y[i];
             for (Py_ssize_t j = 0; j < k; j++) acc -= Q[i * k + j] * y[j];
             w[i] = acc;
             if (acc > best) {
@@ -1380,9 +1383,16 @@ static int nonnegative_qp_c(const double *Q, const double *r, Py_ssize_t k, doub
             for (Py_ssize_t a = 0; a < p; a++) {
                 rhs[a] = -r[idx[a]];
                 for (Py_ssize_t c = 0; c < p; c++) sub[a * p + c] = Q[idx[a] * k + idx[c]];
+                sub[a * p + a] += ridge;
             }
             double *sol = w;  /* w is recomputed before it is read again */
-            pseudo_solve(sub, V, p, rhs, sol, 0.0);
+            /* the ridge makes the passive set's system positive definite: Cholesky, and the
+             * pseudo-inverse only if rounding made a pivot vanish */
+            memcpy(V, sub, (size_t)(p * p) * sizeof(double));
+            if (cholesky_factor(V, p, 0.0))
+                cholesky_substitute(V, p, rhs, sol);
+            else
+                pseudo_solve(sub, V, p, rhs, sol, 0.0);
             solves++;
             for (Py_ssize_t i = 0; i < k; i++) s[i] = 0.0;
             int positive = 1;
@@ -1738,7 +1748,8 @@ static PyObject *py_damper_rows(PyObject *self, PyObject *const *args, Py_ssize_
         for (int side = 0; side < 2; side++) {
             double j = AT(Pm, i, 2 + side);
             if (!(j >= 0.0 && j < (double)Sm.m)) {
-                PyErr_Format(PyExc_ValueError, "pairs[%zd] names joint %g of %zd", i, j, Sm.m);
+                PyErr_Format(PyExc_ValueError, "pairs[%zd] names joint %zd; support has %zd",
+                             i, (Py_ssize_t)j, Sm.m);
                 goto done;
             }
         }
