@@ -171,9 +171,10 @@ def test_the_compiled_damper_rows_are_the_numpy_ones(panda):
 
 @pytest.mark.parametrize("name", ["panda", "ur5"])
 def test_the_broad_phase_it_skips_never_misses_a_pair_within_influence(name, panda, ur5):
-    """Along random joint-space walks (steps of up to 3 mrad, every 50th up to 0.3 rad), the pairs the limit measures
-    at each configuration hold every pair whose exact distance is below influence (brute
-    force over every pair), although most steps reuse the last broad phase."""
+    """Along random joint-space walks (steps of up to 3 mrad, every 50th up to 0.3 rad), the
+    pairs the limit measures at each configuration hold every pair whose exact distance is
+    below influence (brute force over every pair), although most steps reuse the last broad
+    phase."""
     robot = panda if name == "panda" else ur5
     rng = np.random.default_rng(15)
     q = robot.random_configuration(rng)

@@ -383,8 +383,8 @@ class CollisionLimit(Limit):
         when it moves only one of them (at least 1 m for a joint that translates), 0 when it
         moves both (rigidly together), summed over the joints it drives (a mimic joint's
         times its multiplier); and whether ``q`` is its own tangent space (revolute and
-        prismatic joints, mimic joints following them). ``None`` for joints whose coordinates are not rates of a
-        motion (Euler angles)."""
+        prismatic joints, mimic joints following them). ``None`` for joints whose coordinates
+        are not rates of a motion (Euler angles)."""
         model = self.model
         n = len(self.geometry.geometryObjects)
         kinds = [model.joints[j].shortname() for j in range(model.njoints)]
@@ -641,7 +641,7 @@ class CollisionLimit(Limit):
         pin.updateGeometryPlacements(model, data, self.geometry, self.geometry_data)
         geometry, gdata, influence = self.geometry, self.geometry_data, self.influence
         compute = pin.computeDistance
-        found = []
+        found: list[int] = []
         pairs, info, margins = self._pair_rows, self._pair_info, self.margins
         for k in near.tolist():
             res = compute(geometry, gdata, k)
