@@ -214,7 +214,7 @@ class Solver:
                             if extra else None)
         #: the commanded velocity and acceleration of the last step (the stage's state)
         self._motion = Motion(np.zeros(robot.nq), np.zeros(n), np.zeros(n), 1.0)
-        self._tracks_motion = accel is not None or bool(extra)
+        self._tracks_motion = accel is not None or any(limit.uses_motion for limit in extra)
         return speeds
 
     def _build_work(self, speeds: np.ndarray) -> None:

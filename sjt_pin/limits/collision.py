@@ -180,6 +180,7 @@ class CollisionLimit(Limit):
     """
 
     name: str = "collision"
+    uses_motion: bool = False  # its rows and bounds depend on q and dt alone
 
     def __init__(self, robot, obstacles: Sequence = (), self_collision: bool = False,
                  margin: float = 0.01, influence: float = 0.05, gain: float = 0.5,
