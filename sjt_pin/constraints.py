@@ -404,7 +404,10 @@ def project(dq: np.ndarray, Jw: np.ndarray, A: np.ndarray, b: np.ndarray, lower:
             upper: np.ndarray, moving: np.ndarray) -> np.ndarray:
     """``argmin (x - dq)^T H (x - dq)`` with ``H = Jw^T Jw + rho I`` over the ``moving`` joints
     (``rho``: the mean of ``Jw^T Jw``'s diagonal), subject to ``A x <= b`` and
-    ``lower <= x <= upper`` (module docstring, step 2); the others keep ``dq``. Compiled
+    ``lower <= x <= upper`` (module docstring, step 2); the others keep ``dq``. When no
+    velocity within the bounds meets every row (a pair in penetration that no joint can
+    separate fast enough), the answer stays within the bounds, the rows as near as the dual's
+    ridge lets them (:func:`nonnegative_qp`). Compiled
     (``kernels.project_rows``, a few microseconds); :func:`project_reference` is the same in
     numpy."""
     out = np.empty(dq.size)
@@ -437,7 +440,9 @@ def project_reference(dq: np.ndarray, Jw: np.ndarray, A: np.ndarray, b: np.ndarr
     y = nonnegative_qp(C @ C.T, r)
     z = -C.T @ y  # z = L^T (x - x0)
     out = dq.copy()
-    out[cols] = x0 + np.linalg.solve(L.T, z)
+    # the bounds are hard: rows that no velocity within them meets (the dual unbounded but for
+    # its ridge) leave the answer on them, not beyond
+    out[cols] = np.clip(x0 + np.linalg.solve(L.T, z), lower[cols], upper[cols])
     return out
 
 

@@ -252,3 +252,29 @@ def test_rows_step_leaves_a_step_within_the_rows_and_bounds_alone(ur5):
     b = np.array([step[1] / 1e-3 - 0.5])
     assert K.rows_step(J, q, A, b, *free, work, broken) == 1
     assert broken[1] / 1e-3 <= b[0] + 1e-9 * (1 + abs(b[0]))
+
+
+@pytest.mark.parametrize("method", ["sjt", "dls"])
+def test_rows_no_velocity_can_meet_leave_the_step_within_the_speed_limits(method, panda):
+    """The limit first evaluated on another Kinematics (at Panda's q0, where it takes its start)
+    and then stepped from a configuration whose link 6 is inside the base: that pair's row asks
+    for a separation no joint speed allows, the projection's QP has no answer, and its dual
+    once diverged into a step of several radians (Romeo: 2.6e5). Every step stays within the
+    URDF's speed limits."""
+    q = np.array([1.111, -1.614, 2.819, -2.779, -2.223, 1.902, -0.285, 0.021])
+    limit = CollisionLimit(panda, self_collision=True, margin=0.01)
+    other = Kinematics(panda.model)
+    other.update(panda.q0)
+    limit.rows(other, Motion(panda.q0, np.zeros(panda.nv), np.zeros(panda.nv), 1e-3))
+    solver = make_solver(method, panda, dt=1e-3, limits=[limit])
+    target = panda.fk(q)
+    broken = 0
+    for _ in range(20):
+        q_next = solver.step(q, target)
+        step = pin.difference(panda.model, q, q_next)
+        assert np.all(np.isfinite(step))
+        assert np.all(np.abs(step) <= panda.velocity_limits * 1e-3 * (1 + 1e-9))
+        rows = limit.rows(solver.stack.kinematics, solver._motion)
+        broken += rows is not None and bool(np.any(rows[0] @ (step / 1e-3) > rows[1] + 1e-6))
+        q = q_next
+    assert broken  # the rows could not all hold: the bounds won

@@ -1431,8 +1431,8 @@ static Py_ssize_t nonnegative_qp_scratch(Py_ssize_t k) { return 6 * k + 2 * k * 
 
 /* out = argmin (x - dq)^T H (x - dq), H = Jw_c^T Jw_c + rho I on the moving joints c (rho the
  * mean of H's diagonal), subject to A x <= b and lower <= x <= upper, the others at dq: as
- * constraints.project (its reference), on the dual of the Cholesky-whitened problem. Returns
- * the passive-set solves, -1 when out of memory. */
+ * constraints.project (its reference), on the dual of the Cholesky-whitened problem; when no
+ * x meets them all, within the bounds. Returns the passive-set solves, -1 when out of memory. */
 static int project_c(const double *dq, Mat Jw, Mat A, const double *b, const double *lower,
                      const double *upper, const double *moving, double *out)
 {
@@ -1520,7 +1520,12 @@ static int project_c(const double *dq, Mat Jw, Mat A, const double *b, const dou
         for (Py_ssize_t c = a + 1; c < nc; c++) acc -= L[c * nc + a] * z[c];
         z[a] = acc / L[a * nc + a];
     }
-    for (Py_ssize_t a = 0; a < nc; a++) out[cols[a]] = x0[a] + z[a];
+    /* the bounds are hard: rows that no velocity within them meets (the dual unbounded but
+     * for its ridge) leave the answer on them, not beyond */
+    for (Py_ssize_t a = 0; a < nc; a++) {
+        Py_ssize_t j = cols[a];
+        out[j] = dmin(dmax(x0[a] + z[a], lower[j]), upper[j]);
+    }
     free(mem);
     return solves;
 }
