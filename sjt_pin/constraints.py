@@ -36,6 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .kernels import project_rows
 from .limits.base import Limit, Motion
 
 #: ``solve(free, held)``: the method's joint velocity (nv,; rad/s) with only the ``free``
@@ -45,6 +46,7 @@ Solve = Callable[[np.ndarray, np.ndarray | None], np.ndarray]
 
 #: a bound counts as reached within this many rad/s (m/s) of it
 TOLERANCE = 1e-12
+_F64 = np.dtype(np.float64)
 
 
 @dataclass
@@ -148,8 +150,11 @@ class ConstraintStage:
             rows = limit.rows(kinematics, motion)
             if rows is None:
                 continue
-            A, b = np.atleast_2d(np.asarray(rows[0], dtype=float)), np.atleast_1d(
-                np.asarray(rows[1], dtype=float))
+            A, b = rows
+            if not (type(A) is np.ndarray and type(b) is np.ndarray and A.dtype == _F64
+                    and b.dtype == _F64 and A.ndim == 2 and b.ndim == 1):
+                A, b = np.atleast_2d(np.asarray(A, dtype=float)), np.atleast_1d(
+                    np.asarray(b, dtype=float))
             if A.shape != (b.size, self.nv):
                 raise ValueError(f"{limit!r}.rows() must return A of shape (k, {self.nv}) and "
                                  f"b of shape (k,), got {A.shape} and {b.shape}")
@@ -157,7 +162,28 @@ class ConstraintStage:
             owners += [limit.name] * b.size
         if not blocks:
             return None
+        if len(blocks) == 1:
+            return blocks[0][0], blocks[0][1], owners
         return np.vstack([a for a, _ in blocks]), np.concatenate([b for _, b in blocks]), owners
+
+    def hard_parts(self, kinematics, motion: Motion):
+        """This stage's bounds and rows at this step, for a step that the solver's kernel
+        checks and corrects itself (``kernels.rows_step``): ``(lower, upper, rows)`` with the
+        intersection of the limits' bounds (rad/s; ``None`` when none bounds) and
+        :meth:`general_rows`; ``None`` when a smoothness limit bounds the step (only
+        :meth:`enforce` weighs those)."""
+        lower = upper = None
+        for limit in self.limits:
+            bounds = limit.bounds(kinematics, motion)
+            if bounds is None:
+                continue
+            if not limit.hard:
+                return None
+            if lower is None or upper is None:
+                lower, upper = bounds
+            else:
+                lower, upper = np.maximum(lower, bounds[0]), np.minimum(upper, bounds[1])
+        return lower, upper, self.general_rows(kinematics, motion)
 
     # -- enforcing ---------------------------------------------------------------------------
     def enforce(self, dq: np.ndarray, solve: Solve, kinematics, motion: Motion,
@@ -299,6 +325,10 @@ def task_scale(a: np.ndarray, b: np.ndarray, lower: np.ndarray, upper: np.ndarra
     return max(min(s_max, 1.0), 0.0), k
 
 
+#: the ridge of the stage's dual QP, relative to its largest diagonal entry (see
+#: :func:`nonnegative_qp`)
+DUAL_RIDGE = 1e-13
+
 #: the free joints still span the task space while the smallest singular value of their
 #: normalised task columns is above this fraction of their root-sum-square (of the largest,
 #: within a factor sqrt(m); Flacco's rank test, the compiled kernels' test)
@@ -392,8 +422,28 @@ def smooth(dq: np.ndarray, hard: Bounds, soft: Bounds) -> tuple[np.ndarray, np.n
 
 def project(dq: np.ndarray, Jw: np.ndarray, A: np.ndarray, b: np.ndarray, lower: np.ndarray,
             upper: np.ndarray, moving: np.ndarray) -> np.ndarray:
-    """``argmin (x - dq)^T H (x - dq)`` with ``H = Jw^T Jw + rho I`` over the ``moving`` joints,
-    subject to ``A x <= b`` and ``lower <= x <= upper`` (module docstring, step 2)."""
+    """``argmin (x - dq)^T H (x - dq)`` with ``H = Jw^T Jw + rho I`` over the ``moving`` joints
+    (``rho``: the mean of ``Jw^T Jw``'s diagonal), subject to ``A x <= b`` and
+    ``lower <= x <= upper`` (module docstring, step 2); the others keep ``dq``. When no
+    velocity within the bounds meets every row (a pair in penetration that no joint can
+    separate fast enough), the answer stays within the bounds, the rows as near as the dual's
+    ridge lets them (:func:`nonnegative_qp`). Compiled
+    (``kernels.project_rows``, a few microseconds); :func:`project_reference` is the same in
+    numpy."""
+    out = np.empty(dq.size)
+    project_rows(np.asarray(dq, dtype=float), np.asarray(Jw, dtype=float),
+                 np.asarray(A, dtype=float), np.asarray(b, dtype=float),
+                 np.asarray(lower, dtype=float), np.asarray(upper, dtype=float),
+                 np.asarray(moving, dtype=float), out)
+    return out
+
+
+def project_reference(dq: np.ndarray, Jw: np.ndarray, A: np.ndarray, b: np.ndarray,
+                      lower: np.ndarray, upper: np.ndarray, moving: np.ndarray) -> np.ndarray:
+    """:func:`project` in numpy: the whitened problem ``z = L^T (x - x0)``, ``H = L L^T``, has
+    the dual ``min 1/2 y^T (C C^T) y + r^T y`` over ``y >= 0`` with ``C = G L^-T`` and
+    ``r = h - G x0`` (``G x <= h``: the rows and the finite bounds), solved by
+    :func:`nonnegative_qp`; then ``z = -C^T y``."""
     cols = np.flatnonzero(moving)
     x0 = dq[cols]
     H = Jw[:, cols].T @ Jw[:, cols] if Jw.size else np.zeros((cols.size, cols.size))
@@ -410,20 +460,31 @@ def project(dq: np.ndarray, Jw: np.ndarray, A: np.ndarray, b: np.ndarray, lower:
     y = nonnegative_qp(C @ C.T, r)
     z = -C.T @ y  # z = L^T (x - x0)
     out = dq.copy()
-    out[cols] = x0 + np.linalg.solve(L.T, z)
+    # the bounds are hard: rows that no velocity within them meets (the dual unbounded but for
+    # its ridge) leave the answer on them, not beyond
+    out[cols] = np.clip(x0 + np.linalg.solve(L.T, z), lower[cols], upper[cols])
     return out
 
 
 def nonnegative_qp(Q: np.ndarray, r: np.ndarray, tol: float = 1e-13) -> np.ndarray:
     """``argmin 1/2 y^T Q y + r^T y`` over ``y >= 0`` for a symmetric PSD ``Q``: the active-set
-    method of Lawson and Hanson's NNLS, on the normal equations of the passive set."""
+    method of Lawson and Hanson's NNLS, on the normal equations of the passive set.
+
+    ``Q`` gets a ridge of :data:`DUAL_RIDGE` times its largest diagonal entry: on a singular
+    ``Q`` (a row twice, more rows than joints) a passive set's system has many solutions, and
+    the one it picks may give the entering row a zero weight, so that the method cycles on it
+    and stops short of the optimum. With the ridge the dual is strictly convex and the method
+    finite; in the primal a row may then be broken by ``ridge * y``, where ``y`` is its weight
+    (the dual of rows softened by a quadratic penalty), far below the stage's tolerances."""
     k = r.size
     y = np.zeros(k)
     passive = np.zeros(k, dtype=bool)
     scale = tol * (1.0 + float(np.max(np.abs(r), initial=0.0)))
     # a row no motion can change (Q_tt = 0: its gradient is zero, e.g. two links that move
     # together) cannot be corrected: it never enters, instead of stalling every round
-    inert = np.diag(Q) <= 1e-14 * max(float(np.max(np.diag(Q), initial=0.0)), 1e-300)
+    top = float(np.max(np.diag(Q), initial=0.0))
+    inert = np.diag(Q) <= 1e-14 * max(top, 1e-300)
+    Q = Q + DUAL_RIDGE * top * np.eye(k)
     for _ in range(3 * k + 10):
         w = -(Q @ y + r)
         w[passive | inert] = -np.inf

@@ -163,7 +163,8 @@ class Solver:
                             if extra else None)
         #: the commanded velocity and acceleration of the last step (the stage's state)
         self._motion = Motion(np.zeros(robot.nq), np.zeros(n), np.zeros(n), 1.0)
-        self._tracks_motion = (accel is not None or bool(extra)) and not self._compiled_smooth
+        self._tracks_motion = ((accel is not None and not self._compiled_smooth)
+                               or any(limit.uses_motion for limit in extra))
         return speeds
 
     def _build_work(self, speeds: np.ndarray) -> None:
@@ -194,6 +195,10 @@ class Solver:
         self._raw_work = work.copy()  # the method alone, for the stage's solves
         self._outcome: Outcome | None = None
         self._outcome_count = -1
+        #: (step count, the user's rows) of a kernel step those rows corrected
+        self._projected: tuple[int, tuple | None] = (-1, None)
+        self._no_rows = (np.zeros((0, n)), np.zeros(0))
+        self._no_bounds = (np.full(n, -np.inf), np.full(n, np.inf))
         work[K.P_ERROR_ROWS] = stack.target_dim
         work[K.P_STALL_RATIO] = -1.0 if self.escape is None else SaddleEscape.STALL_RATIO
         # converged, not stalled: |e_w| below ERROR_FLOOR times the tasks' length (unit-free)
@@ -407,9 +412,24 @@ class Solver:
         dt, layout, raw = self._dt, self._layout, self._raw_work
         motion, stack = self._motion, self.stack
         motion.q = q
-        if (self._user_stage is not None and self._kernel_bounds
-                and self._user_stage.admits(step / dt, stack.kinematics, motion)):
-            return step  # the kernel kept the position and speed bounds; the user's hold too
+        if self._user_stage is not None and self._kernel_bounds:
+            # the kernel kept the position and speed bounds; its step is checked against the
+            # user's limits and, when it breaks a row, projected onto the rows within every
+            # bound, in one compiled call (the kernel's saturation stands: the same as the
+            # whole stage's while the user's bounds do not cut the step)
+            parts = self._user_stage.hard_parts(stack.kinematics, motion)
+            if parts is not None:
+                lower, upper, rows = parts
+                if rows is None and lower is None:
+                    return step
+                A, b = (rows[0], rows[1]) if rows is not None else self._no_rows
+                done = K.rows_step(J, q, A, b, self._no_bounds[0] if lower is None else lower,
+                                   self._no_bounds[1] if upper is None else upper, self._work,
+                                   step)
+                if done >= 0:
+                    if done:
+                        self._projected = (self._count, rows)
+                    return step
         np.copyto(raw, self._work)
         raw[K.P_BOX_COUNT] = 0.0
         layout.inverse_speeds(raw)[:] = 0.0
@@ -444,9 +464,13 @@ class Solver:
         outcome = self.stage.enforce(dq, solve, stack.kinematics, motion,
                                      lambda: stack.sqrt_weight[:, None] * J * chain)
         self._outcome, self._outcome_count = outcome, self._count
-        step = np.multiply(outcome.dq, dt, out=self._step)
+        return self._exact_position(q, np.multiply(outcome.dq, dt, out=self._step))
+
+    def _exact_position(self, q: np.ndarray, step: np.ndarray) -> np.ndarray:
+        """``step`` (in place) with every joint inside its range moved exactly onto a limit it
+        reaches, not a rounding error past it."""
         limit = self.position_limit
-        if limit is not None:  # exactly onto a limit, not a rounding error past it
+        if limit is not None:
             x = q[limit.q_index]
             inside = (x >= limit.lower) & (x <= limit.upper)
             v = limit.v_index[inside]
@@ -556,6 +580,10 @@ class Solver:
                 outcome = self._kernel_outcome(q, step, status)
             if outcome is None:
                 outcome = Outcome(step / self._dt)
+            if self._projected[0] == self._count and self._projected[1] is not None:
+                A, b, owners = self._projected[1]
+                tight = A @ (step / self._dt) - b > -1e-9 * (1.0 + np.abs(b))
+                outcome.rows = tuple(sorted({owners[i] for i in np.flatnonzero(tight)}))
             names: tuple[str, ...] = tuple(dict.fromkeys(joint for _, joint in outcome.active))
             index = {name: i for i, name in enumerate(self._v_names)}
             clamped = np.array([index[name] for name in names], dtype=np.int64)

@@ -17,18 +17,29 @@ against the numpy reference formulas of :mod:`sjt_pin.mappings` and against Pino
 - ``search_iteration(...)``: one Levenberg-Marquardt iteration of ``solve()`` on SJT's
   normalised columns, within the joint limits; ``search_pose(...)``: every iteration of one
   start on a single pose task in one call (it calls Pinocchio's Jacobian once per iteration);
+- ``damper_rows``: the collision limit's velocity-damper rows from its pairs' closest points;
 - ``frame_velocity``, ``position_rows``, ``rotation_defect``: the tasks' small transforms;
+- ``project_rows(dq, Jw, A, b, lower, upper, moving, out)``: the constraint stage's smallest
+  correction onto general rows and a box (:func:`sjt_pin.constraints.project`), on its dual by
+  ``nonnegative_qp(Q, r, y)`` (Lawson and Hanson's NNLS, as
+  :func:`sjt_pin.constraints.nonnegative_qp`); ``rows_step(J, q, A, b, lower, upper, work,
+  step)``: a kernel step checked against a user's rows and bounds, projected in place when
+  it breaks a row (the solver's path for collision dampers);
 - ``cholesky_solve``, ``loop_bound``, ``symmetric_eigen``: the small dense linear algebra,
   exposed for the tests.
 """
 
 from ._kernels import (  # noqa: F401
     cholesky_solve,
+    damper_rows,
     frame_velocity,
     least_squares_step,
     loop_bound,
+    nonnegative_qp,
     position_rows,
+    project_rows,
     rotation_defect,
+    rows_step,
     search_iteration,
     search_pose,
     symmetric_eigen,

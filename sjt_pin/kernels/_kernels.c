@@ -1876,6 +1876,437 @@ done:
     return result;
 }
 
+/* -- the constraint stage's correction (sjt_pin/constraints.py: project, nonnegative_qp) -------- */
+
+/* the dual's ridge relative to its largest diagonal entry (constraints.DUAL_RIDGE) */
+#define DUAL_RIDGE 1e-13
+
+/* argmin 1/2 y^T Q y + r^T y over y >= 0 for the symmetric PSD Q (k x k, row-major) plus
+ * DUAL_RIDGE max(diag Q) I: the active-set method of Lawson and Hanson's NNLS on the normal
+ * equations of the passive set, step for step as constraints.nonnegative_qp (the reference;
+ * the passive set's system by Cholesky where numpy's lstsq solves it). scratch: 3 k + 2 k k
+ * doubles, then k + k passive/inert flags and k indices. Returns the passive-set solves. */
+static int nonnegative_qp_c(const double *Q, const double *r, Py_ssize_t k, double tol,
+                            double *y, double *scratch)
+{
+    double *w = scratch, *s = w + k, *rhs = s + k, *sub = rhs + k, *V = sub + k * k;
+    double *passive = V + k * k, *inert = passive + k;
+    Py_ssize_t *idx = (Py_ssize_t *)(inert + k);
+    double top = 0.0, rmax = 0.0;
+    for (Py_ssize_t i = 0; i < k; i++) {
+        y[i] = passive[i] = 0.0;
+        top = dmax(top, Q[i * k + i]);
+        rmax = dmax(rmax, fabs(r[i]));
+    }
+    double scale = tol * (1.0 + rmax), ridge = DUAL_RIDGE * top;
+    for (Py_ssize_t i = 0; i < k; i++)
+        inert[i] = Q[i * k + i] <= 1e-14 * dmax(top, 1e-300) ? 1.0 : 0.0;
+    int solves = 0;
+    for (Py_ssize_t outer = 0; outer < 3 * k + 10; outer++) {
+        Py_ssize_t t = -1;
+        double best = -INFINITY;
+        for (Py_ssize_t i = 0; i < k; i++) {
+            if (passive[i] != 0.0 || inert[i] != 0.0) continue;
+            double acc = -r[i] - ridge * y[i];
+            for (Py_ssize_t j = 0; j < k; j++) acc -= Q[i * k + j] * y[j];
+            w[i] = acc;
+            if (acc > best) {
+                best = acc;
+                t = i;
+            }
+        }
+        if (t < 0 || best <= scale) break;
+        passive[t] = 1.0;
+        for (Py_ssize_t inner = 0; inner < 3 * k + 10; inner++) {
+            Py_ssize_t p = 0;
+            for (Py_ssize_t i = 0; i < k; i++)
+                if (passive[i] != 0.0) idx[p++] = i;
+            for (Py_ssize_t a = 0; a < p; a++) {
+                rhs[a] = -r[idx[a]];
+                for (Py_ssize_t c = 0; c < p; c++) sub[a * p + c] = Q[idx[a] * k + idx[c]];
+                sub[a * p + a] += ridge;
+            }
+            double *sol = w;  /* w is recomputed before it is read again */
+            /* the ridge makes the passive set's system positive definite: Cholesky, and the
+             * pseudo-inverse only if rounding made a pivot vanish */
+            memcpy(V, sub, (size_t)(p * p) * sizeof(double));
+            if (cholesky_factor(V, p, 0.0))
+                cholesky_substitute(V, p, rhs, sol);
+            else
+                pseudo_solve(sub, V, p, rhs, sol, 0.0);
+            solves++;
+            for (Py_ssize_t i = 0; i < k; i++) s[i] = 0.0;
+            int positive = 1;
+            for (Py_ssize_t a = 0; a < p; a++) {
+                s[idx[a]] = sol[a];
+                if (!(sol[a] > 0.0)) positive = 0;
+            }
+            if (positive) {
+                memcpy(y, s, (size_t)k * sizeof(double));
+                break;
+            }
+            /* the step toward s stops where the first of those at or below 0 reaches 0 (one
+             * already at 0 with s = 0 too stops it at once) */
+            double alpha = INFINITY;
+            for (Py_ssize_t a = 0; a < p; a++) {
+                Py_ssize_t i = idx[a];
+                if (s[i] > 0.0) continue;
+                double gap = y[i] - s[i];
+                alpha = dmin(alpha, gap > 0.0 ? y[i] / gap : 0.0);
+            }
+            int any = 0;
+            for (Py_ssize_t i = 0; i < k; i++) {
+                y[i] += alpha * (s[i] - y[i]);
+                if (passive[i] != 0.0 && !(y[i] > 1e-15)) passive[i] = 0.0;
+                if (passive[i] == 0.0) y[i] = 0.0;
+                any |= passive[i] != 0.0;
+            }
+            if (!any) break;
+        }
+    }
+    return solves;
+}
+
+/* doubles of scratch nonnegative_qp_c needs for k rows (its flags and indices included) */
+static Py_ssize_t nonnegative_qp_scratch(Py_ssize_t k) { return 6 * k + 2 * k * k + 1; }
+
+/* out = argmin (x - dq)^T H (x - dq), H = Jw_c^T Jw_c + rho I on the moving joints c (rho the
+ * mean of H's diagonal), subject to A x <= b and lower <= x <= upper, the others at dq: as
+ * constraints.project (its reference), on the dual of the Cholesky-whitened problem; when no
+ * x meets them all, within the bounds. Returns the passive-set solves, -1 when out of memory. */
+static int project_c(const double *dq, Mat Jw, Mat A, const double *b, const double *lower,
+                     const double *upper, const double *moving, double *out)
+{
+    Py_ssize_t n = Jw.n, m = Jw.m, k = A.m, nc = 0, rows;
+    Py_ssize_t lo_count = 0, hi_count = 0;
+    for (Py_ssize_t j = 0; j < n; j++) {
+        out[j] = dq[j];
+        if (moving[j] != 0.0) {
+            nc++;
+            lo_count += isfinite(lower[j]) ? 1 : 0;
+            hi_count += isfinite(upper[j]) ? 1 : 0;
+        }
+    }
+    rows = k + lo_count + hi_count;
+    size_t size = (size_t)(n + nc * nc + rows * nc + 2 * rows + rows * rows + 2 * nc
+                           + nonnegative_qp_scratch(rows));
+    double *mem = (double *)malloc(size * sizeof(double));
+    if (!mem) return -1;
+    Py_ssize_t *cols = (Py_ssize_t *)mem;
+    double *L = mem + n, *C = L + nc * nc, *h = C + rows * nc, *y = h + rows, *Q = y + rows;
+    double *x0 = Q + rows * rows, *z = x0 + nc, *scratch = z + nc;
+    nc = 0;
+    for (Py_ssize_t j = 0; j < n; j++)
+        if (moving[j] != 0.0) cols[nc++] = j;
+    double trace = 0.0;
+    for (Py_ssize_t a = 0; a < nc; a++) {
+        x0[a] = dq[cols[a]];
+        for (Py_ssize_t c = 0; c <= a; c++) {
+            double acc = 0.0;
+            for (Py_ssize_t i = 0; i < m; i++) acc += AT(Jw, i, cols[a]) * AT(Jw, i, cols[c]);
+            L[a * nc + c] = L[c * nc + a] = acc;
+        }
+        trace += L[a * nc + a];
+    }
+    double rho = dmax(trace / (double)(nc > 0 ? nc : 1), 1e-12);
+    int solves = 0;
+    if (nc > 0 && !cholesky_factor(L, nc, rho)) {
+        free(mem);
+        return 0;  /* not reached: H + rho I is positive definite */
+    }
+    /* G: A's moving columns, then -e_c for each finite lower bound, e_c for each upper;
+     * C = G L^-T row by row (forward substitution), r = h - G x0 (into h) */
+    Py_ssize_t row = 0;
+    for (Py_ssize_t i = 0; i < rows; i++) {
+        double *g = C + i * nc;
+        double hi_;
+        if (i < k) {
+            hi_ = b[i];
+            for (Py_ssize_t j = 0; j < n; j++)
+                if (moving[j] == 0.0) hi_ -= AT(A, i, j) * dq[j];
+            for (Py_ssize_t a = 0; a < nc; a++) g[a] = AT(A, i, cols[a]);
+        } else {
+            for (Py_ssize_t a = 0; a < nc; a++) g[a] = 0.0;
+            int upper_row = i >= k + lo_count;
+            /* the next column with a finite bound of this kind */
+            if (i == k || i == k + lo_count) row = 0;
+            while (!isfinite(upper_row ? upper[cols[row]] : lower[cols[row]])) row++;
+            g[row] = upper_row ? 1.0 : -1.0;
+            hi_ = upper_row ? upper[cols[row]] : -lower[cols[row]];
+            row++;
+        }
+        for (Py_ssize_t a = 0; a < nc; a++) hi_ -= g[a] * x0[a];
+        h[i] = hi_;
+        for (Py_ssize_t a = 0; a < nc; a++) {
+            double acc = g[a];
+            for (Py_ssize_t c = 0; c < a; c++) acc -= L[a * nc + c] * g[c];
+            g[a] = acc / L[a * nc + a];
+        }
+    }
+    for (Py_ssize_t i = 0; i < rows; i++)
+        for (Py_ssize_t j = 0; j <= i; j++) {
+            double acc = 0.0;
+            for (Py_ssize_t a = 0; a < nc; a++) acc += C[i * nc + a] * C[j * nc + a];
+            Q[i * rows + j] = Q[j * rows + i] = acc;
+        }
+    solves = nonnegative_qp_c(Q, h, rows, 1e-13, y, scratch);
+    /* z = -C^T y, then x - x0 = L^-T z (back substitution) */
+    for (Py_ssize_t a = 0; a < nc; a++) {
+        double acc = 0.0;
+        for (Py_ssize_t i = 0; i < rows; i++) acc -= C[i * nc + a] * y[i];
+        z[a] = acc;
+    }
+    for (Py_ssize_t a = nc - 1; a >= 0; a--) {
+        double acc = z[a];
+        for (Py_ssize_t c = a + 1; c < nc; c++) acc -= L[c * nc + a] * z[c];
+        z[a] = acc / L[a * nc + a];
+    }
+    /* the bounds are hard: rows that no velocity within them meets (the dual unbounded but
+     * for its ridge) leave the answer on them, not beyond */
+    for (Py_ssize_t a = 0; a < nc; a++) {
+        Py_ssize_t j = cols[a];
+        out[j] = dmin(dmax(x0[a] + z[a], lower[j]), upper[j]);
+    }
+    free(mem);
+    return solves;
+}
+
+/* nonnegative_qp(Q, r, y) -> int: y = argmin 1/2 y^T Q y + r^T y over y >= 0 */
+static PyObject *py_nonnegative_qp(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (!nargs_ok(nargs, 3, "nonnegative_qp")) return NULL;
+    Arg Qa = {0}, ra = {0}, ya = {0};
+    PyObject *result = NULL;
+    double *mem = NULL;
+    if (acquire(args[0], &Qa, 0, 2, "Q") || acquire(args[1], &ra, 0, 1, "r")
+        || acquire(args[2], &ya, 1, 1, "y"))
+        goto done;
+    Py_ssize_t k = length(&ra);
+    Mat Qm = mat(&Qa);
+    double *rv = vec(&ra, "r"), *yv = out_vec(&ya, "y");
+    if (!rv || !yv) goto done;
+    if (Qm.m != k || Qm.n != k || length(&ya) != k) {
+        PyErr_Format(PyExc_ValueError, "Q (%zd, %zd), r (%zd,) and y (%zd,) do not fit", Qm.m,
+                     Qm.n, k, length(&ya));
+        goto done;
+    }
+    mem = (double *)malloc((size_t)(k * k + nonnegative_qp_scratch(k)) * sizeof(double));
+    if (!mem) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    for (Py_ssize_t i = 0; i < k; i++)
+        for (Py_ssize_t j = 0; j < k; j++) mem[i * k + j] = AT(Qm, i, j);
+    int solves = nonnegative_qp_c(mem, rv, k, 1e-13, yv, mem + k * k);
+    result = PyLong_FromLong(solves);
+done:
+    free(mem);
+    release(&Qa); release(&ra); release(&ya);
+    return result;
+}
+
+/* project_rows(dq, Jw, A, b, lower, upper, moving, out) -> int */
+static PyObject *py_project_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (!nargs_ok(nargs, 8, "project_rows")) return NULL;
+    Arg dq = {0}, Jw = {0}, A = {0}, b = {0}, lo = {0}, hi = {0}, mv = {0}, out = {0};
+    PyObject *result = NULL;
+    if (acquire(args[0], &dq, 0, 1, "dq") || acquire(args[1], &Jw, 0, 2, "Jw")
+        || acquire(args[2], &A, 0, 2, "A") || acquire(args[3], &b, 0, 1, "b")
+        || acquire(args[4], &lo, 0, 1, "lower") || acquire(args[5], &hi, 0, 1, "upper")
+        || acquire(args[6], &mv, 0, 1, "moving") || acquire(args[7], &out, 1, 1, "out"))
+        goto done;
+    Mat Jm = mat(&Jw), Am = mat(&A);
+    Py_ssize_t n = length(&dq);
+    if (Jm.n != n || Am.n != n || length(&b) != Am.m || length(&lo) != n || length(&hi) != n
+        || length(&mv) != n || length(&out) != n) {
+        PyErr_Format(PyExc_ValueError, "dq (%zd,), Jw (%zd, %zd), A (%zd, %zd), b (%zd,), lower, "
+                     "upper, moving and out (n,) do not fit", n, Jm.m, Jm.n, Am.m, Am.n,
+                     length(&b));
+        goto done;
+    }
+    double *dv = vec(&dq, "dq"), *bv = vec(&b, "b"), *lv = vec(&lo, "lower");
+    double *hv = vec(&hi, "upper"), *mvv = vec(&mv, "moving"), *ov = out_vec(&out, "out");
+    if (!dv || !bv || !lv || !hv || !mvv || !ov) goto done;
+    int solves;
+    Py_BEGIN_ALLOW_THREADS
+    solves = project_c(dv, Jm, Am, bv, lv, hv, mvv, ov);
+    Py_END_ALLOW_THREADS
+    if (solves < 0) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    result = PyLong_FromLong(solves);
+done:
+    release(&dq); release(&Jw); release(&A); release(&b); release(&lo); release(&hi);
+    release(&mv); release(&out);
+    return result;
+}
+
+/* A kernel step (step, written by step_c) against a user's general rows A q_dot <= b and
+ * bounds [lower, upper] (rad/s; -inf/inf where none): 0 when it meets them all (step
+ * untouched), -1 when it breaks one of the bounds (the caller's whole constraint stage must
+ * saturate it), else 1 with step projected onto the rows within those bounds and the kernel's
+ * own box of this step (project_c in the metric of the weighted task rows, the moving joints
+ * of the mask; every joint inside its range exactly onto a limit it reaches); -2 when out of
+ * memory. */
+static int rows_step_c(Mat J, const double *q, Mat A, const double *b, const double *lower,
+                       const double *upper, double *work, double *step)
+{
+    Py_ssize_t m = J.m, n = J.n, k = A.m;
+    double dt = work[P_DT];
+    const double *mask = work + (Py_ssize_t)work[P_MASK];
+    const double *sw = work + (Py_ssize_t)work[P_ROWS];
+    const double *box_lo = work + (Py_ssize_t)work[P_CLAMPED] + n, *box_hi = box_lo + n;
+    for (Py_ssize_t j = 0; j < n; j++) {
+        double v = step[j] / dt;
+        if (v < lower[j] - BOUND_TOL || v > upper[j] + BOUND_TOL) return -1;
+    }
+    int broken = 0;
+    for (Py_ssize_t i = 0; i < k && !broken; i++) {
+        double acc = -b[i];
+        for (Py_ssize_t j = 0; j < n; j++) acc += AT(A, i, j) * step[j] / dt;
+        if (acc > BOUND_TOL * (1.0 + fabs(b[i]))) broken = 1;
+    }
+    if (!broken) return 0;
+    double *mem = (double *)malloc((size_t)(m * n + 5 * n + 1) * sizeof(double));
+    if (!mem) return -2;
+    double *Jw = mem, *dq = Jw + m * n, *lo = dq + n, *hi = lo + n, *moving = hi + n;
+    double *out = moving + n;
+    for (Py_ssize_t i = 0; i < m; i++)
+        for (Py_ssize_t j = 0; j < n; j++) Jw[i * n + j] = sw[i] * AT(J, i, j) * mask[j];
+    for (Py_ssize_t j = 0; j < n; j++) {
+        dq[j] = step[j] / dt;
+        lo[j] = dmax(box_lo[j], lower[j]);
+        hi[j] = dmin(box_hi[j], upper[j]);
+        moving[j] = mask[j] != 0.0 ? 1.0 : 0.0;
+    }
+    Mat Jm = {Jw, m, n, n, 1};
+    int solves = project_c(dq, Jm, A, b, lo, hi, moving, out);
+    if (solves < 0) {
+        free(mem);
+        return -2;
+    }
+    for (Py_ssize_t j = 0; j < n; j++) step[j] = out[j] * dt;
+    exact_position(q, work, step);
+    free(mem);
+    return 1;
+}
+
+/* rows_step(J, q, A, b, lower, upper, work, step) -> int (rows_step_c) */
+static PyObject *py_rows_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (!nargs_ok(nargs, 8, "rows_step")) return NULL;
+    Arg J = {0}, q = {0}, A = {0}, b = {0}, lo = {0}, hi = {0}, work = {0}, step = {0};
+    PyObject *result = NULL;
+    if (acquire(args[0], &J, 0, 2, "J") || acquire(args[1], &q, 0, 1, "q")
+        || acquire(args[2], &A, 0, 2, "A") || acquire(args[3], &b, 0, 1, "b")
+        || acquire(args[4], &lo, 0, 1, "lower") || acquire(args[5], &hi, 0, 1, "upper")
+        || acquire(args[6], &work, 1, 1, "work") || acquire(args[7], &step, 1, 1, "step"))
+        goto done;
+    Mat Jm = mat(&J), Am = mat(&A);
+    Py_ssize_t n = Jm.n;
+    if (Am.n != n || length(&b) != Am.m || length(&lo) != n || length(&hi) != n
+        || length(&step) != n) {
+        PyErr_Format(PyExc_ValueError, "J (%zd, %zd), A (%zd, %zd), b (%zd,), lower, upper and "
+                     "step (n,) do not fit", Jm.m, n, Am.m, Am.n, length(&b));
+        goto done;
+    }
+    if (check_work(&work, Jm.m, n)) goto done;
+    double *qv = vec(&q, "q"), *bv = vec(&b, "b"), *lv = vec(&lo, "lower");
+    double *hv = vec(&hi, "upper"), *wv = out_vec(&work, "work"), *sv = out_vec(&step, "step");
+    if (!qv || !bv || !lv || !hv || !wv || !sv) goto done;
+    int status;
+    Py_BEGIN_ALLOW_THREADS
+    status = rows_step_c(Jm, qv, Am, bv, lv, hv, wv, sv);
+    Py_END_ALLOW_THREADS
+    if (status == -2) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    result = PyLong_FromLong(status);
+done:
+    release(&J); release(&q); release(&A); release(&b); release(&lo); release(&hi);
+    release(&work); release(&step);
+    return result;
+}
+
+/* -- collision dampers (sjt_pin/limits/collision.py) ------------------------------------------ */
+
+/* damper_rows(J, support, pairs, gain_rate, A, b): one velocity-damper row per pair. J (6, N):
+ * Pinocchio's WORLD joint Jacobians (data.J, rows linear then angular); support (njoints, N):
+ * 1 where a column moves a joint's frame; pairs (k, 13): distance d, margin, the joints of
+ * the two geometries (a, b), the unit normal n from a to b (coal's), the closest points p_a
+ * and p_b (world). Row i: A_i = (u_a^T J) support[a] - (u_b^T J) support[b] with
+ * u_x = [n; p_x x n], and b_i = gain_rate (d - margin); A (k, N) and b (k,) are written. */
+static void damper_rows_c(Mat J, Mat support, Mat pairs, double rate, double *A, double *b)
+{
+    Py_ssize_t N = J.n;
+    for (Py_ssize_t i = 0; i < pairs.m; i++) {
+        double u[2][6];
+        Py_ssize_t joint[2];
+        double nx = AT(pairs, i, 4), ny = AT(pairs, i, 5), nz = AT(pairs, i, 6);
+        for (int side = 0; side < 2; side++) {
+            double px = AT(pairs, i, 7 + 3 * side), py = AT(pairs, i, 8 + 3 * side);
+            double pz = AT(pairs, i, 9 + 3 * side);
+            u[side][0] = nx;
+            u[side][1] = ny;
+            u[side][2] = nz;
+            u[side][3] = py * nz - pz * ny;
+            u[side][4] = pz * nx - px * nz;
+            u[side][5] = px * ny - py * nx;
+            joint[side] = (Py_ssize_t)AT(pairs, i, 2 + side);
+        }
+        for (Py_ssize_t c = 0; c < N; c++) {
+            double va = 0.0, vb = 0.0;
+            for (int r = 0; r < 6; r++) {
+                va += u[0][r] * AT(J, r, c);
+                vb += u[1][r] * AT(J, r, c);
+            }
+            A[i * N + c] = va * AT(support, joint[0], c) - vb * AT(support, joint[1], c);
+        }
+        b[i] = rate * (AT(pairs, i, 0) - AT(pairs, i, 1));
+    }
+}
+
+static PyObject *py_damper_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (!nargs_ok(nargs, 6, "damper_rows")) return NULL;
+    double rate = PyFloat_AsDouble(args[3]);
+    if (rate == -1.0 && PyErr_Occurred()) return NULL;
+    Arg J = {0}, sup = {0}, pairs = {0}, A = {0}, b = {0};
+    PyObject *result = NULL;
+    if (acquire(args[0], &J, 0, 2, "J") || acquire(args[1], &sup, 0, 2, "support")
+        || acquire(args[2], &pairs, 0, 2, "pairs") || acquire(args[4], &A, 1, 2, "A")
+        || acquire(args[5], &b, 1, 1, "b"))
+        goto done;
+    Mat Jm = mat(&J), Sm = mat(&sup), Pm = mat(&pairs);
+    double *Av = out_mat(&A, "A"), *bv = out_vec(&b, "b");
+    if (!Av || !bv) goto done;
+    if (Jm.m != 6 || Sm.n != Jm.n || Pm.n != 13 || A.view.shape[0] != Pm.m
+        || A.view.shape[1] != Jm.n || length(&b) != Pm.m) {
+        PyErr_Format(PyExc_ValueError, "J (6, N), support (njoints, N), pairs (k, 13), A (k, N) "
+                     "and b (k,) do not fit: J (%zd, %zd), support (%zd, %zd), pairs (%zd, %zd)",
+                     Jm.m, Jm.n, Sm.m, Sm.n, Pm.m, Pm.n);
+        goto done;
+    }
+    for (Py_ssize_t i = 0; i < Pm.m; i++)
+        for (int side = 0; side < 2; side++) {
+            double j = AT(Pm, i, 2 + side);
+            if (!(j >= 0.0 && j < (double)Sm.m)) {
+                PyErr_Format(PyExc_ValueError, "pairs[%zd] names joint %zd; support has %zd",
+                             i, (Py_ssize_t)j, Sm.m);
+                goto done;
+            }
+        }
+    damper_rows_c(Jm, Sm, Pm, rate, Av, bv);
+    result = Py_None;
+    Py_INCREF(result);
+done:
+    release(&J); release(&sup); release(&pairs); release(&A); release(&b);
+    return result;
+}
+
 static PyMethodDef methods[] = {
     {"transpose_step", (PyCFunction)(void (*)(void))py_transpose_step, METH_FASTCALL,
      "transpose_step(J, e, ff, q, work, step) -> status: one step of a Jacobian-transpose-type "
@@ -1904,6 +2335,17 @@ static PyMethodDef methods[] = {
      "search_pose(jacobian, arguments, rotation, translation, target, joints, q, q_cur, J_cur, "
      "e, e_cur, limits, work, state, step, count) -> (status, iterations): up to count "
      "iterations of solve() on one pose task, each calling jacobian(*arguments) once."},
+    {"nonnegative_qp", (PyCFunction)(void (*)(void))py_nonnegative_qp, METH_FASTCALL,
+     "nonnegative_qp(Q, r, y) -> int: y = argmin 1/2 y^T Q y + r^T y over y >= 0 (NNLS)."},
+    {"project_rows", (PyCFunction)(void (*)(void))py_project_rows, METH_FASTCALL,
+     "project_rows(dq, Jw, A, b, lower, upper, moving, out) -> int: the constraint stage's "
+     "smallest correction of dq onto A x <= b and the box (constraints.project)."},
+    {"rows_step", (PyCFunction)(void (*)(void))py_rows_step, METH_FASTCALL,
+     "rows_step(J, q, A, b, lower, upper, work, step) -> int: a kernel step against general "
+     "rows and bounds: 0 kept, 1 projected in place, -1 outside the bounds."},
+    {"damper_rows", (PyCFunction)(void (*)(void))py_damper_rows, METH_FASTCALL,
+     "damper_rows(J, support, pairs, gain_rate, A, b): the collision limit's velocity-damper "
+     "rows of the pairs (d, margin, joint a, joint b, normal, p_a, p_b) into A and b."},
     {NULL, NULL, 0, NULL},
 };
 

@@ -197,6 +197,13 @@ class Layout:
         start = self.smooth + part * self.n
         return work[start:start + (self.m if part == SM_GAINS else self.n)]
 
+    def step_box(self, work: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The last step's bounds on the joint velocity (rad/s, m/s): ``(lower, upper)``, the
+        position (or return) and speed bounds the kernel saturated against, 0 included for
+        the joints the mask keeps still (views that the next step overwrites)."""
+        start = self.clamped + self.n
+        return work[start:start + self.n], work[start + self.n:start + 2 * self.n]
+
 # -- the set-point search (search_iteration): its state slots (S_*) are imported above ----------
 #: what an iteration reports
 CONTINUE, CONVERGED, SEARCH_STALLED = 0, 1, 2

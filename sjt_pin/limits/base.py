@@ -47,10 +47,14 @@ class Limit:
             ``False`` for smoothness limits (acceleration, jerk), which yield to the hard ones
             when both cannot hold (a start outside the position range, limits changed between
             steps).
+        uses_motion: whether :meth:`bounds` or :meth:`rows` read ``motion.dq`` or
+            ``motion.ddq``; the solver keeps them up to date (a few microseconds a step) only
+            when one of its limits does.
     """
 
     name: str = "limit"
     hard: bool = True
+    uses_motion: bool = True
 
     def bounds(self, kinematics: Kinematics, motion: Motion
                ) -> tuple[np.ndarray, np.ndarray] | None:

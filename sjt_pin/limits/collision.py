@@ -33,6 +33,7 @@ except ImportError:  # pragma: no cover - the pin wheel ships coal
     coal = None
 
 from ..exceptions import SJTError
+from ..kernels import damper_rows
 from .base import Limit, Motion
 
 __all__ = ["ClosestPoints", "CollisionLimit", "CollisionError", "PairDistance"]
@@ -40,9 +41,6 @@ __all__ = ["ClosestPoints", "CollisionLimit", "CollisionError", "PairDistance"]
 #: the precision (m) of coal's GJK and EPA on convex shapes (its default is 1e-6)
 GJK_TOLERANCE = 1e-9
 
-_LEVI_CIVITA = np.zeros((3, 3, 3))
-_LEVI_CIVITA[0, 1, 2] = _LEVI_CIVITA[1, 2, 0] = _LEVI_CIVITA[2, 0, 1] = 1.0
-_LEVI_CIVITA[0, 2, 1] = _LEVI_CIVITA[2, 1, 0] = _LEVI_CIVITA[1, 0, 2] = -1.0
 
 
 class CollisionError(SJTError, ValueError):
@@ -182,6 +180,7 @@ class CollisionLimit(Limit):
     """
 
     name: str = "collision"
+    uses_motion: bool = False  # its rows and bounds depend on q and dt alone
 
     def __init__(self, robot, obstacles: Sequence = (), self_collision: bool = False,
                  margin: float = 0.01, influence: float = 0.05, gain: float = 0.5,
@@ -334,7 +333,12 @@ class CollisionLimit(Limit):
             self._placement[i] = g.placement.homogeneous
         self._pa, self._pb = self.pairs[:, 0].copy(), self.pairs[:, 1].copy()
         self._ja, self._jb = self._joint[self._pa], self._joint[self._pb]
-        self._reach2 = (self._radius[self._pa] + self._radius[self._pb] + self.influence) ** 2
+        #: per pair: (0, 0, the joints of a and b), and the rows of a step in the form of
+        #: kernels.damper_rows (distance, margin, those joints, the normal, closest points)
+        self._pair_info = np.zeros((len(self.pairs), 4))
+        self._pair_info[:, 2], self._pair_info[:, 3] = self._ja, self._jb
+        self._pair_rows = np.zeros((max(len(self.pairs), 1), 13))
+        self._reach = self._radius[self._pa] + self._radius[self._pb] + self.influence
         # sphere centres: in the parent joint's frame (homogeneous) and in the world
         local = self._placement @ np.append(self._box_center, np.ones((n, 1)), axis=1)[:, :, None]
         self._center_local = local[:, :, 0]
@@ -369,6 +373,43 @@ class CollisionLimit(Limit):
         self._cache: tuple | None = None
         self._lever = self._levers()
         self._bounds: tuple[float, tuple[np.ndarray, np.ndarray]] | None = None
+        self._pair_lever, self._flat = self._pair_levers()
+        #: the last broad phase: (obstacles' version, q, its pairs, each pair's gap)
+        self._reference: tuple[int, np.ndarray, np.ndarray, np.ndarray] | None = None
+
+    def _pair_levers(self) -> tuple[np.ndarray | None, bool]:
+        """For each pair and velocity coordinate, a bound (m per unit) on how much the
+        coordinate changes the distance between any two points of the pair's bounding
+        spheres: the chain of joint offsets from its joint to the far side of either sphere
+        when it moves only one of them (at least 1 m for a joint that translates), 0 when it
+        moves both (rigidly together), summed over the joints it drives (a mimic joint's
+        times its multiplier); and whether ``q`` is its own tangent space (revolute and
+        prismatic joints, mimic joints following them). ``None`` for joints whose coordinates
+        are not rates of a motion (Euler angles)."""
+        model = self.model
+        n = len(self.geometry.geometryObjects)
+        kinds = [model.joints[j].shortname() for j in range(model.njoints)]
+        if any("ZYX" in kind for kind in kinds[1:]):
+            return None, False
+        flat = model.nq == model.nv and all(model.nqs[j] == model.nvs[j] <= 1
+                                             for j in range(1, model.njoints))
+        lever = np.zeros((n, model.nvExtended))  # per geometry, per joint coordinate
+        moves = np.zeros((n, model.nvExtended), dtype=bool)
+        for g in range(n):
+            k = int(self._joint[g])
+            length = float(np.linalg.norm(self._center_local[g, :3]) + self._radius[g])
+            while k > 0:
+                start = model.idx_vExtendeds[k]
+                span = slice(start, start + model.nvExtendeds[k])
+                lever[g, span] = max(length, 1.0) if _translates(kinds[k]) else length
+                moves[g, span] = True
+                length += float(np.linalg.norm(model.jointPlacements[k].translation))
+                k = model.parents[k]
+        pair = np.where(moves[self._pa] & moves[self._pb], 0.0,
+                        lever[self._pa] + lever[self._pb])
+        if self._mimic is not None:
+            pair = pair @ np.abs(self._mimic)
+        return pair, flat
 
     def _levers(self) -> np.ndarray:
         """For each velocity coordinate, a bound (m per unit) on the speed it gives any point of
@@ -445,19 +486,42 @@ class CollisionLimit(Limit):
         First the spheres of both (for every pair), then, where exact distances are dear
         (meshes), for the few pairs left, the sphere of either one against the other's box:
         volumes contain their geometry, so neither test drops a pair within ``influence``."""
+        return self._broad_phase(data)[0]
+
+    def _broad_phase(self, data) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`_candidates`, and for each pair the gap (m) by which its bounding volumes
+        miss ``influence`` (negative for the candidates)."""
         oMi = data.oMi.tolist()
         H = np.concatenate([oMi[j].homogeneous for j in self._joints] + [self._world])
         center = (H @ self._centers_in).take(self._pick)
         diff = self._difference @ center
-        near = np.flatnonzero(np.einsum("ij,ij->i", diff, diff) < self._reach2)
+        slack = np.sqrt(np.einsum("ij,ij->i", diff, diff)) - self._reach
+        near = np.flatnonzero(slack < 0)
         if near.size == 0 or not self._refine:
-            return near
+            return near, slack
         # both directions at once: the sphere of a against b's box, and of b against a's box
         one = np.concatenate((self._pa[near], self._pb[near]))
         other = np.concatenate((self._pb[near], self._pa[near]))
         poses = H.reshape(-1, 4, 4)[self._slot[other]] @ self._placement[other]
         gap = (self._sphere_box(center[one], poses, other) - self._radius[one]).reshape(2, -1)
-        return near[np.maximum(gap[0], gap[1]) < self.influence]
+        slack[near] = np.maximum(gap[0], gap[1]) - self.influence
+        return np.flatnonzero(slack < 0), slack
+
+    def _near(self, data, q: np.ndarray | None) -> np.ndarray:
+        """:meth:`_candidates` at ``q``, from the last broad phase while ``q`` is close to
+        where it ran: a displacement ``dq`` from there changes the distance of a pair's
+        bounding spheres by at most ``sum_j lever_j |dq_j|`` (:meth:`_pair_levers`), so a
+        pair it left out stays out until that reaches the gap it left the pair at."""
+        ref = self._reference
+        if q is not None and ref is not None and ref[0] == self._version:
+            moved = np.abs(q - ref[1] if self._flat else pin.difference(self.model, ref[1], q))
+            if np.all(self._pair_lever @ moved < ref[3]):
+                return ref[2]
+        near, slack = self._broad_phase(data)
+        if q is not None and self._pair_lever is not None:
+            slack[near] = np.inf  # a candidate stays one
+            self._reference = (self._version, q.copy(), near, slack)
+        return near
 
     def _sphere_box(self, points, poses, g) -> np.ndarray:
         """Distance of world ``points`` (k, 3) to the local boxes of geometries ``g``."""
@@ -565,50 +629,66 @@ class CollisionLimit(Limit):
             return cache[3]
         if not self._checked:
             self._check(model, data)
-        out = self._rows(model, data, dt)
+        out = self._rows(model, data, dt, q)
         self._cache = (data, key, tuple(self.active), out)
         return out
 
-    def _rows(self, model, data, dt: float) -> tuple[np.ndarray, np.ndarray] | None:
-        near = self._candidates(data)
+    def _rows(self, model, data, dt: float, q: np.ndarray | None = None
+              ) -> tuple[np.ndarray, np.ndarray] | None:
+        near = self._near(data, q)
         self.active = []  # indices into self.pairs / self.pair_names of the rows returned
         if near.size == 0:
             return None
         pin.updateGeometryPlacements(model, data, self.geometry, self.geometry_data)
         geometry, gdata, influence = self.geometry, self.geometry_data, self.influence
         compute = pin.computeDistance
-        found, distance, normal, point_a, point_b = [], [], [], [], []
+        found: list[int] = []
+        pairs, info, margins = self._pair_rows, self._pair_info, self.margins
         for k in near.tolist():
             res = compute(geometry, gdata, k)
             d = res.min_distance
             if not -math.inf < d < influence:  # beyond, or coal failed (EPA: -inf)
                 continue
+            row = pairs[len(found)]
+            row[:4] = info[k]
+            row[0], row[1] = d, margins[k]
+            row[4:7] = res.normal
+            row[7:10] = res.getNearestPoint1()
+            row[10:] = res.getNearestPoint2()
             found.append(k)
-            distance.append(d)
-            normal.append(res.normal)
-            point_a.append(res.getNearestPoint1())
-            point_b.append(res.getNearestPoint2())
         if not found:
             return None
         self.active = found
-        k = np.array(found)
-        # coal's normal points from the first object to the second; the row wants b -> a;
-        # the WORLD Jacobian of joint j (its supports' columns) moves a point p fixed to it at
-        # v_O + w x p, so n.v(p) = n.v_O + (p x n).w: one product for both ends of every pair
-        n = np.array(normal)
-        u = np.empty((2 * len(found), 6))
-        u[:, :3] = np.concatenate((-n, n))
-        p = np.concatenate((point_b, point_a))
-        u[:, 3:] = np.einsum("ijk,pj,pk->pi", _LEVI_CIVITA, p, u[:, :3])
-        U = u @ data.J
-        U *= self._support[np.concatenate((self._jb[k], self._ja[k]))]
-        A = U[:len(found)] + U[len(found):]
+        count = len(found)
+        A = np.empty((count, self._support.shape[1]))
+        b = np.empty(count)
+        damper_rows(data.J, self._support, pairs[:count], self.gain / dt, A, b)
         if self._mimic is not None:
             A = A @ self._mimic
-        b = self.gain / dt * (np.array(distance) - self.margins[k])
         A.setflags(write=False)
         b.setflags(write=False)
         return A, b
+
+
+def damper_rows_reference(J: np.ndarray, support: np.ndarray, pairs: np.ndarray, rate: float
+                          ) -> tuple[np.ndarray, np.ndarray]:
+    """``kernels.damper_rows`` in numpy: coal's normal ``n`` points from geometry a to b, so
+    ``n^T (v_a - v_b) = -d_dot``; the WORLD Jacobian of joint j (its supports' columns) moves
+    a point p fixed to it at ``v_O + w x p``, so ``n.v(p) = n.v_O + (p x n).w``."""
+    pairs = np.atleast_2d(pairs)
+    n = pairs[:, 4:7]
+    ends = []
+    for side, joints in ((pairs[:, 7:10], pairs[:, 2]), (pairs[:, 10:13], pairs[:, 3])):
+        u = np.hstack([n, np.cross(side, n)])
+        ends.append((u @ J) * support[joints.astype(int)])
+    return ends[0] - ends[1], rate * (pairs[:, 0] - pairs[:, 1])
+
+
+def _translates(kind: str) -> bool:
+    """Whether a joint of this ``shortname()`` translates (its coordinates move points by at
+    least a metre per unit)."""
+    return any(t in kind for t in ("Prismatic", "FreeFlyer", "Planar", "Translation",
+                                   "JointModelP"))
 
 
 def _mimic_map(model: pin.Model, mimic_joints) -> np.ndarray | None:

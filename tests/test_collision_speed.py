@@ -1,0 +1,280 @@
+"""The compiled pieces of a step with collision dampers, against their numpy references: the
+stage's projection and its dual QP (kernels.project_rows, nonnegative_qp) also against SciPy,
+the damper rows (kernels.damper_rows), the solver's one-call correction of a kernel step
+(kernels.rows_step) against the whole stage, and the broad phase that CollisionLimit skips
+while nothing can have come within influence."""
+
+from pathlib import Path
+
+import coal
+import numpy as np
+import pinocchio as pin
+import pytest
+from scipy.optimize import minimize
+
+import sjt_pin as sjt
+from sjt_pin import kernels as K
+from sjt_pin.constraints import nonnegative_qp, project, project_reference
+from sjt_pin.kinematics import Kinematics
+from sjt_pin.limits.base import Motion
+from sjt_pin.limits.collision import CollisionLimit, damper_rows_reference
+from sjt_pin.solvers import make_solver
+
+FIXTURE = Path(__file__).parent / "fixtures" / "qp" / "degenerate_panda_meshes.npz"
+
+
+@pytest.fixture(scope="module")
+def panda():
+    return sjt.Robot.from_example("panda")
+
+
+@pytest.fixture(scope="module")
+def ur5():
+    return sjt.Robot.from_example("ur5")
+
+
+def _instance(rng, degenerate=False):
+    """A random feasible projection (the moving joints at rest meet every row and bound):
+    some joints still, some bounds infinite, rows that may repeat."""
+    n, m, k = int(rng.integers(1, 9)), int(rng.integers(0, 7)), int(rng.integers(0, 8))
+    A = rng.normal(size=(k, n))
+    if degenerate and k > 1:
+        A[1] = A[0]  # a row twice: a singular dual
+    lower = np.where(rng.random(n) < 0.8, -rng.uniform(0.5, 3, n), -np.inf)
+    upper = np.where(rng.random(n) < 0.8, rng.uniform(0.5, 3, n), np.inf)
+    moving = rng.random(n) < 0.85
+    dq = 2 * rng.normal(size=n)
+    b = A[:, ~moving] @ dq[~moving] + rng.uniform(0.0, 1.0, k)
+    return dq, rng.normal(size=(m, n)), A, b, lower, upper, moving
+
+
+def test_the_compiled_projection_is_the_numpy_one():
+    rng = np.random.default_rng(11)
+    for trial in range(400):
+        dq, Jw, A, b, lower, upper, moving = _instance(rng, degenerate=trial % 3 == 0)
+        out = project(dq, Jw, A, b, lower, upper, moving)
+        ref = project_reference(dq, Jw, A, b, lower, upper, moving)
+        np.testing.assert_allclose(out, ref, rtol=0, atol=1e-7 * (1 + np.abs(ref).max()))
+        assert np.all(out[~moving] == dq[~moving])  # the still joints keep theirs
+        assert np.all(A @ out <= b + 1e-9)
+        assert np.all(out[moving] >= lower[moving] - 1e-9)
+        assert np.all(out[moving] <= upper[moving] + 1e-9)
+
+
+def test_the_compiled_projection_is_the_least_cost_feasible_point():
+    """On feasible instances (rows that the zero velocity meets, the box around zero), the
+    answer meets every row and bound and costs no more than SciPy's SLSQP answer."""
+    rng = np.random.default_rng(12)
+    compared = 0
+    for _ in range(40):
+        n = int(rng.integers(2, 8))
+        Jw, A = rng.normal(size=(3, n)), rng.normal(size=(int(rng.integers(1, 6)), n))
+        b = rng.uniform(0.0, 0.5, A.shape[0])
+        dq = 3 * rng.normal(size=n)
+        lower, upper = -rng.uniform(0.5, 2, n), rng.uniform(0.5, 2, n)
+        out = project(dq, Jw, A, b, lower, upper, np.ones(n, dtype=bool))
+        assert np.all(A @ out <= b + 1e-9)
+        assert np.all(out >= lower - 1e-9) and np.all(out <= upper + 1e-9)
+        H = Jw.T @ Jw
+        H += np.trace(H) / n * np.eye(n)
+        ref = minimize(lambda x, H=H, dq=dq: (x - dq) @ H @ (x - dq), np.zeros(n),
+                       jac=lambda x, H=H, dq=dq: 2 * H @ (x - dq), method="SLSQP",
+                       bounds=list(zip(lower, upper, strict=True)),
+                       constraints=[{"type": "ineq", "fun": lambda x, A=A, b=b: b - A @ x,
+                                     "jac": lambda x, A=A: -A}],
+                       options={"ftol": 1e-12, "maxiter": 500})
+        x = ref.x
+        if np.all(A @ x <= b + 1e-7) and np.all(x >= lower - 1e-9) and np.all(x <= upper + 1e-9):
+            compared += 1
+            assert (out - dq) @ H @ (out - dq) <= (x - dq) @ H @ (x - dq) + 1e-7
+    assert compared >= 30
+
+
+def test_the_compiled_dual_qp_is_the_numpy_one_and_meets_its_kkt_conditions():
+    rng = np.random.default_rng(13)
+    for _ in range(200):
+        k = int(rng.integers(1, 12))
+        C = rng.normal(size=(k, int(rng.integers(1, 8))))
+        # the dual of C z <= h, feasible (at z0): more rows than columns make Q singular
+        Q, r = C @ C.T, C @ rng.normal(size=C.shape[1]) + rng.uniform(0, 1, k)
+        y = np.empty(k)
+        K.nonnegative_qp(Q, r, y)
+        np.testing.assert_allclose(y, nonnegative_qp(Q, r), atol=1e-8 * (1 + np.abs(y).max()))
+        gradient, scale = Q @ y + r, 1e-8 * (1 + np.abs(r).max() + np.abs(Q).max() * y.max())
+        assert np.all(y >= 0) and np.all(gradient >= -scale)
+        assert np.all(np.abs(gradient[y > 1e-12]) <= scale)
+
+
+def test_the_compiled_dual_qp_of_the_degenerate_panda_step():
+    """The fixture's dual (Q singular, one broken row no motion can change): finite, that row
+    at 0, and the KKT conditions on the others, as the numpy reference's."""
+    data = np.load(FIXTURE)
+    Q, r = data["Q"], data["r"]
+    y = np.full(r.size, np.nan)
+    K.nonnegative_qp(Q, r, y)
+    assert np.all(np.isfinite(y)) and np.all(y >= 0)
+    inert = np.diag(Q) <= 1e-14 * np.diag(Q).max()
+    assert np.all(y[inert] == 0)
+    gradient = (Q @ y + r)[~inert]
+    scale = 1e-9 * (1.0 + np.abs(r).max())
+    assert np.all(gradient >= -scale)
+    assert np.all(np.abs(gradient[y[~inert] > 1e-12]) <= scale)
+    reference = nonnegative_qp(Q, r)
+    assert (0.5 * y @ Q @ y + r @ y) <= (0.5 * reference @ Q @ reference + r @ reference) + scale
+
+
+def test_compiled_kernels_name_the_argument_that_does_not_fit():
+    with pytest.raises(ValueError, match="do not fit"):
+        K.project_rows(np.zeros(3), np.zeros((2, 3)), np.zeros((1, 4)), np.zeros(1),
+                       np.zeros(3), np.zeros(3), np.ones(3), np.zeros(3))
+    with pytest.raises(TypeError, match="y must be a writable float64 array"):
+        K.nonnegative_qp(np.eye(2), np.zeros(2), (0.0, 0.0))
+    with pytest.raises(ValueError, match="names joint 9"):
+        pairs = np.zeros((1, 13))
+        pairs[0, 2] = 9
+        K.damper_rows(np.zeros((6, 3)), np.zeros((4, 3)), pairs, 1.0, np.zeros((1, 3)),
+                      np.zeros(1))
+
+
+def test_the_compiled_damper_rows_are_the_numpy_ones(panda):
+    """At random Panda configurations with a ball near the hand and self-collision: the rows
+    the limit returns are the numpy formula's on the same pairs, closest points and normals."""
+    rng = np.random.default_rng(14)
+    model = panda.model
+    for _ in range(10):
+        q = panda.random_configuration(rng)
+        data = model.createData()
+        pin.computeJointJacobians(model, data, q)
+        hand = pin.updateFramePlacement(model, data, model.getFrameId(panda.ee_frame))
+        ball = (coal.Sphere(0.03), pin.SE3(np.eye(3), hand.translation + [0.0, 0.0, 0.06]))
+        limit = CollisionLimit(panda, [ball], self_collision=True, margin=0.0, influence=0.1)
+        limit.margins[:] = 0.0  # the start rule keeps the pairs (none checked at this q)
+        limit._checked = True
+        kin = Kinematics(model)
+        kin.update(q)
+        rows = limit.rows(kin, Motion(q, np.zeros(panda.nv), np.zeros(panda.nv), 1e-3))
+        assert rows is not None
+        A, b = rows
+        pairs = []
+        for k in limit.active:
+            res = pin.computeDistance(limit.geometry, limit.geometry_data, k)
+            a, g = limit.pairs[k]
+            pairs.append([res.min_distance, limit.margins[k], limit._joint[a], limit._joint[g],
+                          *res.normal, *res.getNearestPoint1(), *res.getNearestPoint2()])
+        A_ref, b_ref = damper_rows_reference(kin.data.J, limit._support, np.array(pairs),
+                                             limit.gain / 1e-3)
+        if limit._mimic is not None:
+            A_ref = A_ref @ limit._mimic
+        np.testing.assert_allclose(A, A_ref, atol=1e-12)
+        np.testing.assert_allclose(b, b_ref, atol=1e-9)
+
+
+@pytest.mark.parametrize("name", ["panda", "ur5"])
+def test_the_broad_phase_it_skips_never_misses_a_pair_within_influence(name, panda, ur5):
+    """Along random joint-space walks (steps of up to 3 mrad, every 50th up to 0.3 rad), the
+    pairs the limit measures at each configuration hold every pair whose exact distance is
+    below influence (brute force over every pair), although most steps reuse the last broad
+    phase."""
+    robot = panda if name == "panda" else ur5
+    rng = np.random.default_rng(15)
+    q = robot.random_configuration(rng)
+    data = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, data, q)
+    hand = pin.updateFramePlacement(robot.model, data, robot.model.getFrameId(robot.ee_frame))
+    ball = (coal.Sphere(0.05), pin.SE3(np.eye(3), hand.translation + [0.1, 0.0, 0.0]))
+    limit = CollisionLimit(robot, [ball], self_collision=True, influence=0.08)
+    calls = [0]
+    full = limit._broad_phase
+
+    def counted(data):
+        calls[0] += 1
+        return full(data)
+
+    limit._broad_phase = counted
+    lower, upper = robot.model.lowerPositionLimit, robot.model.upperPositionLimit
+    steps = 300
+    for step in range(steps):
+        jump = 0.3 if step % 50 == 0 else 0.003  # mostly small steps, now and then a leap
+        q = np.clip(q + rng.uniform(-jump, jump, robot.nq), lower, upper)
+        pin.computeJointJacobians(robot.model, data, q)
+        near = set(limit._near(data, q).tolist())
+        pin.updateGeometryPlacements(robot.model, data, limit.geometry, limit.geometry_data)
+        for k in range(len(limit.pairs)):
+            d = pin.computeDistance(limit.geometry, limit.geometry_data, k).min_distance
+            if d < limit.influence:
+                assert k in near, (limit.pair_names[k], d)
+    assert calls[0] < steps / 2  # the skip did skip
+
+
+def test_the_solvers_one_call_correction_is_the_whole_stage(panda):
+    """Where the collision speed bounds do not cut the kernel's step, rows_step's correction of
+    the kernel's step equals the whole stage's (re-solve, saturation, projection): the Panda
+    passing a ball, every step whose rows were broken."""
+    start = panda.fk(panda.q0)
+    ball = (coal.Sphere(0.04), pin.SE3(np.eye(3), start.translation + [0.0, 0.2, -0.07]))
+    fast = make_solver("sjt", panda, dt=1e-3,
+                       limits=[CollisionLimit(panda, [ball], self_collision=True)])
+    whole = make_solver("sjt", panda, dt=1e-3,
+                        limits=[CollisionLimit(panda, [ball], self_collision=True)])
+    # every step that breaks a row through the method again and ConstraintStage.enforce
+    whole._user_stage.hard_parts = lambda kinematics, motion: None
+    q = panda.q0.copy()
+    corrected = 0
+    for k in range(1500):
+        target = pin.SE3(start.rotation, start.translation + [0.0, 0.4 * min(k / 1000, 1), 0])
+        q_fast, q_whole = fast.step(q, target), whole.step(q, target)
+        corrected += fast._projected[0] == fast._count
+        np.testing.assert_allclose(q_fast, q_whole, atol=1e-9)
+        q = q_fast
+    assert corrected > 50
+
+
+def test_rows_step_leaves_a_step_within_the_rows_and_bounds_alone(ur5):
+    """A step that meets the rows comes back untouched (0), one outside a user's bound is left
+    to the stage (-1), one that breaks a row is projected onto it (1)."""
+    solver = make_solver("sjt", ur5, dt=1e-3)
+    q = np.array([0.0, -1.2, 1.5, -1.9, -1.57, 0.0])
+    target = ur5.fk(q)
+    target = pin.SE3(target.rotation, target.translation + [0.0, 0.0, -0.01])
+    solver.step(q, target)
+    J, step = solver._record[0], solver.displacement  # the kernel's rows and its step
+    work = solver._work
+    n = ur5.nv
+    free = (np.full(n, -np.inf), np.full(n, np.inf))
+    kept = step.copy()
+    A = np.zeros((1, n))
+    A[0, 1] = 1.0
+    assert K.rows_step(J, q, A, np.array([abs(step[1]) / 1e-3 + 1.0]), *free, work, kept) == 0
+    assert np.array_equal(kept, step)
+    tight = (np.full(n, -1e-6), np.full(n, 1e-6))
+    assert K.rows_step(J, q, A, np.array([1e3]), *tight, work, step.copy()) == -1
+    broken = step.copy()
+    b = np.array([step[1] / 1e-3 - 0.5])
+    assert K.rows_step(J, q, A, b, *free, work, broken) == 1
+    assert broken[1] / 1e-3 <= b[0] + 1e-9 * (1 + abs(b[0]))
+
+
+@pytest.mark.parametrize("method", ["sjt", "dls"])
+def test_rows_no_velocity_can_meet_leave_the_step_within_the_speed_limits(method, panda):
+    """The limit first evaluated on another Kinematics (at Panda's q0, where it takes its start)
+    and then stepped from a configuration whose link 6 is inside the base: that pair's row asks
+    for a separation no joint speed allows, the projection's QP has no answer, and its dual
+    once diverged into a step of several radians (Romeo: 2.6e5). Every step stays within the
+    URDF's speed limits."""
+    q = np.array([1.111, -1.614, 2.819, -2.779, -2.223, 1.902, -0.285, 0.021])
+    limit = CollisionLimit(panda, self_collision=True, margin=0.01)
+    other = Kinematics(panda.model)
+    other.update(panda.q0)
+    limit.rows(other, Motion(panda.q0, np.zeros(panda.nv), np.zeros(panda.nv), 1e-3))
+    solver = make_solver(method, panda, dt=1e-3, limits=[limit])
+    target = panda.fk(q)
+    broken = 0
+    for _ in range(20):
+        q_next = solver.step(q, target)
+        step = pin.difference(panda.model, q, q_next)
+        assert np.all(np.isfinite(step))
+        assert np.all(np.abs(step) <= panda.velocity_limits * 1e-3 * (1 + 1e-9))
+        rows = limit.rows(solver.stack.kinematics, solver._motion)
+        broken += rows is not None and bool(np.any(rows[0] @ (step / 1e-3) > rows[1] + 1e-6))
+        q = q_next
+    assert broken  # the rows could not all hold: the bounds won
