@@ -284,3 +284,32 @@ def test_unit_defect_is_the_largest_squared_norm_defect(rng):
     assert np.isnan(unit_defect(q, flat))
     with pytest.raises(ValueError, match="outside q"):
         unit_defect(q, np.array([11.0, 2.0]))
+
+
+def test_a_work_vector_or_table_that_does_not_fit_raises_instead_of_reading_past_it():
+    """The kernels check the index tables they read against q and the velocity: a q shorter
+    than the limit box indexes, a box index past q, a search state shorter than its slots and a
+    limits table indexing past q raise ValueError (before, some read or wrote out of bounds)."""
+    rng = np.random.default_rng(3)
+    layout = K.Layout(6, 7, 7)
+    work = layout.allocate()
+    work[K.P_DT] = 1e-3
+    for part, value in enumerate((np.arange(7), np.arange(7), -1.0, 1.0, 1.0)):
+        layout.box_part(work, part)[:] = value
+    J, e, ff, step = rng.random((6, 7)), rng.random(6), np.zeros(6), np.zeros(7)
+    assert K.transpose_step(J, e, ff, np.zeros(7), work, step) >= 0  # it fits
+    with pytest.raises(ValueError, match="q of 1 coordinates"):
+        K.transpose_step(J, e, ff, np.zeros(1), work, step)
+    layout.box_part(work, 0)[:] = 10**9
+    with pytest.raises(ValueError, match="work does not fit"):
+        K.least_squares_step(J, e, ff, np.zeros(7), work, step)
+    search = K.Layout(6, 6, 0)
+    w = search.allocate()
+    q, Jc, ec, qc = np.zeros(6), np.zeros((6, 6)), np.zeros(6), np.zeros(6)
+    with pytest.raises(ValueError, match="do not fit"):
+        K.search_iteration(rng.random((6, 6)), rng.random(6), q, Jc, ec, qc, np.zeros((4, 0)),
+                           w, np.zeros(8), np.zeros(6))
+    limits = np.array([[9.0], [0.0], [-1.0], [1.0]])  # a q index past q's end
+    with pytest.raises(ValueError, match="limits: column 0"):
+        K.search_iteration(rng.random((6, 6)), rng.random(6), q, Jc, ec, qc, limits, w,
+                           np.zeros(K.STATE_SIZE), np.zeros(6))

@@ -1498,22 +1498,56 @@ static int nargs_ok(Py_ssize_t got, Py_ssize_t want, const char *name)
     return 0;
 }
 
-static int check_work(const Arg *work, Py_ssize_t m, Py_ssize_t n)
+/* whether work[offset .. offset + count) lies after the header and within size */
+static int region_ok(double offset, Py_ssize_t count, Py_ssize_t size)
+{
+    return offset >= INFO + I_COUNT && offset + (double)count <= (double)size;
+}
+
+/* work laid out by layout.Layout for rows (m, n) and a q of nq coordinates: every part within
+ * the vector, the limit box's indices within q and the velocity (a work vector written by hand
+ * is refused here, never read out of bounds) */
+static int check_work(const Arg *work, Py_ssize_t m, Py_ssize_t n, Py_ssize_t nq)
 {
     Py_ssize_t size = length(work);
     if (size < INFO + I_COUNT) goto bad;
     const double *w = (const double *)work->view.buf;
-    double scratch = w[P_SCRATCH];
+    double scratch = w[P_SCRATCH], count = w[P_BOX_COUNT];
     Py_ssize_t p = m < n ? m : n;
     if (!(scratch >= 0 && scratch + 4 * m + 6 * n + 3 * p * p <= size)) goto bad;
     double smooth = w[P_SMOOTH];  /* the acceleration/jerk stage's part: before the scratch */
     if (!(smooth == 0.0 || (smooth >= INFO + I_COUNT
                             && smooth + (SM_COUNT - 1) * n + m <= scratch))) goto bad;
+    if (!(count >= 0 && count <= n) || !region_ok(w[P_ROWS], 2 * m, size)
+        || !region_ok(w[P_MASK], n, size) || !region_ok(w[P_BOX], 5 * (Py_ssize_t)count, size)
+        || !region_ok(w[P_SPEED], n, size) || !region_ok(w[P_EXTRA], n, size)
+        || !region_ok(w[P_CLAMPED], 12 * n + m + m * m, size)) goto bad;
+    Py_ssize_t box = (Py_ssize_t)w[P_BOX], c = (Py_ssize_t)count;
+    for (Py_ssize_t k = 0; k < c; k++)
+        if (!(w[box + k] >= 0 && w[box + k] < nq && w[box + c + k] >= 0 && w[box + c + k] < n))
+            goto bad;
     return 0;
 bad:
-    PyErr_Format(PyExc_ValueError, "work does not fit rows of shape (%zd, %zd): make it with "
-                 "sjt_pin.kernels.Layout(m, n, c).allocate()", m, n);
+    PyErr_Format(PyExc_ValueError, "work does not fit rows of shape (%zd, %zd) and a q of %zd "
+                 "coordinates: make it with sjt_pin.kernels.Layout(m, n, c).allocate()", m, n,
+                 nq);
     return -1;
+}
+
+/* whether a table of c columns holds q indices (row 0; a (cos, sin) pair takes two when row 2
+ * says so) below nq and velocity indices (row 1) below n: the search's limits and joints */
+static int table_ok(const double *table, Py_ssize_t c, Py_ssize_t nq, Py_ssize_t n, int pairs,
+                    const char *name)
+{
+    for (Py_ssize_t k = 0; k < c; k++) {
+        double width = pairs && table[2 * c + k] != 0.0 ? 2.0 : 1.0;
+        if (!(table[k] >= 0 && table[k] + width <= nq && table[c + k] >= 0 && table[c + k] < n)) {
+            PyErr_Format(PyExc_ValueError, "%s: column %zd indexes past q (%zd,) or the "
+                         "velocity (%zd,)", name, k, nq, n);
+            return -1;
+        }
+    }
+    return 0;
 }
 
 /* transpose_step / least_squares_step (J, e, ff, q, work, step) -> status */
@@ -1533,7 +1567,7 @@ static PyObject *step_wrapper(int kind, PyObject *const *args, Py_ssize_t nargs,
                      "fit", Jm.m, Jm.n, length(&e), length(&ff), length(&step));
         goto done;
     }
-    if (check_work(&work, Jm.m, Jm.n)) goto done;
+    if (check_work(&work, Jm.m, Jm.n, length(&q))) goto done;
     double *ev = vec(&e, "e"), *ffv = vec(&ff, "ff"), *qv = vec(&q, "q");
     double *wv = out_vec(&work, "work"), *sv = out_vec(&step, "step");
     if (!ev || !ffv || !qv || !wv || !sv) goto done;
@@ -1781,11 +1815,12 @@ static PyObject *py_search_iteration(PyObject *self, PyObject *const *args, Py_s
     if (!Jcv || !limv || !ev || !qv || !ecv || !qcv || !wv || !sv || !stv) goto done;
     if (Jc.view.shape[0] != Jm.m || Jc.view.shape[1] != Jm.n || length(&e) != Jm.m
         || length(&ec) != Jm.m || length(&step) != Jm.n || length(&qc) != length(&q)
-        || lim.view.shape[0] != 4 || length(&state) < 8) {
+        || lim.view.shape[0] != 4 || length(&state) < S_COUNT) {
         PyErr_SetString(PyExc_ValueError, "search_iteration: the arrays do not fit J's shape");
         goto done;
     }
-    if (check_work(&work, Jm.m, Jm.n)) goto done;
+    if (check_work(&work, Jm.m, Jm.n, length(&q))
+        || table_ok(limv, lim.view.shape[1], length(&q), Jm.n, 0, "limits")) goto done;
     int status = search_iteration_c(Jm, ev, qv, length(&q), Jcv, ecv, qcv, limv,
                                     lim.view.shape[1], wv, sv, stv);
     result = PyLong_FromLong(status);
@@ -1833,7 +1868,8 @@ static PyObject *py_search_pose(PyObject *self, PyObject *const *args, Py_ssize_
         PyErr_SetString(PyExc_ValueError, "search_pose: the arrays do not fit a pose task");
         goto done;
     }
-    if (check_work(&work, 6, n)) goto done;
+    if (check_work(&work, 6, n, nq) || table_ok(limv, lim.view.shape[1], nq, n, 0, "limits")
+        || table_ok(tabv, k, nq, n, 1, "joints")) goto done;
     const double *pv = (const double *)p.view.buf;
     Py_ssize_t p_stride = p.view.strides[0] / 8;
     int status = CONTINUE;
@@ -2212,7 +2248,12 @@ static PyObject *py_rows_step(PyObject *self, PyObject *const *args, Py_ssize_t 
                      "step (n,) do not fit", Jm.m, n, Am.m, Am.n, length(&b));
         goto done;
     }
-    if (check_work(&work, Jm.m, n)) goto done;
+    if (check_work(&work, Jm.m, n, length(&q))) goto done;
+    if (((const double *)work.view.buf)[P_SMOOTH] != 0.0) {
+        PyErr_SetString(PyExc_ValueError, "rows_step: a work vector with the acceleration/jerk "
+                        "stage (Layout(..., smooth=True)) keeps no step box");
+        goto done;
+    }
     double *qv = vec(&q, "q"), *bv = vec(&b, "b"), *lv = vec(&lo, "lower");
     double *hv = vec(&hi, "upper"), *wv = out_vec(&work, "work"), *sv = out_vec(&step, "step");
     if (!qv || !bv || !lv || !hv || !wv || !sv) goto done;
