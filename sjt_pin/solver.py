@@ -552,8 +552,8 @@ class Solver:
         see :attr:`StepInfo.task_scale`), without building :attr:`last`."""
         if self._outcome is not None and self._outcome_count == self._count:
             return float(self._outcome.scale)
-        if self._compiled_smooth and self._record is not None:
-            return float(self._info[K.I_SCALE])
+        if self._record is not None and self.method.kernel is not None:
+            return float(self._info[K.I_SCALE])  # the kernel's saturation wrote it
         return 1.0
 
     @property

@@ -1,4 +1,5 @@
 import numpy as np
+import pinocchio as pin
 import pytest
 
 import sjt_pin as sjt
@@ -28,3 +29,23 @@ def test_divergence_is_reported_not_raised(planar3):
     assert log.diverged and log.reason
     assert log.max_error == np.inf and log.rms_error == np.inf
     assert len(log) < 1001 and np.all(np.isfinite(log.q))
+
+
+@pytest.mark.parametrize("accelerations", [None, 50.0])
+def test_the_task_scale_is_logged_on_every_path(ur5, accelerations):
+    """Slow speed limits scale the task down: ``solver.task_scale`` is the step's
+    ``StepInfo.task_scale`` on the kernel's own path and with the compiled acceleration stage,
+    and ``track()`` logs it."""
+    q0 = np.array([0.0, -1.2, 1.5, -1.9, -1.57, 0.0])
+    target = ur5.fk(q0) * pin.SE3(np.eye(3), np.array([0.0, 0.2, 0.0]))
+    options = dict(velocity_limits=np.full(ur5.nv, 0.2), acceleration_limits=accelerations)
+    solver = sjt.SJTSolver(ur5, **options)
+    q, scales = q0.copy(), []
+    for _ in range(200):
+        q = solver.step(q, target)
+        assert solver.task_scale == solver.last.task_scale
+        scales.append(solver.task_scale)
+    assert min(scales) < 0.5
+    log = sjt.track(sjt.SJTSolver(ur5, **options),
+                    sjt.PoseInterpolation(ur5.fk(q0), target, duration=0.2), q0)
+    assert log.task_scale.min() < 0.5
