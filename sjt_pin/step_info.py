@@ -20,12 +20,13 @@ def makes_no_progress(Jw: np.ndarray, ew: np.ndarray, dq: np.ndarray, ffw: np.nd
     """Whether the joint velocity ``dq`` (nv,; rad/s, m/s) leaves the weighted error ``ew``
     (m,) where it is: ``|ew|^2 > floor_sq`` and the rate ``ew . (Jw dq - ffw)`` at which the
     motion beyond the target's own weighted velocity ``ffw`` (m,; zeros without feed-forward)
-    lowers ``1/2 |ew|^2`` is below ``STALL_RATE |ew|^2`` (``Jw``: the weighted task rows,
-    m x nv)."""
+    changes ``1/2 |ew|^2`` is within ``STALL_RATE |ew|^2`` of zero either way (``Jw``: the
+    weighted task rows, m x nv): an arm braking against its error (acceleration limits after a
+    target jumped) is on its way, not stalled."""
     ew_sq = float(ew @ ew)
     if not ew_sq > floor_sq:
         return False
-    return float(ew @ (Jw @ dq - ffw)) < STALL_RATE * ew_sq
+    return abs(float(ew @ (Jw @ dq - ffw))) < STALL_RATE * ew_sq
 
 
 @dataclass(frozen=True)

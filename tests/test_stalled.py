@@ -52,6 +52,21 @@ def test_an_arm_on_its_way_or_at_its_target_has_not_stalled(method):
     assert solver.error_norm < 1e-9  # converged: below the floor, not a stall
 
 
+def test_an_arm_braking_after_a_target_jumped_has_not_stalled():
+    """With acceleration and jerk limits a target that jumps back the other way leaves the arm
+    moving against its error while it brakes: it is on its way, not stalled (z1, 30 cm)."""
+    z1 = sjt.Robot.from_example("z1")
+    q = z1.q0.copy()
+    q[1], q[2] = q[1] + 0.6, q[2] - 0.6
+    there = z1.fk(q) * pin.SE3(np.eye(3), np.array([0.0, 0.15, 0.0]))
+    back = z1.fk(q) * pin.SE3(np.eye(3), np.array([0.0, -0.15, 0.0]))
+    solver = sjt.SJTSolver(z1, acceleration_limits=5.0, jerk_limits=500.0)
+    for k in range(600):
+        q = solver.step(q, there if k < 300 else back)
+        info = solver.last
+        assert not (info.stalled and np.abs(info.dq).max() > 1e-3), (k, info)
+
+
 def test_tracking_a_moving_target_is_not_a_stall():
     """The rate counts the motion beyond the target's own velocity: following a circle with a
     steady lag is progress, not a stall."""
