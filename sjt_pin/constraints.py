@@ -31,6 +31,7 @@ this module is its reference, and ``tests/test_smooth_kernel.py`` holds the two 
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
@@ -115,7 +116,7 @@ class ConstraintStage:
         n = self.nv
         parts = {}
         for k, limit in enumerate(self.limits):
-            bounds = limit.bounds(kinematics, motion)
+            bounds = _checked(limit, limit.bounds(kinematics, motion), n)
             if bounds is None:
                 continue
             if limit.hard not in parts:
@@ -158,6 +159,9 @@ class ConstraintStage:
             if A.shape != (b.size, self.nv):
                 raise ValueError(f"{limit!r}.rows() must return A of shape (k, {self.nv}) and "
                                  f"b of shape (k,), got {A.shape} and {b.shape}")
+            if not math.isfinite(float(A.sum())) or math.isnan(float(b.sum())):
+                raise ValueError(f"{limit!r}.rows() returned NaN or inf in A or NaN in b: a row "
+                                 "that bounds nothing would let the joints move freely")
             blocks.append((A, b))
             owners += [limit.name] * b.size
         if not blocks:
@@ -174,7 +178,7 @@ class ConstraintStage:
         :meth:`enforce` weighs those)."""
         lower = upper = None
         for limit in self.limits:
-            bounds = limit.bounds(kinematics, motion)
+            bounds = _checked(limit, limit.bounds(kinematics, motion), self.nv)
             if bounds is None:
                 continue
             if not limit.hard:
@@ -299,6 +303,19 @@ def active_limits(dq: np.ndarray, box: Box, limit_names: Mapping[int, str] | Seq
             if pair not in pairs:
                 pairs.append(pair)
     return tuple(pairs)
+
+
+def _checked(limit: Limit, bounds, n: int):
+    """A limit's ``bounds()`` (``None`` or ``(lower, upper)``, each (n,)), checked: a wrong shape
+    or a NaN (a bound that bounds nothing) raises ``ValueError`` naming the limit."""
+    if bounds is None:
+        return None
+    lower, upper = bounds
+    if (np.shape(lower) != (n,) or np.shape(upper) != (n,)
+            or math.isnan(float(np.sum(lower))) or math.isnan(float(np.sum(upper)))):
+        raise ValueError(f"{limit!r}.bounds() must return (lower, upper) of shape ({n},) "
+                         "without NaN (inf: no bound)")
+    return bounds
 
 
 def _inside(dq, lower, upper) -> bool:

@@ -163,3 +163,46 @@ def test_the_reference_limits_as_extra_limits_give_the_kernel_steps(ur5, rng):
 def test_extra_limits_must_be_limit_objects(ur5):
     with pytest.raises(TypeError, match="Limit"):
         sjt.SJTSolver(ur5, limits=[object()])
+
+
+class _Band(sjt.limits.Limit):
+    """A joint band whose upper bound on joint 1 is ``value`` (rad/s), inf elsewhere."""
+
+    name = "band"
+
+    def __init__(self, value):
+        self.value = value
+
+    def bounds(self, kinematics, motion):
+        n = kinematics.model.nv
+        upper = np.full(n, np.inf)
+        upper[1] = self.value
+        return np.full(n, -np.inf), upper
+
+
+class _Row(sjt.limits.Limit):
+    """One row ``q_dot_1 <= value``."""
+
+    name = "row"
+
+    def __init__(self, value):
+        self.value = value
+
+    def rows(self, kinematics, motion):
+        A = np.zeros((1, kinematics.model.nv))
+        A[0, 1] = 1.0
+        return A, np.array([self.value])
+
+
+@pytest.mark.parametrize("acceleration", [None, 10.0])
+def test_a_limit_that_returns_nan_is_refused_naming_it(ur5, acceleration):
+    """A NaN bound or row bounds nothing: the joint would move freely. The step raises,
+    naming the limit; inf (no bound) is fine."""
+    q = np.array([0.0, -1.2, 1.5, -1.9, -1.57, 0.0])
+    target = ur5.fk(q) * pin.SE3(np.eye(3), np.array([0.1, 0.0, -0.1]))
+    for good in (_Band(np.inf), _Row(np.inf), _Band(0.0), _Row(0.0)):
+        sjt.SJTSolver(ur5, limits=[good], acceleration_limits=acceleration).step(q, target)
+    for bad, match in ((_Band(np.nan), r"_Band.*bounds\(\)"), (_Row(np.nan), r"_Row.*rows\(\)")):
+        solver = sjt.SJTSolver(ur5, limits=[bad], acceleration_limits=acceleration)
+        with pytest.raises(ValueError, match=match):
+            solver.step(q, target)
