@@ -373,6 +373,8 @@ def solve(solver, target, q0, *, tol: float = TOL, max_iters: int = MAX_ITERS,
     """
     search = solver.search()
     tol, max_iters, budget, restarts = _options(tol, max_iters, budget, restarts)
+    if rng is not None and type(rng) is not int and not isinstance(rng, np.random.Generator):
+        rng = _generator(rng)  # checked at the door, not when a restart first needs it
     q, clipped = _seed(solver.robot, q0)
     targets = _targets(search, solver.robot, target, q)
     search.aim(targets, tol)
@@ -412,6 +414,15 @@ def _options(tol, max_iters, budget, restarts) -> tuple[float, int, int, int | N
     if restarts is not None:
         restarts = integer(restarts, "restarts", 0)
     return tol, max_iters, budget, restarts
+
+
+def _generator(rng) -> np.random.Generator:
+    """``numpy.random.default_rng(rng)``, or a ``TypeError`` naming ``rng``."""
+    try:
+        return np.random.default_rng(rng)
+    except (TypeError, ValueError) as exc:
+        raise TypeError(f"rng must be a numpy.random.Generator, a seed (int) or None, got "
+                        f"{rng!r} ({exc})") from None
 
 
 def _seed(robot, q0) -> tuple[np.ndarray, tuple[str, ...]]:

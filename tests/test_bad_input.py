@@ -322,3 +322,13 @@ def test_long_name_lists_in_errors_are_cut():
     with pytest.raises(sjt.FrameNotFound) as missing:
         sjt.Robot.from_urdf(star, ee_frame="nope")
     assert len(str(missing.value)) < 1000
+
+
+@pytest.mark.parametrize("rng", ["x", 1.5, [0.5]])
+def test_solve_refuses_a_bad_rng_at_the_door(ur5, rng):
+    """A bad ``rng`` is refused even when the first start succeeds (no restart ever draws)."""
+    solver = sjt.SJTSolver(ur5)
+    target = ur5.fk(ur5.q0)
+    assert solver.solve(target, ur5.q0).success  # the first start succeeds
+    with pytest.raises(TypeError, match="rng must be"):
+        solver.solve(target, ur5.q0, rng=rng)
