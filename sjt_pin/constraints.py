@@ -37,7 +37,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .kernels import project_rows
+from . import kernels
+from .kernels import BOUND_TOL, project_rows
 from .limits.base import Limit, Motion
 
 #: ``solve(free, held)``: the method's joint velocity (nv,; rad/s) with only the ``free``
@@ -45,8 +46,8 @@ from .limits.base import Limit, Motion
 #: taken off the free joints' share. ``solve(free, None)`` leaves the held joints at rest.
 Solve = Callable[[np.ndarray, np.ndarray | None], np.ndarray]
 
-#: a bound counts as reached within this many rad/s (m/s) of it
-TOLERANCE = 1e-12
+#: a bound counts as reached within this many rad/s (m/s) of it (the kernels' BOUND_TOL)
+TOLERANCE = BOUND_TOL
 _F64 = np.dtype(np.float64)
 
 
@@ -344,12 +345,12 @@ def task_scale(a: np.ndarray, b: np.ndarray, lower: np.ndarray, upper: np.ndarra
 
 #: the ridge of the stage's dual QP, relative to its largest diagonal entry (see
 #: :func:`nonnegative_qp`)
-DUAL_RIDGE = 1e-13
+DUAL_RIDGE = kernels.DUAL_RIDGE
 
 #: the free joints still span the task space while the smallest singular value of their
 #: normalised task columns is above this fraction of their root-sum-square (of the largest,
 #: within a factor sqrt(m); Flacco's rank test, the compiled kernels' test)
-RANK_TOL = 1e-6
+RANK_TOL = kernels.RANK_TOL
 
 
 def saturate(dq: np.ndarray, solve: Solve, lower: np.ndarray, upper: np.ndarray,

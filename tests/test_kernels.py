@@ -194,6 +194,16 @@ def test_the_slots_are_the_compiled_module_s_and_no_python_module_numbers_one():
     assignment = re.compile(r"^\s*\(?\s*[PIS]_[A-Z0-9_]+\b[^=\n]*=\s*(range\(|\d)", re.M)
     for path in source.rglob("*.py"):
         assert not assignment.search(path.read_text()), path
+    # the modes, status bits and tolerances the kernels share with Python are theirs too
+    shared = ("GAIN_FIXED", "GAIN_AUTO", "FF_TRANSPOSE", "FF_DAMPED", "FB_TRANSPOSE", "FB_DAMPED",
+              "NON_FINITE", "STALLED", "CLAMPED", "SCALED", "CONTINUE", "CONVERGED",
+              "SEARCH_STALLED", "EIGEN_FLOOR", "BOUND_TOL", "RANK_TOL", "BRAKING_TOL",
+              "BRAKING_STEPS", "DUAL_RIDGE", "BOUND_PRODUCTS")
+    names = "|".join(shared)
+    constant = re.compile(rf"^\s*(?:[A-Z_]+,\s*)*({names})\b[^=\n]*=\s*[-\d(]", re.M)
+    for path in source.rglob("*.py"):
+        assert not constant.search(path.read_text()), path
+    assert all(getattr(layout, name) == getattr(_kernels, name) for name in shared)
 
 
 def test_bad_arguments_raise_instead_of_crashing():

@@ -54,8 +54,10 @@ static const char *const LIMIT_CODE_NAMES[] = { LIMIT_CODES(SLOT_NAME) };
 /* the results follow the parameters */
 #define INFO P_COUNT
 #define GAIN_FIXED 0
+#define GAIN_AUTO 1
 #define FF_TRANSPOSE 1
 #define FF_DAMPED 2
+#define FB_TRANSPOSE 0
 #define FB_DAMPED 1
 #define NON_FINITE 1
 #define STALLED 2
@@ -2412,6 +2414,20 @@ PyMODINIT_FUNC PyInit__kernels(void)
     for (int i = 0; i < L_COUNT; i++)
         if (PyModule_AddIntConstant(m, LIMIT_CODE_NAMES[i], i) < 0) goto fail;
     if (PyModule_AddIntConstant(m, "SMOOTH_SIZE", SM_COUNT) < 0) goto fail;
+    /* the modes, status bits and tolerances the kernels and their Python side share, by name */
+#define EXPORT_INT(name) if (PyModule_AddIntConstant(m, #name, name) < 0) goto fail;
+#define EXPORT_FLOAT(name) \
+    if (PyModule_AddObjectRef(m, #name, value = PyFloat_FromDouble(name)) < 0) goto fail; \
+    Py_DECREF(value);
+    PyObject *value = NULL;
+    EXPORT_INT(GAIN_FIXED) EXPORT_INT(GAIN_AUTO) EXPORT_INT(FF_TRANSPOSE) EXPORT_INT(FF_DAMPED)
+    EXPORT_INT(FB_TRANSPOSE) EXPORT_INT(FB_DAMPED) EXPORT_INT(NON_FINITE) EXPORT_INT(STALLED)
+    EXPORT_INT(CLAMPED) EXPORT_INT(SCALED) EXPORT_INT(BOUND_PRODUCTS) EXPORT_INT(CONTINUE)
+    EXPORT_INT(CONVERGED) EXPORT_INT(SEARCH_STALLED) EXPORT_INT(BRAKING_STEPS)
+    EXPORT_FLOAT(EIGEN_FLOOR) EXPORT_FLOAT(BOUND_TOL) EXPORT_FLOAT(RANK_TOL)
+    EXPORT_FLOAT(BRAKING_TOL) EXPORT_FLOAT(DUAL_RIDGE)
+#undef EXPORT_INT
+#undef EXPORT_FLOAT
     if (PyModule_AddIntConstant(m, "INFO", INFO) < 0
         || PyModule_AddIntConstant(m, "INFO_SIZE", I_COUNT) < 0
         || PyModule_AddIntConstant(m, "STATE_SIZE", S_COUNT) < 0)

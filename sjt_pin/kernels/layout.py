@@ -13,6 +13,21 @@ import numpy as np
 
 # -- slots: their numbers are the compiled module's (_kernels.c names each slot once) ---------
 from ._kernels import (  # noqa: F401 (re-exported: the kernels' vocabulary)
+    BOUND_PRODUCTS,
+    BOUND_TOL,
+    BRAKING_STEPS,
+    BRAKING_TOL,
+    CLAMPED,
+    CONTINUE,
+    CONVERGED,
+    DUAL_RIDGE,
+    EIGEN_FLOOR,
+    FB_DAMPED,
+    FB_TRANSPOSE,
+    FF_DAMPED,
+    FF_TRANSPOSE,
+    GAIN_AUTO,
+    GAIN_FIXED,
     I_E_SQ,
     I_EW_SQ,
     I_FF_SQ,
@@ -28,6 +43,7 @@ from ._kernels import (  # noqa: F401 (re-exported: the kernels' vocabulary)
     L_JERK,
     L_POSITION,
     L_VELOCITY,
+    NON_FINITE,
     P_BOX,
     P_BOX_COUNT,
     P_CLAMPED,
@@ -57,6 +73,7 @@ from ._kernels import (  # noqa: F401 (re-exported: the kernels' vocabulary)
     P_STALL_RATIO,
     P_STALL_RUN,
     P_STALL_WAIT,
+    RANK_TOL,
     S_BEST,
     S_E_SQ,
     S_ERROR_ROWS,
@@ -72,6 +89,8 @@ from ._kernels import (  # noqa: F401 (re-exported: the kernels' vocabulary)
     S_STALE,
     S_STALE_LIMIT,
     S_TOL_SQ,
+    SCALED,
+    SEARCH_STALLED,
     SM_ACC,
     SM_BRAKE_ACC,
     SM_BRAKE_JERK,
@@ -93,26 +112,23 @@ from ._kernels import (  # noqa: F401 (re-exported: the kernels' vocabulary)
     SM_SOFT_LO_BY,
     SM_TORN,
     SMOOTH_SIZE,
+    STALLED,
     STATE_SIZE,
 )
 
 HEADER = INFO + INFO_SIZE
 
-#: gain modes: K as given; "auto": c K / (dt lambda_hat), lambda_hat >= lambda_max(J M)
-GAIN_FIXED, GAIN_AUTO = 0, 1
-#: how a method maps the desired velocity (``P_FF_MODE``; ``P_HAS_FF`` says whether a step has
-#: one): through the feedback's own mapping (paper eq. 10, 21), or the damped sqrt(D) solve
-FF_TRANSPOSE, FF_DAMPED = 1, 2
-#: feedback of the transpose methods: S J^T K e (eq. 10, 21), or through the damped solve
-FB_TRANSPOSE, FB_DAMPED = 0, 1
-#: status bits a step kernel returns (0: nothing to do but integrate): errors and a stall need
-#: Python; joints clamped at a position limit and a step scaled for the speed limits do not
-NON_FINITE, STALLED, CLAMPED, SCALED = 1, 2, 4, 8
-#: matrix products of the loop-eigenvalue bound (tr A^(2^(s+1)))^(1/2^(s+1))
-BOUND_PRODUCTS = 2
-#: smallest eigenvalue of J J^T, relative to the largest, that the pseudoinverse inverts: the
-#: eigenvalues of a Gram matrix are exact to about 1e3 eps of the largest
-EIGEN_FLOOR = 1e3 * 2.220446049250313e-16
+# The modes, status bits and tolerances are the compiled module's too (imported above):
+#: gain modes (GAIN_FIXED: K as given; GAIN_AUTO: c K / (dt lambda_hat), lambda_hat >=
+#: lambda_max(J M)); how a method maps the desired velocity (``P_FF_MODE``; ``P_HAS_FF`` says
+#: whether a step has one: FF_TRANSPOSE through the feedback's own mapping, paper eq. 10, 21,
+#: FF_DAMPED the damped sqrt(D) solve); the transpose methods' feedback (FB_TRANSPOSE:
+#: S J^T K e, eq. 10, 21; FB_DAMPED: through the damped solve); the status bits a step kernel
+#: returns (0: nothing to do but integrate; NON_FINITE and STALLED need Python, CLAMPED and
+#: SCALED do not); the matrix products of the loop-eigenvalue bound; the smallest eigenvalue of
+#: J J^T, relative to the largest, that the pseudoinverse inverts (EIGEN_FLOOR: a Gram matrix's
+#: eigenvalues are exact to about 1e3 eps of the largest); the tolerances of the constraint
+#: stage and of the braking speed's root search, which their Python references share
 
 
 #: the limit that set a bound of the compiled acceleration/jerk stage (its ``SM_*_BY`` parts)
@@ -197,13 +213,6 @@ class Layout:
         start = self.smooth + part * self.n
         return work[start:start + (self.m if part == SM_GAINS else self.n)]
 
-    def step_box(self, work: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The last step's bounds on the joint velocity (rad/s, m/s): ``(lower, upper)``, the
-        position (or return) and speed bounds the kernel saturated against, 0 included for
-        the joints the mask keeps still (views that the next step overwrites)."""
-        start = self.clamped + self.n
-        return work[start:start + self.n], work[start + self.n:start + 2 * self.n]
 
 # -- the set-point search (search_iteration): its state slots (S_*) are imported above ----------
-#: what an iteration reports
-CONTINUE, CONVERGED, SEARCH_STALLED = 0, 1, 2
+#: what an iteration reports: CONTINUE, CONVERGED, SEARCH_STALLED (imported above)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .. import kernels
 from .base import Limit, Motion
 
 #: the share of the acceleration and jerk limits that a braking plan keeps in reserve
@@ -145,9 +146,9 @@ def stopping_distance(w: np.ndarray, a0: np.ndarray, A: np.ndarray, J: np.ndarra
 
 
 #: the braking speed's root is found to this fraction of its bracket (that of 40 halvings)
-BRAKING_TOL = 2.0**-40
+BRAKING_TOL = kernels.BRAKING_TOL  # 2^-40
 #: at most this many steps of the root search (it takes 5-15)
-BRAKING_STEPS = 60
+BRAKING_STEPS = kernels.BRAKING_STEPS
 
 
 def _overshoot(x, v, room, dt, A, J):
