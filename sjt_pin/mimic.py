@@ -167,33 +167,9 @@ def apply_mimics(model: pin.Model, mimics: Sequence[MimicJoint],
     applied: list[tuple[int, int, MimicJoint]] = []
     bounds: dict[int, list] = {}
     for members in groups.values():
-        # q_x = a_x q_root + b_x; the first joint in the model's order becomes independent
-        first, a0, b0 = min(members, key=lambda m: index[m[0]])
-        joint = model.joints[index[first]]
-        lo, hi = lower[joint.idx_q], upper[joint.idx_q]
-        v_max = speed[joint.idx_v] if 0.0 < speed[joint.idx_v] < NO_LIMIT else math.inf
-        for name, a_x, b_x in members:
-            if name == first:
-                continue
-            k = a_x / a0  # q_x = k q_first + o
-            o = b_x - k * b0
-            own = model.joints[index[name]]
-            own_range = ((float(lower[own.idx_q]), float(upper[own.idx_q])) if own.nq == 1
-                         else (-math.inf, math.inf))
-            applied.append((index[first], index[name], MimicJoint(name, first, k, o,
-                                                                  *own_range)))
-            if own.nq == 1 and np.isfinite(lower[own.idx_q]):
-                ends = sorted(((lower[own.idx_q] - o) / k, (upper[own.idx_q] - o) / k))
-                lo, hi = max(lo, ends[0]), min(hi, ends[1])
-                if lo > hi + 1e-12 * max(1.0, abs(lo)):
-                    raise error(f"joint {name!r} mimics {first!r} as q = {k:g} q[{first!r}] "
-                                f"{o:+g}, but no value of {first!r} keeps both within their "
-                                "position limits")
-                hi = max(lo, hi)
-            own_speed = speed[own.idx_v]
-            if 0.0 < own_speed < NO_LIMIT:
-                v_max = min(v_max, own_speed / abs(k))
-        bounds[index[first]] = [lo, hi, v_max]
+        first, relations, bound = _tie(model, members, index, (lower, upper, speed), error)
+        applied += relations
+        bounds[first] = bound
     for leader, follower, mimic in sorted(applied, key=lambda x: x[1]):
         model = pin.transformJointIntoMimic(model, leader, follower, mimic.multiplier,
                                            mimic.offset)
@@ -205,6 +181,42 @@ def apply_mimics(model: pin.Model, mimics: Sequence[MimicJoint],
         if math.isfinite(v_max):
             model.velocityLimit[joint.idx_v] = v_max
     return model, [m for _, _, m in sorted(applied, key=lambda x: x[1])]
+
+
+def _tie(model: pin.Model, members: list[tuple[str, float, float]], index: dict[str, int],
+         limits: tuple[np.ndarray, np.ndarray, np.ndarray], error: Callable[[str], URDFError]
+         ) -> tuple[int, list[tuple[int, int, MimicJoint]], list[float]]:
+    """One group of joints tied by relations ``q_x = a_x q_root + b_x`` (``members``): the
+    joint first in the model's order becomes independent. Returns its id, each other member's
+    ``(leader id, follower id, relation on the independent joint)``, and the independent joint's
+    ``[lower, upper, speed]`` narrowed by the members' own position and speed limits."""
+    lower, upper, speed = limits
+    first, a0, b0 = min(members, key=lambda m: index[m[0]])
+    joint = model.joints[index[first]]
+    lo, hi = lower[joint.idx_q], upper[joint.idx_q]
+    v_max = speed[joint.idx_v] if 0.0 < speed[joint.idx_v] < NO_LIMIT else math.inf
+    applied = []
+    for name, a_x, b_x in members:
+        if name == first:
+            continue
+        k = a_x / a0  # q_x = k q_first + o
+        o = b_x - k * b0
+        own = model.joints[index[name]]
+        own_range = ((float(lower[own.idx_q]), float(upper[own.idx_q])) if own.nq == 1
+                     else (-math.inf, math.inf))
+        applied.append((index[first], index[name], MimicJoint(name, first, k, o, *own_range)))
+        if own.nq == 1 and np.isfinite(lower[own.idx_q]):
+            ends = sorted(((lower[own.idx_q] - o) / k, (upper[own.idx_q] - o) / k))
+            lo, hi = max(lo, ends[0]), min(hi, ends[1])
+            if lo > hi + 1e-12 * max(1.0, abs(lo)):
+                raise error(f"joint {name!r} mimics {first!r} as q = {k:g} q[{first!r}] "
+                            f"{o:+g}, but no value of {first!r} keeps both within their "
+                            "position limits")
+            hi = max(lo, hi)
+        own_speed = speed[own.idx_v]
+        if 0.0 < own_speed < NO_LIMIT:
+            v_max = min(v_max, own_speed / abs(k))
+    return index[first], applied, [lo, hi, v_max]
 
 
 def reduced_configuration(full: pin.Model, model: pin.Model, q: np.ndarray) -> np.ndarray:
