@@ -203,24 +203,32 @@ def braking_speed(room: np.ndarray, v: np.ndarray, a: np.ndarray, dt: float,
         searching = ~(done_inf | done_low | done_zero)
         lo = np.where(straddles, 0.0, low)
         f_lo = np.where(straddles, f_zero, f_lo)
-        hi = high.copy()
-        tol = (high - low) * BRAKING_TOL
-        side = np.zeros(v.shape)  # the end the last step moved (-1 lo, 1 hi)
-        for _ in range(BRAKING_STEPS):
-            searching &= hi - lo > tol
-            if not np.any(searching):
-                break
-            x = lo - f_lo * (hi - lo) / (f_hi - f_lo)
-            x = np.where((x > lo) & (x < hi), x, 0.5 * (lo + hi))
-            fx = _overshoot(x, v, room, dt, A, J)
-            fits = searching & (fx <= 0.0)
-            breaks = searching & ~(fx <= 0.0)
-            f_hi = np.where(fits & (side < 0), 0.5 * f_hi, f_hi)
-            f_lo = np.where(breaks & (side > 0), 0.5 * f_lo, f_lo)
-            lo, f_lo = np.where(fits, x, lo), np.where(fits, fx, f_lo)
-            hi, f_hi = np.where(breaks, x, hi), np.where(breaks, fx, f_hi)
-            side = np.where(fits, -1.0, np.where(breaks, 1.0, side))
+        lo = _illinois(lo, f_lo, high.copy(), f_hi, searching, (high - low) * BRAKING_TOL,
+                       lambda x: _overshoot(x, v, room, dt, A, J))
         result = np.where(done_inf, np.inf, np.where(done_low, low,
                                                      np.where(done_zero, 0.0, lo)))
         full[near] = result
         return full
+
+
+def _illinois(lo: np.ndarray, f_lo: np.ndarray, hi: np.ndarray, f_hi: np.ndarray,
+              searching: np.ndarray, tol: np.ndarray, f) -> np.ndarray:
+    """The largest x with ``f(x) <= 0`` in each bracket ``[lo, hi]`` (``f(lo) <= 0 < f(hi)``)
+    where ``searching``, to ``tol``: regula falsi with the Illinois modification, a bisection
+    step when the secant leaves the bracket; at most :data:`BRAKING_STEPS` steps."""
+    side = np.zeros(lo.shape)  # the end the last step moved (-1 lo, 1 hi)
+    for _ in range(BRAKING_STEPS):
+        searching = searching & (hi - lo > tol)
+        if not np.any(searching):
+            break
+        x = lo - f_lo * (hi - lo) / (f_hi - f_lo)
+        x = np.where((x > lo) & (x < hi), x, 0.5 * (lo + hi))
+        fx = f(x)
+        fits = searching & (fx <= 0.0)
+        breaks = searching & ~(fx <= 0.0)
+        f_hi = np.where(fits & (side < 0), 0.5 * f_hi, f_hi)
+        f_lo = np.where(breaks & (side > 0), 0.5 * f_lo, f_lo)
+        lo, f_lo = np.where(fits, x, lo), np.where(fits, fx, f_lo)
+        hi, f_hi = np.where(breaks, x, hi), np.where(breaks, fx, f_hi)
+        side = np.where(fits, -1.0, np.where(breaks, 1.0, side))
+    return lo
