@@ -440,10 +440,11 @@ class Solver:
         rows allow, its smoothness box, the motion state following (``kernels.smooth_rows_step``,
         one compiled call). A user's bound the hard box does not meet, or a smoothness limit of
         the user's, leaves the step to the whole stage in Python (the status bit ``_STAGE``)."""
-        motion, before = self._motion, self._before
+        motion, before, user = self._motion, self._before, self._user_stage
+        assert user is not None  # this kernel is for a user's limits
         motion.q = q
         np.copyto(before, self._state)
-        parts = self._user_parts = self._user_stage.hard_parts(self.stack.kinematics, motion)
+        parts = self._user_parts = user.hard_parts(self.stack.kinematics, motion)
         status = self._method_step(J, e, ff, q, work, step)
         if status & K.NON_FINITE:
             return status

@@ -1,9 +1,9 @@
 """The compiled acceleration/jerk stage (the step kernel's, used by a built-in method) equals
 its Python reference (the constraint stage in sjt_pin/constraints.py and sjt_pin/limits, which
 solvers made with ``sjt_pin.solver.COMPILED_SMOOTH_STAGE = False`` run): on random robots,
-random motion states (velocities, accelerations, joints near and outside their position limits), with and
-without jerk limits, for every built-in method — the same displacement, motion state and
-StepInfo report."""
+random motion states (velocities, accelerations, joints near and outside their position
+limits), with and without jerk limits, for every built-in method — the same displacement,
+motion state and StepInfo report."""
 
 import pickle
 
@@ -15,8 +15,8 @@ from hypothesis import strategies as st
 
 import sjt_pin as sjt
 import sjt_pin.kernels as K
-from sjt_pin.bench.limits import PANDA_ACCELERATION, PANDA_JERK
 import sjt_pin.solver as solver_module
+from sjt_pin.bench.limits import PANDA_ACCELERATION, PANDA_JERK
 
 from .test_random_urdfs import random_urdf_semantics
 
