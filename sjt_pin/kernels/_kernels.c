@@ -2231,19 +2231,48 @@ done:
     return result;
 }
 
+/* the acceleration and jerk limits' box of joint j around the state (v, a) a step starts from
+ * (smooth_stage_c's step 3, without the approach to the wanted velocity) */
+static void smoothness_box(const double *S, Py_ssize_t n, Py_ssize_t j, double v, double a,
+                           double dt, int has_jerk, double *lo_out, double *hi_out)
+{
+    double A = S[SM_ACC * n + j], Jk = S[SM_JERK * n + j], vj = S[SM_JERK_SPEED * n + j];
+    double lo = v - A * dt, hi = v + A * dt;
+    if (has_jerk && isfinite(Jk)) {
+        double change = Jk * dt;
+        double jl = v + dt * (a - change), jh = v + dt * (a + change);
+        double left = dmax(vj - v, 0.0);
+        double bound = v + dt * (Jk * (-dt + sqrt(dt * dt + 2.0 * left / Jk)));
+        if (isfinite(bound)) jh = dmin(jh, bound);
+        left = dmax(vj + v, 0.0);
+        bound = v - dt * (Jk * (-dt + sqrt(dt * dt + 2.0 * left / Jk)));
+        if (isfinite(bound)) jl = dmax(jl, bound);
+        lo = dmax(lo, jl);
+        hi = dmin(hi, jh);
+    }
+    if (lo > hi) lo = hi = 0.5 * (lo + hi);  /* limits that contradict each other */
+    *lo_out = lo;
+    *hi_out = hi;
+}
+
+/* how far the smoothness box widens, around its centre, in the rounds that look for the
+ * smallest breach of the acceleration and jerk limits that lets the rows hold */
+#define SMOOTH_WIDEN_ROUNDS 6
+
 /* A step of the compiled acceleration/jerk stage (step and the stage's part of work, written by
  * smooth_stage_c) against a user's general rows A q_dot <= b and bounds [lower, upper] (rad/s;
- * -inf/inf where none); `previous` (nv,) is the velocity commanded the step before (the stage's
- * state before this step). 0 when the step meets them all (step and work untouched); -1 when a
- * user's bound leaves nothing of the stage's hard box on some joint (the caller's whole
- * constraint stage must weigh them); else step is projected (project_c in the metric of the
- * weighted task rows, the moving joints of the mask) onto the rows within the intersection of
- * the user's bounds, the stage's hard box (positions with their braking, speeds) and, where it
- * meets them, its smoothness box (acceleration, jerk): 1 when every joint kept its smoothness
- * box, 2 when some had to leave it (the hard limits and the rows win, the stage's rule; those
- * joints are marked in SM_TORN). After a projection every joint inside its range lands exactly
- * on a limit it reaches, SM_OUT holds the new velocity and the motion state (SM_DQ, SM_DDQ) is
- * the one this velocity commands. -2 when out of memory. */
+ * -inf/inf where none); `previous` (2 nv) is the motion state the step started from (the
+ * velocity, then the acceleration, commanded the step before). 0 when the step meets them all
+ * (step and work untouched); -1 when a user's bound leaves nothing of the stage's hard box on
+ * some joint (the caller's whole constraint stage must weigh them); else step is projected
+ * (project_c in the metric of the weighted task rows, the moving joints of the mask) onto the
+ * rows within the user's bounds, the stage's hard box (positions with their braking, speeds)
+ * and the acceleration/jerk box around the previous state: 1 when that holds; 2 when no velocity
+ * in it meets the rows, and the hard limits and the rows win (the stage's rule): the
+ * smoothness box is widened around its centre, 2, 4, ... 32 times, until they hold (else it is
+ * dropped), and the joints that leave it are marked in SM_TORN. After a projection every joint
+ * inside its range lands exactly on a limit it reaches, SM_OUT holds the new velocity and the
+ * motion state (SM_DQ, SM_DDQ) the one it commands. -2 when out of memory. */
 static int smooth_rows_c(Mat J, const double *q, Mat A, const double *b, const double *lower,
                          const double *upper, const double *previous, double *work,
                          double *step)
@@ -2255,8 +2284,8 @@ static int smooth_rows_c(Mat J, const double *q, Mat A, const double *b, const d
     double *S = work + (Py_ssize_t)work[P_SMOOTH];
     double *pdq = S + SM_DQ * n, *pddq = S + SM_DDQ * n;
     const double *hlo = S + SM_HARD_LO * n, *hhi = S + SM_HARD_HI * n;
-    const double *slo = S + SM_SOFT_LO * n, *shi = S + SM_SOFT_HI * n;
     double *out = S + SM_OUT * n, *torn = S + SM_TORN * n;
+    int has_jerk = work[P_JERK] != 0.0;
     int broken = 0;
     for (Py_ssize_t j = 0; j < n && !broken; j++) {
         double v = step[j] / dt;
@@ -2268,11 +2297,11 @@ static int smooth_rows_c(Mat J, const double *q, Mat A, const double *b, const d
         if (acc > BOUND_TOL * (1.0 + fabs(b[i]))) broken = 1;
     }
     if (!broken) return 0;
-    double *mem = (double *)malloc((size_t)(m * n + 8 * n + 1) * sizeof(double));
+    double *mem = (double *)malloc((size_t)(m * n + 10 * n + 1) * sizeof(double));
     if (!mem) return -2;
     double *Jw = mem, *dq = Jw + m * n, *lo = dq + n, *hi = lo + n, *moving = hi + n;
     double *res = moving + n, *hard_lo = res + n, *hard_hi = hard_lo + n;
-    int status = 1;
+    double *soft_lo = hard_hi + n, *soft_hi = soft_lo + n;
     for (Py_ssize_t i = 0; i < m; i++)
         for (Py_ssize_t j = 0; j < n; j++) Jw[i * n + j] = sw[i] * AT(J, i, j) * mask[j];
     for (Py_ssize_t j = 0; j < n; j++) {
@@ -2284,18 +2313,30 @@ static int smooth_rows_c(Mat J, const double *q, Mat A, const double *b, const d
             free(mem);
             return -1;
         }
-        double l = dmax(hard_lo[j], slo[j]), u = dmin(hard_hi[j], shi[j]);
-        if (l <= u) {
-            lo[j] = l;
-            hi[j] = u;
-        } else {  /* the smoothness box lies beyond the hard one: the hard box wins */
-            lo[j] = hard_lo[j];
-            hi[j] = hard_hi[j];
-            status = 2;
-        }
+        smoothness_box(S, n, j, previous[j], previous[n + j], dt, has_jerk, soft_lo + j,
+                       soft_hi + j);
     }
     Mat Jm = {Jw, m, n, n, 1};
-    for (int attempt = 0; attempt < 2; attempt++) {
+    int status = 1;
+    for (int round = 0; round <= SMOOTH_WIDEN_ROUNDS; round++) {
+        /* round r: the smoothness box widened 2^r times (the last round: none), within the
+         * hard box */
+        double widen = (double)(1 << (round < SMOOTH_WIDEN_ROUNDS ? round : 0));
+        for (Py_ssize_t j = 0; j < n; j++) {
+            double l = hard_lo[j], u = hard_hi[j];
+            if (round < SMOOTH_WIDEN_ROUNDS) {
+                double c = 0.5 * (soft_lo[j] + soft_hi[j]), r = 0.5 * (soft_hi[j] - soft_lo[j]);
+                double sl = dmax(l, c - widen * r), su = dmin(u, c + widen * r);
+                if (sl <= su) {  /* else the hard box lies beyond: it wins on this joint */
+                    l = sl;
+                    u = su;
+                } else {
+                    status = 2;
+                }
+            }
+            lo[j] = l;
+            hi[j] = u;
+        }
         if (project_c(dq, Jm, A, b, lo, hi, moving, res) < 0) {
             free(mem);
             return -2;
@@ -2306,17 +2347,14 @@ static int smooth_rows_c(Mat J, const double *q, Mat A, const double *b, const d
             for (Py_ssize_t j = 0; j < n; j++) acc += AT(A, i, j) * res[j];
             if (acc > 1e-9 * (1.0 + fabs(b[i]))) kept = 0;
         }
-        if (kept || status == 2) break;
-        /* no velocity within the smoothness box meets the rows: they win over smoothness */
-        memcpy(lo, hard_lo, (size_t)n * sizeof(double));
-        memcpy(hi, hard_hi, (size_t)n * sizeof(double));
+        if (kept || round == SMOOTH_WIDEN_ROUNDS) break;
         status = 2;
     }
     for (Py_ssize_t j = 0; j < n; j++) step[j] = res[j] * dt;
     exact_position(q, work, step);
     for (Py_ssize_t j = 0; j < n; j++) {
         double v = step[j] / dt;
-        if (v < slo[j] - BOUND_TOL || v > shi[j] + BOUND_TOL) torn[j] = 1.0;
+        if (v < soft_lo[j] - BOUND_TOL || v > soft_hi[j] + BOUND_TOL) torn[j] = 1.0;
         out[j] = v;
         pddq[j] = (v - previous[j]) / dt;
         pdq[j] = v;
@@ -2341,9 +2379,10 @@ static PyObject *py_smooth_rows_step(PyObject *self, PyObject *const *args, Py_s
     Mat Jm = mat(&J), Am = mat(&A);
     Py_ssize_t n = Jm.n;
     if (Am.n != n || length(&b) != Am.m || length(&lo) != n || length(&hi) != n
-        || length(&pv) != n || length(&step) != n) {
+        || length(&pv) != 2 * n || length(&step) != n) {
         PyErr_Format(PyExc_ValueError, "J (%zd, %zd), A (%zd, %zd), b (%zd,), lower, upper, "
-                     "previous and step (n,) do not fit", Jm.m, n, Am.m, Am.n, length(&b));
+                     "step (n,) and previous (2 n,) do not fit", Jm.m, n, Am.m, Am.n,
+                     length(&b));
         goto done;
     }
     if (check_work(&work, Jm.m, n)) goto done;
