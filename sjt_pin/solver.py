@@ -454,9 +454,9 @@ class Solver:
         if rows is None and lower is None:
             return status
         A, b = (rows[0], rows[1]) if rows is not None else self._no_rows
-        done = K.smooth_rows_step(J, q, A, b, self._no_bounds[0] if lower is None else lower,
-                                  self._no_bounds[1] if upper is None else upper,
-                                  before, work, step)
+        if lower is None:  # (lower and upper come together)
+            upper = None
+        done = K.smooth_rows_step(J, q, A, b, lower, upper, before, work, step)
         if done < 0:
             return status | _STAGE
         if done:

@@ -2261,7 +2261,7 @@ static void smoothness_box(const double *S, Py_ssize_t n, Py_ssize_t j, double v
 
 /* A step of the compiled acceleration/jerk stage (step and the stage's part of work, written by
  * smooth_stage_c) against a user's general rows A q_dot <= b and bounds [lower, upper] (rad/s;
- * -inf/inf where none); `previous` (2 nv) is the motion state the step started from (the
+ * -inf/inf where none; both NULL: none at all); `previous` (2 nv) is the motion state the step started from (the
  * velocity, then the acceleration, commanded the step before). 0 when the step meets them all
  * (step and work untouched); -1 when a user's bound leaves nothing of the stage's hard box on
  * some joint (the caller's whole constraint stage must weigh them); else step is projected
@@ -2287,7 +2287,7 @@ static int smooth_rows_c(Mat J, const double *q, Mat A, const double *b, const d
     double *out = S + SM_OUT * n, *torn = S + SM_TORN * n;
     int has_jerk = work[P_JERK] != 0.0;
     int broken = 0;
-    for (Py_ssize_t j = 0; j < n && !broken; j++) {
+    for (Py_ssize_t j = 0; j < n && !broken && lower; j++) {
         double v = step[j] / dt;
         if (v < lower[j] - BOUND_TOL || v > upper[j] + BOUND_TOL) broken = 1;
     }
@@ -2307,8 +2307,8 @@ static int smooth_rows_c(Mat J, const double *q, Mat A, const double *b, const d
     for (Py_ssize_t j = 0; j < n; j++) {
         dq[j] = step[j] / dt;
         moving[j] = mask[j] != 0.0 ? 1.0 : 0.0;
-        hard_lo[j] = dmax(hlo[j], lower[j]);
-        hard_hi[j] = dmin(hhi[j], upper[j]);
+        hard_lo[j] = lower ? dmax(hlo[j], lower[j]) : hlo[j];
+        hard_hi[j] = upper ? dmin(hhi[j], upper[j]) : hhi[j];
         if (hard_lo[j] > hard_hi[j]) {  /* the user's bound against the hard box */
             free(mem);
             return -1;
@@ -2363,22 +2363,25 @@ static int smooth_rows_c(Mat J, const double *q, Mat A, const double *b, const d
     return status;
 }
 
-/* smooth_rows_step(J, q, A, b, lower, upper, previous, work, step) -> int (smooth_rows_c) */
+/* smooth_rows_step(J, q, A, b, lower, upper, previous, work, step) -> int (smooth_rows_c;
+ * lower and upper both None: no bounds, two buffers fewer to acquire) */
 static PyObject *py_smooth_rows_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     if (!nargs_ok(nargs, 9, "smooth_rows_step")) return NULL;
     Arg J = {0}, q = {0}, A = {0}, b = {0}, lo = {0}, hi = {0}, pv = {0}, work = {0};
     Arg step = {0};
     PyObject *result = NULL;
+    int bounded = args[4] != Py_None || args[5] != Py_None;
     if (acquire(args[0], &J, 0, 2, "J") || acquire(args[1], &q, 0, 1, "q")
         || acquire(args[2], &A, 0, 2, "A") || acquire(args[3], &b, 0, 1, "b")
-        || acquire(args[4], &lo, 0, 1, "lower") || acquire(args[5], &hi, 0, 1, "upper")
+        || (bounded && (acquire(args[4], &lo, 0, 1, "lower")
+                        || acquire(args[5], &hi, 0, 1, "upper")))
         || acquire(args[6], &pv, 0, 1, "previous") || acquire(args[7], &work, 1, 1, "work")
         || acquire(args[8], &step, 1, 1, "step"))
         goto done;
     Mat Jm = mat(&J), Am = mat(&A);
     Py_ssize_t n = Jm.n;
-    if (Am.n != n || length(&b) != Am.m || length(&lo) != n || length(&hi) != n
+    if (Am.n != n || length(&b) != Am.m || (bounded && (length(&lo) != n || length(&hi) != n))
         || length(&pv) != 2 * n || length(&step) != n) {
         PyErr_Format(PyExc_ValueError, "J (%zd, %zd), A (%zd, %zd), b (%zd,), lower, upper, "
                      "step (n,) and previous (2 n,) do not fit", Jm.m, n, Am.m, Am.n,
@@ -2393,9 +2396,10 @@ static PyObject *py_smooth_rows_step(PyObject *self, PyObject *const *args, Py_s
                         "(Layout(..., smooth=True))");
         goto done;
     }
-    double *qv = vec(&q, "q"), *bv = vec(&b, "b"), *lv = vec(&lo, "lower");
-    double *hv = vec(&hi, "upper"), *pvv = vec(&pv, "previous"), *sv = out_vec(&step, "step");
-    if (!qv || !bv || !lv || !hv || !pvv || !sv) goto done;
+    double *qv = vec(&q, "q"), *bv = vec(&b, "b");
+    double *lv = bounded ? vec(&lo, "lower") : NULL, *hv = bounded ? vec(&hi, "upper") : NULL;
+    double *pvv = vec(&pv, "previous"), *sv = out_vec(&step, "step");
+    if (!qv || !bv || (bounded && (!lv || !hv)) || !pvv || !sv) goto done;
     int status;
     Py_BEGIN_ALLOW_THREADS
     status = smooth_rows_c(Jm, qv, Am, bv, lv, hv, pvv, wv, sv);
