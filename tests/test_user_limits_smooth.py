@@ -16,6 +16,7 @@ import pinocchio as pin
 import pytest
 
 import sjt_pin as sjt
+import sjt_pin.solver as solver_module
 from sjt_pin.bench.limits import PANDA_ACCELERATION, PANDA_JERK  # Franka's published limits
 from sjt_pin.limits import Limit
 from sjt_pin.limits.position import braking_speed
@@ -227,3 +228,48 @@ def test_rows_that_need_more_than_the_smoothness_limits_win_and_say_so(panda, do
     # the limits as fast as the jerk limits let them)
     for k in np.flatnonzero(over & ~np.concatenate([[False], over[:-1]])):
         assert infos[k].limit_conflicts, f"step {k} broke a smoothness limit unreported"
+
+
+def test_a_bound_outside_the_hard_box_takes_the_python_stage_and_keeps_the_state(ur5):
+    """The README's ``JointBand`` with the elbow starting outside it: its bound asks for the
+    way back in one period, beyond the speed and braking bounds — nothing of the hard box is
+    left, so that step runs the whole stage in Python, its result the reference's (the band,
+    a hard limit of the user's, wins there, as in the stage). The motion state is what was
+    commanded, step after step."""
+
+    class JointBand(Limit):
+        name = "band"
+
+        def __init__(self, lower, upper):
+            self.lower, self.upper = lower, upper
+
+        def bounds(self, kinematics, motion):
+            lo, hi = np.full(6, -np.inf), np.full(6, np.inf)
+            x = motion.q[2]
+            lo[2], hi[2] = (self.lower - x) / motion.dt, (self.upper - x) / motion.dt
+            return lo, hi
+
+    q = np.array([0.3, -1.2, 1.8, -1.8, -1.5, 0.2])
+    target = ur5.fk(q)
+    solver = sjt.SJTSolver(ur5, dt=DT, acceleration_limits=10.0, jerk_limits=5000.0,
+                           limits=[JointBand(0.5, 1.53)])
+    qs = [q]
+    previous = np.zeros(6)
+    for _ in range(400):
+        q = solver.step(q, target)
+        qs.append(q)
+        dq = solver.displacement / DT
+        state = solver.__reduce__()[2]["motion"]
+        np.testing.assert_allclose(state[0], dq, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(state[1], (dq - previous) / DT, rtol=0, atol=1e-6)
+        previous = dq.copy()
+    qs = np.array(qs)
+    assert np.all(qs[1:, 2] <= 1.53 + 1e-12)  # inside the band from the first step on
+    # the first step (the band against the hard box) is the reference's
+    solver_module.COMPILED_SMOOTH_STAGE = False
+    try:
+        reference = sjt.SJTSolver(ur5, dt=DT, acceleration_limits=10.0, jerk_limits=5000.0,
+                                  limits=[JointBand(0.5, 1.53)])
+    finally:
+        solver_module.COMPILED_SMOOTH_STAGE = True
+    np.testing.assert_allclose(reference.step(qs[0], target), qs[1], rtol=0, atol=1e-12)
