@@ -18,9 +18,12 @@ limits — runs the same stages:
    the position limits' braking, SNS on the hard box, the smoothing, and the motion state
    (the previous velocity and acceleration, kept in the kernel's work vector);
 3. only when something needs it, Python: an error to raise, the stability check, the escape's
-   curvature test at the end of a stall, and the :class:`~sjt_pin.constraints.ConstraintStage`
-   for user limits (:mod:`~sjt_pin.limits`), or for every limit of a method without a kernel
-   (the stage in Python is the compiled one's reference);
+   curvature test at the end of a stall, and the user's limits (:mod:`~sjt_pin.limits`) —
+   their bounds and rows checked against the kernel's step, which is corrected in one more
+   compiled call only when it breaks them (within the acceleration/jerk stage's boxes when it
+   has one), the :class:`~sjt_pin.constraints.ConstraintStage` in Python when that cannot
+   weigh them — or every limit of a method without a kernel (the stage in Python is the
+   compiled one's reference, :data:`COMPILED_SMOOTH_STAGE`);
 4. ``pinocchio.integrate`` moves ``q`` on its manifold (continuous joints, free flyers);
 5. :attr:`Solver.last` builds a :class:`~sjt_pin.step_info.StepInfo` from the step's buffers
    on first access.
