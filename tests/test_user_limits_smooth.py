@@ -14,12 +14,16 @@ import coal
 import numpy as np
 import pinocchio as pin
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 import sjt_pin as sjt
 import sjt_pin.solver as solver_module
 from sjt_pin.bench.limits import PANDA_ACCELERATION, PANDA_JERK  # Franka's published limits
 from sjt_pin.limits import Limit
 from sjt_pin.limits.position import braking_speed
+
+from .test_random_urdfs import random_urdf_semantics
 
 DT = 1e-3
 
@@ -273,3 +277,74 @@ def test_a_bound_outside_the_hard_box_takes_the_python_stage_and_keeps_the_state
     finally:
         solver_module.COMPILED_SMOOTH_STAGE = True
     np.testing.assert_allclose(reference.step(qs[0], target), qs[1], rtol=0, atol=1e-12)
+
+
+class SpeedRows(Limit):
+    """Constant general rows ``A q_dot <= b`` (a linear bound on joint speeds)."""
+
+    name = "rows"
+    uses_motion = False
+
+    def __init__(self, A, b):
+        self.A, self.b = A, b
+
+    def rows(self, kinematics, motion):
+        return self.A, self.b
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(seed=st.integers(0, 2**32 - 1), joints=st.integers(2, 8),
+       method=st.sampled_from(["sjt", "dls", "jt", "jp"]), jerk=st.booleans())
+def test_random_rows_beside_acceleration_limits_on_random_robots(seed, joints, method, jerk):
+    """Random robots, random acceleration (and jerk) limits, random constant rows on the joint
+    speeds: the rows and the hard limits hold on every step; every run of steps that breaks an
+    acceleration or jerk limit starts with a step that reports it; until the rows first act
+    the stream is bitwise the one without them."""
+    xml, leaf = random_urdf_semantics(seed, joints)
+    try:
+        robot = sjt.Robot.from_urdf(xml, ee_frame=leaf, load_visuals=False)
+    except sjt.URDFError:
+        return
+    n = robot.nv
+    if n == 0:
+        return
+    rng = np.random.default_rng(seed)
+    accel = rng.uniform(2.0, 40.0, n)
+    jerks = rng.uniform(500.0, 20000.0, n) if jerk else None
+    A = rng.normal(size=(rng.integers(1, 4), n))
+    b = rng.uniform(0.05, 0.5, A.shape[0])
+    limit = SpeedRows(A, b)
+    q0 = pin.normalize(robot.model, robot.random_configuration(rng))
+    lower, upper = robot.lower_limits, robot.upper_limits
+    q0 = np.where(np.isfinite(lower) & np.isfinite(upper),
+                  np.clip(q0, lower + 0.1 * (upper - lower), upper - 0.1 * (upper - lower)),
+                  q0)
+    q0 = pin.normalize(robot.model, q0)
+    target = robot.fk(pin.normalize(robot.model, robot.random_configuration(rng)))
+    runs = []
+    for limits in ([limit], []):
+        solver = sjt.make_solver(method, robot, dt=DT, acceleration_limits=accel,
+                                 jerk_limits=jerks, limits=limits)
+        q, qs, infos, dqs = q0.copy(), [q0], [], []
+        for _ in range(150):
+            q = solver.step(q, target)
+            qs.append(q)
+            infos.append(solver.last)
+            dqs.append(solver.displacement / DT)
+        runs.append((np.array(qs), infos, np.array(dqs)))
+    (qs, infos, dqs), (plain, _, _) = runs
+    assert np.all(dqs @ A.T <= b + 1e-9 * (1 + np.abs(b)))
+    finite = np.isfinite(lower) & np.isfinite(upper)
+    within = (qs[:, finite] >= lower[finite] - 1e-12) & (qs[:, finite] <= upper[finite] + 1e-12)
+    assert np.all(within)
+    assert np.all(np.abs(dqs) <= robot.velocity_limits * (1 + 1e-9))
+    padded = np.vstack([np.zeros((1, n)), dqs])
+    a = np.diff(padded, axis=0) / DT
+    over = np.max(np.abs(a) / accel, axis=1) > 1.01
+    if jerk:
+        j = np.diff(np.vstack([np.zeros((1, n)), a]), axis=0) / DT
+        over |= np.max(np.abs(j) / jerks, axis=1) > 1.01
+    for k in np.flatnonzero(over & ~np.concatenate([[False], over[:-1]])):
+        assert infos[k].limit_conflicts, f"step {k} broke a smoothness limit unreported"
+    active = ["rows" in info.active_rows for info in infos]
+    assert_same_until_active(plain, qs, active)
