@@ -348,3 +348,38 @@ def test_random_rows_beside_acceleration_limits_on_random_robots(seed, joints, m
         assert infos[k].limit_conflicts, f"step {k} broke a smoothness limit unreported"
     active = ["rows" in info.active_rows for info in infos]
     assert_same_until_active(plain, qs, active)
+
+
+def test_a_smoothness_limit_of_ones_own_runs_the_python_stage(panda, down):
+    """A user's limit with ``hard = False`` (a smoothness bound: here the hand's joints held
+    below half their acceleration limit) is weighed only by the stage in Python: every step
+    runs it, from the motion state the step starts from — the reference's stream (to rounding:
+    the method's own step is solved again there)."""
+
+    class Gentle(Limit):
+        name = "gentle"
+        hard = False
+
+        def bounds(self, kinematics, motion):
+            change = 0.5 * PANDA_ACCELERATION * motion.dt
+            return motion.dq - change, motion.dq + change
+
+    compiled = sjt.SJTSolver(panda, dt=DT, acceleration_limits=PANDA_ACCELERATION,
+                             jerk_limits=PANDA_JERK, limits=[Gentle()])
+    solver_module.COMPILED_SMOOTH_STAGE = False
+    try:
+        reference = sjt.SJTSolver(panda, dt=DT, acceleration_limits=PANDA_ACCELERATION,
+                                  jerk_limits=PANDA_JERK, limits=[Gentle()])
+    finally:
+        solver_module.COMPILED_SMOOTH_STAGE = True
+    q = panda.q0.copy()
+    for k in range(300):
+        pose, velocity = down.sample(k * DT)
+        qa, qb = compiled.step(q, pose, velocity), reference.step(q, pose, velocity)
+        np.testing.assert_allclose(qa, qb, rtol=1e-9, atol=1e-9, err_msg=f"step {k}")
+        # (which of two equal bounds names a joint depends on rounding: the joints, not names)
+        joints = [{j for _, j in x.last.active_limits} for x in (compiled, reference)]
+        assert joints[0] == joints[1], f"step {k}"
+        q = qa
+    dq = compiled.displacement / DT
+    assert np.all(np.abs(compiled.__reduce__()[2]["motion"][0] - dq) <= 1e-12)
