@@ -316,9 +316,9 @@ def test_random_rows_beside_acceleration_limits_on_random_robots(seed, joints, m
     limit = SpeedRows(A, b)
     q0 = pin.normalize(robot.model, robot.random_configuration(rng))
     lower, upper = robot.lower_limits, robot.upper_limits
-    q0 = np.where(np.isfinite(lower) & np.isfinite(upper),
-                  np.clip(q0, lower + 0.1 * (upper - lower), upper - 0.1 * (upper - lower)),
-                  q0)
+    bounded = np.isfinite(lower) & np.isfinite(upper)  # a start inside the ranges
+    span = np.where(bounded, upper - lower, 0.0)
+    q0[bounded] = np.clip(q0, lower + 0.1 * span, upper - 0.1 * span)[bounded]
     q0 = pin.normalize(robot.model, q0)
     target = robot.fk(pin.normalize(robot.model, robot.random_configuration(rng)))
     runs = []
