@@ -62,13 +62,14 @@ from .validation import period, raise_non_finite_targets
 _F64 = np.dtype(np.float64)
 #: |squared norm - 1| of a configuration's unit blocks taken as exact (rounding of unit norm)
 _UNIT_EXACT = 4e-14
-#: status bits that need Python: an error to raise, a stall for the escape to look at (joints
-#: held at the position and speed bounds, a task scaled for them: the kernel's own work)
-_PYTHON = K.NON_FINITE | K.STALLED
 #: a status bit of Python's own (beside the kernels' 1-8): a user's limit that the compiled
 #: acceleration/jerk stage's correction cannot weigh (its bound against the hard box, a
 #: smoothness limit of the user's), so the whole stage runs in Python on this step
 _STAGE = 64
+#: status bits that need Python: an error to raise, a stall for the escape to look at, a
+#: user's limit for the stage in Python (joints held at the position and speed bounds, a task
+#: scaled for them: the kernel's own work)
+_PYTHON = K.NON_FINITE | K.STALLED | _STAGE
 
 #: whether solvers made from now on run the acceleration/jerk stage compiled in their step
 #: kernel (a built-in method); ``False`` makes them run its reference, the stage in Python

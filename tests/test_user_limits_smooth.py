@@ -351,8 +351,8 @@ def test_random_rows_beside_acceleration_limits_on_random_robots(seed, joints, m
 
 
 def test_a_smoothness_limit_of_ones_own_runs_the_python_stage(panda, down):
-    """A user's limit with ``hard = False`` (a smoothness bound: here the hand's joints held
-    below half their acceleration limit) is weighed only by the stage in Python: every step
+    """A user's limit with ``hard = False`` (a smoothness bound: here the arm's joints held
+    below 5 % of their acceleration limit) is weighed only by the stage in Python: every step
     runs it, from the motion state the step starts from — the reference's stream (to rounding:
     the method's own step is solved again there)."""
 
@@ -361,7 +361,7 @@ def test_a_smoothness_limit_of_ones_own_runs_the_python_stage(panda, down):
         hard = False
 
         def bounds(self, kinematics, motion):
-            change = 0.5 * PANDA_ACCELERATION * motion.dt
+            change = 0.05 * PANDA_ACCELERATION * motion.dt
             return motion.dq - change, motion.dq + change
 
     compiled = sjt.SJTSolver(panda, dt=DT, acceleration_limits=PANDA_ACCELERATION,
@@ -381,5 +381,8 @@ def test_a_smoothness_limit_of_ones_own_runs_the_python_stage(panda, down):
         joints = [{j for _, j in x.last.active_limits} for x in (compiled, reference)]
         assert joints[0] == joints[1], f"step {k}"
         q = qa
-    dq = compiled.displacement / DT
-    assert np.all(np.abs(compiled.__reduce__()[2]["motion"][0] - dq) <= 1e-12)
+        if k:  # the limit of one's own holds (from rest, the first step may start at once)
+            assert np.all(np.abs(compiled.displacement / DT - previous)
+                          <= 0.05 * PANDA_ACCELERATION * DT * (1 + 1e-9) + 1e-12)
+        previous = compiled.displacement / DT
+    assert np.all(np.abs(compiled.__reduce__()[2]["motion"][0] - previous) <= 1e-12)
