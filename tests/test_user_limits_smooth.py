@@ -235,11 +235,11 @@ def test_rows_that_need_more_than_the_smoothness_limits_win_and_say_so(panda, do
 
 
 def test_a_bound_outside_the_hard_box_takes_the_python_stage_and_keeps_the_state(ur5):
-    """The README's ``JointBand`` with the elbow starting outside it: its bound asks for the
-    way back in one period, beyond the speed and braking bounds — nothing of the hard box is
-    left, so that step runs the whole stage in Python, its result the reference's (the band,
-    a hard limit of the user's, wins there, as in the stage). The motion state is what was
-    commanded, step after step."""
+    """The README's ``JointBand`` narrowed while the elbow is outside the new band: its bound
+    asks for the way back in one period, beyond the speed and braking bounds — nothing of the
+    hard box is left, so that step runs the whole stage in Python, its result the reference's
+    (the band, a hard limit of the user's, wins there, as in the stage). The motion state is
+    what was commanded, step after step."""
 
     class JointBand(Limit):
         name = "band"
@@ -254,29 +254,34 @@ def test_a_bound_outside_the_hard_box_takes_the_python_stage_and_keeps_the_state
             return lo, hi
 
     q = np.array([0.3, -1.2, 1.8, -1.8, -1.5, 0.2])
-    target = ur5.fk(q)
-    solver = sjt.SJTSolver(ur5, dt=DT, acceleration_limits=10.0, jerk_limits=5000.0,
-                           limits=[JointBand(0.5, 1.53)])
-    qs = [q]
+    target = ur5.fk(np.array([0.3, -1.2, 1.5, -1.8, -1.5, 0.2]))
+    solvers = []
+    for compiled in (True, False):
+        solver_module.COMPILED_SMOOTH_STAGE = compiled
+        try:
+            solvers.append(sjt.SJTSolver(ur5, dt=DT, acceleration_limits=10.0,
+                                         jerk_limits=5000.0, limits=[JointBand(0.5, 2.0)]))
+        finally:
+            solver_module.COMPILED_SMOOTH_STAGE = True
+    solver, reference = solvers
     previous = np.zeros(6)
-    for _ in range(400):
+    for k in range(400):
+        if k == 5:  # the elbow, at about 1.8 rad, is now outside the band
+            for s in solvers:
+                s.stage.limits[-1].upper = 1.53
+        q_ref = reference.step(q, target)
         q = solver.step(q, target)
-        qs.append(q)
+        if k <= 5:  # (later the band's bound is in the reference's box while the compiled
+            # step, smoothed, meets it: two admissible answers)
+            np.testing.assert_allclose(q, q_ref, rtol=0, atol=1e-9, err_msg=f"step {k}")
+        if k >= 5:
+            assert q[2] <= 1.53 + 1e-12
         dq = solver.displacement / DT
         state = solver.__reduce__()[2]["motion"]
         np.testing.assert_allclose(state[0], dq, rtol=0, atol=1e-12)
         np.testing.assert_allclose(state[1], (dq - previous) / DT, rtol=0, atol=1e-6)
         previous = dq.copy()
-    qs = np.array(qs)
-    assert np.all(qs[1:, 2] <= 1.53 + 1e-12)  # inside the band from the first step on
-    # the first step (the band against the hard box) is the reference's
-    solver_module.COMPILED_SMOOTH_STAGE = False
-    try:
-        reference = sjt.SJTSolver(ur5, dt=DT, acceleration_limits=10.0, jerk_limits=5000.0,
-                                  limits=[JointBand(0.5, 1.53)])
-    finally:
-        solver_module.COMPILED_SMOOTH_STAGE = True
-    np.testing.assert_allclose(reference.step(qs[0], target), qs[1], rtol=0, atol=1e-12)
+        reference.__setstate__(dict(reference.__reduce__()[2], motion=state))
 
 
 class SpeedRows(Limit):
@@ -372,7 +377,7 @@ def test_a_smoothness_limit_of_ones_own_runs_the_python_stage(panda, down):
                                   jerk_limits=PANDA_JERK, limits=[Gentle()])
     finally:
         solver_module.COMPILED_SMOOTH_STAGE = True
-    q = panda.q0.copy()
+    q, previous = panda.q0.copy(), np.zeros(panda.nv)
     for k in range(300):
         pose, velocity = down.sample(k * DT)
         qa, qb = compiled.step(q, pose, velocity), reference.step(q, pose, velocity)
@@ -381,8 +386,7 @@ def test_a_smoothness_limit_of_ones_own_runs_the_python_stage(panda, down):
         joints = [{j for _, j in x.last.active_limits} for x in (compiled, reference)]
         assert joints[0] == joints[1], f"step {k}"
         q = qa
-        if k:  # the limit of one's own holds (from rest, the first step may start at once)
-            assert np.all(np.abs(compiled.displacement / DT - previous)
-                          <= 0.05 * PANDA_ACCELERATION * DT * (1 + 1e-9) + 1e-12)
+        assert np.all(np.abs(compiled.displacement / DT - previous)  # the limit holds
+                      <= 0.05 * PANDA_ACCELERATION * DT * (1 + 1e-9) + 1e-12)
         previous = compiled.displacement / DT
     assert np.all(np.abs(compiled.__reduce__()[2]["motion"][0] - previous) <= 1e-12)
