@@ -18,6 +18,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import sjt_pin as sjt
+import sjt_pin.kernels as K
 import sjt_pin.solver as solver_module
 from sjt_pin.bench.limits import PANDA_ACCELERATION, PANDA_JERK  # Franka's published limits
 from sjt_pin.limits import Limit
@@ -390,3 +391,20 @@ def test_a_smoothness_limit_of_ones_own_runs_the_python_stage(panda, down):
                       <= 0.05 * PANDA_ACCELERATION * DT * (1 + 1e-9) + 1e-12)
         previous = compiled.displacement / DT
     assert np.all(np.abs(compiled.__reduce__()[2]["motion"][0] - previous) <= 1e-12)
+
+
+def test_the_correction_refuses_arguments_that_do_not_fit():
+    """``kernels.smooth_rows_step`` names what does not fit instead of reading past it."""
+    m, n = 6, 7
+    J, q, A, b = np.ones((m, n)), np.zeros(n), np.ones((1, n)), np.zeros(1)
+    step, previous = np.zeros(n), np.zeros(2 * n)
+    plain = K.Layout(m, n, 0).allocate()
+    with pytest.raises(ValueError, match="no acceleration/jerk stage"):
+        K.smooth_rows_step(J, q, A, b, None, None, previous, plain, step)
+    work = K.Layout(m, n, 0, smooth=True).allocate()
+    with pytest.raises(ValueError, match="previous"):
+        K.smooth_rows_step(J, q, A, b, None, None, np.zeros(n), work, step)
+    with pytest.raises(TypeError, match="upper"):
+        K.smooth_rows_step(J, q, A, b, np.zeros(n), None, previous, work, step)
+    work[K.P_DT] = 1e-3
+    assert K.smooth_rows_step(J, q, A, b, None, None, previous, work, step) == 0  # kept
