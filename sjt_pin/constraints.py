@@ -24,9 +24,13 @@ speeds, collisions) win over *smoothness* limits (acceleration, jerk) when both 
 a start outside the range, limits changed between steps: the velocity is then the point of the
 hard box nearest the smoothness box, and the step reports it.
 
-A solver with only the built-in limits (position, speed, acceleration, jerk) and a built-in
-method runs this stage inside its step kernel (``smooth_stage_c`` in ``kernels/_kernels.c``);
-this module is its reference, and ``tests/test_smooth_kernel.py`` holds the two equal.
+A solver with a built-in method runs this stage on the built-in limits (position, speed,
+acceleration, jerk) inside its step kernel (``smooth_stage_c`` in ``kernels/_kernels.c``); a
+user's limits then correct that step only where it breaks them (``kernels.rows_step``,
+``kernels.smooth_rows_step``), and a user's bound that the hard box does not meet leaves the
+step to this module. This module is the compiled stage's reference
+(``sjt_pin.solver.COMPILED_SMOOTH_STAGE = False`` runs it on every step), and
+``tests/test_smooth_kernel.py`` holds the two equal.
 """
 
 from __future__ import annotations

@@ -18,9 +18,12 @@ limits — runs the same stages:
    the position limits' braking, SNS on the hard box, the smoothing, and the motion state
    (the previous velocity and acceleration, kept in the kernel's work vector);
 3. only when something needs it, Python: an error to raise, the stability check, the escape's
-   curvature test at the end of a stall, and the :class:`~sjt_pin.constraints.ConstraintStage`
-   for user limits (:mod:`~sjt_pin.limits`), or for every limit of a method without a kernel
-   (the stage in Python is the compiled one's reference);
+   curvature test at the end of a stall, and the user's limits (:mod:`~sjt_pin.limits`) —
+   their bounds and rows checked against the kernel's step, which is corrected in one more
+   compiled call only when it breaks them (within the acceleration/jerk stage's boxes when it
+   has one), the :class:`~sjt_pin.constraints.ConstraintStage` in Python when that cannot
+   weigh them — or every limit of a method without a kernel (the stage in Python is the
+   compiled one's reference, :data:`COMPILED_SMOOTH_STAGE`);
 4. ``pinocchio.integrate`` moves ``q`` on its manifold (continuous joints, free flyers);
 5. :attr:`Solver.last` builds a :class:`~sjt_pin.step_info.StepInfo` from the step's buffers
    on first access.
@@ -59,9 +62,20 @@ from .validation import period, raise_non_finite_targets
 _F64 = np.dtype(np.float64)
 #: |squared norm - 1| of a configuration's unit blocks taken as exact (rounding of unit norm)
 _UNIT_EXACT = 4e-14
-#: status bits that need Python: an error to raise, a stall for the escape to look at (joints
-#: held at the position and speed bounds, a task scaled for them: the kernel's own work)
-_PYTHON = K.NON_FINITE | K.STALLED
+#: a status bit of Python's own (beside the kernels' 1-8): a user's limit that the compiled
+#: acceleration/jerk stage's correction cannot weigh (its bound against the hard box, a
+#: smoothness limit of the user's), so the whole stage runs in Python on this step
+_STAGE = 64
+#: status bits that need Python: an error to raise, a stall for the escape to look at, a
+#: user's limit for the stage in Python (joints held at the position and speed bounds, a task
+#: scaled for them: the kernel's own work)
+_PYTHON = K.NON_FINITE | K.STALLED | _STAGE
+
+#: whether solvers made from now on run the acceleration/jerk stage compiled in their step
+#: kernel (a built-in method); ``False`` makes them run its reference, the stage in Python
+#: (:mod:`sjt_pin.constraints`), on every step — for comparisons and tests
+#: (``tests/test_smooth_kernel.py``); read when a solver is made
+COMPILED_SMOOTH_STAGE = True
 
 
 class Solver:
@@ -93,7 +107,9 @@ class Solver:
         self._returned: np.ndarray | None = None
         self._first = True  # the first step checks the targets' distance (units)
         self._dt = period(opts.dt)
-        self._kernel = method.kernel if method.kernel is not None else method.python_step
+        #: the method's own step (the stage's re-solves call it)
+        self._method_step = method.kernel if method.kernel is not None else method.python_step
+        self._kernel = self._method_step
         speeds = self._build_stage(opts)
         self.escape = (SaddleEscape(robot.model, stack.chain, robot.velocity_limits,
                                     self.position_limit) if opts.escape and method.stalls
@@ -148,11 +164,13 @@ class Solver:
         self.stage = ConstraintStage(
             [x for x in (self.position_limit, self.velocity_limit, accel, jerk, *extra)
              if x is not None], moving, robot.velocity_names, stack.target_dim)
-        #: the compiled kernel runs the acceleration/jerk stage itself (built-in limits only, a
-        #: built-in method): one call per step, its motion state kept in the work vector
-        self._compiled_smooth = accel is not None and not extra and method.kernel is not None
+        #: the compiled kernel runs the acceleration/jerk stage itself (a built-in method): one
+        #: call per step, its motion state kept in the work vector; a user's limits then cost
+        #: their own rows (:meth:`_smooth_user_step`)
+        self._compiled_smooth = (accel is not None and method.kernel is not None
+                                 and COMPILED_SMOOTH_STAGE)
         #: limits the kernel cannot test for the stage: every step goes through it
-        self._staged = bool(extra) or method.kernel is None or (
+        self._staged = (bool(extra) and not self._compiled_smooth) or method.kernel is None or (
             accel is not None and not self._compiled_smooth)
         #: the compiled kernel holds the position and speed bounds itself (a built-in method,
         #: and no acceleration limits or the compiled stage for them): the stage then only
@@ -163,8 +181,9 @@ class Solver:
                             if extra else None)
         #: the commanded velocity and acceleration of the last step (the stage's state)
         self._motion = Motion(np.zeros(robot.nq), np.zeros(n), np.zeros(n), 1.0)
-        self._tracks_motion = ((accel is not None and not self._compiled_smooth)
-                               or any(limit.uses_motion for limit in extra))
+        # (the compiled stage keeps its own, corrections included)
+        self._tracks_motion = not self._compiled_smooth and (
+            accel is not None or any(limit.uses_motion for limit in extra))
         return speeds
 
     def _build_work(self, speeds: np.ndarray) -> None:
@@ -192,6 +211,8 @@ class Solver:
             layout.inverse_speeds(work)[:] = np.where(np.isfinite(speeds), 1.0 / speeds, 0.0)
         if self._compiled_smooth:
             self._fill_smooth(layout, work)
+            if self._user_stage is not None:
+                self._kernel = self._smooth_user_step
         self._raw_work = work.copy()  # the method alone, for the stage's solves
         self._outcome: Outcome | None = None
         self._outcome_count = -1
@@ -221,6 +242,13 @@ class Solver:
             layout.smooth_part(work, part)[:] = values
         self._motion.dq = layout.smooth_part(work, K.SM_DQ)
         self._motion.ddq = layout.smooth_part(work, K.SM_DDQ)
+        #: the state (velocity, then acceleration: adjacent parts) and its copy from before
+        #: the step, which the user's limits and a correction of the step start from
+        start = layout.smooth + K.SM_DQ * n
+        self._state = work[start:start + 2 * n]
+        self._before = np.zeros(2 * n)
+        #: the user's limits' bounds and rows of this step (before its kernel call)
+        self._user_parts: tuple | None = None
 
     # -- settings ----------------------------------------------------------------------------
     @property
@@ -366,7 +394,8 @@ class Solver:
             self._stability.check(self.stack.sqrt_weight[:, None] * J * self.stack.chain,
                                   float(self._info[K.I_TRACE]), self._gain.largest, self._dt)
         step, dt = self._step, self._dt
-        if self._staged:  # with this step's escape velocity, as the kernel's step has it
+        if self._staged or status & _STAGE:  # with this step's escape velocity, as the
+            # kernel's step has it
             step = self._constrain(q, J, e, ff, status, step)
         escape = self.escape
         self._escaped = (self._count, escape is not None and escape.active)
@@ -407,12 +436,45 @@ class Solver:
                           "to bring them back)", UserWarning, stacklevel=5)
 
     # -- the constraint stage ------------------------------------------------------------------
+    def _smooth_user_step(self, J, e, ff, q, work, step) -> int:
+        """The step kernel with the compiled acceleration/jerk stage, then the user's limits at
+        the cost of their own rows: their bounds and rows, evaluated before the call (on the
+        motion state the step starts from), are checked against its result and, only when it
+        breaks one, it is projected onto them within the stage's hard box and, as far as the
+        rows allow, its smoothness box, the motion state following (``kernels.smooth_rows_step``,
+        one compiled call). A user's bound the hard box does not meet, or a smoothness limit of
+        the user's, leaves the step to the whole stage in Python (the status bit ``_STAGE``)."""
+        motion, before, user = self._motion, self._before, self._user_stage
+        assert user is not None  # this kernel is for a user's limits
+        motion.q = q
+        np.copyto(before, self._state)
+        parts = self._user_parts = user.hard_parts(self.stack.kinematics, motion)
+        status = self._method_step(J, e, ff, q, work, step)
+        if status & K.NON_FINITE:
+            return status
+        if parts is None:
+            return status | _STAGE
+        lower, upper, rows = parts
+        if rows is None and lower is None:
+            return status
+        A, b = (rows[0], rows[1]) if rows is not None else self._no_rows
+        if lower is None:  # (lower and upper come together)
+            upper = None
+        done = K.smooth_rows_step(J, q, A, b, lower, upper, before, work, step)
+        if done < 0:
+            return status | _STAGE
+        if done:
+            self._projected = (self._count + 1, rows)  # (the step counts after its kernel)
+        return status
+
     def _constrain(self, q, J, e, ff, status, step) -> np.ndarray:
         """Run the constraint stage on the method's step (see :mod:`sjt_pin.constraints`)."""
         dt, layout, raw = self._dt, self._layout, self._raw_work
         motion, stack = self._motion, self.stack
         motion.q = q
-        if self._user_stage is not None and self._kernel_bounds:
+        if self._compiled_smooth:  # the stage starts from the state before this step
+            self._state[:] = self._before
+        elif self._user_stage is not None and self._kernel_bounds:
             # the kernel kept the position and speed bounds; its step is checked against the
             # user's limits and, when it breaks a row, projected onto the rows within every
             # bound, in one compiled call (the kernel's saturation stands: the same as the
@@ -432,6 +494,7 @@ class Solver:
                     return step
         np.copyto(raw, self._work)
         raw[K.P_BOX_COUNT] = 0.0
+        raw[K.P_SMOOTH] = 0.0  # the method alone
         layout.inverse_speeds(raw)[:] = 0.0
         chain = stack.chain
         ff_in = ff if self._ff_on else np.zeros(stack.dim)
@@ -449,7 +512,7 @@ class Solver:
                 gains[:] = layout.gains(self._work) * scale
                 if self._gain.mode != K.GAIN_FIXED:
                     gains *= float(self._info[K.I_GAIN])
-            self._kernel(J, e, v, q, raw, out)
+            self._method_step(J, e, v, q, raw, out)
             raw[K.P_GAIN_MODE] = self._work[K.P_GAIN_MODE]
             layout.gains(raw)[:] = layout.gains(self._work)
             return out / dt
@@ -464,7 +527,12 @@ class Solver:
         outcome = self.stage.enforce(dq, solve, stack.kinematics, motion,
                                      lambda: stack.sqrt_weight[:, None] * J * chain)
         self._outcome, self._outcome_count = outcome, self._count
-        return self._exact_position(q, np.multiply(outcome.dq, dt, out=self._step))
+        step = self._exact_position(q, np.multiply(outcome.dq, dt, out=self._step))
+        if self._compiled_smooth:  # the state the stage's step commands
+            np.subtract(step / dt, motion.dq, out=motion.ddq)
+            motion.ddq /= dt
+            motion.dq[:] = step / dt
+        return step
 
     def _exact_position(self, q: np.ndarray, step: np.ndarray) -> np.ndarray:
         """``step`` (in place) with every joint inside its range moved exactly onto a limit it
@@ -644,6 +712,18 @@ class Solver:
         active = active_limits(dq, Box(hard, soft), K.LIMIT_NAMES, self._v_names,
                                part(K.SM_DESIRED))
         torn = np.flatnonzero(part(K.SM_TORN))
+        parts = self._user_parts
+        if (self._projected[0] == self._count and parts is not None and parts[0] is not None
+                and self._user_stage is not None):
+            # the user's bounds the correction put joints on (evaluated again, as they were)
+            n = dq.size
+            before = Motion(self._motion.q, self._before[:n], self._before[n:], self._dt)
+            user = self._user_stage.box(self.stack.kinematics, before)
+            if user is not None:
+                names = [limit.name for limit in self._user_stage.limits]
+                active += tuple(pair for pair in active_limits(dq, Box(user.hard), names,
+                                                                self._v_names)
+                                if pair not in active)
         return Outcome(dq, float(self._info[K.I_SCALE]), self._clamped != 0.0, active,
                        conflict=tuple(self._v_names[j] for j in torn))
 

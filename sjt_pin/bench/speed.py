@@ -19,6 +19,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 import pinocchio as pin
 
+from ..limits import Limit
 from ..robot import Robot
 from ..solvers import make_solver
 from ..tasks import PoseTask, PositionTask, PostureTask
@@ -30,6 +31,11 @@ ROBOTS = ("ur5", "panda", "kinova")
 ACCELERATION_PATHS = (("SJT pose, acceleration limits", {"acceleration_limits": 10.0}),
                       ("SJT pose, acceleration and jerk limits",
                        {"acceleration_limits": 10.0, "jerk_limits": 5000.0}))
+#: a user's general-row limit beside acceleration and jerk limits: a floor under the end
+#: effector (:class:`Floor`, the README's), 1 m below its start (never acts) or 1 mm above it
+#: (acts on every step: the task pulls the frame down onto it, the row holds it up)
+USER_LIMIT_PATHS = (("SJT pose, acceleration + jerk limits + a user limit (inactive)", -1.0),
+                    ("SJT pose, acceleration + jerk limits + a user limit (active)", 1e-3))
 #: serial chains (random axes, seeded) timed with a pose task plus a posture task
 CHAIN_JOINTS = (30, 100)
 #: Start configurations inside the limits and away from singularities.
@@ -160,6 +166,22 @@ def _circle(robot: Robot, q: np.ndarray, frame: str, duration: float,
     pose = robot.fk(q, frame)
     return Circle(pose.translation - [radius, 0.0, 0.0], radius, duration=duration,
                   rotation=pose.rotation, turns=duration)
+
+
+class Floor(Limit):
+    """A frame's origin stays above ``z_min`` (m): ``z_dot >= -gain (z - z_min) / dt`` (one
+    general row; the README's example)."""
+
+    name = "floor"
+    uses_motion = False
+
+    def __init__(self, robot: Robot, frame: str, z_min: float, gain: float = 0.5):
+        self.frame_id, self.z_min, self.gain = robot.frame_id(frame), z_min, gain
+
+    def rows(self, kinematics, motion):
+        z = kinematics.placement(self.frame_id).translation[2]
+        J_z = kinematics.world_aligned_jacobian(self.frame_id)[2]
+        return -J_z[None, :], np.array([self.gain * (z - self.z_min) / motion.dt])
 
 
 def _targets(robot: Robot, q0: np.ndarray, frames: tuple[str, ...], count: int, dt: float):
@@ -306,6 +328,11 @@ def speed(robots=ROBOTS, steps: int = 5000, warmup: int = 500, peers: bool = Fal
                           warmup, frames=TWO_FRAMES[name]))
         add(time_track(robot, q0, steps))
         for label, options in ACCELERATION_PATHS:
+            add(time_path(robot, q0, Path(label, options=options), steps, warmup))
+        z0 = robot.fk(q0).translation[2]
+        for label, offset in USER_LIMIT_PATHS:
+            options = dict(ACCELERATION_PATHS[-1][1],
+                           limits=[Floor(robot, robot.ee_frame, z0 + offset)])
             add(time_path(robot, q0, Path(label, options=options), steps, warmup))
         if peers:
             add(time_pink(robot, q0, steps, warmup))

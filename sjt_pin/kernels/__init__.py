@@ -24,7 +24,10 @@ against the numpy reference formulas of :mod:`sjt_pin.mappings` and against Pino
   ``nonnegative_qp(Q, r, y)`` (Lawson and Hanson's NNLS, as
   :func:`sjt_pin.constraints.nonnegative_qp`); ``rows_step(J, q, A, b, lower, upper, work,
   step)``: a kernel step checked against a user's rows and bounds, projected in place when
-  it breaks a row (the solver's path for collision dampers);
+  it breaks a row (the solver's path for collision dampers); ``smooth_rows_step(J, q, A, b,
+  lower, upper, previous, work, step)``: the same for a step of the acceleration/jerk stage,
+  projected within its hard and smoothness boxes, its motion state kept (the solver's path for
+  a user's limits beside acceleration limits);
 - ``cholesky_solve``, ``loop_bound``, ``symmetric_eigen``: the small dense linear algebra,
   exposed for the tests.
 """
@@ -42,6 +45,7 @@ from ._kernels import (  # noqa: F401
     rows_step,
     search_iteration,
     search_pose,
+    smooth_rows_step,
     symmetric_eigen,
     transpose_step,
     unit_defect,

@@ -2274,6 +2274,190 @@ done:
     return result;
 }
 
+/* the acceleration and jerk limits' box of joint j around the state (v, a) a step starts from
+ * (smooth_stage_c's step 3, without the approach to the wanted velocity) */
+static void smoothness_box(const double *S, Py_ssize_t n, Py_ssize_t j, double v, double a,
+                           double dt, int has_jerk, double *lo_out, double *hi_out)
+{
+    double A = S[SM_ACC * n + j], Jk = S[SM_JERK * n + j], vj = S[SM_JERK_SPEED * n + j];
+    double lo = v - A * dt, hi = v + A * dt;
+    if (has_jerk && isfinite(Jk)) {
+        double change = Jk * dt;
+        double jl = v + dt * (a - change), jh = v + dt * (a + change);
+        double left = dmax(vj - v, 0.0);
+        double bound = v + dt * (Jk * (-dt + sqrt(dt * dt + 2.0 * left / Jk)));
+        if (isfinite(bound)) jh = dmin(jh, bound);
+        left = dmax(vj + v, 0.0);
+        bound = v - dt * (Jk * (-dt + sqrt(dt * dt + 2.0 * left / Jk)));
+        if (isfinite(bound)) jl = dmax(jl, bound);
+        lo = dmax(lo, jl);
+        hi = dmin(hi, jh);
+    }
+    if (lo > hi) lo = hi = 0.5 * (lo + hi);  /* limits that contradict each other */
+    *lo_out = lo;
+    *hi_out = hi;
+}
+
+/* how far the smoothness box widens, around its centre, in the rounds that look for the
+ * smallest breach of the acceleration and jerk limits that lets the rows hold */
+#define SMOOTH_WIDEN_ROUNDS 6
+
+/* A step of the compiled acceleration/jerk stage (step and the stage's part of work, written by
+ * smooth_stage_c) against a user's general rows A q_dot <= b and bounds [lower, upper] (rad/s;
+ * -inf/inf where none; both NULL: none at all); `previous` (2 nv) is the motion state the step started from (the
+ * velocity, then the acceleration, commanded the step before). 0 when the step meets them all
+ * (step and work untouched); -1 when a user's bound leaves nothing of the stage's hard box on
+ * some joint (the caller's whole constraint stage must weigh them); else step is projected
+ * (project_c in the metric of the weighted task rows, the moving joints of the mask) onto the
+ * rows within the user's bounds, the stage's hard box (positions with their braking, speeds)
+ * and the acceleration/jerk box around the previous state: 1 when that holds; 2 when no velocity
+ * in it meets the rows, and the hard limits and the rows win (the stage's rule): the
+ * smoothness box is widened around its centre, 2, 4, ... 32 times, until they hold (else it is
+ * dropped), and the joints that leave it are marked in SM_TORN. After a projection every joint
+ * inside its range lands exactly on a limit it reaches, SM_OUT holds the new velocity and the
+ * motion state (SM_DQ, SM_DDQ) the one it commands. -2 when out of memory. */
+static int smooth_rows_c(Mat J, const double *q, Mat A, const double *b, const double *lower,
+                         const double *upper, const double *previous, double *work,
+                         double *step)
+{
+    Py_ssize_t m = J.m, n = J.n, k = A.m;
+    double dt = work[P_DT];
+    const double *mask = work + (Py_ssize_t)work[P_MASK];
+    const double *sw = work + (Py_ssize_t)work[P_ROWS];
+    double *S = work + (Py_ssize_t)work[P_SMOOTH];
+    double *pdq = S + SM_DQ * n, *pddq = S + SM_DDQ * n;
+    const double *hlo = S + SM_HARD_LO * n, *hhi = S + SM_HARD_HI * n;
+    double *out = S + SM_OUT * n, *torn = S + SM_TORN * n;
+    int has_jerk = work[P_JERK] != 0.0;
+    int broken = 0;
+    for (Py_ssize_t j = 0; j < n && !broken && lower; j++) {
+        double v = step[j] / dt;
+        if (v < lower[j] - BOUND_TOL || v > upper[j] + BOUND_TOL) broken = 1;
+    }
+    for (Py_ssize_t i = 0; i < k && !broken; i++) {
+        double acc = -b[i];
+        for (Py_ssize_t j = 0; j < n; j++) acc += AT(A, i, j) * step[j] / dt;
+        if (acc > BOUND_TOL * (1.0 + fabs(b[i]))) broken = 1;
+    }
+    if (!broken) return 0;
+    double *mem = (double *)malloc((size_t)(m * n + 10 * n + 1) * sizeof(double));
+    if (!mem) return -2;
+    double *Jw = mem, *dq = Jw + m * n, *lo = dq + n, *hi = lo + n, *moving = hi + n;
+    double *res = moving + n, *hard_lo = res + n, *hard_hi = hard_lo + n;
+    double *soft_lo = hard_hi + n, *soft_hi = soft_lo + n;
+    for (Py_ssize_t i = 0; i < m; i++)
+        for (Py_ssize_t j = 0; j < n; j++) Jw[i * n + j] = sw[i] * AT(J, i, j) * mask[j];
+    for (Py_ssize_t j = 0; j < n; j++) {
+        dq[j] = step[j] / dt;
+        moving[j] = mask[j] != 0.0 ? 1.0 : 0.0;
+        hard_lo[j] = lower ? dmax(hlo[j], lower[j]) : hlo[j];
+        hard_hi[j] = upper ? dmin(hhi[j], upper[j]) : hhi[j];
+        if (hard_lo[j] > hard_hi[j]) {  /* the user's bound against the hard box */
+            free(mem);
+            return -1;
+        }
+        smoothness_box(S, n, j, previous[j], previous[n + j], dt, has_jerk, soft_lo + j,
+                       soft_hi + j);
+    }
+    Mat Jm = {Jw, m, n, n, 1};
+    int status = 1;
+    for (int round = 0; round <= SMOOTH_WIDEN_ROUNDS; round++) {
+        /* round r: the smoothness box widened 2^r times (the last round: none), within the
+         * hard box */
+        double widen = (double)(1 << (round < SMOOTH_WIDEN_ROUNDS ? round : 0));
+        for (Py_ssize_t j = 0; j < n; j++) {
+            double l = hard_lo[j], u = hard_hi[j];
+            if (round < SMOOTH_WIDEN_ROUNDS) {
+                double c = 0.5 * (soft_lo[j] + soft_hi[j]), r = 0.5 * (soft_hi[j] - soft_lo[j]);
+                double sl = dmax(l, c - widen * r), su = dmin(u, c + widen * r);
+                if (sl <= su) {  /* else the hard box lies beyond: it wins on this joint */
+                    l = sl;
+                    u = su;
+                } else {
+                    status = 2;
+                }
+            }
+            lo[j] = l;
+            hi[j] = u;
+        }
+        if (project_c(dq, Jm, A, b, lo, hi, moving, res) < 0) {
+            free(mem);
+            return -2;
+        }
+        int kept = 1;  /* the rows met within the box (to the dual's ridge) */
+        for (Py_ssize_t i = 0; i < k && kept; i++) {
+            double acc = -b[i];
+            for (Py_ssize_t j = 0; j < n; j++) acc += AT(A, i, j) * res[j];
+            if (acc > 1e-9 * (1.0 + fabs(b[i]))) kept = 0;
+        }
+        if (kept || round == SMOOTH_WIDEN_ROUNDS) break;
+        status = 2;
+    }
+    for (Py_ssize_t j = 0; j < n; j++) step[j] = res[j] * dt;
+    exact_position(q, work, step);
+    for (Py_ssize_t j = 0; j < n; j++) {
+        double v = step[j] / dt;
+        if (v < soft_lo[j] - BOUND_TOL || v > soft_hi[j] + BOUND_TOL) torn[j] = 1.0;
+        out[j] = v;
+        pddq[j] = (v - previous[j]) / dt;
+        pdq[j] = v;
+    }
+    free(mem);
+    return status;
+}
+
+/* smooth_rows_step(J, q, A, b, lower, upper, previous, work, step) -> int (smooth_rows_c;
+ * lower and upper both None: no bounds, two buffers fewer to acquire) */
+static PyObject *py_smooth_rows_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (!nargs_ok(nargs, 9, "smooth_rows_step")) return NULL;
+    Arg J = {0}, q = {0}, A = {0}, b = {0}, lo = {0}, hi = {0}, pv = {0}, work = {0};
+    Arg step = {0};
+    PyObject *result = NULL;
+    int bounded = args[4] != Py_None || args[5] != Py_None;
+    if (acquire(args[0], &J, 0, 2, "J") || acquire(args[1], &q, 0, 1, "q")
+        || acquire(args[2], &A, 0, 2, "A") || acquire(args[3], &b, 0, 1, "b")
+        || (bounded && (acquire(args[4], &lo, 0, 1, "lower")
+                        || acquire(args[5], &hi, 0, 1, "upper")))
+        || acquire(args[6], &pv, 0, 1, "previous") || acquire(args[7], &work, 1, 1, "work")
+        || acquire(args[8], &step, 1, 1, "step"))
+        goto done;
+    Mat Jm = mat(&J), Am = mat(&A);
+    Py_ssize_t n = Jm.n;
+    if (Am.n != n || length(&b) != Am.m || (bounded && (length(&lo) != n || length(&hi) != n))
+        || length(&pv) != 2 * n || length(&step) != n) {
+        PyErr_Format(PyExc_ValueError, "J (%zd, %zd), A (%zd, %zd), b (%zd,), lower, upper, "
+                     "step (n,) and previous (2 n,) do not fit", Jm.m, n, Am.m, Am.n,
+                     length(&b));
+        goto done;
+    }
+    if (check_work(&work, Jm.m, n)) goto done;
+    double *wv = out_vec(&work, "work");
+    if (!wv) goto done;
+    if (!(wv[P_SMOOTH] > 0.0)) {
+        PyErr_SetString(PyExc_ValueError, "work has no acceleration/jerk stage "
+                        "(Layout(..., smooth=True))");
+        goto done;
+    }
+    double *qv = vec(&q, "q"), *bv = vec(&b, "b");
+    double *lv = bounded ? vec(&lo, "lower") : NULL, *hv = bounded ? vec(&hi, "upper") : NULL;
+    double *pvv = vec(&pv, "previous"), *sv = out_vec(&step, "step");
+    if (!qv || !bv || (bounded && (!lv || !hv)) || !pvv || !sv) goto done;
+    int status;
+    Py_BEGIN_ALLOW_THREADS
+    status = smooth_rows_c(Jm, qv, Am, bv, lv, hv, pvv, wv, sv);
+    Py_END_ALLOW_THREADS
+    if (status == -2) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    result = PyLong_FromLong(status);
+done:
+    release(&J); release(&q); release(&A); release(&b); release(&lo); release(&hi);
+    release(&pv); release(&work); release(&step);
+    return result;
+}
+
 /* -- collision dampers (sjt_pin/limits/collision.py) ------------------------------------------ */
 
 /* damper_rows(J, support, pairs, gain_rate, A, b): one velocity-damper row per pair. J (6, N):
@@ -2389,6 +2573,10 @@ static PyMethodDef methods[] = {
     {"damper_rows", (PyCFunction)(void (*)(void))py_damper_rows, METH_FASTCALL,
      "damper_rows(J, support, pairs, gain_rate, A, b): the collision limit's velocity-damper "
      "rows of the pairs (d, margin, joint a, joint b, normal, p_a, p_b) into A and b."},
+    {"smooth_rows_step", (PyCFunction)(void (*)(void))py_smooth_rows_step, METH_FASTCALL,
+     "smooth_rows_step(J, q, A, b, lower, upper, previous, work, step) -> int: a step of the "
+     "compiled acceleration/jerk stage against general rows and bounds: 0 kept, 1 projected "
+     "within every box, 2 projected with smoothness yielding, -1 a bound outside the hard box."},
     {NULL, NULL, 0, NULL},
 };
 

@@ -1,0 +1,410 @@
+"""A user's limit beside acceleration and jerk limits: the compiled acceleration/jerk stage runs,
+and the user's limit costs only its own rows — the step is corrected only where it breaks
+them, within the stage's hard and smoothness boxes (``kernels.smooth_rows_step``).
+
+On Panda at 1 kHz with Franka's published acceleration and jerk limits, for a general-row limit
+(a floor under the hand, the README's ``Floor`` with a braking distance), a box limit (a joint
+band, the README's ``JointBand`` braking within the joint's limits) and a ``CollisionLimit``:
+every returned configuration is within the URDF range, its finite-difference speeds,
+accelerations and jerks within their limits (+1 %), the user's limit holds; the steps before
+the limit first acts are bitwise those of the run without it, and a limit that never acts
+changes nothing, bitwise."""
+
+import coal
+import numpy as np
+import pinocchio as pin
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import sjt_pin as sjt
+import sjt_pin.kernels as K
+import sjt_pin.solver as solver_module
+from sjt_pin.bench.limits import PANDA_ACCELERATION, PANDA_JERK  # Franka's published limits
+from sjt_pin.limits import Limit
+from sjt_pin.limits.position import braking_speed
+
+from .test_random_urdfs import random_urdf_semantics
+
+DT = 1e-3
+
+
+class BrakingFloor(Limit):
+    """The hand's origin stays above ``z_min`` (m), slowing down at most ``deceleration``
+    (m/s^2) as it approaches: ``z_dot >= -s(z - z_min)`` with the speed ``s`` from which a stop
+    at that deceleration fits the distance (one general row)."""
+
+    name = "floor"
+    uses_motion = False
+
+    def __init__(self, robot, frame, z_min, deceleration):
+        self.frame_id, self.z_min, self.a = robot.frame_id(frame), z_min, deceleration
+
+    def rows(self, kinematics, motion):
+        d = max(kinematics.placement(self.frame_id).translation[2] - self.z_min, 0.0)
+        J_z = kinematics.world_aligned_jacobian(self.frame_id)[2]
+        a, dt = self.a, motion.dt
+        return -J_z[None, :], np.array([a * (-dt + np.sqrt(dt * dt + 2.0 * d / a))])
+
+
+class BrakingBand(Limit):
+    """One joint within [lower, upper] (rad), braking within ``acceleration`` and ``jerk``
+    (a box limit: per-joint bounds from the braking speed of the position limits)."""
+
+    name = "band"
+
+    def __init__(self, robot, joint, lower, upper, acceleration, jerk):
+        j = robot.model.joints[robot.model.getJointId(joint)]
+        self.iq, self.iv, self.nv = j.idx_q, j.idx_v, robot.nv
+        self.lower, self.upper = lower, upper
+        self.limits = np.array([acceleration]), np.array([jerk])
+
+    def bounds(self, kinematics, motion):
+        lo, hi = np.full(self.nv, -np.inf), np.full(self.nv, np.inf)
+        x, v, dt = motion.q[self.iq], motion.dq[self.iv], motion.dt
+        up = braking_speed(np.array([self.upper - x]), np.array([v]), None, dt, *self.limits)
+        down = braking_speed(np.array([x - self.lower]), np.array([-v]), None, dt,
+                             *self.limits)
+        hi[self.iv] = min(up[0], (self.upper - x) / dt)
+        lo[self.iv] = -min(down[0], (x - self.lower) / dt)
+        return lo, hi
+
+
+def run(robot, method, limits, trajectory, steps):
+    """The configurations (steps + 1, nq) and the steps' reports of one run from q0."""
+    solver = sjt.make_solver(method, robot, dt=DT, acceleration_limits=PANDA_ACCELERATION,
+                             jerk_limits=PANDA_JERK, limits=limits)
+    assert solver._compiled_smooth  # noqa: SLF001 (the compiled stage runs beside the limit)
+    q = robot.q0.copy()
+    qs, infos = [q], []
+    for k in range(steps):
+        pose, velocity = trajectory.sample(min(k * DT, trajectory.duration))
+        q = solver.step(q, pose, velocity)
+        qs.append(q)
+        infos.append(solver.last)
+    return np.array(qs), infos
+
+
+def assert_within_limits(robot, qs):
+    """The stream from rest: URDF range, speeds, accelerations and jerks (+1 %)."""
+    assert np.all(qs >= robot.lower_limits - 1e-12) and np.all(qs <= robot.upper_limits + 1e-12)
+    padded = np.vstack([qs[:1], qs[:1], qs])
+    v = np.diff(padded, axis=0) / DT
+    a = np.diff(v, axis=0) / DT
+    j = np.diff(a, axis=0) / DT
+    assert np.max(np.abs(v) / robot.velocity_limits) <= 1.01
+    assert np.max(np.abs(a) / PANDA_ACCELERATION) <= 1.01
+    assert np.max(np.abs(j) / PANDA_JERK) <= 1.01
+
+
+def assert_same_until_active(plain, limited, active):
+    """Bitwise the run without the limit up to the first step where the limit acted."""
+    differs = np.flatnonzero(np.any(plain != limited, axis=1))
+    if differs.size:
+        first = int(differs[0])  # qs[first] is the result of step first - 1
+        assert active[first - 1], f"the runs part at step {first - 1}, the limit inactive"
+
+
+def user_limit_active(info, name):
+    return name in info.active_rows or any(limit == name for limit, _ in info.active_limits)
+
+
+@pytest.fixture(scope="module")
+def down(panda):
+    """The hand down by 30 cm (and 10 cm forward) in 1.5 s (minimum jerk)."""
+    start = panda.fk(panda.q0)
+    end = pin.SE3(start.rotation, start.translation + [0.1, 0.0, -0.3])
+    return sjt.PoseInterpolation(start, end, duration=1.5)
+
+
+@pytest.mark.parametrize("method", ["sjt", "dls"])
+def test_a_floor_beside_acceleration_and_jerk_limits(panda, down, method):
+    z0 = panda.fk(panda.q0, "panda_hand").translation[2]
+    floor = BrakingFloor(panda, "panda_hand", z0 - 0.1, deceleration=0.5)
+    qs, infos = run(panda, method, [floor], down, 2500)
+    plain, _ = run(panda, method, [], down, 2500)
+    active = [user_limit_active(info, "floor") for info in infos]
+    assert sum(active) > 500  # the floor held the hand above the target
+    assert all(info.limit_conflicts == () for info in infos)
+    assert_within_limits(panda, qs)
+    z = np.array([panda.fk(q, "panda_hand").translation[2] for q in qs])
+    # the row is first order: sliding along the floor, the hand sinks by micrometres
+    assert np.min(z) >= floor.z_min - 1e-5
+    assert_same_until_active(plain, qs, active)
+    # the row held on every step, at the step's own configuration
+    model, data = panda.model, panda.model.createData()
+    fid = panda.frame_id("panda_hand")
+    for q, q_next in zip(qs[:-1], qs[1:], strict=True):
+        J_z = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)[2]
+        d = max(data.oMf[fid].translation[2] - floor.z_min, 0.0)
+        dq = pin.difference(model, q, q_next) / DT
+        a = floor.a
+        assert -J_z @ dq <= a * (-DT + np.sqrt(DT * DT + 2.0 * d / a)) + 1e-9
+
+
+@pytest.mark.parametrize("method", ["sjt", "dls"])
+def test_a_joint_band_beside_acceleration_and_jerk_limits(panda, down, method):
+    i = 3  # panda_joint4
+    q0 = panda.q0
+    band = BrakingBand(panda, "panda_joint4", q0[i] - 0.15, q0[i] + 0.15,
+                       0.5 * PANDA_ACCELERATION[i], 0.5 * PANDA_JERK[i])
+    qs, infos = run(panda, method, [band], down, 1500)
+    plain, _ = run(panda, method, [], down, 1500)
+    assert np.min(plain[:, i]) < band.lower - 0.05  # without the band the joint leaves it
+    active = [user_limit_active(info, "band") for info in infos]
+    assert sum(active) > 100
+    assert all(info.limit_conflicts == () for info in infos)
+    assert_within_limits(panda, qs)
+    assert np.all(qs[:, i] >= band.lower - 1e-12) and np.all(qs[:, i] <= band.upper + 1e-12)
+    assert_same_until_active(plain, qs, active)
+
+
+@pytest.mark.parametrize("method", ["sjt", "dls"])
+def test_limits_that_never_act_change_nothing(panda, down, method):
+    z0 = panda.fk(panda.q0, "panda_hand").translation[2]
+    far = pin.SE3(np.eye(3), np.array([3.0, 3.0, 3.0]))
+    idle = [BrakingFloor(panda, "panda_hand", z0 - 2.0, deceleration=0.5),
+            BrakingBand(panda, "panda_joint1", -2.5, 2.5, 7.5, 3750.0),
+            sjt.CollisionLimit(panda, obstacles=[(coal.Sphere(0.05), far)])]
+    plain, _ = run(panda, method, [], down, 600)
+    for limit in idle:
+        qs, infos = run(panda, method, [limit], down, 600)
+        np.testing.assert_array_equal(qs, plain)
+
+
+@pytest.mark.parametrize("method", ["sjt", "dls"])
+def test_a_collision_limit_beside_acceleration_and_jerk_limits(panda, method):
+    """The README's scene (the hand passes a ball), the line in 6 s and dampers of gain 0.02:
+    slow enough for the arm to brake within its limits."""
+    start = panda.fk(panda.q0)
+    line = sjt.PoseInterpolation(start, pin.SE3(start.rotation, start.translation + [0, 0.4, 0]),
+                                 duration=6.0)
+    ball = (coal.Sphere(0.04), pin.SE3(np.eye(3), start.translation + [0.0, 0.2, -0.07]))
+    fence = sjt.CollisionLimit(panda, obstacles=[ball], margin=0.01, gain=0.02)
+    qs, infos = run(panda, method, [fence], line, 6500)
+    plain, _ = run(panda, method, [], line, 6500)
+    active = [user_limit_active(info, fence.name) for info in infos]
+    assert sum(active) > 1000
+    assert min(fence.distances(q)[0].distance for q in plain[::10]) < 0.0  # it would hit
+    assert all(info.limit_conflicts == () for info in infos)
+    assert_within_limits(panda, qs)
+    assert min(fence.distances(q)[0].distance for q in qs[::5]) >= 0.01 - 1e-4
+    assert infos[-1].error_norm < 1e-9  # past the ball, the line's end is reached
+    assert_same_until_active(plain, qs, active)
+
+
+@pytest.mark.parametrize("method", ["sjt", "dls"])
+def test_rows_that_need_more_than_the_smoothness_limits_win_and_say_so(panda, down, method):
+    """The README's floor (gain 0.5: the hand may halve its distance in one period) stops the
+    hand faster than the acceleration limits allow: the row holds on every step, and every
+    run of steps that break an acceleration or jerk limit starts with one that names the joints
+    in ``limit_conflicts``."""
+
+    class Floor(Limit):
+        name = "floor"
+        uses_motion = False
+
+        def __init__(self, z_min):
+            self.frame_id, self.z_min = panda.frame_id("panda_hand"), z_min
+
+        def rows(self, kinematics, motion):
+            z = kinematics.placement(self.frame_id).translation[2]
+            J_z = kinematics.world_aligned_jacobian(self.frame_id)[2]
+            return -J_z[None, :], np.array([0.5 * (z - self.z_min) / motion.dt])
+
+    z0 = panda.fk(panda.q0, "panda_hand").translation[2]
+    floor = Floor(z0 - 0.1)
+    qs, infos = run(panda, method, [floor], down, 1500)
+    model, data = panda.model, panda.model.createData()
+    fid = panda.frame_id("panda_hand")
+    for q, q_next in zip(qs[:-1], qs[1:], strict=True):
+        J_z = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)[2]
+        z = data.oMf[fid].translation[2]
+        dq = pin.difference(model, q, q_next) / DT
+        assert -J_z @ dq <= 0.5 * (z - floor.z_min) / DT + 1e-9
+    padded = np.vstack([qs[:1], qs[:1], qs])
+    v = np.diff(padded, axis=0) / DT
+    a = np.diff(v, axis=0) / DT
+    j = np.diff(a, axis=0) / DT
+    over = (np.max(np.abs(a[1:]) / PANDA_ACCELERATION, axis=1) > 1.01) | (
+        np.max(np.abs(j) / PANDA_JERK, axis=1) > 1.01)  # step k: a[k + 1], j[k]
+    assert over.any()  # the case this test is about
+    # each run of such steps starts with a reported one (the steps after it come back within
+    # the limits as fast as the jerk limits let them)
+    for k in np.flatnonzero(over & ~np.concatenate([[False], over[:-1]])):
+        assert infos[k].limit_conflicts, f"step {k} broke a smoothness limit unreported"
+
+
+def test_a_bound_outside_the_hard_box_takes_the_python_stage_and_keeps_the_state(ur5):
+    """The README's ``JointBand`` narrowed while the elbow is outside the new band: its bound
+    asks for the way back in one period, beyond the speed and braking bounds — nothing of the
+    hard box is left, so that step runs the whole stage in Python, its result the reference's
+    (the band, a hard limit of the user's, wins there, as in the stage). The motion state is
+    what was commanded, step after step."""
+
+    class JointBand(Limit):
+        name = "band"
+
+        def __init__(self, lower, upper):
+            self.lower, self.upper = lower, upper
+
+        def bounds(self, kinematics, motion):
+            lo, hi = np.full(6, -np.inf), np.full(6, np.inf)
+            x = motion.q[2]
+            lo[2], hi[2] = (self.lower - x) / motion.dt, (self.upper - x) / motion.dt
+            return lo, hi
+
+    q = np.array([0.3, -1.2, 1.8, -1.8, -1.5, 0.2])
+    target = ur5.fk(np.array([0.3, -1.2, 1.5, -1.8, -1.5, 0.2]))
+    solvers = []
+    for compiled in (True, False):
+        solver_module.COMPILED_SMOOTH_STAGE = compiled
+        try:
+            solvers.append(sjt.SJTSolver(ur5, dt=DT, acceleration_limits=10.0,
+                                         jerk_limits=5000.0, limits=[JointBand(0.5, 2.0)]))
+        finally:
+            solver_module.COMPILED_SMOOTH_STAGE = True
+    solver, reference = solvers
+    previous = np.zeros(6)
+    for k in range(400):
+        if k == 5:  # the elbow, at about 1.8 rad, is now outside the band
+            for s in solvers:
+                s.stage.limits[-1].upper = 1.53
+        q_ref = reference.step(q, target)
+        q = solver.step(q, target)
+        if k <= 5:  # (later the band's bound is in the reference's box while the compiled
+            # step, smoothed, meets it: two admissible answers)
+            np.testing.assert_allclose(q, q_ref, rtol=0, atol=1e-9, err_msg=f"step {k}")
+        if k >= 5:
+            assert q[2] <= 1.53 + 1e-12
+        dq = solver.displacement / DT
+        state = solver.__reduce__()[2]["motion"]
+        np.testing.assert_allclose(state[0], dq, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(state[1], (dq - previous) / DT, rtol=0, atol=1e-6)
+        previous = dq.copy()
+        reference.__setstate__(dict(reference.__reduce__()[2], motion=state))
+
+
+class SpeedRows(Limit):
+    """Constant general rows ``A q_dot <= b`` (a linear bound on joint speeds)."""
+
+    name = "rows"
+    uses_motion = False
+
+    def __init__(self, A, b):
+        self.A, self.b = A, b
+
+    def rows(self, kinematics, motion):
+        return self.A, self.b
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(seed=st.integers(0, 2**32 - 1), joints=st.integers(2, 8),
+       method=st.sampled_from(["sjt", "dls", "jt", "jp"]), jerk=st.booleans())
+def test_random_rows_beside_acceleration_limits_on_random_robots(seed, joints, method, jerk):
+    """Random robots, random acceleration (and jerk) limits, random constant rows on the joint
+    speeds: the rows and the hard limits hold on every step; every run of steps that breaks an
+    acceleration or jerk limit starts with a step that reports it; until the rows first act
+    the stream is bitwise the one without them."""
+    xml, leaf = random_urdf_semantics(seed, joints)
+    try:
+        robot = sjt.Robot.from_urdf(xml, ee_frame=leaf, load_visuals=False)
+    except sjt.URDFError:
+        return
+    n = robot.nv
+    if n == 0:
+        return
+    rng = np.random.default_rng(seed)
+    accel = rng.uniform(2.0, 40.0, n)
+    jerks = rng.uniform(500.0, 20000.0, n) if jerk else None
+    A = rng.normal(size=(rng.integers(1, 4), n))
+    b = rng.uniform(0.05, 0.5, A.shape[0])
+    limit = SpeedRows(A, b)
+    q0 = pin.normalize(robot.model, robot.random_configuration(rng))
+    lower, upper = robot.lower_limits, robot.upper_limits
+    bounded = np.isfinite(lower) & np.isfinite(upper)  # a start inside the ranges
+    span = np.where(bounded, upper - lower, 0.0)
+    q0[bounded] = np.clip(q0, lower + 0.1 * span, upper - 0.1 * span)[bounded]
+    q0 = pin.normalize(robot.model, q0)
+    target = robot.fk(pin.normalize(robot.model, robot.random_configuration(rng)))
+    runs = []
+    for limits in ([limit], []):
+        solver = sjt.make_solver(method, robot, dt=DT, acceleration_limits=accel,
+                                 jerk_limits=jerks, limits=limits)
+        q, qs, infos, dqs = q0.copy(), [q0], [], []
+        for _ in range(150):
+            q = solver.step(q, target)
+            qs.append(q)
+            infos.append(solver.last)
+            dqs.append(solver.displacement / DT)
+        runs.append((np.array(qs), infos, np.array(dqs)))
+    (qs, infos, dqs), (plain, _, _) = runs
+    assert np.all(dqs @ A.T <= b + 1e-9 * (1 + np.abs(b)))
+    finite = np.isfinite(lower) & np.isfinite(upper)
+    within = (qs[:, finite] >= lower[finite] - 1e-12) & (qs[:, finite] <= upper[finite] + 1e-12)
+    assert np.all(within)
+    assert np.all(np.abs(dqs) <= robot.velocity_limits * (1 + 1e-9))
+    padded = np.vstack([np.zeros((1, n)), dqs])
+    a = np.diff(padded, axis=0) / DT
+    over = np.max(np.abs(a) / accel, axis=1) > 1.01
+    if jerk:
+        j = np.diff(np.vstack([np.zeros((1, n)), a]), axis=0) / DT
+        over |= np.max(np.abs(j) / jerks, axis=1) > 1.01
+    for k in np.flatnonzero(over & ~np.concatenate([[False], over[:-1]])):
+        assert infos[k].limit_conflicts, f"step {k} broke a smoothness limit unreported"
+    active = ["rows" in info.active_rows for info in infos]
+    assert_same_until_active(plain, qs, active)
+
+
+def test_a_smoothness_limit_of_ones_own_runs_the_python_stage(panda, down):
+    """A user's limit with ``hard = False`` (a smoothness bound: here the arm's joints held
+    below 5 % of their acceleration limit) is weighed only by the stage in Python: every step
+    runs it, from the motion state the step starts from — the reference's stream (to rounding:
+    the method's own step is solved again there)."""
+
+    class Gentle(Limit):
+        name = "gentle"
+        hard = False
+
+        def bounds(self, kinematics, motion):
+            change = 0.05 * PANDA_ACCELERATION * motion.dt
+            return motion.dq - change, motion.dq + change
+
+    compiled = sjt.SJTSolver(panda, dt=DT, acceleration_limits=PANDA_ACCELERATION,
+                             jerk_limits=PANDA_JERK, limits=[Gentle()])
+    solver_module.COMPILED_SMOOTH_STAGE = False
+    try:
+        reference = sjt.SJTSolver(panda, dt=DT, acceleration_limits=PANDA_ACCELERATION,
+                                  jerk_limits=PANDA_JERK, limits=[Gentle()])
+    finally:
+        solver_module.COMPILED_SMOOTH_STAGE = True
+    q, previous = panda.q0.copy(), np.zeros(panda.nv)
+    for k in range(300):
+        pose, velocity = down.sample(k * DT)
+        qa, qb = compiled.step(q, pose, velocity), reference.step(q, pose, velocity)
+        np.testing.assert_allclose(qa, qb, rtol=1e-9, atol=1e-9, err_msg=f"step {k}")
+        # (which of two equal bounds names a joint depends on rounding: the joints, not names)
+        joints = [{j for _, j in x.last.active_limits} for x in (compiled, reference)]
+        assert joints[0] == joints[1], f"step {k}"
+        q = qa
+        assert np.all(np.abs(compiled.displacement / DT - previous)  # the limit holds
+                      <= 0.05 * PANDA_ACCELERATION * DT * (1 + 1e-9) + 1e-12)
+        previous = compiled.displacement / DT
+    assert np.all(np.abs(compiled.__reduce__()[2]["motion"][0] - previous) <= 1e-12)
+
+
+def test_the_correction_refuses_arguments_that_do_not_fit():
+    """``kernels.smooth_rows_step`` names what does not fit instead of reading past it."""
+    m, n = 6, 7
+    J, q, A, b = np.ones((m, n)), np.zeros(n), np.ones((1, n)), np.zeros(1)
+    step, previous = np.zeros(n), np.zeros(2 * n)
+    plain = K.Layout(m, n, 0).allocate()
+    with pytest.raises(ValueError, match="no acceleration/jerk stage"):
+        K.smooth_rows_step(J, q, A, b, None, None, previous, plain, step)
+    work = K.Layout(m, n, 0, smooth=True).allocate()
+    with pytest.raises(ValueError, match="previous"):
+        K.smooth_rows_step(J, q, A, b, None, None, np.zeros(n), work, step)
+    with pytest.raises(TypeError, match="upper"):
+        K.smooth_rows_step(J, q, A, b, np.zeros(n), None, previous, work, step)
+    work[K.P_DT] = 1e-3
+    assert K.smooth_rows_step(J, q, A, b, None, None, previous, work, step) == 0  # kept
