@@ -2431,7 +2431,7 @@ static PyObject *py_smooth_rows_step(PyObject *self, PyObject *const *args, Py_s
                      length(&b));
         goto done;
     }
-    if (check_work(&work, Jm.m, n)) goto done;
+    if (check_work(&work, Jm.m, n, length(&q))) goto done;
     double *wv = out_vec(&work, "work");
     if (!wv) goto done;
     if (!(wv[P_SMOOTH] > 0.0)) {
