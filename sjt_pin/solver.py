@@ -216,8 +216,8 @@ class Solver:
         self._raw_work = work.copy()  # the method alone, for the stage's solves
         self._outcome: Outcome | None = None
         self._outcome_count = -1
-        #: (step count, the user's rows) of a kernel step those rows corrected
-        self._projected: tuple[int, tuple | None] = (-1, None)
+        #: (step count, the user's rows) of a kernel step checked against them (active_rows)
+        self._checked_rows: tuple[int, tuple | None] = (-1, None)
         self._no_rows = (np.zeros((0, n)), np.zeros(0))
         self._no_bounds = (np.full(n, -np.inf), np.full(n, np.inf))
         work[K.P_ERROR_ROWS] = stack.target_dim
@@ -463,8 +463,7 @@ class Solver:
         done = K.smooth_rows_step(J, q, A, b, lower, upper, before, work, step)
         if done < 0:
             return status | _STAGE
-        if done:
-            self._projected = (self._count + 1, rows)  # (the step counts after its kernel)
+        self._checked_rows = (self._count + 1, rows)  # (the step counts after its kernel)
         return status
 
     def _constrain(self, q, J, e, ff, status, step) -> np.ndarray:
@@ -489,8 +488,7 @@ class Solver:
                                    self._no_bounds[1] if upper is None else upper, self._work,
                                    step)
                 if done >= 0:
-                    if done:
-                        self._projected = (self._count, rows)
+                    self._checked_rows = (self._count, rows)
                     return step
         np.copyto(raw, self._work)
         raw[K.P_BOX_COUNT] = 0.0
@@ -648,8 +646,8 @@ class Solver:
                 outcome = self._kernel_outcome(q, step, status)
             if outcome is None:
                 outcome = Outcome(step / self._dt)
-            if self._projected[0] == self._count and self._projected[1] is not None:
-                A, b, owners = self._projected[1]
+            if self._checked_rows[0] == self._count and self._checked_rows[1] is not None:
+                A, b, owners = self._checked_rows[1]
                 tight = A @ (step / self._dt) - b > -1e-9 * (1.0 + np.abs(b))
                 outcome.rows = tuple(sorted({owners[i] for i in np.flatnonzero(tight)}))
             names: tuple[str, ...] = tuple(dict.fromkeys(joint for _, joint in outcome.active))
@@ -713,7 +711,7 @@ class Solver:
                                part(K.SM_DESIRED))
         torn = np.flatnonzero(part(K.SM_TORN))
         parts = self._user_parts
-        if (self._projected[0] == self._count and parts is not None and parts[0] is not None
+        if (self._checked_rows[0] == self._count and parts is not None and parts[0] is not None
                 and self._user_stage is not None):
             # the user's bounds the correction put joints on (evaluated again, as they were)
             n = dq.size

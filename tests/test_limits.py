@@ -206,3 +206,26 @@ def test_a_limit_that_returns_nan_is_refused_naming_it(ur5, acceleration):
         solver = sjt.SJTSolver(ur5, limits=[bad], acceleration_limits=acceleration)
         with pytest.raises(ValueError, match=match):
             solver.step(q, target)
+
+
+class _Hold(sjt.limits.Limit):
+    """Two rows that hold joint 1 still: ``0 <= q_dot_1 <= 0``."""
+
+    name = "hold"
+
+    def rows(self, kinematics, motion):
+        A = np.zeros((2, kinematics.model.nv))
+        A[0, 1], A[1, 1] = 1.0, -1.0
+        return A, np.zeros(2)
+
+
+@pytest.mark.parametrize("acceleration", [None, 10.0])
+def test_a_row_held_at_its_bound_is_reported_on_every_step(ur5, acceleration):
+    """A row that holds joint 1 still is active on every step, also when the kernel's step
+    already met it (nothing to correct): StepInfo.active_rows names it each time."""
+    q = np.array([0.0, -1.2, 1.5, -1.9, -1.57, 0.0])
+    target = ur5.fk(q) * pin.SE3(np.eye(3), np.array([0.1, 0.0, -0.1]))
+    solver = sjt.SJTSolver(ur5, limits=[_Hold()], acceleration_limits=acceleration)
+    for _ in range(200):
+        q = solver.step(q, target)
+        assert solver.last.active_rows == ("hold",)
