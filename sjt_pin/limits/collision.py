@@ -13,6 +13,18 @@ joint (zero for an obstacle). Over one period ``dt`` the distance then changes t
 by ``d_dot dt >= -gain (d - margin)``: with ``gain`` in (0, 1] it never crosses ``margin``,
 and below ``margin`` (or in penetration) the row pushes the pair apart.
 
+Witnesses. Where two hulls touch along a face or an edge their closest points are not unique,
+and coal's pick jumps from one end of the contact to the other as the pair slides or turns: one
+row at a time lets the arm turn about the point it keeps, the next step's row (the other end)
+turns it back, and at a blocked target the arm chatters in a limit cycle. So each pair also
+keeps a few of its recent closest points (fixed to their geometries) as rows of their own, on
+the current normal ``n``: for points ``a'`` of geometry a and ``b'`` of b, the plane through
+the closest points separates the hulls, so ``s = n^T (b' - a') >= d``; a row
+``s_dot >= -gain (s - margin) / dt`` asks nothing the pair's own row does not imply to first
+order, but together they hold the whole contact (the several points of a contact manifold),
+and the arm comes to rest there. A witness is forgotten when its ``s`` exceeds ``d`` by half
+the band ``influence - margin`` or when the pair leaves ``influence``.
+
 Distances and closest points come from coal (through Pinocchio's ``GeometryModel``); only the
 pairs whose bounding spheres come within ``influence`` pay for an exact distance query.
 """
@@ -40,6 +52,8 @@ __all__ = ["ClosestPoints", "CollisionLimit", "CollisionError", "PairDistance"]
 
 #: the precision (m) of coal's GJK and EPA on convex shapes (its default is 1e-6)
 GJK_TOLERANCE = 1e-9
+#: two witnesses of a pair closer than this (m, either point, in its geometry's frame) are one
+WITNESS_APART = 1e-4
 
 
 
@@ -177,6 +191,8 @@ class CollisionLimit(Limit):
             the margin still holds for the mesh; GJK on hulls takes about a microsecond where
             a mesh-to-mesh distance takes from 10 us to several ms (Panda). Obstacles stay as
             given.
+        witnesses: how many recent closest points of each pair within ``influence`` to keep as
+            rows beside its own (module docstring, "Witnesses"); 0 keeps none.
     """
 
     name: str = "collision"
@@ -185,7 +201,7 @@ class CollisionLimit(Limit):
     def __init__(self, robot, obstacles: Sequence = (), self_collision: bool = False,
                  margin: float = 0.01, influence: float = 0.05, gain: float = 0.5,
                  pairs: Iterable[tuple[str, str]] = (), ignore: Iterable[tuple[str, str]] = (),
-                 srdf: str | None = None, convex: bool = True):
+                 srdf: str | None = None, convex: bool = True, witnesses: int = 3):
         if coal is None:  # pragma: no cover
             raise CollisionError("CollisionLimit needs coal (shipped with the pin wheel)")
         if not (np.isfinite(margin) and margin >= 0):
@@ -195,11 +211,15 @@ class CollisionLimit(Limit):
                              f"got {influence!r}")
         if not (0 < gain <= 1):
             raise ValueError(f"gain must be in (0, 1], got {gain!r}")
+        if isinstance(witnesses, bool) or not isinstance(witnesses, (int, np.integer)) or (
+                witnesses < 0):
+            raise ValueError(f"witnesses must be an int >= 0, got {witnesses!r}")
         self.margin, self.influence, self.gain = float(margin), float(influence), float(gain)
+        self.witnesses = int(witnesses)
         # what a copy in another process is rebuilt from (coal's hulls do not pickle)
         self._args = dict(robot=robot, obstacles=list(obstacles), self_collision=self_collision,
                           margin=margin, influence=influence, gain=gain, pairs=list(pairs),
-                          ignore=list(ignore), srdf=srdf, convex=convex)
+                          ignore=list(ignore), srdf=srdf, convex=convex, witnesses=witnesses)
         self.model: pin.Model = robot.model
         self._mimic = _mimic_map(robot.model, getattr(robot, "mimic_joints", ()))
         source = self.__dict__.pop("_restored_geometry", None)  # set by __setstate__
@@ -216,7 +236,10 @@ class CollisionLimit(Limit):
                                                           else None))
         self._data = self.model.createData()
         self._checked = False
+        #: the pairs (indices into pairs / pair_names) of the first rows of the last rows()
+        #: (one each, from its exact distance), and of the witness rows that follow them
         self.active: list[int] = []
+        self.witness_pairs: list[int] = []
         self._prepare_broad_phase()
 
     def __getstate__(self) -> dict:
@@ -337,7 +360,10 @@ class CollisionLimit(Limit):
         #: kernels.damper_rows (distance, margin, those joints, the normal, closest points)
         self._pair_info = np.zeros((len(self.pairs), 4))
         self._pair_info[:, 2], self._pair_info[:, 3] = self._ja, self._jb
-        self._pair_rows = np.zeros((max(len(self.pairs), 1), 13))
+        self._pair_rows = np.zeros((max(len(self.pairs), 1) * (1 + self.witnesses), 13))
+        #: per pair within influence: its recent closest points, each in its geometry's joint
+        #: frame (m, 6) (module docstring, "Witnesses")
+        self._memory: dict[int, np.ndarray] = {}
         self._reach = self._radius[self._pa] + self._radius[self._pb] + self.influence
         # sphere centres: in the parent joint's frame (homogeneous) and in the world
         local = self._placement @ np.append(self._box_center, np.ones((n, 1)), axis=1)[:, :, None]
@@ -625,19 +651,21 @@ class CollisionLimit(Limit):
         key = (dt, self._version, None if q is None else q.tobytes())
         cache = self._cache
         if cache is not None and q is not None and cache[0] is data and cache[1] == key:
-            self.active = list(cache[2])
-            return cache[3]
+            self.active, self.witness_pairs = list(cache[2]), list(cache[3])
+            return cache[4]
         if not self._checked:
             self._check(model, data)
         out = self._rows(model, data, dt, q)
-        self._cache = (data, key, tuple(self.active), out)
+        self._cache = (data, key, tuple(self.active), tuple(self.witness_pairs), out)
         return out
 
     def _rows(self, model, data, dt: float, q: np.ndarray | None = None
               ) -> tuple[np.ndarray, np.ndarray] | None:
         near = self._near(data, q)
         self.active = []  # indices into self.pairs / self.pair_names of the rows returned
+        self.witness_pairs = []
         if near.size == 0:
+            self._memory = {}
             return None
         pin.updateGeometryPlacements(model, data, self.geometry, self.geometry_data)
         geometry, gdata, influence = self.geometry, self.geometry_data, self.influence
@@ -657,9 +685,12 @@ class CollisionLimit(Limit):
             row[10:] = res.getNearestPoint2()
             found.append(k)
         if not found:
+            self._memory = {}
             return None
         self.active = found
         count = len(found)
+        if self.witnesses:
+            count = self._witness_rows(data, found)
         A = np.empty((count, self._support.shape[1]))
         b = np.empty(count)
         damper_rows(data.J, self._support, pairs[:count], self.gain / dt, A, b)
@@ -668,6 +699,38 @@ class CollisionLimit(Limit):
         A.setflags(write=False)
         b.setflags(write=False)
         return A, b
+
+
+    def _witness_rows(self, data, found: list[int]) -> int:
+        """Append to the step's rows (``_pair_rows[:len(found)]``) one per remembered witness
+        of each pair in ``found`` (module docstring, "Witnesses") and remember this step's
+        closest points; returns the number of rows."""
+        rows, memory, limit = self._pair_rows, self._memory, self.witnesses
+        keep = 0.5 * (self.influence - self.margin)
+        oMi = data.oMi
+        count, owners, kept = len(found), self.witness_pairs, {}
+        for i, k in enumerate(found):
+            row = rows[i]
+            Ma, Mb = oMi[int(row[2])], oMi[int(row[3])]
+            Ra, ta, Rb, tb = Ma.rotation, Ma.translation, Mb.rotation, Mb.translation
+            now = np.concatenate(((row[7:10] - ta) @ Ra, (row[10:13] - tb) @ Rb))
+            past = memory.get(k)
+            if past is None:
+                kept[k] = now[None]
+                continue
+            pa, pb = past[:, :3] @ Ra.T + ta, past[:, 3:] @ Rb.T + tb
+            s = (pb - pa) @ row[4:7]
+            use = (np.abs(past - now).max(axis=1) > WITNESS_APART) & (s - row[0] < keep)
+            m = int(np.count_nonzero(use))
+            if m:
+                block = rows[count:count + m]
+                block[:] = row
+                block[:, 0], block[:, 7:10], block[:, 10:13] = s[use], pa[use], pb[use]
+                owners.extend([k] * m)
+                count += m
+            kept[k] = np.vstack((past[use][max(m - limit + 1, 0):], now[None]))
+        self._memory = kept
+        return count
 
 
 def damper_rows_reference(J: np.ndarray, support: np.ndarray, pairs: np.ndarray, rate: float
