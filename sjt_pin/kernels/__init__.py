@@ -18,6 +18,7 @@ against the numpy reference formulas of :mod:`sjt_pin.mappings` and against Pino
   normalised columns, within the joint limits; ``search_pose(...)``: every iteration of one
   start on a single pose task in one call (it calls Pinocchio's Jacobian once per iteration);
 - ``damper_rows``: the collision limit's velocity-damper rows from its pairs' closest points;
+  ``witness_rows``: the rows of its pairs' remembered closest points (and their memory);
 - ``frame_velocity``, ``position_rows``, ``rotation_defect``: the tasks' small transforms;
 - ``project_rows(dq, Jw, A, b, lower, upper, moving, out)``: the constraint stage's smallest
   correction onto general rows and a box (:func:`sjt_pin.constraints.project`), on its dual by
@@ -45,5 +46,6 @@ from ._kernels import (  # noqa: F401
     symmetric_eigen,
     transpose_step,
     unit_defect,
+    witness_rows,
 )
 from .layout import *  # noqa: F403 (the slot names are the kernels' vocabulary)

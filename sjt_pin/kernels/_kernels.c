@@ -2307,6 +2307,113 @@ done:
     return result;
 }
 
+/* witness_rows(poses, rows, found, memory, state, tick, keep, apart, owners) -> int: the
+ * collision limit's witness rows (limits/collision.py, "Witnesses"). rows (N, 13) holds the
+ * step's exact rows of the pairs `found` (count,) in its first count rows (as damper_rows
+ * reads them); poses (count, 32): per row the 4x4 world poses of the joints of geometry a and
+ * of b (row-major). memory (npairs * W, 6): per pair up to W remembered closest points, each
+ * in its joint's frame (p_a, p_b); state (npairs, 2): how many are remembered and the tick of
+ * the call that last saw the pair within influence (a pair missed by the previous call,
+ * tick - 1, forgets them). Each remembered pair of points that lies farther than `apart`
+ * (either point, its frame) from this step's and whose separation s = n^T (p_b - p_a) along
+ * this step's normal is under d + keep becomes a row after the exact ones (d = s, the points
+ * in the world, the rest as its pair's row), its pair written to owners; the pair then
+ * remembers those (the last W - 1) and this step's points. Returns the number of rows. */
+static Py_ssize_t witness_rows_c(const double *poses, double *rows, const double *found,
+                                 Py_ssize_t count, double *memory, Py_ssize_t W, double *state,
+                                 double tick, double keep, double apart, double *owners)
+{
+    Py_ssize_t total = count;
+    for (Py_ssize_t i = 0; i < count; i++) {
+        Py_ssize_t k = (Py_ssize_t)found[i];
+        double *row = rows + 13 * i, *st = state + 2 * k, *mem = memory + 6 * W * k;
+        const double *H[2] = {poses + 32 * i, poses + 32 * i + 16};
+        Py_ssize_t filled = st[1] == tick - 1.0 ? (Py_ssize_t)st[0] : 0;
+        st[1] = tick;
+        double now[6];
+        for (int side = 0; side < 2; side++) {
+            const double *M = H[side], *p = row + 7 + 3 * side;
+            double dx = p[0] - M[3], dy = p[1] - M[7], dz = p[2] - M[11];
+            for (int c = 0; c < 3; c++)  /* R^T (p - t) */
+                now[3 * side + c] = M[c] * dx + M[4 + c] * dy + M[8 + c] * dz;
+        }
+        double kept[64][6];
+        Py_ssize_t nk = 0;
+        for (Py_ssize_t w = 0; w < filled; w++) {
+            const double *m = mem + 6 * w;
+            double far = 0.0, world[6];
+            for (int c = 0; c < 6; c++) far = dmax(far, fabs(m[c] - now[c]));
+            if (!(far > apart)) continue;
+            for (int side = 0; side < 2; side++) {
+                const double *M = H[side], *l = m + 3 * side;
+                for (int r = 0; r < 3; r++)
+                    world[3 * side + r] = M[4 * r] * l[0] + M[4 * r + 1] * l[1]
+                                          + M[4 * r + 2] * l[2] + M[4 * r + 3];
+            }
+            double s = row[4] * (world[3] - world[0]) + row[5] * (world[4] - world[1])
+                       + row[6] * (world[5] - world[2]);
+            if (!(s - row[0] < keep)) continue;
+            double *out = rows + 13 * total;
+            for (int c = 0; c < 13; c++) out[c] = row[c];
+            out[0] = s;
+            for (int c = 0; c < 6; c++) out[7 + c] = world[c];
+            owners[total - count] = (double)k;
+            total++;
+            if (nk < 64) {
+                for (int c = 0; c < 6; c++) kept[nk][c] = m[c];
+                nk++;
+            }
+        }
+        Py_ssize_t start = nk > W - 1 ? nk - (W - 1) : 0, n = 0;
+        for (Py_ssize_t w = start; w < nk; w++, n++)
+            for (int c = 0; c < 6; c++) mem[6 * n + c] = kept[w][c];
+        for (int c = 0; c < 6; c++) mem[6 * n + c] = now[c];
+        st[0] = (double)(n + 1);
+    }
+    return total;
+}
+
+static PyObject *py_witness_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (!nargs_ok(nargs, 9, "witness_rows")) return NULL;
+    double tick = PyFloat_AsDouble(args[5]), keep = PyFloat_AsDouble(args[6]);
+    double apart = PyFloat_AsDouble(args[7]);
+    if (PyErr_Occurred()) return NULL;
+    Arg poses = {0}, rows = {0}, found = {0}, memory = {0}, state = {0}, owners = {0};
+    PyObject *result = NULL;
+    if (acquire(args[0], &poses, 0, 2, "poses") || acquire(args[1], &rows, 1, 2, "rows")
+        || acquire(args[2], &found, 0, 1, "found") || acquire(args[3], &memory, 1, 2, "memory")
+        || acquire(args[4], &state, 1, 2, "state") || acquire(args[8], &owners, 1, 1, "owners"))
+        goto done;
+    double *pv = out_mat(&poses, "poses"), *rv = out_mat(&rows, "rows");
+    double *fv = vec(&found, "found"), *mv = out_mat(&memory, "memory");
+    double *sv = out_mat(&state, "state"), *ov = out_vec(&owners, "owners");
+    if (!pv || !rv || !fv || !mv || !sv || !ov) goto done;
+    Py_ssize_t count = length(&found), N = rows.view.shape[0], npairs = state.view.shape[0];
+    Py_ssize_t W = npairs > 0 ? memory.view.shape[0] / npairs : 0;
+    if (poses.view.shape[0] != count || poses.view.shape[1] != 32 || rows.view.shape[1] != 13
+        || memory.view.shape[1] != 6 || state.view.shape[1] != 2 || W < 1 || W > 64
+        || memory.view.shape[0] != W * npairs || N < count * (1 + W)
+        || length(&owners) < count * W) {
+        PyErr_Format(PyExc_ValueError, "witness_rows: poses (count, 32), rows (>= count (1 + W), "
+                     "13), memory (npairs W, 6) with 1 <= W <= 64, state (npairs, 2) and owners "
+                     "(>= count W,) do not fit (count %zd, rows %zd, npairs %zd)", count, N,
+                     npairs);
+        goto done;
+    }
+    for (Py_ssize_t i = 0; i < count; i++)
+        if (!(fv[i] >= 0.0 && fv[i] < (double)npairs)) {
+            PyErr_Format(PyExc_ValueError, "found[%zd] is no pair (npairs %zd)", i, npairs);
+            goto done;
+        }
+    result = PyLong_FromSsize_t(witness_rows_c(pv, rv, fv, count, mv, W, sv, tick, keep, apart,
+                                               ov));
+done:
+    release(&poses); release(&rows); release(&found); release(&memory); release(&state);
+    release(&owners);
+    return result;
+}
+
 static PyMethodDef methods[] = {
     {"transpose_step", (PyCFunction)(void (*)(void))py_transpose_step, METH_FASTCALL,
      "transpose_step(J, e, ff, q, work, step) -> status: one step of a Jacobian-transpose-type "
@@ -2346,6 +2453,9 @@ static PyMethodDef methods[] = {
     {"damper_rows", (PyCFunction)(void (*)(void))py_damper_rows, METH_FASTCALL,
      "damper_rows(J, support, pairs, gain_rate, A, b): the collision limit's velocity-damper "
      "rows of the pairs (d, margin, joint a, joint b, normal, p_a, p_b) into A and b."},
+    {"witness_rows", (PyCFunction)(void (*)(void))py_witness_rows, METH_FASTCALL,
+     "witness_rows(poses, rows, found, memory, state, tick, keep, apart, owners) -> int: the "
+     "collision limit's rows of its pairs' remembered closest points after their own rows."},
     {NULL, NULL, 0, NULL},
 };
 

@@ -45,7 +45,7 @@ except ImportError:  # pragma: no cover - the pin wheel ships coal
     coal = None
 
 from ..exceptions import SJTError
-from ..kernels import damper_rows
+from ..kernels import damper_rows, witness_rows
 from .base import Limit, Motion
 
 __all__ = ["ClosestPoints", "CollisionLimit", "CollisionError", "PairDistance"]
@@ -361,9 +361,17 @@ class CollisionLimit(Limit):
         self._pair_info = np.zeros((len(self.pairs), 4))
         self._pair_info[:, 2], self._pair_info[:, 3] = self._ja, self._jb
         self._pair_rows = np.zeros((max(len(self.pairs), 1) * (1 + self.witnesses), 13))
-        #: per pair within influence: its recent closest points, each in its geometry's joint
-        #: frame (m, 6) (module docstring, "Witnesses")
-        self._memory: dict[int, np.ndarray] = {}
+        #: per pair: its recent closest points, each in its joint's frame (witnesses rows of
+        #: 6), how many and the tick of the last rows() that had it within influence (module
+        #: docstring, "Witnesses"; kernels.witness_rows)
+        slots = max(len(self.pairs), 1)
+        self._memory = np.zeros((slots * max(self.witnesses, 1), 6))
+        self._memory_state = np.zeros((slots, 2))
+        self._memory_state[:, 1] = -np.inf
+        self._tick = 0.0
+        self._owners = np.zeros(slots * max(self.witnesses, 1))
+        self._poses = np.zeros((slots, 2, 4, 4))  # the joint poses of a step's pairs
+        self._joint_pairs = [(int(a), int(b)) for a, b in zip(self._ja, self._jb, strict=True)]
         self._reach = self._radius[self._pa] + self._radius[self._pb] + self.influence
         # sphere centres: in the parent joint's frame (homogeneous) and in the world
         local = self._placement @ np.append(self._box_center, np.ones((n, 1)), axis=1)[:, :, None]
@@ -497,6 +505,7 @@ class CollisionLimit(Limit):
         self._center_local[g] = self._centers_in[:, g] = (self._placement[g]
                                                           @ np.append(self._box_center[g], 1.0))
         self._version += 1
+        self._tick += 2.0  # the remembered points on the obstacle moved: forget every one
 
     @property
     def obstacles(self) -> list[tuple]:
@@ -665,7 +674,6 @@ class CollisionLimit(Limit):
         self.active = []  # indices into self.pairs / self.pair_names of the rows returned
         self.witness_pairs = []
         if near.size == 0:
-            self._memory = {}
             return None
         pin.updateGeometryPlacements(model, data, self.geometry, self.geometry_data)
         geometry, gdata, influence = self.geometry, self.geometry_data, self.influence
@@ -685,7 +693,6 @@ class CollisionLimit(Limit):
             row[10:] = res.getNearestPoint2()
             found.append(k)
         if not found:
-            self._memory = {}
             return None
         self.active = found
         count = len(found)
@@ -703,34 +710,21 @@ class CollisionLimit(Limit):
 
     def _witness_rows(self, data, found: list[int]) -> int:
         """Append to the step's rows (``_pair_rows[:len(found)]``) one per remembered witness
-        of each pair in ``found`` (module docstring, "Witnesses") and remember this step's
-        closest points; returns the number of rows."""
-        rows, memory, limit = self._pair_rows, self._memory, self.witnesses
-        keep = 0.5 * (self.influence - self.margin)
-        oMi = data.oMi
-        count, owners, kept = len(found), self.witness_pairs, {}
+        of each pair in ``found`` (module docstring, "Witnesses"; ``kernels.witness_rows``) and
+        remember this step's closest points; returns the number of rows."""
+        count = len(found)
+        poses = self._poses[:count]
+        oMi, joints = data.oMi, self._joint_pairs
         for i, k in enumerate(found):
-            row = rows[i]
-            Ma, Mb = oMi[int(row[2])], oMi[int(row[3])]
-            Ra, ta, Rb, tb = Ma.rotation, Ma.translation, Mb.rotation, Mb.translation
-            now = np.concatenate(((row[7:10] - ta) @ Ra, (row[10:13] - tb) @ Rb))
-            past = memory.get(k)
-            if past is None:
-                kept[k] = now[None]
-                continue
-            pa, pb = past[:, :3] @ Ra.T + ta, past[:, 3:] @ Rb.T + tb
-            s = (pb - pa) @ row[4:7]
-            use = (np.abs(past - now).max(axis=1) > WITNESS_APART) & (s - row[0] < keep)
-            m = int(np.count_nonzero(use))
-            if m:
-                block = rows[count:count + m]
-                block[:] = row
-                block[:, 0], block[:, 7:10], block[:, 10:13] = s[use], pa[use], pb[use]
-                owners.extend([k] * m)
-                count += m
-            kept[k] = np.vstack((past[use][max(m - limit + 1, 0):], now[None]))
-        self._memory = kept
-        return count
+            a, b = joints[k]
+            poses[i, 0], poses[i, 1] = oMi[a].homogeneous, oMi[b].homogeneous
+        self._tick += 1.0
+        total = witness_rows(poses.reshape(count, 32), self._pair_rows,
+                             np.array(found, dtype=float), self._memory, self._memory_state,
+                             self._tick, 0.5 * (self.influence - self.margin), WITNESS_APART,
+                             self._owners)
+        self.witness_pairs = self._owners[:total - count].astype(int).tolist()
+        return total
 
 
 def damper_rows_reference(J: np.ndarray, support: np.ndarray, pairs: np.ndarray, rate: float
