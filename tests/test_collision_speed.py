@@ -206,6 +206,52 @@ def test_the_broad_phase_it_skips_never_misses_a_pair_within_influence(name, pan
     assert calls[0] < steps / 2  # the skip did skip
 
 
+@pytest.mark.parametrize("name", ["panda", "ur5"])
+def test_rows_hold_every_pair_within_influence_though_most_are_not_queried(name, panda, ur5):
+    """Along random joint-space walks (steps of up to 3 mrad, every 50th up to 0.3 rad), the
+    rows are those of exactly the pairs whose exact distance is below influence (brute force
+    over every pair), although a pair last measured far enough beyond influence is not
+    queried again until its bound reaches that gap."""
+    robot = panda if name == "panda" else ur5
+    rng = np.random.default_rng(16)
+    q = robot.random_configuration(rng)
+    data = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, data, q)
+    hand = pin.updateFramePlacement(robot.model, data, robot.model.getFrameId(robot.ee_frame))
+    ball = (coal.Sphere(0.05), pin.SE3(np.eye(3), hand.translation + [0.1, 0.0, 0.0]))
+    limit = CollisionLimit(robot, [ball], self_collision=True, influence=0.08)
+    limit._checked = True  # every pair stays, the ball wherever the walk takes the arm
+    queries, candidates, within = [0], 0, 0
+    compute = pin.computeDistance
+
+    def counted(*args):
+        queries[0] += 1
+        return compute(*args)
+
+    kin = Kinematics(robot.model)
+    motion = Motion(q, np.zeros(robot.nv), np.zeros(robot.nv), 1e-3)
+    probe = limit.geometry.copy()
+    probe_data = limit.geometry_data.copy()
+    lower, upper = robot.model.lowerPositionLimit, robot.model.upperPositionLimit
+    for step in range(300):
+        jump = 0.3 if step % 50 == 0 else 0.003
+        q = np.clip(q + rng.uniform(-jump, jump, robot.nq), lower, upper)
+        kin.update(q)
+        pin.computeDistance = counted
+        try:
+            limit.rows(kin, motion)
+        finally:
+            pin.computeDistance = compute
+        candidates += limit._near(kin.data, q).size
+        pin.updateGeometryPlacements(robot.model, data, probe, probe_data, q)
+        close = {k for k in range(len(limit.pairs))
+                 if compute(probe, probe_data, k).min_distance < limit.influence}
+        assert set(limit.active) == close, step
+        within += len(close)
+    assert within > 100  # pairs were within influence
+    assert queries[0] < 0.6 * candidates  # and most candidates were not queried
+
+
 def test_the_solvers_one_call_correction_is_the_whole_stage(panda):
     """Where the collision speed bounds do not cut the kernel's step, rows_step's correction of
     the kernel's step equals the whole stage's (re-solve, saturation, projection): the Panda

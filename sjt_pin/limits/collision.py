@@ -410,6 +410,11 @@ class CollisionLimit(Limit):
         self._pair_lever, self._flat = self._pair_levers()
         #: the last broad phase: (obstacles' version, q, its pairs, each pair's gap)
         self._reference: tuple[int, np.ndarray, np.ndarray, np.ndarray] | None = None
+        #: per pair, its exact distance at its last query minus the bound of _near there (m):
+        #: while that minus the bound now exceeds influence, the pair is not queried (_rows)
+        self._floor = np.full(len(self.pairs), -np.inf)
+        self._no_bound = np.zeros(len(self.pairs))
+        self._bound: np.ndarray | None = None
 
     def _pair_levers(self) -> tuple[np.ndarray | None, bool]:
         """For each pair and velocity coordinate, a bound (m per unit) on how much the
@@ -546,16 +551,31 @@ class CollisionLimit(Limit):
         """:meth:`_candidates` at ``q``, from the last broad phase while ``q`` is close to
         where it ran: a displacement ``dq`` from there changes the distance of a pair's
         bounding spheres by at most ``sum_j lever_j |dq_j|`` (:meth:`_pair_levers`), so a
-        pair it left out stays out until that reaches the gap it left the pair at."""
+        pair it left out stays out until that reaches the gap it left the pair at.
+
+        Sets :attr:`_bound`: that bound for every pair at ``q`` (m; None without a
+        reference), which :meth:`_rows` also holds the candidates' exact distances to."""
         ref = self._reference
+        bound = None
         if q is not None and ref is not None and ref[0] == self._version:
             moved = np.abs(q - ref[1] if self._flat else pin.difference(self.model, ref[1], q))
-            if np.all(self._pair_lever @ moved < ref[3]):
+            bound = self._pair_lever @ moved
+            if np.all(bound < ref[3]):
+                self._bound = bound
                 return ref[2]
         near, slack = self._broad_phase(data)
         if q is not None and self._pair_lever is not None:
             slack[near] = np.inf  # a candidate stays one
             self._reference = (self._version, q.copy(), near, slack)
+            self._bound = self._no_bound
+            # the exact distances' floors move to the new reference (here, where its bound is
+            # 0); after a move() of an obstacle they are gone
+            if bound is None:
+                self._floor.fill(-np.inf)
+            else:
+                self._floor -= bound
+        else:
+            self._bound = None
         return near
 
     def _sphere_box(self, points, poses, g) -> np.ndarray:
@@ -673,16 +693,23 @@ class CollisionLimit(Limit):
         near = self._near(data, q)
         self.active = []  # indices into self.pairs / self.pair_names of the rows returned
         self.witness_pairs = []
+        influence, bound, floor = self.influence, self._bound, self._floor
+        if bound is not None and near.size:
+            # a pair's distance changes by at most its bound's change (_near): one that was
+            # beyond influence by more than that at its last query still is
+            near = near[floor[near] - bound[near] <= influence]
         if near.size == 0:
             return None
         pin.updateGeometryPlacements(model, data, self.geometry, self.geometry_data)
-        geometry, gdata, influence = self.geometry, self.geometry_data, self.influence
+        geometry, gdata = self.geometry, self.geometry_data
         compute = pin.computeDistance
         found: list[int] = []
         pairs, info, margins = self._pair_rows, self._pair_info, self.margins
         for k in near.tolist():
             res = compute(geometry, gdata, k)
             d = res.min_distance
+            if bound is not None:
+                floor[k] = d - bound[k] if d > -math.inf else -math.inf  # NaN: -inf
             if not -math.inf < d < influence:  # beyond, or coal failed (EPA: -inf)
                 continue
             row = pairs[len(found)]
