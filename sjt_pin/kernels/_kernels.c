@@ -2310,8 +2310,8 @@ done:
 /* witness_rows(poses, rows, found, memory, state, tick, keep, apart, owners) -> int: the
  * collision limit's witness rows (limits/collision.py, "Witnesses"). rows (N, 13) holds the
  * step's exact rows of the pairs `found` (count,) in its first count rows (as damper_rows
- * reads them); poses (count, 32): per row the 4x4 world poses of the joints of geometry a and
- * of b (row-major). memory (npairs * W, 6): per pair up to W remembered closest points, each
+ * reads them); poses (njoints, 16): the 4x4 world pose of each joint the rows name (row-major;
+ * the others are not read). memory (npairs * W, 6): per pair up to W remembered closest points, each
  * in its joint's frame (p_a, p_b); state (npairs, 2): how many are remembered and the tick of
  * the call that last saw the pair within influence (a pair missed by the previous call,
  * tick - 1, forgets them). Each remembered pair of points that lies farther than `apart`
@@ -2327,7 +2327,7 @@ static Py_ssize_t witness_rows_c(const double *poses, double *rows, const double
     for (Py_ssize_t i = 0; i < count; i++) {
         Py_ssize_t k = (Py_ssize_t)found[i];
         double *row = rows + 13 * i, *st = state + 2 * k, *mem = memory + 6 * W * k;
-        const double *H[2] = {poses + 32 * i, poses + 32 * i + 16};
+        const double *H[2] = {poses + 16 * (Py_ssize_t)row[2], poses + 16 * (Py_ssize_t)row[3]};
         Py_ssize_t filled = st[1] == tick - 1.0 ? (Py_ssize_t)st[0] : 0;
         st[1] = tick;
         double now[6];
@@ -2391,21 +2391,30 @@ static PyObject *py_witness_rows(PyObject *self, PyObject *const *args, Py_ssize
     if (!pv || !rv || !fv || !mv || !sv || !ov) goto done;
     Py_ssize_t count = length(&found), N = rows.view.shape[0], npairs = state.view.shape[0];
     Py_ssize_t W = npairs > 0 ? memory.view.shape[0] / npairs : 0;
-    if (poses.view.shape[0] != count || poses.view.shape[1] != 32 || rows.view.shape[1] != 13
+    if (poses.view.shape[1] != 16 || rows.view.shape[1] != 13
         || memory.view.shape[1] != 6 || state.view.shape[1] != 2 || W < 1 || W > 64
         || memory.view.shape[0] != W * npairs || N < count * (1 + W)
         || length(&owners) < count * W) {
-        PyErr_Format(PyExc_ValueError, "witness_rows: poses (count, 32), rows (>= count (1 + W), "
+        PyErr_Format(PyExc_ValueError, "witness_rows: poses (njoints, 16), rows (>= count (1 + W), "
                      "13), memory (npairs W, 6) with 1 <= W <= 64, state (npairs, 2) and owners "
                      "(>= count W,) do not fit (count %zd, rows %zd, npairs %zd)", count, N,
                      npairs);
         goto done;
     }
-    for (Py_ssize_t i = 0; i < count; i++)
+    for (Py_ssize_t i = 0; i < count; i++) {
         if (!(fv[i] >= 0.0 && fv[i] < (double)npairs)) {
             PyErr_Format(PyExc_ValueError, "found[%zd] is no pair (npairs %zd)", i, npairs);
             goto done;
         }
+        for (int side = 0; side < 2; side++) {
+            double j = rv[13 * i + 2 + side];
+            if (!(j >= 0.0 && j < (double)poses.view.shape[0])) {
+                PyErr_Format(PyExc_ValueError, "rows[%zd] names joint %zd; poses has %zd", i,
+                             (Py_ssize_t)j, poses.view.shape[0]);
+                goto done;
+            }
+        }
+    }
     result = PyLong_FromSsize_t(witness_rows_c(pv, rv, fv, count, mv, W, sv, tick, keep, apart,
                                                ov));
 done:

@@ -370,7 +370,10 @@ class CollisionLimit(Limit):
         self._memory_state[:, 1] = -np.inf
         self._tick = 0.0
         self._owners = np.zeros(slots * max(self.witnesses, 1))
-        self._poses = np.zeros((slots, 2, 4, 4))  # the joint poses of a step's pairs
+        #: the world poses of the joints the step's pairs name (the world's: the identity)
+        self._poses = np.zeros((model.njoints, 4, 4))
+        self._poses[0] = np.eye(4)
+        self._flat_poses = self._poses.reshape(model.njoints, 16)
         self._joint_pairs = [(int(a), int(b)) for a, b in zip(self._ja, self._jb, strict=True)]
         self._reach = self._radius[self._pa] + self._radius[self._pb] + self.influence
         # sphere centres: in the parent joint's frame (homogeneous) and in the world
@@ -740,13 +743,11 @@ class CollisionLimit(Limit):
         of each pair in ``found`` (module docstring, "Witnesses"; ``kernels.witness_rows``) and
         remember this step's closest points; returns the number of rows."""
         count = len(found)
-        poses = self._poses[:count]
-        oMi, joints = data.oMi, self._joint_pairs
-        for i, k in enumerate(found):
-            a, b = joints[k]
-            poses[i, 0], poses[i, 1] = oMi[a].homogeneous, oMi[b].homogeneous
+        poses, oMi, joints = self._poses, data.oMi, self._joint_pairs
+        for j in {j for k in found for j in joints[k]} - {0}:  # the world's: the identity
+            poses[j] = oMi[j].homogeneous
         self._tick += 1.0
-        total = witness_rows(poses.reshape(count, 32), self._pair_rows,
+        total = witness_rows(self._flat_poses, self._pair_rows,
                              np.array(found, dtype=float), self._memory, self._memory_state,
                              self._tick, 0.5 * (self.influence - self.margin), WITNESS_APART,
                              self._owners)
