@@ -252,6 +252,76 @@ def test_rows_hold_every_pair_within_influence_though_most_are_not_queried(name,
     assert queries[0] < 0.6 * candidates  # and most candidates were not queried
 
 
+def _witness_reference(poses, rows, found, memory, state, tick, keep, apart):
+    """kernels.witness_rows in numpy (limits/collision.py, "Witnesses")."""
+    W = memory.shape[0] // state.shape[0]
+    out, owners = [r.copy() for r in rows[:len(found)]], []
+    for i, k in enumerate(found):
+        row, k = rows[i], int(k)
+        H = [poses[int(row[2])].reshape(4, 4), poses[int(row[3])].reshape(4, 4)]
+        now = np.concatenate([H[s][:3, :3].T @ (row[7 + 3 * s:10 + 3 * s] - H[s][:3, 3])
+                              for s in (0, 1)])
+        filled = int(state[k, 0]) if state[k, 1] == tick - 1 else 0
+        kept = []
+        for m in memory[W * k:W * k + filled]:
+            pa, pb = H[0][:3, :3] @ m[:3] + H[0][:3, 3], H[1][:3, :3] @ m[3:] + H[1][:3, 3]
+            sep = row[4:7] @ (pb - pa)
+            if np.abs(m - now).max() > apart and sep - row[0] < keep:
+                extra = row.copy()
+                extra[0], extra[7:10], extra[10:] = sep, pa, pb
+                out.append(extra)
+                owners.append(k)
+                kept.append(m.copy())
+        kept = kept[max(len(kept) - (W - 1), 0):] + [now]
+        memory[W * k:W * k + len(kept)] = kept
+        state[k] = len(kept), tick
+    return np.array(out), owners
+
+
+def test_the_compiled_witness_rows_are_the_numpy_ones():
+    """Random poses, rows and memories, some stale (a pair the previous call missed), some
+    witnesses too close to this step's points or too far from contact: the same rows, owners,
+    memory and state, over several calls."""
+    rng = np.random.default_rng(3)
+    njoints, npairs, W = 5, 6, 3
+    memory = rng.normal(size=(npairs * W, 6)) * 0.05
+    state = np.column_stack([rng.integers(0, W + 1, npairs), np.full(npairs, 4.0)])
+    state[1, 1] = 2.0  # stale
+    ref_memory, ref_state = memory.copy(), state.copy()
+    extra = 0
+    for tick in (5.0, 6.0, 7.0):
+        poses = np.zeros((njoints, 4, 4))
+        for j in range(njoints):
+            poses[j] = pin.SE3(pin.exp3(rng.normal(size=3) * 0.1), rng.normal(size=3)).homogeneous
+        found = rng.permutation(npairs)[:4].astype(float)
+        rows = np.zeros((npairs * (1 + W), 13))
+        for i, k in enumerate(found):
+            n = rng.normal(size=3)
+            rows[i, :4] = rng.uniform(0.0, 0.04), 0.01, *rng.integers(0, njoints, 2)
+            rows[i, 4:7] = n / np.linalg.norm(n)
+            rows[i, 7:13] = rng.normal(size=6) * 0.05
+            if k == found[0]:  # this step's points where one remembered pair is
+                joints = rows[i, 2:4].astype(int)
+                m = memory[W * int(k)]
+                rows[i, 7:10] = poses[joints[0]][:3, :3] @ m[:3] + poses[joints[0]][:3, 3]
+                rows[i, 10:13] = poses[joints[1]][:3, :3] @ m[3:] + poses[joints[1]][:3, 3]
+        flat = poses.reshape(njoints, 16)
+        want, want_owners = _witness_reference(flat, rows, found, ref_memory, ref_state, tick,
+                                               0.02, 1e-4)
+        owners = np.zeros(npairs * W)
+        total = K.witness_rows(flat, rows, found, memory, state, tick, 0.02, 1e-4, owners)
+        assert total == len(want)
+        np.testing.assert_allclose(rows[:total], want, atol=1e-12)
+        assert owners[:total - len(found)].astype(int).tolist() == want_owners
+        extra += total - len(found)
+        np.testing.assert_allclose(state, ref_state)
+        for k in range(npairs):  # the remembered points (those counted)
+            count = int(state[k, 0])
+            np.testing.assert_allclose(memory[W * k:W * k + count],
+                                       ref_memory[W * k:W * k + count], atol=1e-12)
+    assert extra > 0  # some remembered points became rows
+
+
 def test_the_solvers_one_call_correction_is_the_whole_stage(panda):
     """Where the collision speed bounds do not cut the kernel's step, rows_step's correction of
     the kernel's step equals the whole stage's (re-solve, saturation, projection): the Panda
