@@ -19,6 +19,7 @@ against the numpy reference formulas of :mod:`sjt_pin.mappings` and against Pino
   start on a single pose task in one call (it calls Pinocchio's Jacobian once per iteration);
 - ``damper_rows``: the collision limit's velocity-damper rows from its pairs' closest points;
   ``witness_rows``: the rows of its pairs' remembered closest points (and their memory);
+  ``query_rows``: its exact distance queries (through Pinocchio's ``computeDistance``) and rows;
 - ``frame_velocity``, ``position_rows``, ``rotation_defect``: the tasks' small transforms;
 - ``project_rows(dq, Jw, A, b, lower, upper, moving, out)``: the constraint stage's smallest
   correction onto general rows and a box (:func:`sjt_pin.constraints.project`), on its dual by
@@ -39,6 +40,7 @@ from ._kernels import (  # noqa: F401
     nonnegative_qp,
     position_rows,
     project_rows,
+    query_rows,
     rotation_defect,
     rows_step,
     search_iteration,

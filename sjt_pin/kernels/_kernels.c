@@ -2423,6 +2423,128 @@ done:
     return result;
 }
 
+/* 3 doubles from a float64 array-like (coal's vectors) */
+static int read3(PyObject *obj, double *out, const char *name)
+{
+    Arg a = {0};
+    if (acquire(obj, &a, 0, 1, name)) return -1;
+    double *v = length(&a) == 3 ? vec(&a, name) : NULL;
+    if (!v) {
+        if (!PyErr_Occurred())
+            PyErr_Format(PyExc_ValueError, "%s must hold 3 numbers", name);
+        release(&a);
+        return -1;
+    }
+    out[0] = v[0];
+    out[1] = v[1];
+    out[2] = v[2];
+    release(&a);
+    return 0;
+}
+
+/* query_rows(compute, geometry, geometry_data, near, bound, floor, margins, joints, influence,
+ * rows) -> list: the collision limit's exact distance queries (limits/collision.py, _rows):
+ * for each pair k of the list `near`, res = compute(geometry, geometry_data, k) (Pinocchio's
+ * computeDistance), d = res.min_distance; with a bound (npairs,) (else None) floor[k] =
+ * d - bound[k] (-inf for a failed query: d -inf or NaN); a pair with -inf < d < influence
+ * gets the next row of rows (N, 13) as damper_rows reads it: d, margins[k], joints[k] (npairs,
+ * 2), res.normal, res.getNearestPoint1(), res.getNearestPoint2(). Returns those pairs. */
+static PyObject *py_query_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (!nargs_ok(nargs, 10, "query_rows")) return NULL;
+    static PyObject *s_distance = NULL, *s_normal = NULL, *s_p1 = NULL, *s_p2 = NULL;
+    if (!s_distance) {
+        s_distance = PyUnicode_InternFromString("min_distance");
+        s_normal = PyUnicode_InternFromString("normal");
+        s_p1 = PyUnicode_InternFromString("getNearestPoint1");
+        s_p2 = PyUnicode_InternFromString("getNearestPoint2");
+        if (!s_distance || !s_normal || !s_p1 || !s_p2) return NULL;
+    }
+    double influence = PyFloat_AsDouble(args[8]);
+    if (influence == -1.0 && PyErr_Occurred()) return NULL;
+    int has_bound = args[4] != Py_None;
+    Arg bound = {0}, floor_ = {0}, margins = {0}, joints = {0}, rows = {0};
+    PyObject *found = NULL, *near = NULL, *result = NULL;
+    if ((has_bound && acquire(args[4], &bound, 0, 1, "bound"))
+        || acquire(args[5], &floor_, 1, 1, "floor") || acquire(args[6], &margins, 0, 1, "margins")
+        || acquire(args[7], &joints, 0, 2, "joints") || acquire(args[9], &rows, 1, 2, "rows"))
+        goto done;
+    double *bv = has_bound ? vec(&bound, "bound") : NULL, *fv = out_vec(&floor_, "floor");
+    double *mv = vec(&margins, "margins"), *rv = out_mat(&rows, "rows");
+    if ((has_bound && !bv) || !fv || !mv || !rv) goto done;
+    Mat Jm = mat(&joints);
+    Py_ssize_t npairs = length(&floor_), N = rows.view.shape[0];
+    if (length(&margins) != npairs || Jm.m != npairs || Jm.n != 2 || rows.view.shape[1] != 13
+        || (has_bound && length(&bound) != npairs)) {
+        PyErr_Format(PyExc_ValueError, "query_rows: bound, floor, margins (npairs,), joints "
+                     "(npairs, 2) and rows (N, 13) do not fit (npairs %zd)", npairs);
+        goto done;
+    }
+    near = PySequence_Fast(args[3], "near must be a sequence of pair indices");
+    if (!near) goto done;
+    found = PyList_New(0);
+    if (!found) goto done;
+    Py_ssize_t m = PySequence_Fast_GET_SIZE(near), count = 0;
+    PyObject **items = PySequence_Fast_ITEMS(near);
+    for (Py_ssize_t i = 0; i < m; i++) {
+        Py_ssize_t k = PyLong_AsSsize_t(items[i]);
+        if (k == -1 && PyErr_Occurred()) goto fail;
+        if (k < 0 || k >= npairs) {
+            PyErr_Format(PyExc_ValueError, "near[%zd] = %zd is no pair (npairs %zd)", i, k,
+                         npairs);
+            goto fail;
+        }
+        PyObject *call[3] = {args[1], args[2], items[i]};
+        PyObject *res = PyObject_Vectorcall(args[0], call, 3, NULL);
+        if (!res) goto fail;
+        PyObject *dobj = PyObject_GetAttr(res, s_distance);
+        double d = dobj ? PyFloat_AsDouble(dobj) : -1.0;
+        Py_XDECREF(dobj);
+        if (!dobj || (d == -1.0 && PyErr_Occurred())) {
+            Py_DECREF(res);
+            goto fail;
+        }
+        if (has_bound) fv[k] = d > -INFINITY ? d - bv[k] : -INFINITY;  /* NaN: -inf */
+        if (!(d > -INFINITY && d < influence)) {
+            Py_DECREF(res);
+            continue;
+        }
+        if (count >= N) {
+            Py_DECREF(res);
+            PyErr_SetString(PyExc_ValueError, "query_rows: more pairs within influence than rows");
+            goto fail;
+        }
+        double *row = rv + 13 * count;
+        PyObject *normal = PyObject_GetAttr(res, s_normal);
+        PyObject *p1 = normal ? PyObject_CallMethodNoArgs(res, s_p1) : NULL;
+        PyObject *p2 = p1 ? PyObject_CallMethodNoArgs(res, s_p2) : NULL;
+        int bad = !p2 || read3(normal, row + 4, "normal") || read3(p1, row + 7, "nearest point 1")
+                  || read3(p2, row + 10, "nearest point 2");
+        Py_XDECREF(normal);
+        Py_XDECREF(p1);
+        Py_XDECREF(p2);
+        Py_DECREF(res);
+        if (bad) goto fail;
+        row[0] = d;
+        row[1] = mv[k];
+        row[2] = AT(Jm, k, 0);
+        row[3] = AT(Jm, k, 1);
+        if (PyList_Append(found, items[i]) < 0) goto fail;
+        count++;
+    }
+    result = found;
+    found = NULL;
+    goto done;
+fail:
+    Py_CLEAR(found);
+done:
+    Py_XDECREF(near);
+    Py_XDECREF(found);
+    if (has_bound) release(&bound);
+    release(&floor_); release(&margins); release(&joints); release(&rows);
+    return result;
+}
+
 static PyMethodDef methods[] = {
     {"transpose_step", (PyCFunction)(void (*)(void))py_transpose_step, METH_FASTCALL,
      "transpose_step(J, e, ff, q, work, step) -> status: one step of a Jacobian-transpose-type "
@@ -2465,6 +2587,9 @@ static PyMethodDef methods[] = {
     {"witness_rows", (PyCFunction)(void (*)(void))py_witness_rows, METH_FASTCALL,
      "witness_rows(poses, rows, found, memory, state, tick, keep, apart, owners) -> int: the "
      "collision limit's rows of its pairs' remembered closest points after their own rows."},
+    {"query_rows", (PyCFunction)(void (*)(void))py_query_rows, METH_FASTCALL,
+     "query_rows(compute, geometry, geometry_data, near, bound, floor, margins, joints, "
+     "influence, rows) -> list: the collision limit's distance queries and its pairs' rows."},
     {NULL, NULL, 0, NULL},
 };
 

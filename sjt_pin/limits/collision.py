@@ -31,7 +31,6 @@ pairs whose bounding spheres come within ``influence`` pay for an exact distance
 
 from __future__ import annotations
 
-import math
 import os
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
@@ -45,7 +44,7 @@ except ImportError:  # pragma: no cover - the pin wheel ships coal
     coal = None
 
 from ..exceptions import SJTError
-from ..kernels import damper_rows, witness_rows
+from ..kernels import damper_rows, query_rows, witness_rows
 from .base import Limit, Motion
 
 __all__ = ["ClosestPoints", "CollisionLimit", "CollisionError", "PairDistance"]
@@ -375,6 +374,7 @@ class CollisionLimit(Limit):
         self._poses[0] = np.eye(4)
         self._flat_poses = self._poses.reshape(model.njoints, 16)
         self._joint_pairs = [(int(a), int(b)) for a, b in zip(self._ja, self._jb, strict=True)]
+        self._joint_table = np.column_stack([self._ja, self._jb]).astype(float).reshape(-1, 2)
         self._reach = self._radius[self._pa] + self._radius[self._pb] + self.influence
         # sphere centres: in the parent joint's frame (homogeneous) and in the world
         local = self._placement @ np.append(self._box_center, np.ones((n, 1)), axis=1)[:, :, None]
@@ -704,24 +704,11 @@ class CollisionLimit(Limit):
         if near.size == 0:
             return None
         pin.updateGeometryPlacements(model, data, self.geometry, self.geometry_data)
-        geometry, gdata = self.geometry, self.geometry_data
-        compute = pin.computeDistance
-        found: list[int] = []
-        pairs, info, margins = self._pair_rows, self._pair_info, self.margins
-        for k in near.tolist():
-            res = compute(geometry, gdata, k)
-            d = res.min_distance
-            if bound is not None:
-                floor[k] = d - bound[k] if d > -math.inf else -math.inf  # NaN: -inf
-            if not -math.inf < d < influence:  # beyond, or coal failed (EPA: -inf)
-                continue
-            row = pairs[len(found)]
-            row[:4] = info[k]
-            row[0], row[1] = d, margins[k]
-            row[4:7] = res.normal
-            row[7:10] = res.getNearestPoint1()
-            row[10:] = res.getNearestPoint2()
-            found.append(k)
+        # coal's distance of each pair in near; those within influence get a row (compiled:
+        # the Python around each query cost more than the query)
+        found = query_rows(pin.computeDistance, self.geometry, self.geometry_data, near.tolist(),
+                           bound, floor, self.margins, self._joint_table, influence,
+                           self._pair_rows)
         if not found:
             return None
         self.active = found
@@ -730,7 +717,7 @@ class CollisionLimit(Limit):
             count = self._witness_rows(data, found)
         A = np.empty((count, self._support.shape[1]))
         b = np.empty(count)
-        damper_rows(data.J, self._support, pairs[:count], self.gain / dt, A, b)
+        damper_rows(data.J, self._support, self._pair_rows[:count], self.gain / dt, A, b)
         if self._mimic is not None:
             A = A @ self._mimic
         A.setflags(write=False)
