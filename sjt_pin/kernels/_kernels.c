@@ -2379,17 +2379,30 @@ static PyObject *py_witness_rows(PyObject *self, PyObject *const *args, Py_ssize
     double tick = PyFloat_AsDouble(args[5]), keep = PyFloat_AsDouble(args[6]);
     double apart = PyFloat_AsDouble(args[7]);
     if (PyErr_Occurred()) return NULL;
-    Arg poses = {0}, rows = {0}, found = {0}, memory = {0}, state = {0}, owners = {0};
-    PyObject *result = NULL;
+    Arg poses = {0}, rows = {0}, memory = {0}, state = {0}, owners = {0};
+    PyObject *result = NULL, *found = NULL;
+    double *fv = NULL;
     if (acquire(args[0], &poses, 0, 2, "poses") || acquire(args[1], &rows, 1, 2, "rows")
-        || acquire(args[2], &found, 0, 1, "found") || acquire(args[3], &memory, 1, 2, "memory")
-        || acquire(args[4], &state, 1, 2, "state") || acquire(args[8], &owners, 1, 1, "owners"))
+        || acquire(args[3], &memory, 1, 2, "memory") || acquire(args[4], &state, 1, 2, "state")
+        || acquire(args[8], &owners, 1, 1, "owners"))
         goto done;
     double *pv = out_mat(&poses, "poses"), *rv = out_mat(&rows, "rows");
-    double *fv = vec(&found, "found"), *mv = out_mat(&memory, "memory");
+    double *mv = out_mat(&memory, "memory");
     double *sv = out_mat(&state, "state"), *ov = out_vec(&owners, "owners");
-    if (!pv || !rv || !fv || !mv || !sv || !ov) goto done;
-    Py_ssize_t count = length(&found), N = rows.view.shape[0], npairs = state.view.shape[0];
+    if (!pv || !rv || !mv || !sv || !ov) goto done;
+    found = PySequence_Fast(args[2], "found must be a sequence of pair indices");
+    if (!found) goto done;
+    Py_ssize_t count = PySequence_Fast_GET_SIZE(found), N = rows.view.shape[0];
+    Py_ssize_t npairs = state.view.shape[0];
+    fv = (double *)malloc((size_t)(count > 0 ? count : 1) * sizeof(double));
+    if (!fv) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    for (Py_ssize_t i = 0; i < count; i++) {
+        fv[i] = PyFloat_AsDouble(PySequence_Fast_GET_ITEM(found, i));
+        if (fv[i] == -1.0 && PyErr_Occurred()) goto done;
+    }
     Py_ssize_t W = npairs > 0 ? memory.view.shape[0] / npairs : 0;
     if (poses.view.shape[1] != 16 || rows.view.shape[1] != 13
         || memory.view.shape[1] != 6 || state.view.shape[1] != 2 || W < 1 || W > 64
@@ -2418,8 +2431,9 @@ static PyObject *py_witness_rows(PyObject *self, PyObject *const *args, Py_ssize
     result = PyLong_FromSsize_t(witness_rows_c(pv, rv, fv, count, mv, W, sv, tick, keep, apart,
                                                ov));
 done:
-    release(&poses); release(&rows); release(&found); release(&memory); release(&state);
-    release(&owners);
+    Py_XDECREF(found);
+    free(fv);
+    release(&poses); release(&rows); release(&memory); release(&state); release(&owners);
     return result;
 }
 

@@ -373,7 +373,9 @@ class CollisionLimit(Limit):
         self._poses = np.zeros((model.njoints, 4, 4))
         self._poses[0] = np.eye(4)
         self._flat_poses = self._poses.reshape(model.njoints, 16)
-        self._joint_pairs = [(int(a), int(b)) for a, b in zip(self._ja, self._jb, strict=True)]
+        #: per pair, the joints of its geometries other than the world
+        self._moving_joints = [tuple(int(j) for j in (a, b) if j != 0)
+                               for a, b in zip(self._ja, self._jb, strict=True)]
         self._joint_table = np.column_stack([self._ja, self._jb]).astype(float).reshape(-1, 2)
         self._reach = self._radius[self._pa] + self._radius[self._pb] + self.influence
         # sphere centres: in the parent joint's frame (homogeneous) and in the world
@@ -563,7 +565,7 @@ class CollisionLimit(Limit):
         if q is not None and ref is not None and ref[0] == self._version:
             moved = np.abs(q - ref[1] if self._flat else pin.difference(self.model, ref[1], q))
             bound = self._pair_lever @ moved
-            if np.all(bound < ref[3]):
+            if (bound < ref[3]).all():
                 self._bound = bound
                 return ref[2]
         near, slack = self._broad_phase(data)
@@ -724,18 +726,17 @@ class CollisionLimit(Limit):
         b.setflags(write=False)
         return A, b
 
-
     def _witness_rows(self, data, found: list[int]) -> int:
         """Append to the step's rows (``_pair_rows[:len(found)]``) one per remembered witness
         of each pair in ``found`` (module docstring, "Witnesses"; ``kernels.witness_rows``) and
         remember this step's closest points; returns the number of rows."""
         count = len(found)
-        poses, oMi, joints = self._poses, data.oMi, self._joint_pairs
-        for j in {j for k in found for j in joints[k]} - {0}:  # the world's: the identity
+        poses, oMi, joints = self._poses, data.oMi, self._moving_joints
+        for j in {j for k in found for j in joints[k]}:  # the world's: the identity
             poses[j] = oMi[j].homogeneous
         self._tick += 1.0
-        total = witness_rows(self._flat_poses, self._pair_rows,
-                             np.array(found, dtype=float), self._memory, self._memory_state,
+        total = witness_rows(self._flat_poses, self._pair_rows, found, self._memory,
+                             self._memory_state,
                              self._tick, 0.5 * (self.influence - self.margin), WITNESS_APART,
                              self._owners)
         self.witness_pairs = self._owners[:total - count].astype(int).tolist()
