@@ -262,6 +262,9 @@ def _witness_reference(poses, rows, found, memory, state, tick, keep, apart):
         now = np.concatenate([H[s][:3, :3].T @ (row[7 + 3 * s:10 + 3 * s] - H[s][:3, 3])
                               for s in (0, 1)])
         filled = int(state[k, 0]) if state[k, 1] == tick - 1 else 0
+        if row[0] - row[1] >= keep:
+            state[k] = 0, tick
+            continue
         kept = []
         for m in memory[W * k:W * k + filled]:
             pa, pb = H[0][:3, :3] @ m[:3] + H[0][:3, 3], H[1][:3, :3] @ m[3:] + H[1][:3, 3]
@@ -309,7 +312,8 @@ def test_the_compiled_witness_rows_are_the_numpy_ones():
         want, want_owners = _witness_reference(flat, rows, found, ref_memory, ref_state, tick,
                                                0.02, 1e-4)
         owners = np.zeros(npairs * W)
-        total = K.witness_rows(flat, rows, found, memory, state, tick, 0.02, 1e-4, owners)
+        total = K.witness_rows(None, flat, rows, found.tolist(), memory, state, tick, 0.02,
+                               1e-4, owners)
         assert total == len(want)
         np.testing.assert_allclose(rows[:total], want, atol=1e-12)
         assert owners[:total - len(found)].astype(int).tolist() == want_owners

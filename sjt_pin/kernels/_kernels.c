@@ -2307,11 +2307,12 @@ done:
     return result;
 }
 
-/* witness_rows(poses, rows, found, memory, state, tick, keep, apart, owners) -> int: the
+/* witness_rows(oMi, poses, rows, found, memory, state, tick, keep, apart, owners) -> int: the
  * collision limit's witness rows (limits/collision.py, "Witnesses"). rows (N, 13) holds the
  * step's exact rows of the pairs `found` (count,) in its first count rows (as damper_rows
- * reads them); poses (njoints, 16): the 4x4 world pose of each joint the rows name (row-major;
- * the others are not read). memory (npairs * W, 6): per pair up to W remembered closest points, each
+ * reads them); poses (njoints, 16): the 4x4 world pose of each joint the rows name (row-major),
+ * taken here from Pinocchio's data.oMi (joint 0: the identity) unless oMi is None. A pair
+ * whose d - margin is not under keep remembers nothing. memory (npairs * W, 6): per pair up to W remembered closest points, each
  * in its joint's frame (p_a, p_b); state (npairs, 2): how many are remembered and the tick of
  * the call that last saw the pair within influence (a pair missed by the previous call,
  * tick - 1, forgets them). Each remembered pair of points that lies farther than `apart`
@@ -2330,6 +2331,10 @@ static Py_ssize_t witness_rows_c(const double *poses, double *rows, const double
         const double *H[2] = {poses + 16 * (Py_ssize_t)row[2], poses + 16 * (Py_ssize_t)row[3]};
         Py_ssize_t filled = st[1] == tick - 1.0 ? (Py_ssize_t)st[0] : 0;
         st[1] = tick;
+        if (!(row[0] - row[1] < keep)) {  /* far from its margin: its row binds nothing */
+            st[0] = 0.0;
+            continue;
+        }
         double now[6];
         for (int side = 0; side < 2; side++) {
             const double *M = H[side], *p = row + 7 + 3 * side;
@@ -2373,16 +2378,49 @@ static Py_ssize_t witness_rows_c(const double *poses, double *rows, const double
     return total;
 }
 
+/* the 4x4 world pose of joint j (Pinocchio's data.oMi[j].homogeneous) into out (row-major) */
+static int fetch_pose(PyObject *oMi, Py_ssize_t j, double *out)
+{
+    static PyObject *s_homogeneous = NULL;
+    if (!s_homogeneous && !(s_homogeneous = PyUnicode_InternFromString("homogeneous")))
+        return -1;
+    PyObject *index = PyLong_FromSsize_t(j);
+    PyObject *M = index ? PyObject_GetItem(oMi, index) : NULL;
+    Py_XDECREF(index);
+    PyObject *H = M ? PyObject_GetAttr(M, s_homogeneous) : NULL;
+    Py_XDECREF(M);
+    if (!H) return -1;
+    Arg a = {0};
+    int bad = acquire(H, &a, 0, 2, "oMi[j].homogeneous");
+    if (!bad) {
+        Mat Hm = mat(&a);
+        if (Hm.m != 4 || Hm.n != 4) {
+            PyErr_SetString(PyExc_ValueError, "oMi[j].homogeneous must be 4x4");
+            bad = 1;
+        } else {
+            for (int r = 0; r < 4; r++)
+                for (int c = 0; c < 4; c++) out[4 * r + c] = AT(Hm, r, c);
+        }
+        release(&a);
+    }
+    Py_DECREF(H);
+    return bad ? -1 : 0;
+}
+
 static PyObject *py_witness_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
-    if (!nargs_ok(nargs, 9, "witness_rows")) return NULL;
+    if (!nargs_ok(nargs, 10, "witness_rows")) return NULL;
+    PyObject *oMi = args[0];
+    args++;  /* the rest as without oMi */
     double tick = PyFloat_AsDouble(args[5]), keep = PyFloat_AsDouble(args[6]);
     double apart = PyFloat_AsDouble(args[7]);
     if (PyErr_Occurred()) return NULL;
     Arg poses = {0}, rows = {0}, memory = {0}, state = {0}, owners = {0};
     PyObject *result = NULL, *found = NULL;
     double *fv = NULL;
-    if (acquire(args[0], &poses, 0, 2, "poses") || acquire(args[1], &rows, 1, 2, "rows")
+    char *fetched = NULL;
+    if (acquire(args[0], &poses, oMi != Py_None, 2, "poses")
+        || acquire(args[1], &rows, 1, 2, "rows")
         || acquire(args[3], &memory, 1, 2, "memory") || acquire(args[4], &state, 1, 2, "state")
         || acquire(args[8], &owners, 1, 1, "owners"))
         goto done;
@@ -2428,11 +2466,33 @@ static PyObject *py_witness_rows(PyObject *self, PyObject *const *args, Py_ssize
             }
         }
     }
+    if (oMi != Py_None) {  /* the poses of the joints of the pairs that remember */
+        Py_ssize_t nj = poses.view.shape[0];
+        fetched = (char *)calloc((size_t)nj, 1);
+        if (!fetched) {
+            PyErr_NoMemory();
+            goto done;
+        }
+        double *P = (double *)poses.view.buf;
+        for (int c = 0; c < 16; c++) P[c] = c % 5 == 0 ? 1.0 : 0.0;
+        fetched[0] = 1;
+        for (Py_ssize_t i = 0; i < count; i++) {
+            const double *row = rv + 13 * i;
+            if (!(row[0] - row[1] < keep)) continue;
+            for (int side = 0; side < 2; side++) {
+                Py_ssize_t j = (Py_ssize_t)row[2 + side];
+                if (fetched[j]) continue;
+                if (fetch_pose(oMi, j, P + 16 * j)) goto done;
+                fetched[j] = 1;
+            }
+        }
+    }
     result = PyLong_FromSsize_t(witness_rows_c(pv, rv, fv, count, mv, W, sv, tick, keep, apart,
                                                ov));
 done:
     Py_XDECREF(found);
     free(fv);
+    free(fetched);
     release(&poses); release(&rows); release(&memory); release(&state); release(&owners);
     return result;
 }
@@ -2599,7 +2659,7 @@ static PyMethodDef methods[] = {
      "damper_rows(J, support, pairs, gain_rate, A, b): the collision limit's velocity-damper "
      "rows of the pairs (d, margin, joint a, joint b, normal, p_a, p_b) into A and b."},
     {"witness_rows", (PyCFunction)(void (*)(void))py_witness_rows, METH_FASTCALL,
-     "witness_rows(poses, rows, found, memory, state, tick, keep, apart, owners) -> int: the "
+     "witness_rows(oMi, poses, rows, found, memory, state, tick, keep, apart, owners) -> int: the "
      "collision limit's rows of its pairs' remembered closest points after their own rows."},
     {"query_rows", (PyCFunction)(void (*)(void))py_query_rows, METH_FASTCALL,
      "query_rows(compute, geometry, geometry_data, near, bound, floor, margins, joints, "

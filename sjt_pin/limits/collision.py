@@ -23,7 +23,8 @@ the closest points separates the hulls, so ``s = n^T (b' - a') >= d``; a row
 ``s_dot >= -gain (s - margin) / dt`` asks nothing the pair's own row does not imply to first
 order, but together they hold the whole contact (the several points of a contact manifold),
 and the arm comes to rest there. A witness is forgotten when its ``s`` exceeds ``d`` by half
-the band ``influence - margin`` or when the pair leaves ``influence``.
+the band ``influence - margin`` or when the pair leaves ``influence``, and a pair farther
+than that from its margin remembers nothing (its row binds nothing).
 
 Distances and closest points come from coal (through Pinocchio's ``GeometryModel``); only the
 pairs whose bounding spheres come within ``influence`` pay for an exact distance query.
@@ -369,13 +370,10 @@ class CollisionLimit(Limit):
         self._memory_state[:, 1] = -np.inf
         self._tick = 0.0
         self._owners = np.zeros(slots * max(self.witnesses, 1))
-        #: the world poses of the joints the step's pairs name (the world's: the identity)
+        #: the world poses of the joints the step's pairs name (kernels.witness_rows' scratch)
         self._poses = np.zeros((model.njoints, 4, 4))
         self._poses[0] = np.eye(4)
         self._flat_poses = self._poses.reshape(model.njoints, 16)
-        #: per pair, the joints of its geometries other than the world
-        self._moving_joints = [tuple(int(j) for j in (a, b) if j != 0)
-                               for a, b in zip(self._ja, self._jb, strict=True)]
         self._joint_table = np.column_stack([self._ja, self._jb]).astype(float).reshape(-1, 2)
         self._reach = self._radius[self._pa] + self._radius[self._pb] + self.influence
         # sphere centres: in the parent joint's frame (homogeneous) and in the world
@@ -731,11 +729,8 @@ class CollisionLimit(Limit):
         of each pair in ``found`` (module docstring, "Witnesses"; ``kernels.witness_rows``) and
         remember this step's closest points; returns the number of rows."""
         count = len(found)
-        poses, oMi, joints = self._poses, data.oMi, self._moving_joints
-        for j in {j for k in found for j in joints[k]}:  # the world's: the identity
-            poses[j] = oMi[j].homogeneous
         self._tick += 1.0
-        total = witness_rows(self._flat_poses, self._pair_rows, found, self._memory,
+        total = witness_rows(data.oMi, self._flat_poses, self._pair_rows, found, self._memory,
                              self._memory_state,
                              self._tick, 0.5 * (self.influence - self.margin), WITNESS_APART,
                              self._owners)
