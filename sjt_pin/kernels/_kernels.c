@@ -2619,6 +2619,80 @@ done:
     return result;
 }
 
+/* near_pairs(q, reference, lever, slack, bound, near, floor, influence) -> list | None: the
+ * collision limit's skip of its broad phase and of its queries (limits/collision.py, _near
+ * and _rows) for q in its own tangent space (revolute and prismatic joints): bound (npairs,)
+ * = lever (npairs, nv) |q - reference|; None when some pair's bound reaches its slack (npairs,)
+ * (the broad phase must run again); else the pairs of the list `near` whose floor - bound is
+ * not above influence (those to query). */
+static PyObject *py_near_pairs(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (!nargs_ok(nargs, 8, "near_pairs")) return NULL;
+    double influence = PyFloat_AsDouble(args[7]);
+    if (influence == -1.0 && PyErr_Occurred()) return NULL;
+    Arg q = {0}, ref = {0}, lever = {0}, slack = {0}, bound = {0}, floor_ = {0};
+    PyObject *result = NULL, *near = NULL, *out = NULL;
+    double *moved = NULL;
+    if (acquire(args[0], &q, 0, 1, "q") || acquire(args[1], &ref, 0, 1, "reference")
+        || acquire(args[2], &lever, 0, 2, "lever") || acquire(args[3], &slack, 0, 1, "slack")
+        || acquire(args[4], &bound, 1, 1, "bound") || acquire(args[6], &floor_, 0, 1, "floor"))
+        goto done;
+    double *qv = vec(&q, "q"), *rv = vec(&ref, "reference"), *sv = vec(&slack, "slack");
+    double *bv = out_vec(&bound, "bound"), *fv = vec(&floor_, "floor");
+    if (!qv || !rv || !sv || !bv || !fv) goto done;
+    Mat L = mat(&lever);
+    Py_ssize_t n = length(&q), npairs = L.m;
+    if (length(&ref) != n || L.n != n || length(&slack) != npairs || length(&bound) != npairs
+        || length(&floor_) != npairs) {
+        PyErr_Format(PyExc_ValueError, "near_pairs: q, reference (n,), lever (npairs, n), "
+                     "slack, bound and floor (npairs,) do not fit (n %zd, npairs %zd)", n, npairs);
+        goto done;
+    }
+    moved = (double *)malloc((size_t)(n > 0 ? n : 1) * sizeof(double));
+    if (!moved) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    for (Py_ssize_t j = 0; j < n; j++) moved[j] = fabs(qv[j] - rv[j]);
+    int within = 1;
+    for (Py_ssize_t k = 0; k < npairs; k++) {
+        double acc = 0.0;
+        for (Py_ssize_t j = 0; j < n; j++) acc += AT(L, k, j) * moved[j];
+        bv[k] = acc;
+        if (!(acc < sv[k])) within = 0;
+    }
+    if (!within) {
+        result = Py_None;
+        Py_INCREF(result);
+        goto done;
+    }
+    near = PySequence_Fast(args[5], "near must be a sequence of pair indices");
+    if (!near) goto done;
+    out = PyList_New(0);
+    if (!out) goto done;
+    Py_ssize_t m = PySequence_Fast_GET_SIZE(near);
+    PyObject **items = PySequence_Fast_ITEMS(near);
+    for (Py_ssize_t i = 0; i < m; i++) {
+        Py_ssize_t k = PyLong_AsSsize_t(items[i]);
+        if (k == -1 && PyErr_Occurred()) goto done;
+        if (k < 0 || k >= npairs) {
+            PyErr_Format(PyExc_ValueError, "near[%zd] = %zd is no pair (npairs %zd)", i, k,
+                         npairs);
+            goto done;
+        }
+        if (!(fv[k] - bv[k] > influence) && PyList_Append(out, items[i]) < 0) goto done;
+    }
+    result = out;
+    out = NULL;
+done:
+    Py_XDECREF(out);
+    Py_XDECREF(near);
+    free(moved);
+    release(&q); release(&ref); release(&lever); release(&slack); release(&bound);
+    release(&floor_);
+    return result;
+}
+
 static PyMethodDef methods[] = {
     {"transpose_step", (PyCFunction)(void (*)(void))py_transpose_step, METH_FASTCALL,
      "transpose_step(J, e, ff, q, work, step) -> status: one step of a Jacobian-transpose-type "
@@ -2664,6 +2738,9 @@ static PyMethodDef methods[] = {
     {"query_rows", (PyCFunction)(void (*)(void))py_query_rows, METH_FASTCALL,
      "query_rows(compute, geometry, geometry_data, near, bound, floor, margins, joints, "
      "influence, rows) -> list: the collision limit's distance queries and its pairs' rows."},
+    {"near_pairs", (PyCFunction)(void (*)(void))py_near_pairs, METH_FASTCALL,
+     "near_pairs(q, reference, lever, slack, bound, near, floor, influence) -> list | None: "
+     "the collision limit's pairs to query, or None when its broad phase must run again."},
     {NULL, NULL, 0, NULL},
 };
 

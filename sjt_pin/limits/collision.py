@@ -45,7 +45,7 @@ except ImportError:  # pragma: no cover - the pin wheel ships coal
     coal = None
 
 from ..exceptions import SJTError
-from ..kernels import damper_rows, query_rows, witness_rows
+from ..kernels import damper_rows, near_pairs, query_rows, witness_rows
 from .base import Limit, Motion
 
 __all__ = ["ClosestPoints", "CollisionLimit", "CollisionError", "PairDistance"]
@@ -411,12 +411,14 @@ class CollisionLimit(Limit):
         self._lever = self._levers()
         self._bounds: tuple[float, tuple[np.ndarray, np.ndarray]] | None = None
         self._pair_lever, self._flat = self._pair_levers()
-        #: the last broad phase: (obstacles' version, q, its pairs, each pair's gap)
-        self._reference: tuple[int, np.ndarray, np.ndarray, np.ndarray] | None = None
+        #: the last broad phase: (obstacles' version, q, its pairs, each pair's gap, its pairs
+        #: as a list)
+        self._reference: tuple[int, np.ndarray, np.ndarray, np.ndarray, list] | None = None
         #: per pair, its exact distance at its last query minus the bound of _near there (m):
         #: while that minus the bound now exceeds influence, the pair is not queried (_rows)
         self._floor = np.full(len(self.pairs), -np.inf)
         self._no_bound = np.zeros(len(self.pairs))
+        self._bound_now = np.zeros(len(self.pairs))  # kernels.near_pairs' output
         self._bound: np.ndarray | None = None
 
     def _pair_levers(self) -> tuple[np.ndarray | None, bool]:
@@ -569,7 +571,7 @@ class CollisionLimit(Limit):
         near, slack = self._broad_phase(data)
         if q is not None and self._pair_lever is not None:
             slack[near] = np.inf  # a candidate stays one
-            self._reference = (self._version, q.copy(), near, slack)
+            self._reference = (self._version, q.copy(), near, slack, near.tolist())
             self._bound = self._no_bound
             # the exact distances' floors move to the new reference (here, where its bound is
             # 0); after a move() of an obstacle they are gone
@@ -693,20 +695,30 @@ class CollisionLimit(Limit):
 
     def _rows(self, model, data, dt: float, q: np.ndarray | None = None
               ) -> tuple[np.ndarray, np.ndarray] | None:
-        near = self._near(data, q)
         self.active = []  # indices into self.pairs / self.pair_names of the rows returned
         self.witness_pairs = []
-        influence, bound, floor = self.influence, self._bound, self._floor
-        if bound is not None and near.size:
-            # a pair's distance changes by at most its bound's change (_near): one that was
-            # beyond influence by more than that at its last query still is
-            near = near[floor[near] - bound[near] <= influence]
-        if near.size == 0:
+        influence, floor, ref = self.influence, self._floor, self._reference
+        # a pair's distance changes by at most its bound's change (_near): one that was beyond
+        # influence by more than that at its last query still is; both tests compiled where q
+        # is its own tangent space, else _near and numpy
+        listed = None
+        if self._flat and q is not None and ref is not None and ref[0] == self._version:
+            listed = near_pairs(q, ref[1], self._pair_lever, ref[3], self._bound_now, ref[4],
+                                floor, influence)
+        if listed is not None:
+            bound = self._bound = self._bound_now
+        else:
+            near = self._near(data, q)
+            bound = self._bound
+            if bound is not None and near.size:
+                near = near[floor[near] - bound[near] <= influence]
+            listed = near.tolist()
+        if not listed:
             return None
         pin.updateGeometryPlacements(model, data, self.geometry, self.geometry_data)
-        # coal's distance of each pair in near; those within influence get a row (compiled:
-        # the Python around each query cost more than the query)
-        found = query_rows(pin.computeDistance, self.geometry, self.geometry_data, near.tolist(),
+        # coal's distance of each pair listed; those within influence get a row (compiled: the
+        # Python around each query cost more than the query)
+        found = query_rows(pin.computeDistance, self.geometry, self.geometry_data, listed,
                            bound, floor, self.margins, self._joint_table, influence,
                            self._pair_rows)
         if not found:
