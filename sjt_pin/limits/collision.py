@@ -702,6 +702,7 @@ class CollisionLimit(Limit):
         # influence by more than that at its last query still is; both tests compiled where q
         # is its own tangent space, else _near and numpy
         listed = None
+        bound: np.ndarray | None
         if self._flat and q is not None and ref is not None and ref[0] == self._version:
             listed = near_pairs(q, ref[1], self._pair_lever, ref[3], self._bound_now, ref[4],
                                 floor, influence)
