@@ -109,12 +109,12 @@ def _blocked_scene(robot, rng):
             return q0, end, bench._line(start, end, 1.0), (shape, pose)
 
 
-# seeds of _blocked_scene where the arm comes to rest; the others in 0-7 on Panda end sliding
-# slowly along the obstacle (net motion, no reversals) or, for DLS on seed 5, in a cycle that
-# the speed saturation of the method's own step makes (its step switches between saturated
-# joint sets while the rows stay put)
+# seeds of _blocked_scene where the arm comes to rest; the others in 0-7 on Panda end in a
+# self-motion along the obstacle (the task frozen, |J dq| ~1e-3 |dq|: the stage's correction
+# leaks into the null space) or, for DLS on seed 5, in a cycle of the method's own step (its
+# saturated step switches while the rows stay put)
 RESTING = [("panda", 0), ("panda", 3), ("panda", 4), ("panda", 7), ("ur5", 0), ("ur5", 3),
-           ("ur5", 5), ("ur5", 6)]
+           ("ur5", 4), ("ur5", 5), ("ur5", 6)]
 
 
 @pytest.mark.parametrize("name,seed", RESTING)
@@ -129,3 +129,11 @@ def test_random_blocked_targets_come_to_rest(name, seed, panda, ur5):
         assert _rest(qs) < 1e-3, method
         assert bench._pose_error(robot, qs[-1], end) > 0.05, method  # the obstacle blocks it
         assert _closest(robot, [obstacle], limit, qs) >= MARGIN - 1e-3, method
+
+
+def test_without_witness_rows_sjt_chatters_under_a_ur5_obstacle(ur5):
+    """UR5, random blocked scene 4: with one row per pair SJT cycles at 0.02 rad/s with no net
+    motion (test_random_blocked_targets_come_to_rest: at rest with the witness rows)."""
+    q0, end, target, obstacle = _blocked_scene(ur5, np.random.default_rng(4))
+    limit = CollisionLimit(ur5, [obstacle], self_collision=True, margin=MARGIN, witnesses=0)
+    assert _rest(_run(ur5, q0, target, limit, "sjt")) > 5e-3
