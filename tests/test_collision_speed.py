@@ -134,6 +134,17 @@ def test_compiled_kernels_name_the_argument_that_does_not_fit():
         pairs[0, 2] = 9
         K.damper_rows(np.zeros((6, 3)), np.zeros((4, 3)), pairs, 1.0, np.zeros((1, 3)),
                       np.zeros(1))
+    with pytest.raises(ValueError, match="near\\[0\\] = 5 is no pair"):
+        K.near_pairs(np.zeros(2), np.zeros(2), np.zeros((3, 2)), np.ones(3), np.zeros(3), [5],
+                     np.zeros(3), 0.05)
+    with pytest.raises(ValueError, match="do not fit"):
+        K.query_rows(pin.computeDistance, None, None, [], None, np.zeros(3), np.zeros(2),
+                     np.zeros((3, 2)), 0.05, np.zeros((3, 13)))
+    with pytest.raises(ValueError, match="rows\\[0\\] names joint 7; poses has 2"):
+        rows = np.zeros((4, 13))
+        rows[0, 3] = 7
+        K.witness_rows(None, np.zeros((2, 16)), rows, [0], np.zeros((3, 6)), np.zeros((1, 2)),
+                       1.0, 0.02, 1e-4, np.zeros(3))
 
 
 def test_the_compiled_damper_rows_are_the_numpy_ones(panda):
