@@ -134,6 +134,17 @@ def test_compiled_kernels_name_the_argument_that_does_not_fit():
         pairs[0, 2] = 9
         K.damper_rows(np.zeros((6, 3)), np.zeros((4, 3)), pairs, 1.0, np.zeros((1, 3)),
                       np.zeros(1))
+    with pytest.raises(ValueError, match="near\\[0\\] = 5 is no pair"):
+        K.near_pairs(np.zeros(2), np.zeros(2), np.zeros((3, 2)), np.ones(3), np.zeros(3), [5],
+                     np.zeros(3), 0.05)
+    with pytest.raises(ValueError, match="do not fit"):
+        K.query_rows(pin.computeDistance, None, None, [], None, np.zeros(3), np.zeros(2),
+                     np.zeros((3, 2)), 0.05, np.zeros((3, 13)))
+    with pytest.raises(ValueError, match="rows\\[0\\] names joint 7; poses has 2"):
+        rows = np.zeros((4, 13))
+        rows[0, 3] = 7
+        K.witness_rows(None, np.zeros((2, 16)), rows, [0], np.zeros((3, 6)), np.zeros((1, 2)),
+                       1.0, 0.02, 1e-4, np.zeros(3))
 
 
 def test_the_compiled_damper_rows_are_the_numpy_ones(panda):
@@ -204,6 +215,126 @@ def test_the_broad_phase_it_skips_never_misses_a_pair_within_influence(name, pan
             if d < limit.influence:
                 assert k in near, (limit.pair_names[k], d)
     assert calls[0] < steps / 2  # the skip did skip
+
+
+@pytest.mark.parametrize("name", ["panda", "ur5"])
+def test_rows_hold_every_pair_within_influence_though_most_are_not_queried(name, panda, ur5):
+    """Along random joint-space walks (steps of up to 3 mrad, every 50th up to 0.3 rad), the
+    rows are those of exactly the pairs whose exact distance is below influence (brute force
+    over every pair), although a pair last measured far enough beyond influence is not
+    queried again until its bound reaches that gap."""
+    robot = panda if name == "panda" else ur5
+    rng = np.random.default_rng(16)
+    q = robot.random_configuration(rng)
+    data = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, data, q)
+    hand = pin.updateFramePlacement(robot.model, data, robot.model.getFrameId(robot.ee_frame))
+    ball = (coal.Sphere(0.05), pin.SE3(np.eye(3), hand.translation + [0.1, 0.0, 0.0]))
+    limit = CollisionLimit(robot, [ball], self_collision=True, influence=0.08)
+    limit._checked = True  # every pair stays, the ball wherever the walk takes the arm
+    queries, candidates, within = [0], 0, 0
+    compute = pin.computeDistance
+
+    def counted(*args):
+        queries[0] += 1
+        return compute(*args)
+
+    kin = Kinematics(robot.model)
+    motion = Motion(q, np.zeros(robot.nv), np.zeros(robot.nv), 1e-3)
+    probe = limit.geometry.copy()
+    probe_data = limit.geometry_data.copy()
+    lower, upper = robot.model.lowerPositionLimit, robot.model.upperPositionLimit
+    for step in range(300):
+        jump = 0.3 if step % 50 == 0 else 0.003
+        q = np.clip(q + rng.uniform(-jump, jump, robot.nq), lower, upper)
+        kin.update(q)
+        pin.computeDistance = counted
+        try:
+            limit.rows(kin, motion)
+        finally:
+            pin.computeDistance = compute
+        candidates += limit._near(kin.data, q).size
+        pin.updateGeometryPlacements(robot.model, data, probe, probe_data, q)
+        close = {k for k in range(len(limit.pairs))
+                 if compute(probe, probe_data, k).min_distance < limit.influence}
+        assert set(limit.active) == close, step
+        within += len(close)
+    assert within > 100  # pairs were within influence
+    assert queries[0] < 0.6 * candidates  # and most candidates were not queried
+
+
+def _witness_reference(poses, rows, found, memory, state, tick, keep, apart):
+    """kernels.witness_rows in numpy (limits/collision.py, "Witnesses")."""
+    W = memory.shape[0] // state.shape[0]
+    out, owners = [r.copy() for r in rows[:len(found)]], []
+    for i, k in enumerate(found):
+        row, k = rows[i], int(k)
+        H = [poses[int(row[2])].reshape(4, 4), poses[int(row[3])].reshape(4, 4)]
+        now = np.concatenate([H[s][:3, :3].T @ (row[7 + 3 * s:10 + 3 * s] - H[s][:3, 3])
+                              for s in (0, 1)])
+        filled = int(state[k, 0]) if state[k, 1] == tick - 1 else 0
+        if row[0] - row[1] >= keep:
+            state[k] = 0, tick
+            continue
+        kept = []
+        for m in memory[W * k:W * k + filled]:
+            pa, pb = H[0][:3, :3] @ m[:3] + H[0][:3, 3], H[1][:3, :3] @ m[3:] + H[1][:3, 3]
+            sep = row[4:7] @ (pb - pa)
+            if np.abs(m - now).max() > apart and sep - row[0] < keep:
+                extra = row.copy()
+                extra[0], extra[7:10], extra[10:] = sep, pa, pb
+                out.append(extra)
+                owners.append(k)
+                kept.append(m.copy())
+        kept = kept[max(len(kept) - (W - 1), 0):] + [now]
+        memory[W * k:W * k + len(kept)] = kept
+        state[k] = len(kept), tick
+    return np.array(out), owners
+
+
+def test_the_compiled_witness_rows_are_the_numpy_ones():
+    """Random poses, rows and memories, some stale (a pair the previous call missed), some
+    witnesses too close to this step's points or too far from contact: the same rows, owners,
+    memory and state, over several calls."""
+    rng = np.random.default_rng(3)
+    njoints, npairs, W = 5, 6, 3
+    memory = rng.normal(size=(npairs * W, 6)) * 0.05
+    state = np.column_stack([rng.integers(0, W + 1, npairs), np.full(npairs, 4.0)])
+    state[1, 1] = 2.0  # stale
+    ref_memory, ref_state = memory.copy(), state.copy()
+    extra = 0
+    for tick in (5.0, 6.0, 7.0):
+        poses = np.zeros((njoints, 4, 4))
+        for j in range(njoints):
+            poses[j] = pin.SE3(pin.exp3(rng.normal(size=3) * 0.1), rng.normal(size=3)).homogeneous
+        found = rng.permutation(npairs)[:4].astype(float)
+        rows = np.zeros((npairs * (1 + W), 13))
+        for i, k in enumerate(found):
+            n = rng.normal(size=3)
+            rows[i, :4] = rng.uniform(0.0, 0.04), 0.01, *rng.integers(0, njoints, 2)
+            rows[i, 4:7] = n / np.linalg.norm(n)
+            rows[i, 7:13] = rng.normal(size=6) * 0.05
+            if k == found[0]:  # this step's points where one remembered pair is
+                joints = rows[i, 2:4].astype(int)
+                m = memory[W * int(k)]
+                rows[i, 7:10] = poses[joints[0]][:3, :3] @ m[:3] + poses[joints[0]][:3, 3]
+                rows[i, 10:13] = poses[joints[1]][:3, :3] @ m[3:] + poses[joints[1]][:3, 3]
+        flat = poses.reshape(njoints, 16)
+        want, want_owners = _witness_reference(flat, rows, found, ref_memory, ref_state, tick,
+                                               0.02, 1e-4)
+        owners = np.zeros(npairs * W)
+        total = K.witness_rows(None, flat, rows, found.tolist(), memory, state, tick, 0.02,
+                               1e-4, owners)
+        assert total == len(want)
+        np.testing.assert_allclose(rows[:total], want, atol=1e-12)
+        assert owners[:total - len(found)].astype(int).tolist() == want_owners
+        extra += total - len(found)
+        np.testing.assert_allclose(state, ref_state)
+        for k in range(npairs):  # the remembered points (those counted)
+            count = int(state[k, 0])
+            np.testing.assert_allclose(memory[W * k:W * k + count],
+                                       ref_memory[W * k:W * k + count], atol=1e-12)
+    assert extra > 0  # some remembered points became rows
 
 
 def test_the_solvers_one_call_correction_is_the_whole_stage(panda):

@@ -18,6 +18,9 @@ against the numpy reference formulas of :mod:`sjt_pin.mappings` and against Pino
   normalised columns, within the joint limits; ``search_pose(...)``: every iteration of one
   start on a single pose task in one call (it calls Pinocchio's Jacobian once per iteration);
 - ``damper_rows``: the collision limit's velocity-damper rows from its pairs' closest points;
+  ``witness_rows``: the rows of its pairs' remembered closest points (and their memory);
+  ``query_rows``: its exact distance queries (through Pinocchio's ``computeDistance``) and rows;
+  ``near_pairs``: the pairs it must query, or whether its broad phase must run again;
 - ``frame_velocity``, ``position_rows``, ``rotation_defect``: the tasks' small transforms;
 - ``project_rows(dq, Jw, A, b, lower, upper, moving, out)``: the constraint stage's smallest
   correction onto general rows and a box (:func:`sjt_pin.constraints.project`), on its dual by
@@ -38,9 +41,11 @@ from ._kernels import (  # noqa: F401
     frame_velocity,
     least_squares_step,
     loop_bound,
+    near_pairs,
     nonnegative_qp,
     position_rows,
     project_rows,
+    query_rows,
     rotation_defect,
     rows_step,
     search_iteration,
@@ -49,5 +54,6 @@ from ._kernels import (  # noqa: F401
     symmetric_eigen,
     transpose_step,
     unit_defect,
+    witness_rows,
 )
 from .layout import *  # noqa: F403 (the slot names are the kernels' vocabulary)

@@ -13,13 +13,27 @@ joint (zero for an obstacle). Over one period ``dt`` the distance then changes t
 by ``d_dot dt >= -gain (d - margin)``: with ``gain`` in (0, 1] it never crosses ``margin``,
 and below ``margin`` (or in penetration) the row pushes the pair apart.
 
+Witnesses. Where two hulls touch along a face or an edge their closest points are not unique,
+and coal's pick jumps from one end of the contact to the other as the pair slides or turns: one
+row at a time lets the arm turn about the point it keeps, the next step's row (the other end)
+turns it back, and at a blocked target the arm chatters in a limit cycle. So each pair also
+keeps a few of its recent closest points (fixed to their geometries) as rows of their own, on
+the current normal ``n``: for points ``a'`` of geometry a and ``b'`` of b, the plane through
+the closest points separates the hulls, so ``s = n^T (b' - a') >= d``; a row
+``s_dot >= -gain (s - margin) / dt`` asks nothing the pair's own row does not imply to first
+order, but together they hold the whole contact (the several points of a contact manifold),
+and the arm comes to rest there. A witness is forgotten when its ``s`` exceeds ``d`` by half
+the band ``influence - margin`` or when the pair leaves ``influence``, and a pair farther
+than that from its margin remembers nothing (its row binds nothing).
+
 Distances and closest points come from coal (through Pinocchio's ``GeometryModel``); only the
-pairs whose bounding spheres come within ``influence`` pay for an exact distance query.
+pairs whose bounding spheres come within ``influence`` pay for an exact distance query, and a
+pair whose last exact distance was beyond ``influence`` is not queried again until its joints
+can have closed that gap (a bound from the joint offsets, :meth:`CollisionLimit._near`).
 """
 
 from __future__ import annotations
 
-import math
 import os
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
@@ -33,13 +47,15 @@ except ImportError:  # pragma: no cover - the pin wheel ships coal
     coal = None
 
 from ..exceptions import SJTError
-from ..kernels import damper_rows
+from ..kernels import damper_rows, near_pairs, query_rows, witness_rows
 from .base import Limit, Motion
 
 __all__ = ["ClosestPoints", "CollisionLimit", "CollisionError", "PairDistance"]
 
 #: the precision (m) of coal's GJK and EPA on convex shapes (its default is 1e-6)
 GJK_TOLERANCE = 1e-9
+#: two witnesses of a pair closer than this (m, either point, in its geometry's frame) are one
+WITNESS_APART = 1e-4
 
 
 
@@ -177,6 +193,8 @@ class CollisionLimit(Limit):
             the margin still holds for the mesh; GJK on hulls takes about a microsecond where
             a mesh-to-mesh distance takes from 10 us to several ms (Panda). Obstacles stay as
             given.
+        witnesses: how many recent closest points of each pair within ``influence`` to keep as
+            rows beside its own (module docstring, "Witnesses"); 0 keeps none.
     """
 
     name: str = "collision"
@@ -185,7 +203,7 @@ class CollisionLimit(Limit):
     def __init__(self, robot, obstacles: Sequence = (), self_collision: bool = False,
                  margin: float = 0.01, influence: float = 0.05, gain: float = 0.5,
                  pairs: Iterable[tuple[str, str]] = (), ignore: Iterable[tuple[str, str]] = (),
-                 srdf: str | None = None, convex: bool = True):
+                 srdf: str | None = None, convex: bool = True, witnesses: int = 3):
         if coal is None:  # pragma: no cover
             raise CollisionError("CollisionLimit needs coal (shipped with the pin wheel)")
         if not (np.isfinite(margin) and margin >= 0):
@@ -195,11 +213,15 @@ class CollisionLimit(Limit):
                              f"got {influence!r}")
         if not (0 < gain <= 1):
             raise ValueError(f"gain must be in (0, 1], got {gain!r}")
+        if isinstance(witnesses, bool) or not isinstance(witnesses, (int, np.integer)) or (
+                witnesses < 0):
+            raise ValueError(f"witnesses must be an int >= 0, got {witnesses!r}")
         self.margin, self.influence, self.gain = float(margin), float(influence), float(gain)
+        self.witnesses = int(witnesses)
         # what a copy in another process is rebuilt from (coal's hulls do not pickle)
         self._args = dict(robot=robot, obstacles=list(obstacles), self_collision=self_collision,
                           margin=margin, influence=influence, gain=gain, pairs=list(pairs),
-                          ignore=list(ignore), srdf=srdf, convex=convex)
+                          ignore=list(ignore), srdf=srdf, convex=convex, witnesses=witnesses)
         self.model: pin.Model = robot.model
         self._mimic = _mimic_map(robot.model, getattr(robot, "mimic_joints", ()))
         source = self.__dict__.pop("_restored_geometry", None)  # set by __setstate__
@@ -216,7 +238,10 @@ class CollisionLimit(Limit):
                                                           else None))
         self._data = self.model.createData()
         self._checked = False
+        #: the pairs (indices into pairs / pair_names) of the first rows of the last rows()
+        #: (one each, from its exact distance), and of the witness rows that follow them
         self.active: list[int] = []
+        self.witness_pairs: list[int] = []
         self._prepare_broad_phase()
 
     def __getstate__(self) -> dict:
@@ -337,7 +362,21 @@ class CollisionLimit(Limit):
         #: kernels.damper_rows (distance, margin, those joints, the normal, closest points)
         self._pair_info = np.zeros((len(self.pairs), 4))
         self._pair_info[:, 2], self._pair_info[:, 3] = self._ja, self._jb
-        self._pair_rows = np.zeros((max(len(self.pairs), 1), 13))
+        self._pair_rows = np.zeros((max(len(self.pairs), 1) * (1 + self.witnesses), 13))
+        #: per pair: its recent closest points, each in its joint's frame (witnesses rows of
+        #: 6), how many and the tick of the last rows() that had it within influence (module
+        #: docstring, "Witnesses"; kernels.witness_rows)
+        slots = max(len(self.pairs), 1)
+        self._memory = np.zeros((slots * max(self.witnesses, 1), 6))
+        self._memory_state = np.zeros((slots, 2))
+        self._memory_state[:, 1] = -np.inf
+        self._tick = 0.0
+        self._owners = np.zeros(slots * max(self.witnesses, 1))
+        #: the world poses of the joints the step's pairs name (kernels.witness_rows' scratch)
+        self._poses = np.zeros((model.njoints, 4, 4))
+        self._poses[0] = np.eye(4)
+        self._flat_poses = self._poses.reshape(model.njoints, 16)
+        self._joint_table = np.column_stack([self._ja, self._jb]).astype(float).reshape(-1, 2)
         self._reach = self._radius[self._pa] + self._radius[self._pb] + self.influence
         # sphere centres: in the parent joint's frame (homogeneous) and in the world
         local = self._placement @ np.append(self._box_center, np.ones((n, 1)), axis=1)[:, :, None]
@@ -374,8 +413,15 @@ class CollisionLimit(Limit):
         self._lever = self._levers()
         self._bounds: tuple[float, tuple[np.ndarray, np.ndarray]] | None = None
         self._pair_lever, self._flat = self._pair_levers()
-        #: the last broad phase: (obstacles' version, q, its pairs, each pair's gap)
-        self._reference: tuple[int, np.ndarray, np.ndarray, np.ndarray] | None = None
+        #: the last broad phase: (obstacles' version, q, its pairs, each pair's gap, its pairs
+        #: as a list)
+        self._reference: tuple[int, np.ndarray, np.ndarray, np.ndarray, list] | None = None
+        #: per pair, its exact distance at its last query minus the bound of _near there (m):
+        #: while that minus the bound now exceeds influence, the pair is not queried (_rows)
+        self._floor = np.full(len(self.pairs), -np.inf)
+        self._no_bound = np.zeros(len(self.pairs))
+        self._bound_now = np.zeros(len(self.pairs))  # kernels.near_pairs' output
+        self._bound: np.ndarray | None = None
 
     def _pair_levers(self) -> tuple[np.ndarray | None, bool]:
         """For each pair and velocity coordinate, a bound (m per unit) on how much the
@@ -471,6 +517,7 @@ class CollisionLimit(Limit):
         self._center_local[g] = self._centers_in[:, g] = (self._placement[g]
                                                           @ np.append(self._box_center[g], 1.0))
         self._version += 1
+        self._tick += 2.0  # the remembered points on the obstacle moved: forget every one
 
     @property
     def obstacles(self) -> list[tuple]:
@@ -511,16 +558,31 @@ class CollisionLimit(Limit):
         """:meth:`_candidates` at ``q``, from the last broad phase while ``q`` is close to
         where it ran: a displacement ``dq`` from there changes the distance of a pair's
         bounding spheres by at most ``sum_j lever_j |dq_j|`` (:meth:`_pair_levers`), so a
-        pair it left out stays out until that reaches the gap it left the pair at."""
+        pair it left out stays out until that reaches the gap it left the pair at.
+
+        Sets :attr:`_bound`: that bound for every pair at ``q`` (m; None without a
+        reference), which :meth:`_rows` also holds the candidates' exact distances to."""
         ref = self._reference
+        bound = None
         if q is not None and ref is not None and ref[0] == self._version:
             moved = np.abs(q - ref[1] if self._flat else pin.difference(self.model, ref[1], q))
-            if np.all(self._pair_lever @ moved < ref[3]):
+            bound = self._pair_lever @ moved
+            if (bound < ref[3]).all():
+                self._bound = bound
                 return ref[2]
         near, slack = self._broad_phase(data)
         if q is not None and self._pair_lever is not None:
             slack[near] = np.inf  # a candidate stays one
-            self._reference = (self._version, q.copy(), near, slack)
+            self._reference = (self._version, q.copy(), near, slack, near.tolist())
+            self._bound = self._no_bound
+            # the exact distances' floors move to the new reference (here, where its bound is
+            # 0); after a move() of an obstacle they are gone
+            if bound is None:
+                self._floor.fill(-np.inf)
+            else:
+                self._floor -= bound
+        else:
+            self._bound = None
         return near
 
     def _sphere_box(self, points, poses, g) -> np.ndarray:
@@ -625,49 +687,70 @@ class CollisionLimit(Limit):
         key = (dt, self._version, None if q is None else q.tobytes())
         cache = self._cache
         if cache is not None and q is not None and cache[0] is data and cache[1] == key:
-            self.active = list(cache[2])
-            return cache[3]
+            self.active, self.witness_pairs = list(cache[2]), list(cache[3])
+            return cache[4]
         if not self._checked:
             self._check(model, data)
         out = self._rows(model, data, dt, q)
-        self._cache = (data, key, tuple(self.active), out)
+        self._cache = (data, key, tuple(self.active), tuple(self.witness_pairs), out)
         return out
 
     def _rows(self, model, data, dt: float, q: np.ndarray | None = None
               ) -> tuple[np.ndarray, np.ndarray] | None:
-        near = self._near(data, q)
         self.active = []  # indices into self.pairs / self.pair_names of the rows returned
-        if near.size == 0:
+        self.witness_pairs = []
+        influence, floor, ref = self.influence, self._floor, self._reference
+        # a pair's distance changes by at most its bound's change (_near): one that was beyond
+        # influence by more than that at its last query still is; both tests compiled where q
+        # is its own tangent space, else _near and numpy
+        listed = None
+        bound: np.ndarray | None
+        if self._flat and q is not None and ref is not None and ref[0] == self._version:
+            listed = near_pairs(q, ref[1], self._pair_lever, ref[3], self._bound_now, ref[4],
+                                floor, influence)
+        if listed is not None:
+            bound = self._bound = self._bound_now
+        else:
+            near = self._near(data, q)
+            bound = self._bound
+            if bound is not None and near.size:
+                near = near[floor[near] - bound[near] <= influence]
+            listed = near.tolist()
+        if not listed:
             return None
         pin.updateGeometryPlacements(model, data, self.geometry, self.geometry_data)
-        geometry, gdata, influence = self.geometry, self.geometry_data, self.influence
-        compute = pin.computeDistance
-        found: list[int] = []
-        pairs, info, margins = self._pair_rows, self._pair_info, self.margins
-        for k in near.tolist():
-            res = compute(geometry, gdata, k)
-            d = res.min_distance
-            if not -math.inf < d < influence:  # beyond, or coal failed (EPA: -inf)
-                continue
-            row = pairs[len(found)]
-            row[:4] = info[k]
-            row[0], row[1] = d, margins[k]
-            row[4:7] = res.normal
-            row[7:10] = res.getNearestPoint1()
-            row[10:] = res.getNearestPoint2()
-            found.append(k)
+        # coal's distance of each pair listed; those within influence get a row (compiled: the
+        # Python around each query cost more than the query)
+        found = query_rows(pin.computeDistance, self.geometry, self.geometry_data, listed,
+                           bound, floor, self.margins, self._joint_table, influence,
+                           self._pair_rows)
         if not found:
             return None
         self.active = found
         count = len(found)
+        if self.witnesses:
+            count = self._witness_rows(data, found)
         A = np.empty((count, self._support.shape[1]))
         b = np.empty(count)
-        damper_rows(data.J, self._support, pairs[:count], self.gain / dt, A, b)
+        damper_rows(data.J, self._support, self._pair_rows[:count], self.gain / dt, A, b)
         if self._mimic is not None:
             A = A @ self._mimic
         A.setflags(write=False)
         b.setflags(write=False)
         return A, b
+
+    def _witness_rows(self, data, found: list[int]) -> int:
+        """Append to the step's rows (``_pair_rows[:len(found)]``) one per remembered witness
+        of each pair in ``found`` (module docstring, "Witnesses"; ``kernels.witness_rows``) and
+        remember this step's closest points; returns the number of rows."""
+        count = len(found)
+        self._tick += 1.0
+        total = witness_rows(data.oMi, self._flat_poses, self._pair_rows, found, self._memory,
+                             self._memory_state,
+                             self._tick, 0.5 * (self.influence - self.margin), WITNESS_APART,
+                             self._owners)
+        self.witness_pairs = self._owners[:total - count].astype(int).tolist()
+        return total
 
 
 def damper_rows_reference(J: np.ndarray, support: np.ndarray, pairs: np.ndarray, rate: float
