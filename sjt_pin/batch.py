@@ -44,7 +44,7 @@ from .validation import integer
 
 #: targets per chunk: in this process and the pool, and on another executor (fewer, larger
 #: tasks for a cluster's scheduler)
-CHUNK, EXECUTOR_CHUNK = 64, 256
+CHUNK, EXECUTOR_CHUNK = 64, 1024
 #: chunks submitted ahead of the results: per process of the pool, and on another executor
 POOL_INFLIGHT, EXECUTOR_INFLIGHT = 4, 64
 #: solvers (and their pickled bytes) a worker keeps, most recent first
@@ -367,7 +367,7 @@ def solve_many(solver, targets: Iterable, q0, *, processes: int | None = None,
             ``client.get_executor()``: each worker thread unpickles the solver once and keeps
             it (see :mod:`sjt_pin.batch`).
         progress: a progress bar (tqdm) on standard error.
-        chunk: targets per task (default 64; 256 on an executor).
+        chunk: targets per task (default 64; 1,024 on an executor).
         inflight: chunks submitted ahead of the results (default: 4 per process of the pool;
             64 on an executor, enough for a cluster of 16-32 worker threads; raise it for a
             larger one).
