@@ -60,7 +60,8 @@ class SJTSolver(Solver):
       orientation rows only, 1 otherwise, see ``methods.transpose.POSE_LM_WEIGHT``), so that
       an arm that cannot reach comes to rest; unit-free like the rest. "auto" is
       ``K = 1 / dt``. On the accuracy benchmark its max error is below DLS's (damping 0.05) on
-      every path (0.03-0.27x), and it rests at unreachable targets, which DLS does not.
+      every path (0.03-0.23x), and it rests at unreachable targets (as DLS and JP do with their
+      own error damping, which the textbook forms lack).
     - ``feedback="transpose"``: ``q_dot = D J^T K e`` plus the damped feed-forward: the
       paper's feedback, which corrects slowly along directions J nearly loses.
     - ``feedback="transpose", feedforward="transpose"``: the paper's eq. (21) exactly,
