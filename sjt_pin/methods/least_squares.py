@@ -19,7 +19,8 @@ w by measurement (a target 0.05, 0.3 or 2 m beyond reach, from q0 and random con
 8 s at 1 kHz; UR3, UR5, UR10, Panda, xArm7, Kinova, Bravo 7, Z1): with pose rows only, 0.5 rests
 everywhere (RMS speed over the last second below 1e-7 rad/s), the same ``POSE_LM_WEIGHT`` as
 SJT's (the angular rows' second derivatives vanish); with position rows 0.5 oscillates at the
-speed limits on every robot but Bravo 7 and 1 rests. A larger w rests too but slows what the
+speed limits (UR3, UR5, Panda, xArm7, Z1) and 1 rests (Kinova's position-only runs still creep
+at 2e-3-2e-2 rad/s after 8 s, SJT's at 2e-2-0.4). A larger w rests too but slows what the
 error term slows: the lag along nearly lost directions (UR5's wrist path at 2 ms, DLS: max
 error 0.017 textbook, 0.022 with 0.5, 0.029 with 1) and the exit from an exact saddle.
 """
@@ -69,11 +70,6 @@ class LeastSquaresMethod(Method):
         if self.error_damping is None:
             rotational = all(isinstance(t, (PoseTask, OrientationTask)) for t in tasks)
             self.lm_weight = POSE_LM_WEIGHT if rotational and tasks else LM_WEIGHT
-
-    def error_term(self, error_norm: float) -> float:
-        """The Levenberg-Marquardt term ``w |e_w| L`` (m^2) at the weighted error's norm
-        ``error_norm`` (m), what the step adds to the damping of its solve."""
-        return self.lm_weight * self.length * error_norm
 
     def configure(self, work, gain, dt, n_chain):
         super().configure(work, gain, dt, n_chain)
