@@ -7,7 +7,8 @@ name          M(J)                              paper
 ============  ================================  ==========================================
 jp            J^+ (Moore-Penrose)               eq. (4), (8)
 dls           J^T (J J^T + lambda^2 I)^-1       damped least squares (introduction)
-(both)        ... + lm I in the inverse         Levenberg-Marquardt: the error's damping
+jp, dls + lm  ... + lm I inside the inverse     Levenberg-Marquardt (Sugihara 2011), the
+                                                solvers' lm = w |e_w| L
 jt            J^T                               eq. (10)
 sjt           D J^T, D = diag(alpha_i)          eq. (20)-(21), alpha_i = 1 / (J_i^T J_i)
 damped sjt    D J^T (J D J^T + lambda I)^-1     SJT's D as the columns' scale of a damped
