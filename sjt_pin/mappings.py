@@ -7,6 +7,8 @@ name          M(J)                              paper
 ============  ================================  ==========================================
 jp            J^+ (Moore-Penrose)               eq. (4), (8)
 dls           J^T (J J^T + lambda^2 I)^-1       damped least squares (introduction)
+jp, dls + lm  ... + lm I inside the inverse     Levenberg-Marquardt (Sugihara 2011), the
+                                                solvers' lm = w |e_w| L
 jt            J^T                               eq. (10)
 sjt           D J^T, D = diag(alpha_i)          eq. (20)-(21), alpha_i = 1 / (J_i^T J_i)
 damped sjt    D J^T (J D J^T + lambda I)^-1     SJT's D as the columns' scale of a damped
@@ -64,18 +66,24 @@ def jt_matrix(J: np.ndarray) -> np.ndarray:
     return J.T.copy()
 
 
-def jp_matrix(J: np.ndarray, rcond: float = JP_RCOND) -> np.ndarray:
-    """Moore-Penrose pseudoinverse ``J^+`` (eq. 4), from the SVD with relative cutoff ``rcond``."""
+def jp_matrix(J: np.ndarray, rcond: float = JP_RCOND, lm: float = 0.0) -> np.ndarray:
+    """Moore-Penrose pseudoinverse ``J^+`` (eq. 4), from the SVD with relative cutoff ``rcond``;
+    with ``lm`` > 0 (task units^2) the singular values above the cutoff are damped:
+    ``sigma / (sigma^2 + lm)`` instead of ``1 / sigma``, i.e. ``J^T (J J^T + lm I)^-1`` on
+    them (the Levenberg-Marquardt step, whose ``lm`` is ``w |e_w| L``, see
+    :class:`~sjt_pin.methods.JP`)."""
     U, s, Vt = np.linalg.svd(J, full_matrices=False)
     cutoff = rcond * (s[0] if s.size else 0.0)
-    s_inv = np.divide(1.0, s, out=np.zeros_like(s), where=s > cutoff)
+    s_inv = np.divide(s, s * s + lm, out=np.zeros_like(s), where=s > cutoff)
     return (Vt.T * s_inv) @ U.T
 
 
-def dls_matrix(J: np.ndarray, damping: float) -> np.ndarray:
-    """Damped least squares ``J^T (J J^T + damping^2 I)^-1``; ``damping`` in task units (m, rad)."""
+def dls_matrix(J: np.ndarray, damping: float, lm: float = 0.0) -> np.ndarray:
+    """Damped least squares ``J^T (J J^T + (damping^2 + lm) I)^-1``; ``damping`` (lambda) in
+    task units (m, rad), ``lm`` >= 0 in task units^2: the Levenberg-Marquardt term
+    ``w |e_w| L`` (see :class:`~sjt_pin.methods.DLS`), 0 for the textbook form."""
     m = J.shape[0]
-    return np.linalg.solve(J @ J.T + damping**2 * np.eye(m), J).T
+    return np.linalg.solve(J @ J.T + (damping**2 + lm) * np.eye(m), J).T
 
 
 def max_loop_eigenvalue(J: np.ndarray, M: np.ndarray) -> float:

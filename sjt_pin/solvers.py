@@ -30,6 +30,19 @@ _TRANSPOSE = """
         ff_damping: mu of the damped solve (dimensionless, > 0; default 0.01).
 """
 
+_ERROR_DAMPING = """
+        error_damping: w of a Levenberg-Marquardt term that grows with the error: ``{form}``
+            with |e_w| the weighted error (m) and L the tasks' characteristic length (m,
+            :func:`~sjt_pin.tasks.pose.tasks_length`), Sugihara's error-dependent damping
+            ("Solvability-unconcerned inverse kinematics by the Levenberg-Marquardt method",
+            IEEE T-RO 2011). With ``K = 1 / dt`` the linear model reaches the target in one
+            step; at a target out of reach it is badly wrong and the textbook update oscillates
+            at the speed limits, with the term the arm comes to rest; near a reachable target
+            the term vanishes. Dimensionless, >= 0; default ``None``: 0.5 when every target row
+            is a pose or orientation row, 1 otherwise (as SJT's damped feedback); 0: the
+            textbook ``{textbook}``, which the paper's baselines use.
+"""
+
 
 class SJTSolver(Solver):
     __doc__ = """Scaled Jacobian transpose CLIK (eq. 18-22), on SJT's scaling factors.
@@ -47,7 +60,8 @@ class SJTSolver(Solver):
       orientation rows only, 1 otherwise, see ``methods.transpose.POSE_LM_WEIGHT``), so that
       an arm that cannot reach comes to rest; unit-free like the rest. "auto" is
       ``K = 1 / dt``. On the accuracy benchmark its max error is below DLS's (damping 0.05) on
-      every path (0.03-0.27x), and it rests at unreachable targets, which DLS does not.
+      every path (0.03-0.23x), and it rests at unreachable targets (as DLS and JP do with their
+      own error damping, which the textbook forms lack).
     - ``feedback="transpose"``: ``q_dot = D J^T K e`` plus the damped feed-forward: the
       paper's feedback, which corrects slowly along directions J nearly loses.
     - ``feedback="transpose", feedforward="transpose"``: the paper's eq. (21) exactly,
@@ -111,16 +125,18 @@ class JPSolver(Solver):
 
     JP's own arguments:
         rcond: singular values below ``rcond sigma_max`` count as zero (at least about 5e-7:
-            the kernel works on J J^T).""" + _COMMON
+            the kernel works on J J^T).""" + _ERROR_DAMPING.format(
+        form="J^T (J J^T + w |e_w| L I)^-1", textbook="J^+") + _COMMON
 
     def __init__(
         self,
         robot: Robot,
         *,
         rcond: float = JP_RCOND,
+        error_damping: float | None = None,
         **options,
     ):
-        super().__init__(robot, JP(rcond), **options)
+        super().__init__(robot, JP(rcond, error_damping), **options)
 
     @property
     def rcond(self) -> float:
@@ -134,16 +150,19 @@ class DLSSolver(Solver):
 
     DLS's own arguments:
         damping: lambda in task units (m for position rows, rad for orientation rows; default
-            0.05): larger is more robust near singularities and less accurate.""" + _COMMON
+            0.05): larger is more robust near singularities and less accurate.""" + \
+        _ERROR_DAMPING.format(form="J^T (J J^T + (lambda^2 + w |e_w| L) I)^-1",
+                              textbook="J^T (J J^T + lambda^2 I)^-1") + _COMMON
 
     def __init__(
         self,
         robot: Robot,
         *,
         damping: float = DLS_DAMPING,
+        error_damping: float | None = None,
         **options,
     ):
-        super().__init__(robot, DLS(damping), **options)
+        super().__init__(robot, DLS(damping, error_damping), **options)
 
     @property
     def damping(self) -> float:

@@ -88,15 +88,17 @@ def test_damped_feedback_is_the_damped_solve_of_the_whole_velocity(m, n, seed):
 
 
 @settings(max_examples=60, deadline=None)
-@given(**shapes, damping=st.sampled_from([0.0, 0.05, 1.0]))
-def test_least_squares_step_is_jp_or_dls(m, n, seed, damping):
+@given(**shapes, damping=st.sampled_from([0.0, 0.05, 1.0]), lm=st.sampled_from([0.0, 0.3]))
+def test_least_squares_step_is_jp_or_dls(m, n, seed, damping, lm):
     J, e, ff, rows, mask = problem(seed, m, n)
     step, _ = run(K.least_squares_step, J, e, ff, rows, mask, ff_mode=1, mu=damping,
-                  rcond=mappings.JP_RCOND)
+                  rcond=mappings.JP_RCOND, lm=lm)
     sw, k = rows
     Jw = sw[:, None] * J * mask
     v = sw * ff + k * sw * e
-    expected = (mappings.dls_matrix(Jw, damping) if damping else mappings.jp_matrix(Jw)) @ v
+    error = lm * np.linalg.norm(sw * e)  # the Levenberg-Marquardt term w L |e_w|
+    expected = (mappings.dls_matrix(Jw, damping, error) if damping
+                else mappings.jp_matrix(Jw, mappings.JP_RCOND, error)) @ v
     np.testing.assert_allclose(step, DT * expected, rtol=1e-7, atol=1e-10)
 
 
@@ -106,6 +108,11 @@ def test_least_squares_drops_exactly_lost_directions():
     step, _ = run(K.least_squares_step, J, np.array([1.0, 1.0]), np.zeros(2), rows,
                   np.ones(2), rcond=mappings.JP_RCOND)
     np.testing.assert_allclose(step, DT * np.array([0.5, 0.5]))
+    # damped by the error, the pseudoinverse still drops the lost row: (J J^T + d)^-1 on the
+    # kept one, d = lm |e_w| = 0.5 sqrt(2)
+    step, _ = run(K.least_squares_step, J, np.array([1.0, 1.0]), np.zeros(2), rows,
+                  np.ones(2), rcond=mappings.JP_RCOND, lm=0.5)
+    np.testing.assert_allclose(step, DT * np.array([1.0, 1.0]) / (2.0 + 0.5 * np.sqrt(2.0)))
 
 
 @settings(max_examples=80, deadline=None)

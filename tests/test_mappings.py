@@ -86,6 +86,19 @@ def test_matrices_agree_with_textbook_forms(rng):
 def test_jp_drops_lost_directions_at_exact_singularity():
     J = np.array([[1.0, 1.0], [0.0, 0.0]])
     np.testing.assert_allclose(mappings.jp_matrix(J), [[0.5, 0.0], [0.5, 0.0]])
+    # damped by the error's term, the lost direction stays dropped: sigma / (sigma^2 + lm)
+    np.testing.assert_allclose(mappings.jp_matrix(J, lm=0.5), [[0.4, 0.0], [0.4, 0.0]])
+
+
+def test_the_error_term_is_a_damping_added_to_lambda_squared(rng):
+    J = rng.normal(size=(6, 7))
+    lam, lm = 0.1, 0.02
+    np.testing.assert_allclose(mappings.dls_matrix(J, lam, lm),
+                               J.T @ np.linalg.inv(J @ J.T + (lam**2 + lm) * np.eye(6)),
+                               atol=1e-12)
+    # full row rank: the damped pseudoinverse is DLS with lambda^2 = lm
+    np.testing.assert_allclose(mappings.jp_matrix(J, lm=lm),
+                               J.T @ np.linalg.inv(J @ J.T + lm * np.eye(6)), atol=1e-12)
 
 
 def test_stable_gain_bound(rng):

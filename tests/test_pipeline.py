@@ -53,15 +53,19 @@ def row_lengths(robot, task):
     return np.ones(task.dim), length
 
 
-def reference_step(method, options, J, e, ff, sw, k, mask, target_rows, floor, lm=1.0):
+def reference_step(method, options, J, e, ff, sw, k, mask, target_rows, floor, lm=1.0,
+                   length=1.0):
     """dt q_dot of the method from the numpy formulas of ``mappings``; ``floor`` is SJT's
-    floor l under the column norms (m), ``lm`` the weight of its Levenberg-Marquardt term."""
+    floor l under the column norms (m), ``lm`` the weight of the Levenberg-Marquardt term
+    (SJT's, JP's and DLS's), ``length`` the tasks' characteristic length L (m)."""
     Jw = sw[:, None] * J * mask
     ew, ffw = sw * e, sw * ff
+    # JP and DLS: Levenberg-Marquardt damping lm |e_w| L (L: the tasks' length)
+    error = lm * np.linalg.norm(ew[:target_rows]) * length
     if method == "jp":
-        return DT * mappings.jp_matrix(Jw) @ (ffw + k * ew)
+        return DT * mappings.jp_matrix(Jw, mappings.JP_RCOND, error) @ (ffw + k * ew)
     if method == "dls":
-        return DT * mappings.dls_matrix(Jw, DLS_DAMPING) @ (ffw + k * ew)
+        return DT * mappings.dls_matrix(Jw, DLS_DAMPING, error) @ (ffw + k * ew)
     alpha = mappings.scaling_factors(Jw, mappings.COLUMN_TOL, floor)
     if method == "sjt" and options.get("feedback", "damped") == "damped":
         # Levenberg-Marquardt: mu^2 + lm |e_w| sqrt(max alpha)
@@ -115,7 +119,8 @@ def test_one_step_is_the_reference_formula(seed, joints, combination, method, fe
     weights = [row_lengths(robot, t) for t in tasks]
     sw = [(np.ones(t.dim) if t.sqrt_weight is None else t.sqrt_weight) * w
           for t, (w, _) in zip(tasks, weights, strict=True)]
-    floor = FLOOR * max(length for _, length in weights)
+    length = max(length for _, length in weights)
+    floor = FLOOR * length
     # half the Levenberg-Marquardt term when every target row turns with the frame
     rotational = all(isinstance(t, (sjt.PoseTask, sjt.OrientationTask)) for t in tasks)
     lm = POSE_LM_WEIGHT if rotational else 1.0
@@ -127,7 +132,7 @@ def test_one_step_is_the_reference_formula(seed, joints, combination, method, fe
         sw.append(np.full(robot.nv, np.sqrt(0.03)))
     J, e, ff = (np.concatenate(part) for part in zip(*blocks, strict=True))
     expected = reference_step(name, options, J, e, ff, np.concatenate(sw), k, mask, target_rows,
-                              floor, lm)
+                              floor, lm, length)
     np.testing.assert_allclose(solver.displacement, expected, rtol=1e-7,
                                atol=1e-9 * max(1.0, np.abs(expected).max()))
     np.testing.assert_allclose(solver.last.error, e[:target_rows], atol=1e-12)

@@ -89,8 +89,9 @@ def test_unreachable_target_sjt_bounded_jp_reports_divergence(ur5):
     assert not sjt_log.diverged
     assert np.all(np.isfinite(sjt_log.q))
     assert sjt_log.error_norm[-1] <= np.linalg.norm(far - p0) + 0.1  # pulled toward the goal
-    # the bare method: UR5's URDF speed limits would otherwise cap JP's blow-up
-    jp = sjt.JPSolver(ur5, gain=10.0, dt=1e-3, velocity_limits=False)
+    # the bare method: UR5's URDF speed limits would otherwise cap JP's blow-up, and its
+    # error's Levenberg-Marquardt damping would hold it back (error_damping=0: the textbook J^+)
+    jp = sjt.JPSolver(ur5, gain=10.0, dt=1e-3, velocity_limits=False, error_damping=0.0)
     jp_log = sjt.track(jp, line, q0, duration=3.0)
     assert jp_log.diverged and "one step" in jp_log.reason
     assert len(jp_log) < 3001
@@ -168,9 +169,11 @@ def test_auto_gain(panda):
 
 
 def test_per_row_gains_set_per_row_rates(planar3):
-    """With JP the loop is e_dot = -K e: each row decays at its own gain."""
+    """With JP the loop is e_dot = -K e: each row decays at its own gain (the textbook J^+:
+    the error's Levenberg-Marquardt damping would slow the rows while the error is large)."""
     gains = np.array([5.0, 50.0])
-    solver = sjt.JPSolver(planar3, gain=gains, dt=1e-3, task=sjt.PositionTask("xy"))
+    solver = sjt.JPSolver(planar3, gain=gains, dt=1e-3, task=sjt.PositionTask("xy"),
+                          error_damping=0.0)
     q = np.deg2rad([60.0, 45.0, 30.0])
     target = [-0.25, 0.95, 0.0]
     solver.step(q, target)

@@ -422,10 +422,11 @@ static Core transpose_core(Mat J, const double *e, const double *ff, int has_ff,
 }
 
 /* sol = A^+ rhs for the PSD A (p x p, overwritten), singular values of the underlying J below
- * rcond sigma_max treated as zero: by Cholesky when that is exact (lambda_min(A) >= 1 /
+ * rcond sigma_max treated as zero, the others damped by shift >= 0: (A + shift I)^-1 rhs on
+ * the eigenvalues of A above the cutoff. By Cholesky when that is exact (lambda_min(A) >= 1 /
  * tr(A^-1) above the cutoff), else by Jacobi eigenvalues */
-static void pseudo_solve(double *A, double *V, Py_ssize_t p, const double *rhs, double *sol,
-                         double rcond)
+static void damped_pseudo_solve(double *A, double *V, Py_ssize_t p, const double *rhs,
+                                double *sol, double rcond, double shift)
 {
     double top = 0.0;
     for (Py_ssize_t i = 0; i < p; i++) top = dmax(top, A[i * p + i]);
@@ -443,6 +444,10 @@ static void pseudo_solve(double *A, double *V, Py_ssize_t p, const double *rhs, 
             }
         ok = inverse_trace * cutoff < 1.0;
     }
+    if (ok && shift > 0.0) {  /* A is regular: factor A + shift I instead */
+        memcpy(V, A, (size_t)(p * p) * sizeof(double));
+        ok = cholesky_factor(V, p, shift);
+    }
     if (ok) {
         cholesky_substitute(V, p, rhs, sol);
         return;
@@ -454,12 +459,21 @@ static void pseudo_solve(double *A, double *V, Py_ssize_t p, const double *rhs, 
         if (lam <= cutoff) continue;
         double proj = 0.0;
         for (Py_ssize_t i = 0; i < p; i++) proj += V[i * p + c] * rhs[i];
-        proj /= lam;
+        proj /= lam + shift;
         for (Py_ssize_t i = 0; i < p; i++) sol[i] += proj * V[i * p + c];
     }
 }
 
-/* the least-squares mapping (JP eq. 8, DLS) on the joints of mask */
+/* sol = A^+ rhs (damped_pseudo_solve without damping) */
+static void pseudo_solve(double *A, double *V, Py_ssize_t p, const double *rhs, double *sol,
+                         double rcond)
+{
+    damped_pseudo_solve(A, V, p, rhs, sol, rcond, 0.0);
+}
+
+/* the least-squares mapping (JP eq. 8, DLS) on the joints of mask, damped by
+ * mu^2 + P_LM |e_w| (m^2): DLS's lambda^2 plus the Levenberg-Marquardt term that grows with
+ * the error (P_LM = w L in m here; 0 for the textbook JP and DLS) */
 static Core least_squares_core(Mat J, const double *e, const double *ff, int has_ff,
                                const double *mask, double *work, double *step)
 {
@@ -486,9 +500,9 @@ static Core least_squares_core(Mat J, const double *e, const double *ff, int has
             out.ff_sq += ff[i] * ff[i];
         }
     }
+    double damping = work[P_MU], lm = work[P_LM] * sqrt(out.ew_sq);
     Py_ssize_t mt = identity_block(work, m, n);
     if (mt >= 0) {  /* task rows, then posture rows: diagonal plus rank m_t */
-        double damping = work[P_MU];
         double *U = A, *Dg = A + n * mt, *space = Dg + n;
         for (Py_ssize_t j = 0; j < n; j++) {
             double acc = 0.0;
@@ -496,7 +510,7 @@ static Core least_squares_core(Mat J, const double *e, const double *ff, int has
                 U[j * mt + a] = mask[j] * sw[a] * AT(J, a, j);
                 acc += sw[a] * AT(J, a, j) * v[a];
             }
-            Dg[j] = mask[j] * sw[mt + j] * sw[mt + j] + damping * damping;
+            Dg[j] = mask[j] * sw[mt + j] * sw[mt + j] + damping * damping + lm;
             r[j] = mask[j] * (acc + sw[mt + j] * v[mt + j]);
         }
         woodbury(U, Dg, n, mt, r, sol, space);
@@ -514,11 +528,10 @@ static Core least_squares_core(Mat J, const double *e, const double *ff, int has
             r[j] = mask[j] * acc;
         }
     const double *rhs = use_rows ? v : r;
-    double damping = work[P_MU];
     if (damping > 0.0)
-        cholesky_solve_c(A, p, damping * damping, rhs, sol);
+        cholesky_solve_c(A, p, damping * damping + lm, rhs, sol);
     else
-        pseudo_solve(A, V, p, rhs, sol, work[P_RCOND]);
+        damped_pseudo_solve(A, V, p, rhs, sol, work[P_RCOND], lm);
     for (Py_ssize_t j = 0; j < n; j++) {
         if (use_rows) {
             double acc = 0.0;

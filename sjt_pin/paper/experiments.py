@@ -50,6 +50,9 @@ from .stability import stability as run_stability  # noqa: E402
 PAPER_FORM = {
     "sjt": {"feedback": "transpose", "feedforward": "transpose", "length": 0.0, "escape": False},
     "jt": {"feedforward": "transpose", "escape": False},
+    # the textbook least squares, without the error's Levenberg-Marquardt damping
+    "jp": {"error_damping": 0.0},
+    "dls": {"error_damping": 0.0},
 }
 #: The paper's largest stable gains (1/s) for tasks 1, 2 and 3 (Section 4).
 PAPER_GAINS = {"jt": (36.0, 25.0, 33.0), "sjt": (680.0, 500.0, 660.0)}

@@ -69,7 +69,8 @@ def settle(robot: Robot, task: Task, q: np.ndarray, target: pin.SE3) -> np.ndarr
     """``q`` moved onto ``target`` by damped least-squares iterations (to start a run on a path)."""
     from ..solvers import DLSSolver
 
-    solver = DLSSolver(robot, gain="auto", dt=1e-2, task=task, damping=1e-3)
+    # the textbook DLS (no error damping): the start configurations the paper's runs had
+    solver = DLSSolver(robot, gain="auto", dt=1e-2, task=task, damping=1e-3, error_damping=0.0)
     for _ in range(200):
         q = solver.step(q, target)
         if solver.last.error_norm < 1e-10:

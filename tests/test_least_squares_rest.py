@@ -1,0 +1,103 @@
+"""DLS and JP come to rest at a target they cannot reach (their Levenberg-Marquardt term
+``w |e_w| L``) and still converge at one they can; ``error_damping=0`` is the textbook update,
+which oscillates at the speed limits there."""
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+import sjt_pin as sjt
+
+DT = 1e-3
+#: Franka's published acceleration (rad/s^2) and jerk (rad/s^3) limits, and the same order of
+#: magnitude for UR5's six joints
+SMOOTH = {
+    "panda": {"acceleration_limits": [15, 7.5, 10, 12.5, 15, 20, 20, 1],
+              "jerk_limits": [7500, 3750, 5000, 6250, 7500, 10000, 10000, 500]},
+    "ur5": {"acceleration_limits": 10.0, "jerk_limits": 5000.0},
+}
+STARTS = {"panda": None, "ur5": np.array([0.3, -1.2, 1.5, -1.8, -1.5, 0.2])}
+
+
+@pytest.fixture(scope="module")
+def robots():
+    return {name: sjt.Robot.from_example(name) for name in STARTS}
+
+
+def start(robot, name):
+    return robot.q0.copy() if STARTS[name] is None else STARTS[name].copy()
+
+
+def beyond_reach(robot, q, distance=0.8):
+    """The pose at ``q`` moved ``distance`` (m) radially outward: out of reach."""
+    pose = robot.fk(q)
+    radial = pose.translation / np.linalg.norm(pose.translation)
+    return pin.SE3(pose.rotation, pose.translation + distance * radial)
+
+
+def run(solver, q, target, seconds):
+    qs = []
+    for _ in range(int(round(seconds / DT))):
+        q = solver.step(q, target)
+        qs.append(q.copy())
+    return q, np.array(qs)
+
+
+def rms_speed(qs, seconds=1.0):
+    """RMS joint speed (rad/s) of the returned stream over its last ``seconds``."""
+    v = np.diff(qs[-int(round(seconds / DT)) - 1:], axis=0) / DT
+    return float(np.sqrt(np.mean(v**2)))
+
+
+CASES = [(name, method, smooth) for name in STARTS for method in ("dls", "jp")
+         for smooth in (False, True)]
+IDS = [f"{n}-{m}-{'smooth' if s else 'urdf'}" for n, m, s in CASES]
+
+
+@pytest.mark.parametrize("name, method, smooth", CASES, ids=IDS)
+def test_rests_at_a_target_out_of_reach(robots, name, method, smooth):
+    robot = robots[name]
+    q = start(robot, name)
+    solver = sjt.make_solver(method, robot, dt=DT, **(SMOOTH[name] if smooth else {}))
+    q, qs = run(solver, q, beyond_reach(robot, q), 6.0)
+    assert solver.error_norm > 0.1  # well short of the target ...
+    assert rms_speed(qs) < 1e-3  # ... and at rest
+    # says why: a minimum of the error, nothing holds the arm
+    assert solver.last.stalled and solver.last.task_scale == 1.0
+
+
+@pytest.mark.parametrize("method", ["dls", "jp"])
+def test_the_textbook_update_oscillates_there(robots, method):
+    """``error_damping=0`` is the textbook update (the paper's baselines): the linear model's
+    one-step correction overshoots back and forth at the workspace's boundary."""
+    robot = robots["panda"]
+    q = robot.q0.copy()
+    solver = sjt.make_solver(method, robot, dt=DT, error_damping=0.0)
+    _, qs = run(solver, q, beyond_reach(robot, q), 3.0)
+    assert rms_speed(qs) > 0.1
+    assert not solver.last.stalled
+
+
+@pytest.mark.parametrize("name, method, smooth", CASES, ids=IDS)
+def test_converges_at_a_target_in_reach(robots, name, method, smooth):
+    robot = robots[name]
+    q = start(robot, name)
+    target = robot.fk(q) * pin.exp6(pin.Motion(np.array([0.05, 0.02, -0.03, 0.1, 0.0, 0.2])))
+    solver = sjt.make_solver(method, robot, dt=DT, **(SMOOTH[name] if smooth else {}))
+    q, qs = run(solver, q, target, 3.0)
+    assert solver.error_norm < 1e-9
+    assert not solver.last.stalled  # converged, not stalled
+    assert rms_speed(qs, 0.5) < 1e-6
+
+
+def test_error_damping_is_checked_and_the_default_follows_the_rows(robots):
+    ur5 = robots["ur5"]
+    for bad in (-1.0, np.inf, np.nan):
+        with pytest.raises(ValueError, match="error_damping"):
+            sjt.DLSSolver(ur5, error_damping=bad)
+    with pytest.raises(TypeError, match="error_damping"):
+        sjt.JPSolver(ur5, error_damping="large")
+    # the SJT damped feedback's weights: 0.5 with pose rows only, 1 with position rows
+    assert sjt.DLSSolver(ur5).method.lm_weight == 0.5
+    assert sjt.JPSolver(ur5, task=sjt.PositionTask()).method.lm_weight == 1.0
+    assert sjt.DLSSolver(ur5, error_damping=0.2).method.lm_weight == 0.2
