@@ -135,7 +135,8 @@ def test_compiled_kernels_name_the_argument_that_does_not_fit():
         K.damper_rows(np.zeros((6, 3)), np.zeros((4, 3)), pairs, 1.0, np.zeros((1, 3)),
                       np.zeros(1))
     with pytest.raises(ValueError, match="near\\[0\\] = 5 is no pair"):
-        K.near_pairs(np.zeros(2), np.zeros(2), np.zeros((3, 2)), np.ones(3), np.zeros(3), [5],
+        K.near_pairs(np.zeros(2), np.zeros(2), np.full(2, -np.inf), np.full(2, np.inf),
+                     np.zeros((3, 2)), np.ones(3), np.zeros(3), [5],
                      np.zeros(3), 0.05)
     with pytest.raises(ValueError, match="do not fit"):
         K.query_rows(pin.computeDistance, None, None, [], None, np.zeros(3), np.zeros(2),

@@ -2846,34 +2846,46 @@ done:
     return result;
 }
 
-/* near_pairs(q, reference, lever, slack, bound, near, floor, influence) -> list | None: the
- * collision limit's skip of its broad phase and of its queries (limits/collision.py, _near
- * and _rows) for q in its own tangent space (revolute and prismatic joints): bound (npairs,)
- * = lever (npairs, nv) |q - reference|; None when some pair's bound reaches its slack (npairs,)
- * (the broad phase must run again); else the pairs of the list `near` whose floor - bound is
+/* near_pairs(q, reference, lower, upper, lever, slack, bound, near, floor, influence) ->
+ * list | None: the collision limit's skip of its broad phase and of its queries
+ * (limits/collision.py, _near and _rows) for q in its own tangent space (revolute and
+ * prismatic joints): bound (npairs,) = lever (npairs, nv) |q - reference|; None when q leaves
+ * the box lower <= q <= upper (n,) the levers hold in, or when some pair's bound reaches its
+ * slack (npairs,) (the broad phase must run again); else the pairs of the list `near` whose floor - bound is
  * not above influence (those to query). */
 static PyObject *py_near_pairs(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
-    if (!nargs_ok(nargs, 8, "near_pairs")) return NULL;
-    double influence = PyFloat_AsDouble(args[7]);
+    if (!nargs_ok(nargs, 10, "near_pairs")) return NULL;
+    double influence = PyFloat_AsDouble(args[9]);
     if (influence == -1.0 && PyErr_Occurred()) return NULL;
-    Arg q = {0}, ref = {0}, lever = {0}, slack = {0}, bound = {0}, floor_ = {0};
+    Arg q = {0}, ref = {0}, lo = {0}, hi = {0}, lever = {0}, slack = {0}, bound = {0},
+        floor_ = {0};
     PyObject *result = NULL, *near = NULL, *out = NULL;
     double *moved = NULL;
     if (acquire(args[0], &q, 0, 1, "q") || acquire(args[1], &ref, 0, 1, "reference")
-        || acquire(args[2], &lever, 0, 2, "lever") || acquire(args[3], &slack, 0, 1, "slack")
-        || acquire(args[4], &bound, 1, 1, "bound") || acquire(args[6], &floor_, 0, 1, "floor"))
+        || acquire(args[2], &lo, 0, 1, "lower") || acquire(args[3], &hi, 0, 1, "upper")
+        || acquire(args[4], &lever, 0, 2, "lever") || acquire(args[5], &slack, 0, 1, "slack")
+        || acquire(args[6], &bound, 1, 1, "bound") || acquire(args[8], &floor_, 0, 1, "floor"))
         goto done;
     double *qv = vec(&q, "q"), *rv = vec(&ref, "reference"), *sv = vec(&slack, "slack");
+    double *lov = vec(&lo, "lower"), *hiv = vec(&hi, "upper");
     double *bv = out_vec(&bound, "bound"), *fv = vec(&floor_, "floor");
-    if (!qv || !rv || !sv || !bv || !fv) goto done;
+    if (!qv || !rv || !lov || !hiv || !sv || !bv || !fv) goto done;
     Mat L = mat(&lever);
     Py_ssize_t n = length(&q), npairs = L.m;
-    if (length(&ref) != n || L.n != n || length(&slack) != npairs || length(&bound) != npairs
-        || length(&floor_) != npairs) {
-        PyErr_Format(PyExc_ValueError, "near_pairs: q, reference (n,), lever (npairs, n), "
-                     "slack, bound and floor (npairs,) do not fit (n %zd, npairs %zd)", n, npairs);
+    if (length(&ref) != n || length(&lo) != n || length(&hi) != n || L.n != n
+        || length(&slack) != npairs || length(&bound) != npairs || length(&floor_) != npairs) {
+        PyErr_Format(PyExc_ValueError, "near_pairs: q, reference, lower, upper (n,), lever "
+                     "(npairs, n), slack, bound and floor (npairs,) do not fit (n %zd, "
+                     "npairs %zd)", n, npairs);
         goto done;
+    }
+    for (Py_ssize_t j = 0; j < n; j++) {
+        if (!(qv[j] >= lov[j] && qv[j] <= hiv[j])) {
+            result = Py_None;
+            Py_INCREF(result);
+            goto done;
+        }
     }
     moved = (double *)malloc((size_t)(n > 0 ? n : 1) * sizeof(double));
     if (!moved) {
@@ -2893,7 +2905,7 @@ static PyObject *py_near_pairs(PyObject *self, PyObject *const *args, Py_ssize_t
         Py_INCREF(result);
         goto done;
     }
-    near = PySequence_Fast(args[5], "near must be a sequence of pair indices");
+    near = PySequence_Fast(args[7], "near must be a sequence of pair indices");
     if (!near) goto done;
     out = PyList_New(0);
     if (!out) goto done;
@@ -2915,7 +2927,7 @@ done:
     Py_XDECREF(out);
     Py_XDECREF(near);
     free(moved);
-    release(&q); release(&ref); release(&lever); release(&slack); release(&bound);
+    release(&q); release(&ref); release(&lo); release(&hi); release(&lever); release(&slack); release(&bound);
     release(&floor_);
     return result;
 }
@@ -2970,7 +2982,8 @@ static PyMethodDef methods[] = {
      "query_rows(compute, geometry, geometry_data, near, bound, floor, margins, joints, "
      "influence, rows) -> list: the collision limit's distance queries and its pairs' rows."},
     {"near_pairs", (PyCFunction)(void (*)(void))py_near_pairs, METH_FASTCALL,
-     "near_pairs(q, reference, lever, slack, bound, near, floor, influence) -> list | None: "
+     "near_pairs(q, reference, lower, upper, lever, slack, bound, near, floor, influence) -> "
+     "list | None: "
      "the collision limit's pairs to query, or None when its broad phase must run again."},
     {NULL, NULL, 0, NULL},
 };
