@@ -29,7 +29,8 @@ than that from its margin remembers nothing (its row binds nothing).
 Distances and closest points come from coal (through Pinocchio's ``GeometryModel``); only the
 pairs whose bounding spheres come within ``influence`` pay for an exact distance query, and a
 pair whose last exact distance was beyond ``influence`` is not queried again until its joints
-can have closed that gap (a bound from the joint offsets, :meth:`CollisionLimit._near`).
+can have closed that gap (a bound from the joint offsets and the ranges of the prismatic
+joints between, :meth:`CollisionLimit._near`).
 """
 
 from __future__ import annotations
