@@ -184,7 +184,7 @@ def test_the_compiled_damper_rows_are_the_numpy_ones(panda):
 def _walk_scene(robot, rng):
     """A walk's start, a ball and a drift per step: on Panda and UR5 a random start and a ball
     10 cm beside the hand, no drift; on the revolute-prismatic arm the slide at 1.4 m and the
-    first joint swinging 3 mrad a step from 0.9 rad (plus the walk's noise) towards a ball on its path."""
+    first joint swinging 3 mrad a step from 0.9 rad (plus the walk's noise) through a ball."""
     if robot.name == "revolute_prismatic":
         q = np.array([0.9, 1.4, 0.0])
         ball = (coal.Sphere(0.1), pin.SE3(np.eye(3), np.array([0.0, 1.4, 0.0])))
