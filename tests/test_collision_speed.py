@@ -80,11 +80,11 @@ def test_the_compiled_projection_is_the_least_cost_feasible_point():
         H += np.trace(H) / n * np.eye(n)
 
         def least(start, H=H, A=A, b=b, lower=lower, upper=upper, n=n):
-            return minimize(lambda x: (x - start) @ H @ (x - start), np.zeros(n),
-                            jac=lambda x: 2 * H @ (x - start), method="SLSQP",
+            return minimize(lambda v: (v - start) @ H @ (v - start), np.zeros(n),
+                            jac=lambda v: 2 * H @ (v - start), method="SLSQP",
                             bounds=list(zip(lower, upper, strict=True)),
-                            constraints=[{"type": "ineq", "fun": lambda x: b - A @ x,
-                                          "jac": lambda x: -A}],
+                            constraints=[{"type": "ineq", "fun": lambda v: b - A @ v,
+                                          "jac": lambda v: -A}],
                             options={"ftol": 1e-12, "maxiter": 500}).x
 
         x = least(dq)
