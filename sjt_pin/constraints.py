@@ -510,8 +510,8 @@ def project_once_reference(dq: np.ndarray, Jw: np.ndarray, A: np.ndarray, b: np.
                            ) -> np.ndarray:
     """The least-cost point of :func:`project` from ``dq`` in numpy: the whitened problem
     ``z = L^T (x - x0)``, ``H = L L^T``, has the dual ``min 1/2 y^T (C C^T) y + r^T y`` over
-    ``y >= 0`` with ``C = G L^-T`` and ``r = h - G x0`` (``G x <= h``: the rows and the finite bounds), solved by
-    :func:`nonnegative_qp`; then ``z = -C^T y``."""
+    ``y >= 0`` with ``C = G L^-T`` and ``r = h - G x0`` (``G x <= h``: the rows and the
+    finite bounds), solved by :func:`nonnegative_qp`; then ``z = -C^T y``."""
     cols = np.flatnonzero(moving)
     x0 = dq[cols]
     H = Jw[:, cols].T @ Jw[:, cols] if Jw.size else np.zeros((cols.size, cols.size))
