@@ -9,7 +9,7 @@ from scipy.optimize import minimize
 
 import sjt_pin as sjt
 from sjt_pin.bench.limits import PANDA_ACCELERATION, PANDA_JERK  # Franka's published limits
-from sjt_pin.constraints import project, saturate
+from sjt_pin.constraints import project, rest_target, saturate
 from sjt_pin.limits import Limit
 from sjt_pin.methods import Method
 
@@ -173,9 +173,18 @@ def test_the_row_projection_meets_every_row_at_least_cost():
         assert np.all(A @ out <= b + 1e-9) and np.all(np.abs(out) <= 2 + 1e-12)
         H = Jw.T @ Jw
         H += np.trace(H) / n * np.eye(n)
-        ref = qp(lambda x, H=H, dq=dq: (x - dq) @ H @ (x - dq),
-                 lambda x, H=H, dq=dq: 2 * H @ (x - dq), np.zeros(n), lower, upper,
-                 type="ineq", fun=lambda x, A=A, b=b: b - A @ x, jac=lambda x, A=A: -A)
+
+        def least(start, H=H, A=A, b=b, n=n, lower=lower, upper=upper):
+            return qp(lambda v: (v - start) @ H @ (v - start), lambda v: 2 * H @ (v - start),
+                      np.zeros(n), lower, upper, type="ineq", fun=lambda v: b - A @ v,
+                      jac=lambda v: -A)
+
+        ref = least(dq)
+        # a corrected step starts again from dq with its self-motion scaled (rest_target)
+        target = rest_target(dq, ref.x, Jw, np.ones(n, dtype=bool))
+        if target is not None and not np.all(A @ dq <= b):
+            dq = target
+            ref = least(dq)
         cost = (out - dq) @ H @ (out - dq)
         assert cost <= (ref.x - dq) @ H @ (ref.x - dq) + 1e-7
 
