@@ -9,7 +9,7 @@ from scipy.optimize import minimize
 
 import sjt_pin as sjt
 from sjt_pin.bench.limits import PANDA_ACCELERATION, PANDA_JERK  # Franka's published limits
-from sjt_pin.constraints import project, saturate
+from sjt_pin.constraints import project, rest_target, saturate
 from sjt_pin.limits import Limit
 from sjt_pin.methods import Method
 
@@ -173,9 +173,18 @@ def test_the_row_projection_meets_every_row_at_least_cost():
         assert np.all(A @ out <= b + 1e-9) and np.all(np.abs(out) <= 2 + 1e-12)
         H = Jw.T @ Jw
         H += np.trace(H) / n * np.eye(n)
-        ref = qp(lambda x, H=H, dq=dq: (x - dq) @ H @ (x - dq),
-                 lambda x, H=H, dq=dq: 2 * H @ (x - dq), np.zeros(n), lower, upper,
-                 type="ineq", fun=lambda x, A=A, b=b: b - A @ x, jac=lambda x, A=A: -A)
+
+        def least(start, H=H, A=A, b=b, n=n, lower=lower, upper=upper):
+            return qp(lambda v: (v - start) @ H @ (v - start), lambda v: 2 * H @ (v - start),
+                      np.zeros(n), lower, upper, type="ineq", fun=lambda v: b - A @ v,
+                      jac=lambda v: -A)
+
+        ref = least(dq)
+        # a corrected step starts again from dq with its self-motion scaled (rest_target)
+        target = rest_target(dq, ref.x, Jw, np.ones(n, dtype=bool))
+        if target is not None and not np.all(A @ dq <= b):
+            dq = target
+            ref = least(dq)
         cost = (out - dq) @ H @ (out - dq)
         assert cost <= (ref.x - dq) @ H @ (ref.x - dq) + 1e-7
 
@@ -253,3 +262,22 @@ def test_the_dual_qp_of_a_degenerate_step_is_finite_and_optimal():
     scale = 1e-9 * (1.0 + np.abs(r).max())
     assert np.all(gradient >= -scale)
     assert np.all(np.abs(gradient[y[~inert] > 1e-12]) <= scale)
+
+
+def test_a_step_whose_task_motion_the_rows_stop_keeps_none_of_its_self_motion():
+    """Rows that forbid every task motion (``Jw x = 0``): the least-cost point from ``dq`` would
+    be ``dq``'s self-motion, on which a blocked arm drifts in its null space; the projection
+    starts again from ``dq`` with its self-motion scaled by the share of task motion kept (none)
+    and returns rest. A step the rows do not cut keeps its self-motion exactly."""
+    rng = np.random.default_rng(21)
+    for _ in range(20):
+        Jw = rng.normal(size=(2, 5))
+        null = np.linalg.svd(Jw)[2][2:].T  # a basis of Jw's null space
+        dq = Jw.T @ rng.normal(size=2) + null @ rng.normal(size=3)
+        A, b = np.vstack([Jw, -Jw]), np.zeros(4)
+        lower, upper = np.full(5, -10.0), np.full(5, 10.0)
+        out = project(dq, Jw, A, b, lower, upper, np.ones(5, dtype=bool))
+        np.testing.assert_allclose(out, 0.0, atol=1e-9)
+        free = null @ rng.normal(size=3)  # self-motion alone meets the rows: untouched
+        np.testing.assert_array_equal(project(free, Jw, A, b, lower, upper,
+                                              np.ones(5, dtype=bool)), free)

@@ -1931,6 +1931,8 @@ done:
 
 /* the dual's ridge relative to its largest diagonal entry (constraints.DUAL_RIDGE) */
 #define DUAL_RIDGE 1e-13
+/* rest_target_c's ridge of Jw Jw^T, relative to its mean diagonal (constraints.REST_RIDGE) */
+#define REST_RIDGE 1e-12
 
 /* argmin 1/2 y^T Q y + r^T y over y >= 0 for the symmetric PSD Q (k x k, row-major) plus
  * DUAL_RIDGE max(diag Q) I: the active-set method of Lawson and Hanson's NNLS on the normal
@@ -2025,8 +2027,9 @@ static Py_ssize_t nonnegative_qp_scratch(Py_ssize_t k) { return 6 * k + 2 * k * 
  * mean of H's diagonal), subject to A x <= b and lower <= x <= upper, the others at dq: as
  * constraints.project (its reference), on the dual of the Cholesky-whitened problem; when no
  * x meets them all, within the bounds. Returns the passive-set solves, -1 when out of memory. */
-static int project_c(const double *dq, Mat Jw, Mat A, const double *b, const double *lower,
-                     const double *upper, const double *moving, double *out)
+static int project_once_c(const double *dq, Mat Jw, Mat A, const double *b,
+                          const double *lower, const double *upper, const double *moving,
+                          double *out)
 {
     Py_ssize_t n = Jw.n, m = Jw.m, k = A.m, nc = 0, rows;
     Py_ssize_t lo_count = 0, hi_count = 0;
@@ -2119,6 +2122,80 @@ static int project_c(const double *dq, Mat Jw, Mat A, const double *b, const dou
         out[j] = dmin(dmax(x0[a] + z[a], lower[j]), upper[j]);
     }
     free(mem);
+    return solves;
+}
+
+/* The step the projection starts from when it had to correct dq (constraints.rest_target):
+ * dq's self-motion (dq minus its least-norm part with the same task motion Jw dq, on the
+ * moving joints) scaled by the share phi = |Jw x| / |Jw dq| of the task motion the first
+ * projection x kept. A method's step (SJT's per-joint scaling, a saturated step) carries
+ * self-motion along with its push on the task; where the rows stop that push (a target inside
+ * an obstacle) its self-motion would go on alone and the arm drift in its null space. Writes
+ * into target (n) and returns 1, or 0 where it keeps dq (no task motion asked or kept whole,
+ * a singular Jw, out of memory). */
+static int rest_target_c(const double *dq, Mat Jw, const double *moving, const double *x,
+                         double *target)
+{
+    Py_ssize_t n = Jw.n, m = Jw.m;
+    if (m == 0) return 0;
+    double *S = (double *)malloc((size_t)(m * m + 3 * m) * sizeof(double));
+    if (!S) return 0;
+    double *t0 = S + m * m, *t1 = t0 + m, *w = t1 + m;
+    double asked = 0.0, kept = 0.0, trace = 0.0;
+    for (Py_ssize_t i = 0; i < m; i++) {
+        double a0 = 0.0, a1 = 0.0;
+        for (Py_ssize_t j = 0; j < n; j++)
+            if (moving[j] != 0.0) {
+                a0 += AT(Jw, i, j) * dq[j];
+                a1 += AT(Jw, i, j) * x[j];
+            }
+        t0[i] = a0;
+        t1[i] = a1;
+        asked += a0 * a0;
+        kept += a1 * a1;
+        for (Py_ssize_t r = 0; r <= i; r++) {
+            double acc = 0.0;
+            for (Py_ssize_t j = 0; j < n; j++)
+                if (moving[j] != 0.0) acc += AT(Jw, i, j) * AT(Jw, r, j);
+            S[i * m + r] = S[r * m + i] = acc;
+        }
+        trace += S[i * m + i];
+    }
+    double phi = asked > 0.0 ? sqrt(kept / asked) : 1.0;
+    if (!(phi < 1.0) || !cholesky_factor(S, m, REST_RIDGE * dmax(trace / (double)m, 1e-300))) {
+        free(S);
+        return 0;
+    }
+    cholesky_substitute(S, m, t0, w);
+    for (Py_ssize_t j = 0; j < n; j++) {
+        target[j] = dq[j];
+        if (moving[j] == 0.0) continue;
+        double task = 0.0;
+        for (Py_ssize_t i = 0; i < m; i++) task += AT(Jw, i, j) * w[i];
+        target[j] = task + phi * (dq[j] - task);
+    }
+    free(S);
+    return 1;
+}
+
+/* project_once_c, from rest_target_c's start where the first projection corrected dq: the
+ * stage's correction (constraints.project) */
+static int project_c(const double *dq, Mat Jw, Mat A, const double *b, const double *lower,
+                     const double *upper, const double *moving, double *out)
+{
+    int solves = project_once_c(dq, Jw, A, b, lower, upper, moving, out);
+    if (solves < 0) return solves;
+    Py_ssize_t n = Jw.n;
+    int changed = 0;
+    for (Py_ssize_t j = 0; j < n && !changed; j++) changed = out[j] != dq[j];
+    if (!changed) return solves;
+    double *target = (double *)malloc((size_t)(n > 0 ? n : 1) * sizeof(double));
+    if (!target) return -1;
+    if (rest_target_c(dq, Jw, moving, out, target)) {
+        int again = project_once_c(target, Jw, A, b, lower, upper, moving, out);
+        solves = again < 0 ? again : solves + again;
+    }
+    free(target);
     return solves;
 }
 
@@ -2859,34 +2936,46 @@ done:
     return result;
 }
 
-/* near_pairs(q, reference, lever, slack, bound, near, floor, influence) -> list | None: the
- * collision limit's skip of its broad phase and of its queries (limits/collision.py, _near
- * and _rows) for q in its own tangent space (revolute and prismatic joints): bound (npairs,)
- * = lever (npairs, nv) |q - reference|; None when some pair's bound reaches its slack (npairs,)
- * (the broad phase must run again); else the pairs of the list `near` whose floor - bound is
+/* near_pairs(q, reference, lower, upper, lever, slack, bound, near, floor, influence) ->
+ * list | None: the collision limit's skip of its broad phase and of its queries
+ * (limits/collision.py, _near and _rows) for q in its own tangent space (revolute and
+ * prismatic joints): bound (npairs,) = lever (npairs, nv) |q - reference|; None when q leaves
+ * the box lower <= q <= upper (n,) the levers hold in, or when some pair's bound reaches its
+ * slack (npairs,) (the broad phase must run again); else the pairs of the list `near` whose floor - bound is
  * not above influence (those to query). */
 static PyObject *py_near_pairs(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
-    if (!nargs_ok(nargs, 8, "near_pairs")) return NULL;
-    double influence = PyFloat_AsDouble(args[7]);
+    if (!nargs_ok(nargs, 10, "near_pairs")) return NULL;
+    double influence = PyFloat_AsDouble(args[9]);
     if (influence == -1.0 && PyErr_Occurred()) return NULL;
-    Arg q = {0}, ref = {0}, lever = {0}, slack = {0}, bound = {0}, floor_ = {0};
+    Arg q = {0}, ref = {0}, lo = {0}, hi = {0}, lever = {0}, slack = {0}, bound = {0},
+        floor_ = {0};
     PyObject *result = NULL, *near = NULL, *out = NULL;
     double *moved = NULL;
     if (acquire(args[0], &q, 0, 1, "q") || acquire(args[1], &ref, 0, 1, "reference")
-        || acquire(args[2], &lever, 0, 2, "lever") || acquire(args[3], &slack, 0, 1, "slack")
-        || acquire(args[4], &bound, 1, 1, "bound") || acquire(args[6], &floor_, 0, 1, "floor"))
+        || acquire(args[2], &lo, 0, 1, "lower") || acquire(args[3], &hi, 0, 1, "upper")
+        || acquire(args[4], &lever, 0, 2, "lever") || acquire(args[5], &slack, 0, 1, "slack")
+        || acquire(args[6], &bound, 1, 1, "bound") || acquire(args[8], &floor_, 0, 1, "floor"))
         goto done;
     double *qv = vec(&q, "q"), *rv = vec(&ref, "reference"), *sv = vec(&slack, "slack");
+    double *lov = vec(&lo, "lower"), *hiv = vec(&hi, "upper");
     double *bv = out_vec(&bound, "bound"), *fv = vec(&floor_, "floor");
-    if (!qv || !rv || !sv || !bv || !fv) goto done;
+    if (!qv || !rv || !lov || !hiv || !sv || !bv || !fv) goto done;
     Mat L = mat(&lever);
     Py_ssize_t n = length(&q), npairs = L.m;
-    if (length(&ref) != n || L.n != n || length(&slack) != npairs || length(&bound) != npairs
-        || length(&floor_) != npairs) {
-        PyErr_Format(PyExc_ValueError, "near_pairs: q, reference (n,), lever (npairs, n), "
-                     "slack, bound and floor (npairs,) do not fit (n %zd, npairs %zd)", n, npairs);
+    if (length(&ref) != n || length(&lo) != n || length(&hi) != n || L.n != n
+        || length(&slack) != npairs || length(&bound) != npairs || length(&floor_) != npairs) {
+        PyErr_Format(PyExc_ValueError, "near_pairs: q, reference, lower, upper (n,), lever "
+                     "(npairs, n), slack, bound and floor (npairs,) do not fit (n %zd, "
+                     "npairs %zd)", n, npairs);
         goto done;
+    }
+    for (Py_ssize_t j = 0; j < n; j++) {
+        if (!(qv[j] >= lov[j] && qv[j] <= hiv[j])) {
+            result = Py_None;
+            Py_INCREF(result);
+            goto done;
+        }
     }
     moved = (double *)malloc((size_t)(n > 0 ? n : 1) * sizeof(double));
     if (!moved) {
@@ -2906,7 +2995,7 @@ static PyObject *py_near_pairs(PyObject *self, PyObject *const *args, Py_ssize_t
         Py_INCREF(result);
         goto done;
     }
-    near = PySequence_Fast(args[5], "near must be a sequence of pair indices");
+    near = PySequence_Fast(args[7], "near must be a sequence of pair indices");
     if (!near) goto done;
     out = PyList_New(0);
     if (!out) goto done;
@@ -2928,7 +3017,7 @@ done:
     Py_XDECREF(out);
     Py_XDECREF(near);
     free(moved);
-    release(&q); release(&ref); release(&lever); release(&slack); release(&bound);
+    release(&q); release(&ref); release(&lo); release(&hi); release(&lever); release(&slack); release(&bound);
     release(&floor_);
     return result;
 }
@@ -2983,7 +3072,8 @@ static PyMethodDef methods[] = {
      "query_rows(compute, geometry, geometry_data, near, bound, floor, margins, joints, "
      "influence, rows) -> list: the collision limit's distance queries and its pairs' rows."},
     {"near_pairs", (PyCFunction)(void (*)(void))py_near_pairs, METH_FASTCALL,
-     "near_pairs(q, reference, lever, slack, bound, near, floor, influence) -> list | None: "
+     "near_pairs(q, reference, lower, upper, lever, slack, bound, near, floor, influence) -> "
+     "list | None: "
      "the collision limit's pairs to query, or None when its broad phase must run again."},
     {NULL, NULL, 0, NULL},
 };

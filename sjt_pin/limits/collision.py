@@ -29,7 +29,8 @@ than that from its margin remembers nothing (its row binds nothing).
 Distances and closest points come from coal (through Pinocchio's ``GeometryModel``); only the
 pairs whose bounding spheres come within ``influence`` pay for an exact distance query, and a
 pair whose last exact distance was beyond ``influence`` is not queried again until its joints
-can have closed that gap (a bound from the joint offsets, :meth:`CollisionLimit._near`).
+can have closed that gap (a bound from the joint offsets and the ranges of the prismatic
+joints between, :meth:`CollisionLimit._near`).
 """
 
 from __future__ import annotations
@@ -223,7 +224,8 @@ class CollisionLimit(Limit):
                           margin=margin, influence=influence, gain=gain, pairs=list(pairs),
                           ignore=list(ignore), srdf=srdf, convex=convex, witnesses=witnesses)
         self.model: pin.Model = robot.model
-        self._mimic = _mimic_map(robot.model, getattr(robot, "mimic_joints", ()))
+        self._mimics = list(getattr(robot, "mimic_joints", ()))
+        self._mimic = _mimic_map(robot.model, self._mimics)
         source = self.__dict__.pop("_restored_geometry", None)  # set by __setstate__
         self.geometry = source.copy() if source is not None else _collision_model(robot)
         self._source = self.geometry.copy()  # the robot's own geometry (meshes), for copies
@@ -410,6 +412,8 @@ class CollisionLimit(Limit):
                     self._support[j, start:start + model.nvExtendeds[i]] = 1.0
         self._version = 0  # bumped by move(): a new scene
         self._cache: tuple | None = None
+        self._kinds, self._extent, self._lower, self._upper = _extents(
+            model, getattr(self, "_mimics", ()))
         self._lever = self._levers()
         self._bounds: tuple[float, tuple[np.ndarray, np.ndarray]] | None = None
         self._pair_lever, self._flat = self._pair_levers()
@@ -423,23 +427,19 @@ class CollisionLimit(Limit):
         self._bound_now = np.zeros(len(self.pairs))  # kernels.near_pairs' output
         self._bound: np.ndarray | None = None
 
-    def _pair_levers(self) -> tuple[np.ndarray | None, bool]:
-        """For each pair and velocity coordinate, a bound (m per unit) on how much the
-        coordinate changes the distance between any two points of the pair's bounding
-        spheres: the chain of joint offsets from its joint to the far side of either sphere
-        when it moves only one of them (at least 1 m for a joint that translates), 0 when it
-        moves both (rigidly together), summed over the joints it drives (a mimic joint's
-        times its multiplier); and whether ``q`` is its own tangent space (revolute and
-        prismatic joints, mimic joints following them). ``None`` for joints whose coordinates
-        are not rates of a motion (Euler angles)."""
+    def _chains(self, unbounded: float) -> tuple[np.ndarray, np.ndarray]:
+        """For each geometry g and joint coordinate (nvExtended) of a joint k that moves it:
+        a bound (m) on the distance from joint k's origin to any point of g's bounding
+        sphere, over every configuration with the translating joints in their ranges
+        (:func:`_extents`): the sphere's far side from g's joint, plus, for each joint i from
+        g's joint up to (not including) k, its fixed offset (``jointPlacements``) and how far
+        its own motion can carry its frame (a prismatic joint's extension); ``unbounded``
+        stands for the extension of a joint without a finite range. And which coordinates
+        move g at all. The sum of :meth:`_levers` and :meth:`_pair_levers`."""
         model = self.model
         n = len(self.geometry.geometryObjects)
-        kinds = [model.joints[j].shortname() for j in range(model.njoints)]
-        if any("ZYX" in kind for kind in kinds[1:]):
-            return None, False
-        flat = model.nq == model.nv and all(model.nqs[j] == model.nvs[j] <= 1
-                                             for j in range(1, model.njoints))
-        lever = np.zeros((n, model.nvExtended))  # per geometry, per joint coordinate
+        extent = np.where(np.isfinite(self._extent), self._extent, unbounded)
+        chain = np.zeros((n, model.nvExtended))
         moves = np.zeros((n, model.nvExtended), dtype=bool)
         for g in range(n):
             k = int(self._joint[g])
@@ -447,39 +447,62 @@ class CollisionLimit(Limit):
             while k > 0:
                 start = model.idx_vExtendeds[k]
                 span = slice(start, start + model.nvExtendeds[k])
-                lever[g, span] = max(length, 1.0) if _translates(kinds[k]) else length
+                chain[g, span] = length
                 moves[g, span] = True
-                length += float(np.linalg.norm(model.jointPlacements[k].translation))
+                length += float(np.linalg.norm(model.jointPlacements[k].translation)) + extent[k]
                 k = model.parents[k]
-        pair = np.where(moves[self._pa] & moves[self._pb], 0.0,
-                        lever[self._pa] + lever[self._pb])
+        return chain, moves
+
+    def _pair_levers(self) -> tuple[np.ndarray | None, bool]:
+        """For each pair and velocity coordinate, a bound (m per unit) on how much the
+        coordinate changes the distance between any two points of the pair's bounding
+        spheres, at every configuration whose translating joints lie in their ranges
+        (:attr:`_inside`): :meth:`_chains` to the far side of either sphere when it moves only
+        one of them (at least 1 m for a joint that translates: a prismatic joint's own
+        displacement moves the geometry 1:1), 0 when it moves both (rigidly together), summed
+        over the joints it drives (a mimic joint's times its multiplier); and whether ``q`` is
+        its own tangent space (revolute and prismatic joints, mimic joints following them).
+        ``None`` (no skip) for joints whose coordinates are not rates of a motion (Euler
+        angles), or when a joint without a finite range of translation lies between a pair's
+        geometry and a joint that moves it."""
+        model = self.model
+        kinds = self._kinds
+        if any("ZYX" in kind for kind in kinds[1:]):
+            return None, False
+        flat = model.nq == model.nv and all(model.nqs[j] == model.nvs[j] <= 1
+                                             for j in range(1, model.njoints))
+        chain, moves = self._chains(np.inf)
+        translates = np.zeros(model.nvExtended, dtype=bool)
+        for k in range(1, model.njoints):
+            start = model.idx_vExtendeds[k]
+            translates[start:start + model.nvExtendeds[k]] = _translates(kinds[k])
+        lever = np.where(translates, np.maximum(chain, 1.0), chain)
+        lever[~moves] = 0.0
+        one = moves[self._pa] != moves[self._pb]
+        pair = np.where(one, lever[self._pa] + lever[self._pb], 0.0)
+        if not np.isfinite(pair).all():
+            return None, False
         if self._mimic is not None:
             pair = pair @ np.abs(self._mimic)
         return pair, flat
 
     def _levers(self) -> np.ndarray:
         """For each velocity coordinate, a bound (m per unit) on the speed it gives any point of
-        the geometry it moves, at every configuration: the longest chain of joint offsets from
-        its joint to a bounding sphere's far side (triangle inequality), or at least 1 m for a
-        joint that translates (prismatic, planar, free-flyer)."""
+        the geometry it moves: the longest of :meth:`_chains` (triangle inequality), or at
+        least 1 m for a joint that translates (prismatic, planar, free-flyer). A joint without
+        a finite range of translation counts at its origin here (these bounds only keep steps
+        small, :meth:`bounds`; the broad phase's skip does not use them)."""
         model = self.model
-        reach = np.zeros(model.njoints)
-        geoms = self.geometry.geometryObjects
-        for g in range(self.n_robot):
-            k = int(self._joint[g])
-            length = float(np.linalg.norm(self._center_local[g, :3]) + self._radius[g])
-            while k > 0:
-                reach[k] = max(reach[k], length)
-                length += float(np.linalg.norm(model.jointPlacements[k].translation))
-                k = model.parents[k]
-        del geoms
-        lever = np.zeros(model.nv)
+        chain, _ = self._chains(0.0)
+        reach = chain[:self.n_robot].max(axis=0) if self.n_robot else np.zeros(model.nvExtended)
+        lever = np.zeros(model.nvExtended)
         for j in range(1, model.njoints):
-            joint = model.joints[j]
-            kind = joint.shortname()
-            moves = any(t in kind for t in ("Prismatic", "FreeFlyer", "Planar", "Translation",
-                                            "JointModelP"))
-            lever[joint.idx_v:joint.idx_v + joint.nv] = max(reach[j], 1.0) if moves else reach[j]
+            start = model.idx_vExtendeds[j]
+            span = slice(start, start + model.nvExtendeds[j])
+            lever[span] = (np.maximum(reach[span], 1.0) if _translates(self._kinds[j])
+                           else reach[span])
+        if self._mimic is not None:  # a coordinate's lever: the largest of the joints it drives
+            lever = (np.abs(self._mimic) * lever[:, None]).max(axis=0)
         return lever
 
     def bounds(self, kinematics, motion: Motion) -> tuple[np.ndarray, np.ndarray] | None:
@@ -564,14 +587,15 @@ class CollisionLimit(Limit):
         reference), which :meth:`_rows` also holds the candidates' exact distances to."""
         ref = self._reference
         bound = None
-        if q is not None and ref is not None and ref[0] == self._version:
+        inside = q is not None and self._inside(q)
+        if inside and ref is not None and ref[0] == self._version:
             moved = np.abs(q - ref[1] if self._flat else pin.difference(self.model, ref[1], q))
             bound = self._pair_lever @ moved
             if (bound < ref[3]).all():
                 self._bound = bound
                 return ref[2]
         near, slack = self._broad_phase(data)
-        if q is not None and self._pair_lever is not None:
+        if q is not None and inside and self._pair_lever is not None:
             slack[near] = np.inf  # a candidate stays one
             self._reference = (self._version, q.copy(), near, slack, near.tolist())
             self._bound = self._no_bound
@@ -582,8 +606,14 @@ class CollisionLimit(Limit):
             else:
                 self._floor -= bound
         else:
+            self._reference = None  # no reference outside the box the levers hold in
+            self._floor.fill(-np.inf)
             self._bound = None
         return near
+
+    def _inside(self, q: np.ndarray) -> bool:
+        """Whether ``q`` lies in the box of position limits :meth:`_pair_levers` holds in."""
+        return bool(np.all(q >= self._lower) and np.all(q <= self._upper))
 
     def _sphere_box(self, points, poses, g) -> np.ndarray:
         """Distance of world ``points`` (k, 3) to the local boxes of geometries ``g``."""
@@ -706,8 +736,8 @@ class CollisionLimit(Limit):
         listed = None
         bound: np.ndarray | None
         if self._flat and q is not None and ref is not None and ref[0] == self._version:
-            listed = near_pairs(q, ref[1], self._pair_lever, ref[3], self._bound_now, ref[4],
-                                floor, influence)
+            listed = near_pairs(q, ref[1], self._lower, self._upper, self._pair_lever, ref[3],
+                                self._bound_now, ref[4], floor, influence)
         if listed is not None:
             bound = self._bound = self._bound_now
         else:
@@ -772,6 +802,50 @@ def _translates(kind: str) -> bool:
     least a metre per unit)."""
     return any(t in kind for t in ("Prismatic", "FreeFlyer", "Planar", "Translation",
                                    "JointModelP"))
+
+
+#: joints (``shortname()``) whose motion only turns their frame about its origin
+_TURNS = ("JointModelR", "JointModelSpherical", "JointModelUniversal")
+
+
+def _extents(model: pin.Model, mimics: Sequence = ()
+             ) -> tuple[list[str], np.ndarray, np.ndarray, np.ndarray]:
+    """Per joint: its kind (``shortname()``; a mimic joint's is the kind of the joint it
+    follows) and how far (m) its own motion can carry its frame's origin over its position
+    range: 0 for joints that only turn, the largest translation in the box of the URDF limits
+    for prismatic, translation, planar and free-flyer joints (``inf`` where a limit is not
+    finite, and for any other kind); and the box ``lower <= q <= upper`` (nq,) those extents
+    hold in (``-inf``/``inf`` for coordinates they do not depend on)."""
+    lower = np.full(model.nq, -np.inf)
+    upper = np.full(model.nq, np.inf)
+    kinds = [model.joints[j].shortname() for j in range(model.njoints)]
+    extent = np.zeros(model.njoints)
+    follows = {model.getJointId(m.joint): m for m in mimics}
+    for j in range(1, model.njoints):
+        relation = follows.get(j)
+        leader = model.getJointId(relation.mimicked) if relation is not None else j
+        kind = kinds[leader]
+        kinds[j] = kind
+        if kind.startswith(_TURNS):
+            continue
+        if kind.startswith(("JointModelP", "JointModelTranslation", "JointModelFreeFlyer")):
+            count = 2 if "Planar" in kind else (1 if kind.startswith("JointModelP") else 3)
+        else:
+            extent[j] = np.inf  # helical, composite, ...: not bounded here
+            continue
+        start = model.idx_qs[leader]
+        lo = np.array(model.lowerPositionLimit[start:start + count], dtype=float)
+        hi = np.array(model.upperPositionLimit[start:start + count], dtype=float)
+        if relation is not None:  # q[j] = multiplier q[leader] + offset
+            ends = relation.multiplier * np.array([lo, hi]) + relation.offset
+            far = np.abs(ends).max(axis=0)
+        else:
+            far = np.maximum(np.abs(lo), np.abs(hi))
+        finite = bool(np.all(np.isfinite(far)) and np.all(far < 1e10))
+        extent[j] = float(np.linalg.norm(far)) if finite else np.inf
+        if finite:
+            lower[start:start + count], upper[start:start + count] = lo, hi
+    return kinds, extent, lower, upper
 
 
 def _mimic_map(model: pin.Model, mimic_joints) -> np.ndarray | None:
