@@ -799,6 +799,15 @@ static int saturate_c(int kind, Mat J, const double *e, const double *ff, int ha
  * its reference: Solver._constrain, _brake_feedback, ConstraintStage.box/enforce, smooth,
  * PositionLimit.bounds, braking_speed, stopping_distance, AccelerationLimit, JerkLimit) --- */
 
+/* The speed (rad/s or m/s) at which a ramp at `rate` (rad/s^2, or rad/s^3 for a change of
+ * acceleration) still comes to rest within `room` (rad, or rad/s) when it starts after one step
+ * of dt (s): the positive root of v dt + v^2 / (2 rate) = room, as rate (-dt + sqrt(dt^2 +
+ * 2 room / rate)) (sjt_pin/limits/position.py, braking_speed without jerk). */
+static inline double ramp_speed(double rate, double room, double dt)
+{
+    return rate * (-dt + sqrt(dt * dt + 2.0 * room / rate));
+}
+
 /* Distance (rad or m) to stop from velocity w > 0 with acceleration a0 along it, braking at the
  * acceleration limit A reached and left at the jerk limit J (inf: instantly); see
  * sjt_pin/limits/position.py, stopping_distance. */
@@ -849,7 +858,7 @@ static double braking_speed_c(double room, double v, double dt, double A, double
 {
     if (!isfinite(A)) return INFINITY;
     room = dmax(room, 0.0);
-    if (!has_jerk) return A * (-dt + sqrt(dt * dt + 2.0 * room / A));
+    if (!has_jerk) return ramp_speed(A, room, dt);
     double top = fabs(v) + 2.0 * A * dt;
     if (!(room < top * dt + stopping_distance_c(top, 2.0 * A, A, J))) return INFINITY;
     double low = v - 2.0 * A * dt, high = v + 2.0 * A * dt;
@@ -884,6 +893,248 @@ static double braking_speed_c(double room, double v, double dt, double A, double
     return lo;
 }
 
+/* The stage's vectors in work (n each, SM_* parts of sjt_pin/kernels/layout.py): the motion
+ * state, the limits, the boxes and the codes of the limits that set them, and scratch. */
+typedef struct {
+    double *pdq, *pddq;                   /* previous velocity (rad/s) and acceleration */
+    double *A, *Jk, *vj, *BA, *BJ;        /* accel., jerk, jerk's speed, braking accel./jerk */
+    double *hlo, *hhi, *slo, *shi;        /* hard and smoothness boxes (rad/s) */
+    double *hlb, *hhb, *slb, *shb;        /* the L_* code that set each bound, -1 none */
+    double *desired, *out, *torn;         /* velocity before smoothing, result, hard box won */
+    double *dqff, *save;                  /* feed-forward velocity / line base; saved gains */
+} Stage;
+
+static Stage stage_parts(double *work, Py_ssize_t n)
+{
+    double *S = work + (Py_ssize_t)work[P_SMOOTH];
+    Stage st = {
+        S + SM_DQ * n, S + SM_DDQ * n,
+        S + SM_ACC * n, S + SM_JERK * n, S + SM_JERK_SPEED * n, S + SM_BRAKE_ACC * n,
+        S + SM_BRAKE_JERK * n,
+        S + SM_HARD_LO * n, S + SM_HARD_HI * n, S + SM_SOFT_LO * n, S + SM_SOFT_HI * n,
+        S + SM_HARD_LO_BY * n, S + SM_HARD_HI_BY * n, S + SM_SOFT_LO_BY * n,
+        S + SM_SOFT_HI_BY * n,
+        S + SM_DESIRED * n, S + SM_OUT * n, S + SM_TORN * n,
+        S + SM_FF * n, S + SM_GAINS * n,
+    };
+    return st;
+}
+
+/* Narrow [*lo, *hi] to [lo_new, hi_new] where that is tighter, noting `code` (an L_* limit) as
+ * what set each side. */
+static inline void tighten(double *lo, double *hi, double *lo_by, double *hi_by, double lo_new,
+                           double hi_new, double code)
+{
+    if (lo_new > *lo) {
+        *lo = lo_new;
+        *lo_by = code;
+    }
+    if (hi_new < *hi) {
+        *hi = hi_new;
+        *hi_by = code;
+    }
+}
+
+/* Step 1 (Solver._brake_feedback): the feedback part of out (rad/s; out minus the feed-forward
+ * velocity dqff, the method's map of ff plus the escape) slowed by sigma <= 1 so that a stop at
+ * the target, 1/k of the feedback away (k the mean gain, 1/s), fits the acceleration limits:
+ * sigma = ramp_speed(a_min, 1, dt) / rate. Returns sigma, the gain factor of SNS's re-solves. */
+static double brake_feedback(int kind, Mat J, const double *e, const double *ff, int has_ff,
+                             const double *mask, double *work, const Stage *st, int escaping)
+{
+    Py_ssize_t n = J.n, m = J.m;
+    double dt = work[P_DT], *out = st->out, *dqff = st->dqff;
+    Py_ssize_t extra = (Py_ssize_t)work[P_EXTRA];
+    if (has_ff) {  /* (without a feed-forward the method maps 0 to 0: no solve) */
+        core_scaled(kind, J, e, ff, has_ff, mask, work, dqff, 0.0, st->save);
+    } else {
+        for (Py_ssize_t j = 0; j < n; j++) dqff[j] = 0.0;
+    }
+    for (Py_ssize_t j = 0; j < n; j++)
+        dqff[j] = escaping ? (dqff[j] + dt * work[extra + j]) / dt : dqff[j] / dt;
+    Py_ssize_t rows_e = (Py_ssize_t)work[P_ERROR_ROWS];
+    const double *gains = work + (Py_ssize_t)work[P_ROWS] + m;
+    double k = 0.0;
+    for (Py_ssize_t i = 0; i < rows_e; i++) k += gains[i];
+    k /= (double)rows_e;
+    if (work[P_GAIN_MODE] != GAIN_FIXED) k *= work[INFO + I_GAIN];
+    if (!(k > 0.0)) return 1.0;
+    double size = 0.0, dot = 0.0, a_min = INFINITY;
+    for (Py_ssize_t j = 0; j < n; j++) {
+        double fb = out[j] - dqff[j], d = fb / k;
+        size += d * d;
+        dot += fb * d;
+        if (fabs(d) > 0.0) a_min = dmin(a_min, st->A[j] / fabs(d));
+    }
+    double rate = size > 0.0 ? dot / size : 0.0;
+    if (!(rate > 0.0)) return 1.0;
+    double allowed = isfinite(a_min) ? ramp_speed(a_min, 1.0, dt) : INFINITY;
+    double sigma = dmin(1.0, dmax(allowed, 0.0) / rate);
+    if (!(sigma < 1.0)) return 1.0;
+    for (Py_ssize_t j = 0; j < n; j++) out[j] = dqff[j] + sigma * (out[j] - dqff[j]);
+    return sigma;
+}
+
+/* The speed (rad/s or m/s) toward the range of a joint outside it (`above`: past its upper
+ * limit): toward its velocity now plus a push at the braking acceleration BA, with jerk limits a
+ * ramp of the acceleration aa within BJ (v = a dt + J dt^2 / 2 solved for the gap), at most the
+ * recovery speed `rec` and never past the range's other side (`room` away). */
+static double recovery_speed(int above, double room, double rec, double vv, double aa,
+                             double BA, double BJ, double dt, int has_jerk)
+{
+    double toward = above ? -vv : vv;
+    double cap = dmin(rec, room / dt);
+    double push = BA;
+    if (has_jerk && isfinite(BJ)) {
+        double gap = dmax(cap - toward, 0.0);
+        push = dmin(dmin(BA, dmax(above ? -aa : aa, 0.0) + BJ * dt),
+                    sqrt((0.5 * BJ * dt) * (0.5 * BJ * dt) + 2.0 * BJ * gap) - 0.5 * BJ * dt);
+    }
+    return dmin(cap, toward + push * dt);
+}
+
+/* Step 2, the hard box's positions (PositionLimit.bounds): a joint inside its range may move at
+ * most as fast as it can still brake to a stop at either limit (braking_speed_c, within the
+ * braking acceleration and jerk) and never past it in one step; outside, it returns at
+ * recovery_speed. Bounds in rad/s (m/s), codes L_POSITION. */
+static void position_box(const double *q, const double *work, const Stage *st, int has_jerk)
+{
+    double dt = work[P_DT];
+    Py_ssize_t box = (Py_ssize_t)work[P_BOX], count = (Py_ssize_t)work[P_BOX_COUNT];
+    for (Py_ssize_t c = 0; c < count; c++) {
+        Py_ssize_t v = (Py_ssize_t)work[box + count + c];
+        double x = q[(Py_ssize_t)work[box + c]];
+        double lower = work[box + 2 * count + c], upper = work[box + 3 * count + c];
+        double room_up = upper - x, room_down = x - lower, vv = st->pdq[v];
+        double BA = st->BA[v], BJ = st->BJ[v];
+        double up = dmin(braking_speed_c(room_up, vv, dt, BA, BJ, has_jerk), room_up / dt);
+        double lw = -dmin(braking_speed_c(room_down, -vv, dt, BA, BJ, has_jerk),
+                          room_down / dt);
+        int above = room_up < 0.0, below = room_down < 0.0;
+        if (above || below) {  /* back toward the range, a ramp within the limits */
+            double back = recovery_speed(above, above ? room_down : room_up,
+                                         work[box + 4 * count + c], vv, st->pddq[v], BA, BJ,
+                                         dt, has_jerk);
+            lw = up = above ? -back : back;
+        }
+        tighten(st->hlo + v, st->hhi + v, st->hlb + v, st->hhb + v, lw, up, L_POSITION);
+    }
+}
+
+/* The speed limit of velocity coordinate j (rad/s or m/s; INFINITY for none): work keeps its
+ * inverse, 0 for none. */
+static inline double speed_limit(const double *work, Py_ssize_t j)
+{
+    double inv = work[(Py_ssize_t)work[P_SPEED] + j];
+    return inv > 0.0 ? 1.0 / inv : INFINITY;
+}
+
+/* Step 2, the hard box (rad/s): position braking (position_box), speeds (L_VELOCITY), and
+ * joints the solver does not move held at rest. Returns whether out lies inside it. */
+static int hard_box(const double *q, const double *mask, const double *work, const Stage *st,
+                    Py_ssize_t n, int has_jerk)
+{
+    for (Py_ssize_t j = 0; j < n; j++) {
+        st->hlo[j] = -INFINITY;
+        st->hhi[j] = INFINITY;
+        st->hlb[j] = st->hhb[j] = -1.0;
+    }
+    position_box(q, work, st, has_jerk);
+    int inside = 1;
+    for (Py_ssize_t j = 0; j < n; j++) {
+        double vmax = speed_limit(work, j);
+        tighten(st->hlo + j, st->hhi + j, st->hlb + j, st->hhb + j, -vmax, vmax, L_VELOCITY);
+        if (mask[j] == 0.0) {  /* joints the solver does not move stay at rest */
+            st->hlo[j] = dmin(st->hlo[j], 0.0);
+            st->hhi[j] = dmax(st->hhi[j], 0.0);
+        }
+        if (st->out[j] < st->hlo[j] - BOUND_TOL || st->out[j] > st->hhi[j] + BOUND_TOL)
+            inside = 0;
+    }
+    return inside;
+}
+
+/* Step 3, the smoothness box (rad/s, AccelerationLimit and JerkLimit): the previous velocity
+ * pdq changed by at most A dt, and with jerk limits the previous acceleration pddq changed by at
+ * most Jk dt, the velocity approaching the jerk's speed vj no faster than a ramp of the
+ * acceleration can end there (ramp_speed); limits that contradict each other give the middle.
+ * Codes L_ACCELERATION, L_JERK. */
+static void smoothness_bounds(const double *work, const Stage *st, Py_ssize_t n, int has_jerk)
+{
+    double dt = work[P_DT];
+    for (Py_ssize_t j = 0; j < n; j++) {
+        double pdq = st->pdq[j], change = st->A[j] * dt, Jk = st->Jk[j];
+        st->slo[j] = -INFINITY;
+        st->shi[j] = INFINITY;
+        st->slb[j] = st->shb[j] = -1.0;
+        tighten(st->slo + j, st->shi + j, st->slb + j, st->shb + j, pdq - change, pdq + change,
+                L_ACCELERATION);
+        if (has_jerk && isfinite(Jk)) {
+            change = Jk * dt;
+            double lo = pdq + dt * (st->pddq[j] - change), hi = pdq + dt * (st->pddq[j] + change);
+            double bound = pdq + dt * ramp_speed(Jk, dmax(st->vj[j] - pdq, 0.0), dt);
+            if (isfinite(bound)) hi = dmin(hi, bound);
+            bound = pdq - dt * ramp_speed(Jk, dmax(st->vj[j] + pdq, 0.0), dt);
+            if (isfinite(bound)) lo = dmax(lo, bound);
+            tighten(st->slo + j, st->shi + j, st->slb + j, st->shb + j, lo, hi, L_JERK);
+        }
+        if (st->slo[j] > st->shi[j])  /* limits that contradict each other: the middle */
+            st->slo[j] = st->shi[j] = 0.5 * (st->slo[j] + st->shi[j]);
+    }
+}
+
+/* Step 5 (ConstraintStage.smooth): the velocity moves from the smoothness box's centre (within
+ * the hard box where both meet) toward out along a line, as far tau in [0, 1] as the smoothness
+ * box allows, its bounds first narrowed so that with jerk limits out is reached without
+ * overshooting it (ramp_speed of the gap); the hard box wins where it clips the result (marked
+ * in torn). Writes desired (out before), dqff (the line's base), out and step (rad). */
+static void smooth_line(const double *work, const Stage *st, Py_ssize_t n, int has_jerk,
+                        double *step)
+{
+    double dt = work[P_DT], tau = 1.0;
+    double *slo = st->slo, *shi = st->shi, *out = st->out, *base = st->dqff;
+    for (Py_ssize_t j = 0; j < n; j++) {
+        st->desired[j] = out[j];
+        if (has_jerk && isfinite(st->Jk[j])) {
+            double gap = out[j] - st->pdq[j];
+            double a_max = ramp_speed(st->Jk[j], fabs(gap), dt);
+            double room = isfinite(a_max) ? dt * a_max : INFINITY;
+            double lo = gap < 0.0 ? st->pdq[j] - room : -INFINITY;
+            double hi = gap > 0.0 ? st->pdq[j] + room : INFINITY;
+            slo[j] = dmax(slo[j], dmin(lo, shi[j]));
+            shi[j] = dmin(shi[j], dmax(hi, slo[j]));
+        }
+        double l = isfinite(slo[j]) ? slo[j] : shi[j], u = isfinite(shi[j]) ? shi[j] : slo[j];
+        double b = 0.5 * (l + u);
+        if (!isfinite(b)) b = out[j];
+        double both_lo = dmax(slo[j], st->hlo[j]), both_hi = dmin(shi[j], st->hhi[j]);
+        if (both_lo <= both_hi) b = dmin(dmax(b, both_lo), both_hi);
+        base[j] = b;
+        double change = out[j] - b;
+        double room = change > 0.0 ? (shi[j] - b) / change
+                      : change < 0.0 ? (slo[j] - b) / change : INFINITY;
+        tau = dmin(tau, room);
+    }
+    tau = dmin(dmax(tau, 0.0), 1.0);
+    for (Py_ssize_t j = 0; j < n; j++) {
+        double v = base[j] + tau * (out[j] - base[j]);
+        st->torn[j] = v < st->hlo[j] || v > st->hhi[j] ? 1.0 : 0.0;
+        out[j] = dmin(dmax(v, st->hlo[j]), st->hhi[j]);
+        step[j] = out[j] * dt;
+    }
+}
+
+/* Step 6: the motion state for the next step, the velocity (rad/s) and acceleration (rad/s^2)
+ * the step (rad) commands. */
+static void motion_state(const double *step, double dt, const Stage *st, Py_ssize_t n)
+{
+    for (Py_ssize_t j = 0; j < n; j++) {
+        double v = step[j] / dt;
+        st->pddq[j] = (v - st->pdq[j]) / dt;
+        st->pdq[j] = v;
+    }
+}
+
 /* The acceleration/jerk stage on the method's step (rad, overwritten): the feedback slowed so
  * that every joint can stop where the error says the target is; the hard box (position braking
  * within the acceleration and jerk limits, speeds) and the smoothness box (acceleration, jerk,
@@ -897,195 +1148,27 @@ static int smooth_stage_c(int kind, Mat J, const double *e, const double *ff, in
                           const double *q, const double *mask, double *work, double *step,
                           int escaping)
 {
-    Py_ssize_t n = J.n, m = J.m;
+    Py_ssize_t n = J.n;
     double dt = work[P_DT];
-    double *S = work + (Py_ssize_t)work[P_SMOOTH];
-    double *pdq = S + SM_DQ * n, *pddq = S + SM_DDQ * n, *A = S + SM_ACC * n;
-    double *Jk = S + SM_JERK * n, *vj = S + SM_JERK_SPEED * n, *BA = S + SM_BRAKE_ACC * n;
-    double *BJ = S + SM_BRAKE_JERK * n, *hlo = S + SM_HARD_LO * n, *hhi = S + SM_HARD_HI * n;
-    double *slo = S + SM_SOFT_LO * n, *shi = S + SM_SOFT_HI * n;
-    double *hlb = S + SM_HARD_LO_BY * n, *hhb = S + SM_HARD_HI_BY * n;
-    double *slb = S + SM_SOFT_LO_BY * n, *shb = S + SM_SOFT_HI_BY * n;
-    double *desired = S + SM_DESIRED * n, *out = S + SM_OUT * n, *torn = S + SM_TORN * n;
-    double *dqff = S + SM_FF * n, *save = S + SM_GAINS * n;
+    Stage st = stage_parts(work, n);
     double *held = work + (Py_ssize_t)work[P_CLAMPED];
     int has_jerk = work[P_JERK] != 0.0;
-    Py_ssize_t extra = (Py_ssize_t)work[P_EXTRA], speed = (Py_ssize_t)work[P_SPEED];
-    Py_ssize_t box = (Py_ssize_t)work[P_BOX], count = (Py_ssize_t)work[P_BOX_COUNT];
-    for (Py_ssize_t j = 0; j < n; j++) out[j] = step[j] / dt;
-    /* 1. the feedback, slowed so that a stop at the target fits the acceleration limits */
-    double factor = 1.0;
-    if (has_ff) {  /* (without a feed-forward the method maps 0 to 0: no solve) */
-        core_scaled(kind, J, e, ff, has_ff, mask, work, dqff, 0.0, save);
-    } else {
-        for (Py_ssize_t j = 0; j < n; j++) dqff[j] = 0.0;
-    }
-    for (Py_ssize_t j = 0; j < n; j++)
-        dqff[j] = escaping ? (dqff[j] + dt * work[extra + j]) / dt : dqff[j] / dt;
-    Py_ssize_t rows_e = (Py_ssize_t)work[P_ERROR_ROWS];
-    const double *gains = work + (Py_ssize_t)work[P_ROWS] + m;
-    double k = 0.0;
-    for (Py_ssize_t i = 0; i < rows_e; i++) k += gains[i];
-    k /= (double)rows_e;
-    if (work[P_GAIN_MODE] != GAIN_FIXED) k *= work[INFO + I_GAIN];
-    if (k > 0.0) {
-        double size = 0.0, dot = 0.0, a_min = INFINITY;
-        for (Py_ssize_t j = 0; j < n; j++) {
-            double fb = out[j] - dqff[j], d = fb / k;
-            size += d * d;
-            dot += fb * d;
-            if (fabs(d) > 0.0) a_min = dmin(a_min, A[j] / fabs(d));
-        }
-        double rate = size > 0.0 ? dot / size : 0.0;
-        if (rate > 0.0) {
-            double allowed = isfinite(a_min) ? a_min * (-dt + sqrt(dt * dt + 2.0 * 1.0 / a_min))
-                                             : INFINITY;
-            double sigma = dmin(1.0, dmax(allowed, 0.0) / rate);
-            if (sigma < 1.0) {
-                for (Py_ssize_t j = 0; j < n; j++) out[j] = dqff[j] + sigma * (out[j] - dqff[j]);
-                factor = sigma;
-            }
-        }
-    }
-    /* 2. the hard box: position braking (or the way back into the range), speeds */
-    for (Py_ssize_t j = 0; j < n; j++) {
-        hlo[j] = -INFINITY;
-        hhi[j] = INFINITY;
-        hlb[j] = hhb[j] = -1.0;
-    }
-    for (Py_ssize_t c = 0; c < count; c++) {
-        Py_ssize_t v = (Py_ssize_t)work[box + count + c];
-        double x = q[(Py_ssize_t)work[box + c]];
-        double lower = work[box + 2 * count + c], upper = work[box + 3 * count + c];
-        double room_up = upper - x, room_down = x - lower, vv = pdq[v], aa = pddq[v];
-        double up = dmin(braking_speed_c(room_up, vv, dt, BA[v], BJ[v], has_jerk), room_up / dt);
-        double lw = -dmin(braking_speed_c(room_down, -vv, dt, BA[v], BJ[v], has_jerk),
-                          room_down / dt);
-        int above = room_up < 0.0, below = room_down < 0.0;
-        if (above || below) {  /* back toward the range, a ramp within the limits */
-            double rec = work[box + 4 * count + c];
-            double toward = above ? -vv : vv;
-            double cap = dmin(rec, (above ? room_down : room_up) / dt);
-            double push = BA[v], Jb = BJ[v];
-            if (has_jerk && isfinite(Jb)) {
-                double gap = dmax(cap - toward, 0.0);
-                push = dmin(dmin(BA[v], dmax(above ? -aa : aa, 0.0) + Jb * dt),
-                            sqrt((0.5 * Jb * dt) * (0.5 * Jb * dt) + 2.0 * Jb * gap)
-                            - 0.5 * Jb * dt);
-            }
-            double back = dmin(cap, toward + push * dt);
-            lw = up = above ? -back : back;
-        }
-        if (lw > hlo[v]) {
-            hlo[v] = lw;
-            hlb[v] = L_POSITION;
-        }
-        if (up < hhi[v]) {
-            hhi[v] = up;
-            hhb[v] = L_POSITION;
-        }
-    }
-    int inside = 1;
-    for (Py_ssize_t j = 0; j < n; j++) {
-        double inv = work[speed + j];
-        if (inv > 0.0) {
-            double vmax = 1.0 / inv;
-            if (-vmax > hlo[j]) {
-                hlo[j] = -vmax;
-                hlb[j] = L_VELOCITY;
-            }
-            if (vmax < hhi[j]) {
-                hhi[j] = vmax;
-                hhb[j] = L_VELOCITY;
-            }
-        }
-        if (mask[j] == 0.0) {  /* joints the solver does not move stay at rest */
-            hlo[j] = dmin(hlo[j], 0.0);
-            hhi[j] = dmax(hhi[j], 0.0);
-        }
-        if (out[j] < hlo[j] - BOUND_TOL || out[j] > hhi[j] + BOUND_TOL) inside = 0;
-        /* 3. the smoothness box: acceleration, jerk (and its approach to the speed limit) */
-        double change = A[j] * dt, lo = pdq[j] - change, hi = pdq[j] + change;
-        slo[j] = -INFINITY;
-        shi[j] = INFINITY;
-        slb[j] = shb[j] = -1.0;
-        if (lo > slo[j]) {
-            slo[j] = lo;
-            slb[j] = L_ACCELERATION;
-        }
-        if (hi < shi[j]) {
-            shi[j] = hi;
-            shb[j] = L_ACCELERATION;
-        }
-        if (has_jerk && isfinite(Jk[j])) {
-            change = Jk[j] * dt;
-            lo = pdq[j] + dt * (pddq[j] - change);
-            hi = pdq[j] + dt * (pddq[j] + change);
-            double left = dmax(vj[j] - pdq[j], 0.0);
-            double bound = pdq[j] + dt * (Jk[j] * (-dt + sqrt(dt * dt + 2.0 * left / Jk[j])));
-            if (isfinite(bound)) hi = dmin(hi, bound);
-            left = dmax(vj[j] + pdq[j], 0.0);
-            bound = pdq[j] - dt * (Jk[j] * (-dt + sqrt(dt * dt + 2.0 * left / Jk[j])));
-            if (isfinite(bound)) lo = dmax(lo, bound);
-            if (lo > slo[j]) {
-                slo[j] = lo;
-                slb[j] = L_JERK;
-            }
-            if (hi < shi[j]) {
-                shi[j] = hi;
-                shb[j] = L_JERK;
-            }
-        }
-        if (slo[j] > shi[j])  /* limits that contradict each other: the middle */
-            slo[j] = shi[j] = 0.5 * (slo[j] + shi[j]);
-        held[j] = 0.0;
-    }
+    for (Py_ssize_t j = 0; j < n; j++) st.out[j] = step[j] / dt;
+    double factor = brake_feedback(kind, J, e, ff, has_ff, mask, work, &st, escaping);
+    int inside = hard_box(q, mask, work, &st, n, has_jerk);
+    smoothness_bounds(work, &st, n, has_jerk);
+    for (Py_ssize_t j = 0; j < n; j++) held[j] = 0.0;
     /* 4. SNS on the hard box */
     double scale = 1.0;
     int status = 0;
     if (!inside)
-        status = sns_c(kind, J, e, ff, has_ff, mask, work, hlo, hhi, out, factor, save,
-                       escaping, &scale);
+        status = sns_c(kind, J, e, ff, has_ff, mask, work, st.hlo, st.hhi, st.out, factor,
+                       st.save, escaping, &scale);
     work[INFO + I_SCALE] = scale;
-    /* 5. reach the wanted velocity without overshooting it (the jerk's approach bounds),
-     * then along the line from the smoothness box's centre, the hard box winning */
-    double tau = 1.0;
-    for (Py_ssize_t j = 0; j < n; j++) {
-        desired[j] = out[j];
-        if (has_jerk && isfinite(Jk[j])) {
-            double gap = out[j] - pdq[j];
-            double a_max = Jk[j] * (-dt + sqrt(dt * dt + 2.0 * fabs(gap) / Jk[j]));
-            double room = isfinite(a_max) ? dt * a_max : INFINITY;
-            double lo = gap < 0.0 ? pdq[j] - room : -INFINITY;
-            double hi = gap > 0.0 ? pdq[j] + room : INFINITY;
-            slo[j] = dmax(slo[j], dmin(lo, shi[j]));
-            shi[j] = dmin(shi[j], dmax(hi, slo[j]));
-        }
-        double l = isfinite(slo[j]) ? slo[j] : shi[j], u = isfinite(shi[j]) ? shi[j] : slo[j];
-        double base = 0.5 * (l + u);
-        if (!isfinite(base)) base = out[j];
-        double both_lo = dmax(slo[j], hlo[j]), both_hi = dmin(shi[j], hhi[j]);
-        if (both_lo <= both_hi) base = dmin(dmax(base, both_lo), both_hi);
-        dqff[j] = base;
-        double change = out[j] - base;
-        double room = change > 0.0 ? (shi[j] - base) / change
-                      : change < 0.0 ? (slo[j] - base) / change : INFINITY;
-        tau = dmin(tau, room);
-    }
-    tau = dmin(dmax(tau, 0.0), 1.0);
-    for (Py_ssize_t j = 0; j < n; j++) {
-        double v = dqff[j] + tau * (out[j] - dqff[j]);
-        torn[j] = v < hlo[j] || v > hhi[j] ? 1.0 : 0.0;
-        out[j] = dmin(dmax(v, hlo[j]), hhi[j]);
-        step[j] = out[j] * dt;
-    }
+    smooth_line(work, &st, n, has_jerk, step);
     /* 6. exactly onto a position limit; the motion state for the next step */
     exact_position(q, work, step);
-    for (Py_ssize_t j = 0; j < n; j++) {
-        double v = step[j] / dt;
-        pddq[j] = (v - pdq[j]) / dt;
-        pdq[j] = v;
-    }
+    motion_state(step, dt, &st, n);
     return status;
 }
 
