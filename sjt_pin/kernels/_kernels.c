@@ -653,6 +653,84 @@ static void core_scaled(int kind, Mat J, const double *e, const double *ff, int 
     memcpy(k, save, (size_t)m * sizeof(double));
 }
 
+/* SNS's vectors in work's clamped part (n each unless noted): the held flags, the candidate
+ * dq = b + s a (a: the method on the free joints, b: what the held ones leave them to make up,
+ * hv: the held joints' velocities, rad/s), the free joints, the best candidate so far, and
+ * scratch (ff2: m, G: m x m, norm: n). */
+typedef struct {
+    double *held, *a, *b, *hv, *free_;
+    double *best_a, *best_b, *best_hv, *best_held;
+    double *ff2, *G, *norm;
+} Sns;
+
+static Sns sns_parts(double *work, Py_ssize_t m, Py_ssize_t n)
+{
+    Sns s;
+    s.held = work + (Py_ssize_t)work[P_CLAMPED];
+    s.a = s.held + 3 * n;
+    s.b = s.a + n;
+    s.hv = s.b + n;
+    s.free_ = s.hv + n;
+    s.best_a = s.free_ + n;
+    s.best_b = s.best_a + n;
+    s.best_hv = s.best_b + n;
+    s.best_held = s.best_hv + n;
+    s.ff2 = s.best_held + n;
+    s.G = s.ff2 + m;
+    s.norm = s.G + m * m;
+    return s;
+}
+
+/* the candidate (a, b, hv, held) becomes the best so far */
+static void sns_keep(const Sns *s, Py_ssize_t n)
+{
+    memcpy(s->best_a, s->a, (size_t)n * sizeof(double));
+    memcpy(s->best_b, s->b, (size_t)n * sizeof(double));
+    memcpy(s->best_hv, s->hv, (size_t)n * sizeof(double));
+    memcpy(s->best_held, s->held, (size_t)n * sizeof(double));
+}
+
+/* The method solved again on the free joints (Flacco, De Luca and Khatib's SNS step, rad/s):
+ * a = M_free(v) / dt, b = M_free(v - J hv) / dt - a, with the gain factor `factor`
+ * (core_scaled) and the escape's velocity added to a when escaping. */
+static void sns_resolve(int kind, Mat J, const double *e, const double *ff, int has_ff,
+                        double *work, const Sns *s, double factor, double *save, int escaping)
+{
+    Py_ssize_t m = J.m, n = J.n;
+    double dt = work[P_DT];
+    Py_ssize_t extra = (Py_ssize_t)work[P_EXTRA];
+    core_scaled(kind, J, e, ff, has_ff, s->free_, work, s->a, factor, save);
+    int moving = 0;  /* held joints at rest leave the others nothing to make up for */
+    for (Py_ssize_t j = 0; j < n; j++) moving |= s->hv[j] != 0.0;
+    if (moving) {
+        for (Py_ssize_t i = 0; i < m; i++) {
+            double acc = has_ff ? ff[i] : 0.0;
+            for (Py_ssize_t j = 0; j < n; j++) acc -= AT(J, i, j) * s->hv[j];
+            s->ff2[i] = acc;
+        }
+        core_scaled(kind, J, e, s->ff2, 1, s->free_, work, s->b, factor, save);
+    }
+    for (Py_ssize_t j = 0; j < n; j++) {
+        s->a[j] /= dt;
+        s->b[j] = moving ? s->b[j] / dt - s->a[j] : 0.0;
+        if (escaping) s->a[j] += work[extra + j];
+    }
+}
+
+/* Joint k is held at the bound its motion heads for (rad/s). Returns whether joints are left
+ * free. */
+static int sns_hold(const Sns *s, Py_ssize_t k, const double *lo, const double *hi, Py_ssize_t n)
+{
+    double *a = s->a, *b = s->b;
+    double direction = a[k] != 0.0 ? a[k] : (b[k] > hi[k] ? b[k] - hi[k] : b[k]);
+    s->held[k] = 1.0;
+    s->free_[k] = 0.0;
+    s->hv[k] = direction > 0.0 ? hi[k] : lo[k];
+    int left = 0;
+    for (Py_ssize_t j = 0; j < n; j++) left |= s->free_[j] != 0.0;
+    return left;
+}
+
 /* Saturation in the Null Space (sjt_pin/constraints.py, saturate) on the box [lo, hi] (rad/s):
  * the joint that limits the task most is held at its bound and the method solved again on the
  * others (gain factor `factor`, see core_scaled); when the free joints no longer span the task,
@@ -665,73 +743,40 @@ static int sns_c(int kind, Mat J, const double *e, const double *ff, int has_ff,
                  double *dq, double factor, double *save, int escaping, double *scale_out)
 {
     Py_ssize_t m = J.m, n = J.n;
-    double dt = work[P_DT];
-    Py_ssize_t extra = (Py_ssize_t)work[P_EXTRA];
-    double *held = work + (Py_ssize_t)work[P_CLAMPED];
-    double *a = held + 3 * n, *b = a + n, *hv = b + n, *free_ = hv + n;
-    double *best_a = free_ + n, *best_b = best_a + n, *best_hv = best_b + n;
-    double *best_held = best_hv + n, *ff2 = best_held + n, *G = ff2 + m, *norm = G + m * m;
+    Sns s = sns_parts(work, m, n);
     const double *sw = work + (Py_ssize_t)work[P_ROWS];
     Py_ssize_t rows = (Py_ssize_t)work[P_ERROR_ROWS];
     for (Py_ssize_t j = 0; j < n; j++) {
-        a[j] = dq[j];
-        b[j] = 0.0;
-        hv[j] = 0.0;
-        held[j] = 0.0;
-        free_[j] = mask[j] != 0.0 ? mask[j] : 0.0;
+        s.a[j] = dq[j];
+        s.b[j] = 0.0;
+        s.hv[j] = 0.0;
+        s.held[j] = 0.0;
+        s.free_[j] = mask[j] != 0.0 ? mask[j] : 0.0;
     }
     Py_ssize_t k;
-    double best = task_scale_c(a, b, lo, hi, free_, n, &k);
-    memcpy(best_a, a, (size_t)n * sizeof(double));
-    memcpy(best_b, b, (size_t)n * sizeof(double));
-    memcpy(best_hv, hv, (size_t)n * sizeof(double));
-    memcpy(best_held, held, (size_t)n * sizeof(double));
+    double best = task_scale_c(s.a, s.b, lo, hi, s.free_, n, &k);
+    sns_keep(&s, n);
     int any_held = 0;
     for (Py_ssize_t round = 0; round < n; round++) {
-        double s = task_scale_c(a, b, lo, hi, free_, n, &k);
-        if (any_held && !spans_c(J, sw, rows, free_, G, norm)) break;
-        if (s > best) {
-            best = s;
-            memcpy(best_a, a, (size_t)n * sizeof(double));
-            memcpy(best_b, b, (size_t)n * sizeof(double));
-            memcpy(best_hv, hv, (size_t)n * sizeof(double));
-            memcpy(best_held, held, (size_t)n * sizeof(double));
+        double scale = task_scale_c(s.a, s.b, lo, hi, s.free_, n, &k);
+        if (any_held && !spans_c(J, sw, rows, s.free_, s.G, s.norm)) break;
+        if (scale > best) {
+            best = scale;
+            sns_keep(&s, n);
         }
-        if (s >= 1.0 || k < 0) break;
-        double direction = a[k] != 0.0 ? a[k] : (b[k] > hi[k] ? b[k] - hi[k] : b[k]);
-        held[k] = 1.0;
-        free_[k] = 0.0;
-        hv[k] = direction > 0.0 ? hi[k] : lo[k];
+        if (scale >= 1.0 || k < 0) break;
         any_held = 1;
-        int left = 0;
-        for (Py_ssize_t j = 0; j < n; j++) left |= free_[j] != 0.0;
-        if (!left) break;
-        /* a = M_free(v); b = M_free(v - J hv) - a */
-        core_scaled(kind, J, e, ff, has_ff, free_, work, a, factor, save);
-        int moving = 0;  /* held joints at rest leave the others nothing to make up for */
-        for (Py_ssize_t j = 0; j < n; j++) moving |= hv[j] != 0.0;
-        if (moving) {
-            for (Py_ssize_t i = 0; i < m; i++) {
-                double acc = has_ff ? ff[i] : 0.0;
-                for (Py_ssize_t j = 0; j < n; j++) acc -= AT(J, i, j) * hv[j];
-                ff2[i] = acc;
-            }
-            core_scaled(kind, J, e, ff2, 1, free_, work, b, factor, save);
-        }
-        for (Py_ssize_t j = 0; j < n; j++) {
-            a[j] /= dt;
-            b[j] = moving ? b[j] / dt - a[j] : 0.0;
-            if (escaping) a[j] += work[extra + j];
-        }
+        if (!sns_hold(&s, k, lo, hi, n)) break;
+        sns_resolve(kind, J, e, ff, has_ff, work, &s, factor, save, escaping);
     }
     double scale = dmax(best, 0.0);
     int status = 0;
     for (Py_ssize_t j = 0; j < n; j++) {
-        double v = best_held[j] != 0.0 ? best_hv[j] : best_b[j] + scale * best_a[j];
+        double v = s.best_held[j] != 0.0 ? s.best_hv[j] : s.best_b[j] + scale * s.best_a[j];
         if (mask[j] == 0.0) v = 0.0;
         dq[j] = dmin(dmax(v, lo[j]), hi[j]);
-        held[j] = best_held[j];
-        if (held[j] != 0.0) status |= CLAMPED;
+        s.held[j] = s.best_held[j];
+        if (s.held[j] != 0.0) status |= CLAMPED;
     }
     *scale_out = best >= 0.0 ? scale : 0.0;
     if (scale < 1.0) status |= SCALED;
