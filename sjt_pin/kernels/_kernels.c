@@ -319,32 +319,36 @@ static void damped_solve(Mat J, const double *v, const double *sw, const double 
 /* results of a mapping: |e|^2, |ff|^2, |e_w|^2, gain, lambda_hat, stall ratio, trace */
 typedef struct { double e_sq, ff_sq, ew_sq, gain, bound, stall, trace; } Core;
 
-/* the transpose-type mapping (JT eq. 10, SJT eq. 21, and the damped forms) on the joints of
- * mask; see transpose_step's docstring in sjt_pin/kernels/__init__.py */
-static Core transpose_core(Mat J, const double *e, const double *ff, int has_ff,
-                           const double *mask, double *work, double *step)
+/* The weighted error of the transpose mappings: kew = K W e (per row), and on the error rows
+ * (those before the posture's) |e|^2, |W e|^2 into r and |K W e|^2 returned. */
+static double weighted_error(const double *e, const double *sw, const double *k, Py_ssize_t m,
+                             Py_ssize_t error_rows, double *kew, Core *r)
 {
-    Py_ssize_t m = J.m, n = J.n;
-    double dt = work[P_DT];
-    Py_ssize_t rows = (Py_ssize_t)work[P_ROWS];
-    const double *sw = work + rows, *k = work + rows + m;
-    Py_ssize_t scratch = (Py_ssize_t)work[P_SCRATCH];
-    double *kew = work + scratch, *alpha = work + scratch + m, *s = work + scratch + m + n;
-    double tol = work[P_COL_TOL], length2 = work[P_LENGTH2];
-    int scaled = work[P_SCALED] != 0.0, damped = work[P_FB_MODE] == FB_DAMPED;
-    Py_ssize_t error_rows = (Py_ssize_t)work[P_ERROR_ROWS];
-    Core r = {0};
     double kew_sq = 0.0;
     for (Py_ssize_t i = 0; i < m; i++) {
         double ew = sw[i] * e[i];
         kew[i] = k[i] * ew;
         if (i < error_rows) {
-            r.e_sq += e[i] * e[i];
-            r.ew_sq += ew * ew;
+            r->e_sq += e[i] * e[i];
+            r->ew_sq += ew * ew;
             kew_sq += kew[i] * kew[i];
         }
     }
-    double trace = 0.0, stall = 0.0, curvature = 0.0;
+    return kew_sq;
+}
+
+/* The column scales on the joints of mask: alpha_j = 1 / max(|W J_j|^2, length^2) (SJT eq. 21's
+ * D; 0 for a column below col_tol), s = alpha for the scaled mappings else the mask; step_j =
+ * (W J_j)^T K W e, unscaled. Returns tr(J S J^T) in *trace, the stall ratio's numerator
+ * sum s_j (task part)^2 in *stall, and max sqrt(|W J_j|^2) s_j (the Levenberg-Marquardt
+ * term's curvature) in *curvature. */
+static void column_scales(Mat J, const double *sw, const double *kew, const double *mask,
+                          const double *work, double *alpha, double *s, double *step,
+                          double *trace, double *stall, double *curvature)
+{
+    Py_ssize_t m = J.m, n = J.n, error_rows = (Py_ssize_t)work[P_ERROR_ROWS];
+    double tol = work[P_COL_TOL], length2 = work[P_LENGTH2];
+    int scaled = work[P_SCALED] != 0.0;
     for (Py_ssize_t j = 0; j < n; j++) {
         double norm = 0.0, acc = 0.0, acc_task = 0.0;
         if (mask[j] != 0.0) {
@@ -357,42 +361,53 @@ static Core transpose_core(Mat J, const double *e, const double *ff, int has_ff,
         }
         alpha[j] = norm > tol ? 1.0 / dmax(norm, length2) : 0.0;
         s[j] = scaled ? alpha[j] : mask[j];
-        trace += s[j] * norm;
-        stall += s[j] * acc_task * acc_task;
-        if (norm > tol) curvature = dmax(curvature, sqrt(norm) * s[j]);
+        *trace += s[j] * norm;
+        *stall += s[j] * acc_task * acc_task;
+        if (norm > tol) *curvature = dmax(*curvature, sqrt(norm) * s[j]);
         step[j] = acc;
     }
-    stall = kew_sq > 0.0 && trace > 0.0 ? stall / (kew_sq * trace) : 0.0;
-    double bound = 1.0, gain;
-    if (work[P_GAIN_MODE] == GAIN_FIXED) {
-        gain = 1.0;
-    } else if (damped) {
-        gain = work[P_GAIN_ARG] / dt;
+}
+
+/* The "auto" gain's lambda_hat >= lambda_max(W J S J^T W) of the transpose loop (loop_bound_c on
+ * the Gram matrix; with posture rows the task block's bound plus the posture's diagonal), plus
+ * the Levenberg-Marquardt term lm |W e| curvature (1/s times dt gives the loop's eigenvalue). */
+static double transpose_bound(Mat J, const double *sw, const double *s, double *work,
+                              double ew_sq, double curvature)
+{
+    Py_ssize_t m = J.m, n = J.n;
+    double bound, *A = matrices(work, m, n);
+    Py_ssize_t mt = (Py_ssize_t)work[P_IDENTITY_ROWS] == n && m > n ? m - n : -1;
+    if (mt >= 0) {
+        /* lambda_max of the stacked loop matrix <= the task block's + the posture block's
+         * (diagonal: s_j w_j), for PSD block matrices */
+        Mat task = {J.p, mt, n, J.s0, J.s1};
+        Py_ssize_t p = mt < n ? mt : n;
+        double posture = 0.0;
+        for (Py_ssize_t j = 0; j < n; j++)
+            posture = dmax(posture, s[j] * sw[mt + j] * sw[mt + j]);
+        gram(task, sw, s, mt <= n, A);
+        bound = loop_bound_c(A, p, BOUND_PRODUCTS, A + p * p, A + 2 * p * p) + posture;
     } else {
-        double *A = matrices(work, m, n);
-        Py_ssize_t mt = (Py_ssize_t)work[P_IDENTITY_ROWS] == n && m > n ? m - n : -1;
-        if (mt >= 0) {
-            /* lambda_max of the stacked loop matrix <= the task block's + the posture block's
-             * (diagonal: s_j w_j), for PSD block matrices */
-            Mat task = {J.p, mt, n, J.s0, J.s1};
-            Py_ssize_t p = mt < n ? mt : n;
-            double posture = 0.0;
-            for (Py_ssize_t j = 0; j < n; j++)
-                posture = dmax(posture, s[j] * sw[mt + j] * sw[mt + j]);
-            gram(task, sw, s, mt <= n, A);
-            bound = loop_bound_c(A, p, BOUND_PRODUCTS, A + p * p, A + 2 * p * p) + posture;
-        } else {
-            Py_ssize_t p = m < n ? m : n;
-            gram(J, sw, s, m <= n, A);
-            bound = loop_bound_c(A, p, BOUND_PRODUCTS, A + p * p, A + 2 * p * p);
-        }
-        bound += work[P_LM] * sqrt(r.ew_sq) * curvature;
-        gain = bound > 0.0 ? work[P_GAIN_ARG] / (dt * bound) : 0.0;
+        Py_ssize_t p = m < n ? m : n;
+        gram(J, sw, s, m <= n, A);
+        bound = loop_bound_c(A, p, BOUND_PRODUCTS, A + p * p, A + 2 * p * p);
     }
-    if (has_ff)
-        for (Py_ssize_t i = 0; i < m; i++) r.ff_sq += ff[i] * ff[i];
+    return bound + work[P_LM] * sqrt(ew_sq) * curvature;
+}
+
+/* The transpose step (rad) from the unscaled step_j = (W J_j)^T K W e: damped (the feedback
+ * v = gain K e + ff through damped_solve, damping lm sqrt(|W e|^2 max alpha)), else
+ * dt gain s_j step_j plus the feed-forward mapped by the transpose (S J^T W^2 ff) or damped. */
+static void transpose_apply(Mat J, const double *e, const double *ff, int has_ff,
+                            const double *alpha, const double *s, double *work, double gain,
+                            double ew_sq, double *step)
+{
+    Py_ssize_t m = J.m, n = J.n;
+    double dt = work[P_DT];
+    Py_ssize_t rows = (Py_ssize_t)work[P_ROWS], scratch = (Py_ssize_t)work[P_SCRATCH];
+    const double *sw = work + rows, *k = work + rows + m;
     double ff_mode = work[P_FF_MODE];
-    if (damped) {
+    if (work[P_FB_MODE] == FB_DAMPED) {
         double *v = work + scratch + 3 * m + 6 * n;
         for (Py_ssize_t i = 0; i < m; i++) {
             v[i] = gain * k[i] * e[i];
@@ -401,19 +416,49 @@ static Core transpose_core(Mat J, const double *e, const double *ff, int has_ff,
         for (Py_ssize_t j = 0; j < n; j++) step[j] = 0.0;
         double alpha_max = 0.0;
         for (Py_ssize_t j = 0; j < n; j++) alpha_max = dmax(alpha_max, alpha[j]);
-        damped_solve(J, v, sw, alpha, work, dt, step, work[P_LM] * sqrt(r.ew_sq * alpha_max));
-    } else {
-        for (Py_ssize_t j = 0; j < n; j++) step[j] *= dt * gain * s[j];
-        if (has_ff && ff_mode == FF_TRANSPOSE) {
-            for (Py_ssize_t j = 0; j < n; j++) {
-                double acc = 0.0;
-                for (Py_ssize_t i = 0; i < m; i++) acc += sw[i] * sw[i] * AT(J, i, j) * ff[i];
-                step[j] += dt * s[j] * acc;
-            }
-        } else if (has_ff && ff_mode == FF_DAMPED) {
-            damped_solve(J, ff, sw, alpha, work, dt, step, 0.0);
-        }
+        damped_solve(J, v, sw, alpha, work, dt, step, work[P_LM] * sqrt(ew_sq * alpha_max));
+        return;
     }
+    for (Py_ssize_t j = 0; j < n; j++) step[j] *= dt * gain * s[j];
+    if (has_ff && ff_mode == FF_TRANSPOSE) {
+        for (Py_ssize_t j = 0; j < n; j++) {
+            double acc = 0.0;
+            for (Py_ssize_t i = 0; i < m; i++) acc += sw[i] * sw[i] * AT(J, i, j) * ff[i];
+            step[j] += dt * s[j] * acc;
+        }
+    } else if (has_ff && ff_mode == FF_DAMPED) {
+        damped_solve(J, ff, sw, alpha, work, dt, step, 0.0);
+    }
+}
+
+/* the transpose-type mapping (JT eq. 10, SJT eq. 21, and the damped forms) on the joints of
+ * mask; see transpose_step's docstring in sjt_pin/kernels/__init__.py */
+static Core transpose_core(Mat J, const double *e, const double *ff, int has_ff,
+                           const double *mask, double *work, double *step)
+{
+    Py_ssize_t m = J.m, n = J.n;
+    double dt = work[P_DT];
+    Py_ssize_t rows = (Py_ssize_t)work[P_ROWS];
+    const double *sw = work + rows, *k = work + rows + m;
+    Py_ssize_t scratch = (Py_ssize_t)work[P_SCRATCH];
+    double *kew = work + scratch, *alpha = work + scratch + m, *s = work + scratch + m + n;
+    Core r = {0};
+    double kew_sq = weighted_error(e, sw, k, m, (Py_ssize_t)work[P_ERROR_ROWS], kew, &r);
+    double trace = 0.0, stall = 0.0, curvature = 0.0;
+    column_scales(J, sw, kew, mask, work, alpha, s, step, &trace, &stall, &curvature);
+    stall = kew_sq > 0.0 && trace > 0.0 ? stall / (kew_sq * trace) : 0.0;
+    double bound = 1.0, gain;
+    if (work[P_GAIN_MODE] == GAIN_FIXED) {
+        gain = 1.0;
+    } else if (work[P_FB_MODE] == FB_DAMPED) {
+        gain = work[P_GAIN_ARG] / dt;
+    } else {
+        bound = transpose_bound(J, sw, s, work, r.ew_sq, curvature);
+        gain = bound > 0.0 ? work[P_GAIN_ARG] / (dt * bound) : 0.0;
+    }
+    if (has_ff)
+        for (Py_ssize_t i = 0; i < m; i++) r.ff_sq += ff[i] * ff[i];
+    transpose_apply(J, e, ff, has_ff, alpha, s, work, gain, r.ew_sq, step);
     r.gain = gain;
     r.bound = bound;
     r.stall = stall;
