@@ -267,6 +267,23 @@ static Py_ssize_t identity_block(const double *work, Py_ssize_t m, Py_ssize_t n)
     return mt;
 }
 
+/* (W J_j)^T v = sum_i w_i J_ij v_i: column j of the weighted rows against v */
+static inline double weighted_column_dot(Mat J, const double *sw, const double *v, Py_ssize_t j)
+{
+    double acc = 0.0;
+    for (Py_ssize_t i = 0; i < J.m; i++) acc += sw[i] * AT(J, i, j) * v[i];
+    return acc;
+}
+
+/* (W^2 J_j)^T v = sum_i w_i^2 J_ij v_i: column j of J^T W^2 against v */
+static inline double squared_weight_column_dot(Mat J, const double *sw, const double *v,
+                                               Py_ssize_t j)
+{
+    double acc = 0.0;
+    for (Py_ssize_t i = 0; i < J.m; i++) acc += sw[i] * sw[i] * AT(J, i, j) * v[i];
+    return acc;
+}
+
 /* step += dt D J_w^T (J_w D J_w^T + (mu^2 + extra) I)^-1 (sw v) (m x m solve when m <= n), or
  * the same as dt sqrt(D) (G + (mu^2 + extra) I)^-1 sqrt(D) J_w^T (sw v) (n x n) */
 static void damped_solve(Mat J, const double *v, const double *sw, const double *alpha,
@@ -299,18 +316,12 @@ static void damped_solve(Mat J, const double *v, const double *sw, const double 
         double *rhs = work + start, *y = work + start + m;
         for (Py_ssize_t i = 0; i < m; i++) rhs[i] = sw[i] * v[i];
         cholesky_solve_c(A, m, mu2, rhs, y);
-        for (Py_ssize_t j = 0; j < n; j++) {
-            double acc = 0.0;
-            for (Py_ssize_t i = 0; i < m; i++) acc += sw[i] * AT(J, i, j) * y[i];
-            step[j] += dt * alpha[j] * acc;
-        }
+        for (Py_ssize_t j = 0; j < n; j++)
+            step[j] += dt * alpha[j] * weighted_column_dot(J, sw, y, j);
     } else {
         double *rhs = work + start, *x = work + start + n;
-        for (Py_ssize_t j = 0; j < n; j++) {
-            double acc = 0.0;
-            for (Py_ssize_t i = 0; i < m; i++) acc += sw[i] * sw[i] * AT(J, i, j) * v[i];
-            rhs[j] = sqrt(alpha[j]) * acc;
-        }
+        for (Py_ssize_t j = 0; j < n; j++)
+            rhs[j] = sqrt(alpha[j]) * squared_weight_column_dot(J, sw, v, j);
         cholesky_solve_c(A, n, mu2, rhs, x);
         for (Py_ssize_t j = 0; j < n; j++) step[j] += dt * sqrt(alpha[j]) * x[j];
     }
@@ -421,11 +432,8 @@ static void transpose_apply(Mat J, const double *e, const double *ff, int has_ff
     }
     for (Py_ssize_t j = 0; j < n; j++) step[j] *= dt * gain * s[j];
     if (has_ff && ff_mode == FF_TRANSPOSE) {
-        for (Py_ssize_t j = 0; j < n; j++) {
-            double acc = 0.0;
-            for (Py_ssize_t i = 0; i < m; i++) acc += sw[i] * sw[i] * AT(J, i, j) * ff[i];
-            step[j] += dt * s[j] * acc;
-        }
+        for (Py_ssize_t j = 0; j < n; j++)
+            step[j] += dt * s[j] * squared_weight_column_dot(J, sw, ff, j);
     } else if (has_ff && ff_mode == FF_DAMPED) {
         damped_solve(J, ff, sw, alpha, work, dt, step, 0.0);
     }
@@ -504,7 +512,53 @@ static void pseudo_solve(double *A, double *V, Py_ssize_t p, const double *rhs, 
     }
 }
 
-/* the least-squares mapping (JP eq. 8, DLS) on the joints of mask */
+/* The least-squares right-hand side v = gain K W e (+ W ff) (task units/s, per row), and
+ * |e|^2, |W e|^2 on the error rows and |ff|^2 into out. */
+static void least_squares_rhs(const double *e, const double *ff, int has_ff, const double *sw,
+                              const double *k, Py_ssize_t m, Py_ssize_t error_rows, double gain,
+                              double *v, Core *out)
+{
+    for (Py_ssize_t i = 0; i < m; i++) {
+        double ew = sw[i] * e[i];
+        if (i < error_rows) {
+            out->e_sq += e[i] * e[i];
+            out->ew_sq += ew * ew;
+        }
+        v[i] = gain * k[i] * ew;
+        if (has_ff) {
+            v[i] += sw[i] * ff[i];
+            out->ff_sq += ff[i] * ff[i];
+        }
+    }
+}
+
+/* The least-squares step (rad) with posture rows (the last n rows an identity block below m_t
+ * task rows): the normal equations are diagonal plus rank m_t, solved by Woodbury's identity
+ * with damping mu. */
+static void least_squares_posture(Mat J, const double *mask, const double *v, double *work,
+                                  Py_ssize_t mt, double *r, double *sol, double *step)
+{
+    Py_ssize_t m = J.m, n = J.n;
+    const double *sw = work + (Py_ssize_t)work[P_ROWS];
+    double dt = work[P_DT], damping = work[P_MU];
+    double *A = matrices(work, m, n);
+    double *U = A, *Dg = A + n * mt, *space = Dg + n;
+    for (Py_ssize_t j = 0; j < n; j++) {
+        double acc = 0.0;
+        for (Py_ssize_t a = 0; a < mt; a++) {
+            U[j * mt + a] = mask[j] * sw[a] * AT(J, a, j);
+            acc += sw[a] * AT(J, a, j) * v[a];
+        }
+        Dg[j] = mask[j] * sw[mt + j] * sw[mt + j] + damping * damping;
+        r[j] = mask[j] * (acc + sw[mt + j] * v[mt + j]);
+    }
+    woodbury(U, Dg, n, mt, r, sol, space);
+    for (Py_ssize_t j = 0; j < n; j++) step[j] = dt * mask[j] * sol[j];
+}
+
+/* the least-squares mapping (JP eq. 8, DLS) on the joints of mask: the normal equations of the
+ * weighted rows (the row or the column space, the smaller), by Cholesky with the damping mu,
+ * else (mu = 0) by pseudo_solve */
 static Core least_squares_core(Mat J, const double *e, const double *ff, int has_ff,
                                const double *mask, double *work, double *step)
 {
@@ -518,65 +572,27 @@ static Core least_squares_core(Mat J, const double *e, const double *ff, int has
     double *v = work + scratch, *r = work + scratch + m, *sol = work + scratch + m + n;
     double *A = matrices(work, m, n), *V = A + p * p;
     Core out = {0};
-    Py_ssize_t error_rows = (Py_ssize_t)work[P_ERROR_ROWS];
-    for (Py_ssize_t i = 0; i < m; i++) {
-        double ew = sw[i] * e[i];
-        if (i < error_rows) {
-            out.e_sq += e[i] * e[i];
-            out.ew_sq += ew * ew;
-        }
-        v[i] = gain * k[i] * ew;
-        if (has_ff) {
-            v[i] += sw[i] * ff[i];
-            out.ff_sq += ff[i] * ff[i];
-        }
-    }
+    out.gain = gain;
+    out.bound = 1.0;
+    out.stall = 1.0;
+    least_squares_rhs(e, ff, has_ff, sw, k, m, (Py_ssize_t)work[P_ERROR_ROWS], gain, v, &out);
     Py_ssize_t mt = identity_block(work, m, n);
     if (mt >= 0) {  /* task rows, then posture rows: diagonal plus rank m_t */
-        double damping = work[P_MU];
-        double *U = A, *Dg = A + n * mt, *space = Dg + n;
-        for (Py_ssize_t j = 0; j < n; j++) {
-            double acc = 0.0;
-            for (Py_ssize_t a = 0; a < mt; a++) {
-                U[j * mt + a] = mask[j] * sw[a] * AT(J, a, j);
-                acc += sw[a] * AT(J, a, j) * v[a];
-            }
-            Dg[j] = mask[j] * sw[mt + j] * sw[mt + j] + damping * damping;
-            r[j] = mask[j] * (acc + sw[mt + j] * v[mt + j]);
-        }
-        woodbury(U, Dg, n, mt, r, sol, space);
-        for (Py_ssize_t j = 0; j < n; j++) step[j] = dt * mask[j] * sol[j];
-        out.gain = gain;
-        out.bound = 1.0;
-        out.stall = 1.0;
+        least_squares_posture(J, mask, v, work, mt, r, sol, step);
         return out;
     }
     gram(J, sw, mask, use_rows, A);
     if (!use_rows)
-        for (Py_ssize_t j = 0; j < n; j++) {
-            double acc = 0.0;
-            for (Py_ssize_t i = 0; i < m; i++) acc += sw[i] * AT(J, i, j) * v[i];
-            r[j] = mask[j] * acc;
-        }
+        for (Py_ssize_t j = 0; j < n; j++) r[j] = mask[j] * weighted_column_dot(J, sw, v, j);
     const double *rhs = use_rows ? v : r;
     double damping = work[P_MU];
     if (damping > 0.0)
         cholesky_solve_c(A, p, damping * damping, rhs, sol);
     else
         pseudo_solve(A, V, p, rhs, sol, work[P_RCOND]);
-    for (Py_ssize_t j = 0; j < n; j++) {
-        if (use_rows) {
-            double acc = 0.0;
-            for (Py_ssize_t i = 0; i < m; i++) acc += sw[i] * AT(J, i, j) * sol[i];
-            step[j] = dt * mask[j] * acc;
-        } else {
-            step[j] = dt * mask[j] * sol[j];
-        }
-    }
-    out.gain = gain;
-    out.bound = 1.0;
-    out.stall = 1.0;
-    out.trace = 0.0;
+    for (Py_ssize_t j = 0; j < n; j++)
+        step[j] = use_rows ? dt * mask[j] * weighted_column_dot(J, sw, sol, j)
+                           : dt * mask[j] * sol[j];
     return out;
 }
 
