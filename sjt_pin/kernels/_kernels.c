@@ -2021,6 +2021,99 @@ done:
     return result;
 }
 
+/* The Jacobian (6 x n) that jacobian(*arguments) returns, acquired in *Ja and viewed in *Jm
+ * (Pinocchio's one-dimensional Jacobian of a robot with one joint as a column). Returns the
+ * Python object to release with *Ja after use; NULL with the exception set on an error. */
+static PyObject *search_jacobian(PyObject *jacobian, PyObject *arguments, Py_ssize_t n, Arg *Ja,
+                                 Mat *Jm)
+{
+    PyObject *J = PyObject_Call(jacobian, arguments, NULL);
+    if (!J) return NULL;
+    if (acquire(J, Ja, 0, -1, "the Jacobian")) {
+        Py_DECREF(J);
+        return NULL;
+    }
+    Mat view = {(const double *)Ja->view.buf, 0, 0, 0, 0};
+    if (Ja->view.ndim == 2) {
+        view = mat(Ja);
+    } else if (Ja->view.ndim == 1) {  /* Pinocchio's Jacobian of a robot with one joint */
+        Mat column = {(const double *)Ja->view.buf, Ja->view.shape[0], 1,
+                      Ja->view.strides[0] / 8, 1};
+        view = column;
+    }
+    if (view.m != 6 || view.n != n) {
+        PyErr_SetString(PyExc_ValueError, "search_pose: the Jacobian is not 6 x nv");
+        release(Ja);
+        Py_DECREF(J);
+        return NULL;
+    }
+    *Jm = view;
+    return J;
+}
+
+/* The acquired buffers of search_pose, in its argument order. */
+typedef struct {
+    Arg R, p, Md, tab, q, qc, Jc, e, ec, lim, work, state, step;
+} SearchArgs;
+
+/* Up to `count` iterations of the set-point search on a pose task: the pose error (rad, m) of
+ * the frame whose rotation and translation views follow q, one search_iteration_c, and the
+ * integration of its step, until it stops. Returns (status, iterations), NULL on an error. */
+static PyObject *search_pose_loop(PyObject *jacobian, PyObject *arguments, SearchArgs *a,
+                                  long count)
+{
+    double *tabv = (double *)a->tab.view.buf, *qv = (double *)a->q.view.buf;
+    double *qcv = (double *)a->qc.view.buf, *Jcv = (double *)a->Jc.view.buf;
+    double *ev = (double *)a->e.view.buf, *ecv = (double *)a->ec.view.buf;
+    double *limv = (double *)a->lim.view.buf, *wv = (double *)a->work.view.buf;
+    double *sv = (double *)a->state.view.buf, *stv = (double *)a->step.view.buf;
+    Mat Rm = mat(&a->R), Mm = mat(&a->Md);
+    Py_ssize_t n = length(&a->step), nq = length(&a->q), k = a->tab.view.shape[1];
+    const double *pv = (const double *)a->p.view.buf;
+    Py_ssize_t p_stride = a->p.view.strides[0] / 8;
+    int status = CONTINUE;
+    long done = 0;
+    while (done < count) {
+        Arg Ja = {0};
+        Mat Jm;
+        PyObject *J = search_jacobian(jacobian, arguments, n, &Ja, &Jm);
+        if (!J) return NULL;
+        search_pose_error(Rm, pv, p_stride, Mm, ev);
+        status = search_iteration_c(Jm, ev, qv, nq, Jcv, ecv, qcv, limv,
+                                    a->lim.view.shape[1], wv, sv, stv);
+        release(&Ja);
+        Py_DECREF(J);
+        done++;
+        if (status != CONTINUE) break;
+        search_integrate(qcv, stv, tabv, k, nq, qv);
+    }
+    return Py_BuildValue("(il)", status, done);
+}
+
+/* search_pose's checks of the acquired arrays' shapes and tables; 0 when they fit */
+static int search_pose_fits(SearchArgs *a)
+{
+    double *tabv = out_mat(&a->tab, "joints"), *qv = out_vec(&a->q, "q");
+    double *qcv = out_vec(&a->qc, "q_cur"), *Jcv = out_mat(&a->Jc, "J_cur");
+    double *ev = out_vec(&a->e, "e"), *ecv = out_vec(&a->ec, "e_cur");
+    double *limv = out_mat(&a->lim, "limits"), *wv = out_vec(&a->work, "work");
+    double *sv = out_vec(&a->state, "state"), *stv = out_vec(&a->step, "step");
+    if (!tabv || !qv || !qcv || !Jcv || !ev || !ecv || !limv || !wv || !sv || !stv) return -1;
+    Mat Rm = mat(&a->R), Mm = mat(&a->Md);
+    Py_ssize_t n = length(&a->step), nq = length(&a->q), k = a->tab.view.shape[1];
+    if (Rm.m != 3 || Rm.n != 3 || length(&a->p) != 3 || Mm.m != 4 || Mm.n != 4
+        || a->tab.view.shape[0] != 3 || a->Jc.view.shape[0] != 6 || a->Jc.view.shape[1] != n
+        || length(&a->e) != 6 || length(&a->ec) != 6 || length(&a->qc) != nq
+        || a->lim.view.shape[0] != 4 || length(&a->state) < S_COUNT) {
+        PyErr_SetString(PyExc_ValueError, "search_pose: the arrays do not fit a pose task");
+        return -1;
+    }
+    if (check_work(&a->work, 6, n, nq)
+        || table_ok(limv, a->lim.view.shape[1], nq, n, 0, "limits")
+        || table_ok(tabv, k, nq, n, 1, "joints")) return -1;
+    return 0;
+}
+
 /* search_pose(jacobian, arguments, rotation, translation, target, joints, q, q_cur, J_cur, e,
  *             e_cur, limits, work, state, step, count) -> (status, iterations) */
 static PyObject *py_search_pose(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
@@ -2032,74 +2125,25 @@ static PyObject *py_search_pose(PyObject *self, PyObject *const *args, Py_ssize_
                         "a tuple");
         return NULL;
     }
-    Arg R = {0}, p = {0}, Md = {0}, tab = {0}, q = {0}, qc = {0}, Jc = {0}, e = {0}, ec = {0},
-        lim = {0}, work = {0}, state = {0}, step = {0};
+    SearchArgs a;
+    memset(&a, 0, sizeof a);
     PyObject *result = NULL;
     long count = PyLong_AsLong(args[15]);
     if (count == -1 && PyErr_Occurred()) return NULL;
-    if (acquire(args[2], &R, 0, 2, "rotation") || acquire(args[3], &p, 0, 1, "translation")
-        || acquire(args[4], &Md, 0, 2, "target") || acquire(args[5], &tab, 0, 2, "joints")
-        || acquire(args[6], &q, 1, 1, "q") || acquire(args[7], &qc, 1, 1, "q_cur")
-        || acquire(args[8], &Jc, 1, 2, "J_cur") || acquire(args[9], &e, 1, 1, "e")
-        || acquire(args[10], &ec, 1, 1, "e_cur") || acquire(args[11], &lim, 0, 2, "limits")
-        || acquire(args[12], &work, 1, 1, "work") || acquire(args[13], &state, 1, 1, "state")
-        || acquire(args[14], &step, 1, 1, "step"))
+    if (acquire(args[2], &a.R, 0, 2, "rotation") || acquire(args[3], &a.p, 0, 1, "translation")
+        || acquire(args[4], &a.Md, 0, 2, "target") || acquire(args[5], &a.tab, 0, 2, "joints")
+        || acquire(args[6], &a.q, 1, 1, "q") || acquire(args[7], &a.qc, 1, 1, "q_cur")
+        || acquire(args[8], &a.Jc, 1, 2, "J_cur") || acquire(args[9], &a.e, 1, 1, "e")
+        || acquire(args[10], &a.ec, 1, 1, "e_cur") || acquire(args[11], &a.lim, 0, 2, "limits")
+        || acquire(args[12], &a.work, 1, 1, "work")
+        || acquire(args[13], &a.state, 1, 1, "state")
+        || acquire(args[14], &a.step, 1, 1, "step"))
         goto done;
-    double *tabv = out_mat(&tab, "joints"), *qv = out_vec(&q, "q"), *qcv = out_vec(&qc, "q_cur");
-    double *Jcv = out_mat(&Jc, "J_cur"), *ev = out_vec(&e, "e"), *ecv = out_vec(&ec, "e_cur");
-    double *limv = out_mat(&lim, "limits"), *wv = out_vec(&work, "work");
-    double *sv = out_vec(&state, "state"), *stv = out_vec(&step, "step");
-    if (!tabv || !qv || !qcv || !Jcv || !ev || !ecv || !limv || !wv || !sv || !stv) goto done;
-    Mat Rm = mat(&R), Mm = mat(&Md);
-    Py_ssize_t n = length(&step), nq = length(&q), k = tab.view.shape[1];
-    if (Rm.m != 3 || Rm.n != 3 || length(&p) != 3 || Mm.m != 4 || Mm.n != 4
-        || tab.view.shape[0] != 3 || Jc.view.shape[0] != 6 || Jc.view.shape[1] != n
-        || length(&e) != 6 || length(&ec) != 6 || length(&qc) != nq
-        || lim.view.shape[0] != 4 || length(&state) < S_COUNT) {
-        PyErr_SetString(PyExc_ValueError, "search_pose: the arrays do not fit a pose task");
-        goto done;
-    }
-    if (check_work(&work, 6, n, nq) || table_ok(limv, lim.view.shape[1], nq, n, 0, "limits")
-        || table_ok(tabv, k, nq, n, 1, "joints")) goto done;
-    const double *pv = (const double *)p.view.buf;
-    Py_ssize_t p_stride = p.view.strides[0] / 8;
-    int status = CONTINUE;
-    long done_ = 0;
-    while (done_ < count) {
-        PyObject *J = PyObject_Call(jacobian, arguments, NULL);
-        if (!J) goto done;
-        Arg Ja = {0};
-        if (acquire(J, &Ja, 0, -1, "the Jacobian")) {
-            Py_DECREF(J);
-            goto done;
-        }
-        Mat Jm = {(const double *)Ja.view.buf, 0, 0, 0, 0};
-        if (Ja.view.ndim == 2)
-            Jm = mat(&Ja);
-        else if (Ja.view.ndim == 1) {  /* Pinocchio's Jacobian of a robot with one joint */
-            Mat column = {(const double *)Ja.view.buf, Ja.view.shape[0], 1, Ja.view.strides[0] / 8, 1};
-            Jm = column;
-        }
-        if (Jm.m != 6 || Jm.n != n) {
-            PyErr_SetString(PyExc_ValueError, "search_pose: the Jacobian is not 6 x nv");
-            release(&Ja);
-            Py_DECREF(J);
-            goto done;
-        }
-        search_pose_error(Rm, pv, p_stride, Mm, ev);
-        status = search_iteration_c(Jm, ev, qv, nq, Jcv, ecv, qcv, limv, lim.view.shape[1], wv,
-                                    sv, stv);
-        release(&Ja);
-        Py_DECREF(J);
-        done_++;
-        if (status != CONTINUE) break;
-        search_integrate(qcv, stv, tabv, k, nq, qv);
-    }
-    result = Py_BuildValue("(il)", status, done_);
+    if (search_pose_fits(&a) == 0) result = search_pose_loop(jacobian, arguments, &a, count);
 done:
-    release(&R); release(&p); release(&Md); release(&tab); release(&q); release(&qc);
-    release(&Jc); release(&e); release(&ec); release(&lim); release(&work); release(&state);
-    release(&step);
+    release(&a.R); release(&a.p); release(&a.Md); release(&a.tab); release(&a.q);
+    release(&a.qc); release(&a.Jc); release(&a.e); release(&a.ec); release(&a.lim);
+    release(&a.work); release(&a.state); release(&a.step);
     return result;
 }
 
