@@ -676,15 +676,36 @@ static int spans_c(Mat J, const double *sw, Py_ssize_t rows, const double *free_
     return cholesky_factor(G, rows, -RANK_TOL * RANK_TOL * trace);
 }
 
+/* Entry c of the position box in work (the joints with position limits): its velocity index
+ * v, its coordinate x = q[index] (rad or m), its range [lower, upper] and its recovery speed
+ * back (rad/s or m/s) toward the range from outside it. */
+typedef struct { Py_ssize_t v; double x, lower, upper, back; } BoxEntry;
+
+static inline BoxEntry box_entry(const double *q, const double *work, Py_ssize_t c)
+{
+    Py_ssize_t box = (Py_ssize_t)work[P_BOX], count = (Py_ssize_t)work[P_BOX_COUNT];
+    BoxEntry b = {(Py_ssize_t)work[box + count + c], q[(Py_ssize_t)work[box + c]],
+                  work[box + 2 * count + c], work[box + 3 * count + c],
+                  work[box + 4 * count + c]};
+    return b;
+}
+
+/* The speed limit of velocity coordinate j (rad/s or m/s; INFINITY for none): work keeps its
+ * inverse, 0 for none. */
+static inline double speed_limit(const double *work, Py_ssize_t j)
+{
+    double inv = work[(Py_ssize_t)work[P_SPEED] + j];
+    return inv > 0.0 ? 1.0 / inv : INFINITY;
+}
+
 /* a joint inside its range moves exactly onto a limit, never a rounding error past it */
 static void exact_position(const double *q, const double *work, double *step)
 {
-    Py_ssize_t box = (Py_ssize_t)work[P_BOX], count = (Py_ssize_t)work[P_BOX_COUNT];
+    Py_ssize_t count = (Py_ssize_t)work[P_BOX_COUNT];
     for (Py_ssize_t c = 0; c < count; c++) {
-        Py_ssize_t v = (Py_ssize_t)work[box + count + c];
-        double x = q[(Py_ssize_t)work[box + c]];
-        double lower = work[box + 2 * count + c], upper = work[box + 3 * count + c];
-        if (lower <= x && x <= upper) step[v] = dmin(dmax(step[v], lower - x), upper - x);
+        BoxEntry b = box_entry(q, work, c);
+        if (b.lower <= b.x && b.x <= b.upper)
+            step[b.v] = dmin(dmax(step[b.v], b.lower - b.x), b.upper - b.x);
     }
 }
 
@@ -853,28 +874,25 @@ static int saturate_c(int kind, Mat J, const double *e, const double *ff, int ha
 {
     Py_ssize_t n = J.n;
     double dt = work[P_DT];
-    Py_ssize_t box = (Py_ssize_t)work[P_BOX], count = (Py_ssize_t)work[P_BOX_COUNT];
-    Py_ssize_t speed = (Py_ssize_t)work[P_SPEED];
     double *held = work + (Py_ssize_t)work[P_CLAMPED];
     double *lo = held + n, *hi = lo + n, *a = hi + n;
     for (Py_ssize_t j = 0; j < n; j++) {
-        double inv = work[speed + j], vmax = inv > 0.0 ? 1.0 / inv : INFINITY;
+        double vmax = speed_limit(work, j);
         lo[j] = -vmax;
         hi[j] = vmax;
         held[j] = 0.0;
     }
+    Py_ssize_t count = (Py_ssize_t)work[P_BOX_COUNT];
     for (Py_ssize_t c = 0; c < count; c++) {
-        Py_ssize_t v = (Py_ssize_t)work[box + count + c];
-        double x = q[(Py_ssize_t)work[box + c]];
-        double lower = work[box + 2 * count + c], upper = work[box + 3 * count + c];
-        double back = work[box + 4 * count + c];
-        if (x > upper) {
-            lo[v] = hi[v] = -dmin(back, (x - upper) / dt);
-        } else if (x < lower) {
-            lo[v] = hi[v] = dmin(back, (lower - x) / dt);
+        BoxEntry b = box_entry(q, work, c);
+        Py_ssize_t v = b.v;
+        if (b.x > b.upper) {
+            lo[v] = hi[v] = -dmin(b.back, (b.x - b.upper) / dt);
+        } else if (b.x < b.lower) {
+            lo[v] = hi[v] = dmin(b.back, (b.lower - b.x) / dt);
         } else {
-            lo[v] = dmax(lo[v], (lower - x) / dt);
-            hi[v] = dmin(hi[v], (upper - x) / dt);
+            lo[v] = dmax(lo[v], (b.lower - b.x) / dt);
+            hi[v] = dmin(hi[v], (b.upper - b.x) / dt);
         }
     }
     int inside = 1;
@@ -1106,12 +1124,11 @@ static double recovery_speed(int above, double room, double rec, double vv, doub
 static void position_box(const double *q, const double *work, const Stage *st, int has_jerk)
 {
     double dt = work[P_DT];
-    Py_ssize_t box = (Py_ssize_t)work[P_BOX], count = (Py_ssize_t)work[P_BOX_COUNT];
+    Py_ssize_t count = (Py_ssize_t)work[P_BOX_COUNT];
     for (Py_ssize_t c = 0; c < count; c++) {
-        Py_ssize_t v = (Py_ssize_t)work[box + count + c];
-        double x = q[(Py_ssize_t)work[box + c]];
-        double lower = work[box + 2 * count + c], upper = work[box + 3 * count + c];
-        double room_up = upper - x, room_down = x - lower, vv = st->pdq[v];
+        BoxEntry b = box_entry(q, work, c);
+        Py_ssize_t v = b.v;
+        double room_up = b.upper - b.x, room_down = b.x - b.lower, vv = st->pdq[v];
         double BA = st->BA[v], BJ = st->BJ[v];
         double up = dmin(braking_speed_c(room_up, vv, dt, BA, BJ, has_jerk), room_up / dt);
         double lw = -dmin(braking_speed_c(room_down, -vv, dt, BA, BJ, has_jerk),
@@ -1119,20 +1136,12 @@ static void position_box(const double *q, const double *work, const Stage *st, i
         int above = room_up < 0.0, below = room_down < 0.0;
         if (above || below) {  /* back toward the range, a ramp within the limits */
             double back = recovery_speed(above, above ? room_down : room_up,
-                                         work[box + 4 * count + c], vv, st->pddq[v], BA, BJ,
+                                         b.back, vv, st->pddq[v], BA, BJ,
                                          dt, has_jerk);
             lw = up = above ? -back : back;
         }
         tighten(st->hlo + v, st->hhi + v, st->hlb + v, st->hhb + v, lw, up, L_POSITION);
     }
-}
-
-/* The speed limit of velocity coordinate j (rad/s or m/s; INFINITY for none): work keeps its
- * inverse, 0 for none. */
-static inline double speed_limit(const double *work, Py_ssize_t j)
-{
-    double inv = work[(Py_ssize_t)work[P_SPEED] + j];
-    return inv > 0.0 ? 1.0 / inv : INFINITY;
 }
 
 /* Step 2, the hard box (rad/s): position braking (position_box), speeds (L_VELOCITY), and
