@@ -1287,7 +1287,43 @@ static int smooth_stage_c(int kind, Mat J, const double *e, const double *ff, in
     return status;
 }
 
-/* the mapping, then the limits; returns the status bits */
+/* The mapping's results into work's info part (StepInfo), and |step| / dt (rad/s) as the
+ * regular velocity. */
+static void record_core(const Core *r, const double *step, Py_ssize_t n, double *work)
+{
+    double *info = work + INFO, regular = 0.0;
+    info[I_E_SQ] = r->e_sq;
+    info[I_FF_SQ] = r->ff_sq;
+    info[I_EW_SQ] = r->ew_sq;
+    info[I_GAIN] = r->gain;
+    info[I_LOOP] = r->bound;
+    info[I_STALL] = r->stall;
+    info[I_TRACE] = r->trace;
+    if (!isfinite(r->e_sq + r->ff_sq)) return;
+    for (Py_ssize_t j = 0; j < n; j++) regular += step[j] * step[j];
+    info[I_REGULAR] = sqrt(regular) / work[P_DT];
+}
+
+/* A stall (loop gain along the command below P_STALL_RATIO of tr, |e| above the floor) is
+ * Python's (STALLED) on the first stalled step of a run and when the run reaches P_STALL_WAIT
+ * (the escape's window; Python then restarts the count at 0): a lasting stall, such as a
+ * target out of reach, stays on the fast path in between. Counts the run in work. */
+static int stall_status(const Core *r, double *work)
+{
+    if (!(r->stall < work[P_STALL_RATIO] && r->ew_sq > work[P_STALL_ERROR])) {
+        work[P_STALL_RUN] = -1.0;
+        return 0;
+    }
+    if (work[P_STALL_RUN] < 0.0) {
+        work[P_STALL_RUN] = 1.0;
+        return STALLED;
+    }
+    return (work[P_STALL_RUN] += 1.0) >= work[P_STALL_WAIT] ? STALLED : 0;
+}
+
+/* One step's pipeline: the method (core), the stall check, the escape's velocity, then the
+ * limits: the acceleration/jerk stage (smooth_stage_c) or the position and speed bounds
+ * (saturate_c). Returns the status bits. */
 static int step_c(int kind, Mat J, const double *e, const double *ff, const double *q,
                   double *work, double *step)
 {
@@ -1296,33 +1332,9 @@ static int step_c(int kind, Mat J, const double *e, const double *ff, const doub
     const double *mask = work + (Py_ssize_t)work[P_MASK];
     int has_ff = work[P_HAS_FF] != 0.0;
     Core r = core(kind, J, e, ff, has_ff, mask, work, step);
-    double *info = work + INFO;
-    info[I_E_SQ] = r.e_sq;
-    info[I_FF_SQ] = r.ff_sq;
-    info[I_EW_SQ] = r.ew_sq;
-    info[I_GAIN] = r.gain;
-    info[I_LOOP] = r.bound;
-    info[I_STALL] = r.stall;
-    info[I_TRACE] = r.trace;
+    record_core(&r, step, n, work);
     if (!isfinite(r.e_sq + r.ff_sq)) return NON_FINITE;
-    double regular = 0.0;
-    for (Py_ssize_t j = 0; j < n; j++) regular += step[j] * step[j];
-    info[I_REGULAR] = sqrt(regular) / dt;
-    int status = 0;
-    /* a stall (loop gain along the command below P_STALL_RATIO of tr, |e| above the floor)
-     * is Python's on the first stalled step of a run and when the run reaches P_STALL_WAIT
-     * (the escape's window; Python then restarts the count at 0): a lasting stall, such as
-     * a target out of reach, stays on the fast path in between */
-    if (r.stall < work[P_STALL_RATIO] && r.ew_sq > work[P_STALL_ERROR]) {
-        if (work[P_STALL_RUN] < 0.0) {
-            work[P_STALL_RUN] = 1.0;
-            status = STALLED;
-        } else if ((work[P_STALL_RUN] += 1.0) >= work[P_STALL_WAIT]) {
-            status = STALLED;
-        }
-    } else {
-        work[P_STALL_RUN] = -1.0;
-    }
+    int status = stall_status(&r, work);
     int escaping = work[P_ESCAPING] != 0.0;
     Py_ssize_t extra = (Py_ssize_t)work[P_EXTRA];
     if (escaping)
