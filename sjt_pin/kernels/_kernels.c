@@ -267,6 +267,19 @@ static Py_ssize_t identity_block(const double *work, Py_ssize_t m, Py_ssize_t n)
     return mt;
 }
 
+/* |W J_j|^2 over the first `rows` rows: the squared norm of weighted column j (task units^2) */
+static inline double weighted_column_norm2(Mat J, const double *sw, Py_ssize_t rows,
+                                           Py_ssize_t j)
+{
+    double acc = 0.0;
+    for (Py_ssize_t i = 0; i < rows; i++) acc += (sw[i] * AT(J, i, j)) * (sw[i] * AT(J, i, j));
+    return acc;
+}
+
+/* SJT's scale of a column of squared norm `norm` (above the column tolerance), eq. (18) with the
+ * floor l^2 = length2 under the norm: alpha = 1 / max(|W J_j|^2, l^2) */
+static inline double sjt_alpha(double norm, double length2) { return 1.0 / dmax(norm, length2); }
+
 /* (W J_j)^T v = sum_i w_i J_ij v_i: column j of the weighted rows against v */
 static inline double weighted_column_dot(Mat J, const double *sw, const double *v, Py_ssize_t j)
 {
@@ -370,7 +383,7 @@ static void column_scales(Mat J, const double *sw, const double *kew, const doub
                 if (i < error_rows) acc_task += wij * kew[i];
             }
         }
-        alpha[j] = norm > tol ? 1.0 / dmax(norm, length2) : 0.0;
+        alpha[j] = norm > tol ? sjt_alpha(norm, length2) : 0.0;
         s[j] = scaled ? alpha[j] : mask[j];
         *trace += s[j] * norm;
         *stall += s[j] * acc_task * acc_task;
@@ -655,9 +668,7 @@ static int spans_c(Mat J, const double *sw, Py_ssize_t rows, const double *free_
 {
     Py_ssize_t n = J.n, count = 0;
     for (Py_ssize_t j = 0; j < n; j++) {
-        double acc = 0.0;
-        if (free_[j] != 0.0)
-            for (Py_ssize_t i = 0; i < rows; i++) acc += (sw[i] * AT(J, i, j)) * (sw[i] * AT(J, i, j));
+        double acc = free_[j] != 0.0 ? weighted_column_norm2(J, sw, rows, j) : 0.0;
         norm[j] = acc > 0.0 ? 1.0 / acc : 0.0;
         if (acc > 0.0) count++;
     }
@@ -1400,13 +1411,11 @@ static void limited_step(Mat J, const double *e, const double *q, const double *
             v[i] = acc;
         }
         for (Py_ssize_t j = 0; j < n; j++) {
-            double norm = 0.0;
-            if (free_[j] != 0.0)
-                for (Py_ssize_t i = 0; i < m; i++) norm += (sw[i] * AT(J, i, j)) * (sw[i] * AT(J, i, j));
+            double norm = free_[j] != 0.0 ? weighted_column_norm2(J, sw, m, j) : 0.0;
             if (norm <= tol)
                 alpha[j] = 0.0;
             else if (scaled)
-                alpha[j] = 1.0 / dmax(norm, length2);
+                alpha[j] = sjt_alpha(norm, length2);
             else
                 alpha[j] = 1.0;
             step[j] = 0.0;
