@@ -775,7 +775,7 @@ static Sns sns_parts(double *work, Py_ssize_t m, Py_ssize_t n)
 }
 
 /* the candidate (a, b, hv, held) becomes the best so far */
-static void sns_keep(const Sns *s, Py_ssize_t n)
+static inline void sns_keep(const Sns *s, Py_ssize_t n)
 {
     memcpy(s->best_a, s->a, (size_t)n * sizeof(double));
     memcpy(s->best_b, s->b, (size_t)n * sizeof(double));
