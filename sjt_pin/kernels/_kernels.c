@@ -1111,9 +1111,10 @@ static double brake_feedback(int kind, Mat J, const double *e, const double *ff,
 }
 
 /* The speed (rad/s or m/s) toward the range of a joint outside it (`above`: past its upper
- * limit): toward its velocity now plus a push at the braking acceleration BA, with jerk limits a
- * ramp of the acceleration aa within BJ (v = a dt + J dt^2 / 2 solved for the gap), at most the
- * recovery speed `rec` and never past the range's other side (`room` away). */
+ * limit): its velocity toward the range plus one step of a push at the braking acceleration BA;
+ * with jerk limits the push also grows from the acceleration aa by at most BJ dt and stays small
+ * enough to ramp back to 0 before the cap (p dt / 2 + p^2 / (2 BJ) <= the gap to it); at most
+ * the recovery speed `rec` and never past the range's other side (`room` away) in one step. */
 static double recovery_speed(int above, double room, double rec, double vv, double aa,
                              double BA, double BJ, double dt, int has_jerk)
 {
