@@ -267,6 +267,36 @@ static Py_ssize_t identity_block(const double *work, Py_ssize_t m, Py_ssize_t n)
     return mt;
 }
 
+/* |W J_j|^2 over the first `rows` rows: the squared norm of weighted column j (task units^2) */
+static inline double weighted_column_norm2(Mat J, const double *sw, Py_ssize_t rows,
+                                           Py_ssize_t j)
+{
+    double acc = 0.0;
+    for (Py_ssize_t i = 0; i < rows; i++) acc += (sw[i] * AT(J, i, j)) * (sw[i] * AT(J, i, j));
+    return acc;
+}
+
+/* SJT's scale of a column of squared norm `norm` (above the column tolerance), eq. (18) with the
+ * floor l^2 = length2 under the norm: alpha = 1 / max(|W J_j|^2, l^2) */
+static inline double sjt_alpha(double norm, double length2) { return 1.0 / dmax(norm, length2); }
+
+/* (W J_j)^T v = sum_i w_i J_ij v_i: column j of the weighted rows against v */
+static inline double weighted_column_dot(Mat J, const double *sw, const double *v, Py_ssize_t j)
+{
+    double acc = 0.0;
+    for (Py_ssize_t i = 0; i < J.m; i++) acc += sw[i] * AT(J, i, j) * v[i];
+    return acc;
+}
+
+/* (W^2 J_j)^T v = sum_i w_i^2 J_ij v_i: column j of J^T W^2 against v */
+static inline double squared_weight_column_dot(Mat J, const double *sw, const double *v,
+                                               Py_ssize_t j)
+{
+    double acc = 0.0;
+    for (Py_ssize_t i = 0; i < J.m; i++) acc += sw[i] * sw[i] * AT(J, i, j) * v[i];
+    return acc;
+}
+
 /* step += dt D J_w^T (J_w D J_w^T + (mu^2 + extra) I)^-1 (sw v) (m x m solve when m <= n), or
  * the same as dt sqrt(D) (G + (mu^2 + extra) I)^-1 sqrt(D) J_w^T (sw v) (n x n) */
 static void damped_solve(Mat J, const double *v, const double *sw, const double *alpha,
@@ -299,18 +329,12 @@ static void damped_solve(Mat J, const double *v, const double *sw, const double 
         double *rhs = work + start, *y = work + start + m;
         for (Py_ssize_t i = 0; i < m; i++) rhs[i] = sw[i] * v[i];
         cholesky_solve_c(A, m, mu2, rhs, y);
-        for (Py_ssize_t j = 0; j < n; j++) {
-            double acc = 0.0;
-            for (Py_ssize_t i = 0; i < m; i++) acc += sw[i] * AT(J, i, j) * y[i];
-            step[j] += dt * alpha[j] * acc;
-        }
+        for (Py_ssize_t j = 0; j < n; j++)
+            step[j] += dt * alpha[j] * weighted_column_dot(J, sw, y, j);
     } else {
         double *rhs = work + start, *x = work + start + n;
-        for (Py_ssize_t j = 0; j < n; j++) {
-            double acc = 0.0;
-            for (Py_ssize_t i = 0; i < m; i++) acc += sw[i] * sw[i] * AT(J, i, j) * v[i];
-            rhs[j] = sqrt(alpha[j]) * acc;
-        }
+        for (Py_ssize_t j = 0; j < n; j++)
+            rhs[j] = sqrt(alpha[j]) * squared_weight_column_dot(J, sw, v, j);
         cholesky_solve_c(A, n, mu2, rhs, x);
         for (Py_ssize_t j = 0; j < n; j++) step[j] += dt * sqrt(alpha[j]) * x[j];
     }
@@ -318,6 +342,115 @@ static void damped_solve(Mat J, const double *v, const double *sw, const double 
 
 /* results of a mapping: |e|^2, |ff|^2, |e_w|^2, gain, lambda_hat, stall ratio, trace */
 typedef struct { double e_sq, ff_sq, ew_sq, gain, bound, stall, trace; } Core;
+
+/* The weighted error of the transpose mappings: kew = K W e (per row), and on the error rows
+ * (those before the posture's) |e|^2, |W e|^2 into r and |K W e|^2 returned. */
+static double weighted_error(const double *e, const double *sw, const double *k, Py_ssize_t m,
+                             Py_ssize_t error_rows, double *kew, Core *r)
+{
+    double kew_sq = 0.0;
+    for (Py_ssize_t i = 0; i < m; i++) {
+        double ew = sw[i] * e[i];
+        kew[i] = k[i] * ew;
+        if (i < error_rows) {
+            r->e_sq += e[i] * e[i];
+            r->ew_sq += ew * ew;
+            kew_sq += kew[i] * kew[i];
+        }
+    }
+    return kew_sq;
+}
+
+/* The column scales on the joints of mask: alpha_j = 1 / max(|W J_j|^2, length^2) (SJT eq. 21's
+ * D; 0 for a column below col_tol), s = alpha for the scaled mappings else the mask; step_j =
+ * (W J_j)^T K W e, unscaled. Returns tr(J S J^T) in *trace, the stall ratio's numerator
+ * sum s_j (task part)^2 in *stall, and max sqrt(|W J_j|^2) s_j (the Levenberg-Marquardt
+ * term's curvature) in *curvature. */
+static void column_scales(Mat J, const double *sw, const double *kew, const double *mask,
+                          const double *work, double *alpha, double *s, double *step,
+                          double *trace, double *stall, double *curvature)
+{
+    Py_ssize_t m = J.m, n = J.n, error_rows = (Py_ssize_t)work[P_ERROR_ROWS];
+    double tol = work[P_COL_TOL], length2 = work[P_LENGTH2];
+    int scaled = work[P_SCALED] != 0.0;
+    for (Py_ssize_t j = 0; j < n; j++) {
+        double norm = 0.0, acc = 0.0, acc_task = 0.0;
+        if (mask[j] != 0.0) {
+            for (Py_ssize_t i = 0; i < m; i++) {
+                double wij = sw[i] * AT(J, i, j);
+                norm += wij * wij;
+                acc += wij * kew[i];
+                if (i < error_rows) acc_task += wij * kew[i];
+            }
+        }
+        alpha[j] = norm > tol ? sjt_alpha(norm, length2) : 0.0;
+        s[j] = scaled ? alpha[j] : mask[j];
+        *trace += s[j] * norm;
+        *stall += s[j] * acc_task * acc_task;
+        if (norm > tol) *curvature = dmax(*curvature, sqrt(norm) * s[j]);
+        step[j] = acc;
+    }
+}
+
+/* The "auto" gain's lambda_hat >= lambda_max(W J S J^T W) of the transpose loop (loop_bound_c on
+ * the Gram matrix; with posture rows the task block's bound plus the posture's diagonal), plus
+ * the Levenberg-Marquardt term lm |W e| curvature (1/s times dt gives the loop's eigenvalue). */
+static double transpose_bound(Mat J, const double *sw, const double *s, double *work,
+                              double ew_sq, double curvature)
+{
+    Py_ssize_t m = J.m, n = J.n;
+    double bound, *A = matrices(work, m, n);
+    Py_ssize_t mt = (Py_ssize_t)work[P_IDENTITY_ROWS] == n && m > n ? m - n : -1;
+    if (mt >= 0) {
+        /* lambda_max of the stacked loop matrix <= the task block's + the posture block's
+         * (diagonal: s_j w_j), for PSD block matrices */
+        Mat task = {J.p, mt, n, J.s0, J.s1};
+        Py_ssize_t p = mt < n ? mt : n;
+        double posture = 0.0;
+        for (Py_ssize_t j = 0; j < n; j++)
+            posture = dmax(posture, s[j] * sw[mt + j] * sw[mt + j]);
+        gram(task, sw, s, mt <= n, A);
+        bound = loop_bound_c(A, p, BOUND_PRODUCTS, A + p * p, A + 2 * p * p) + posture;
+    } else {
+        Py_ssize_t p = m < n ? m : n;
+        gram(J, sw, s, m <= n, A);
+        bound = loop_bound_c(A, p, BOUND_PRODUCTS, A + p * p, A + 2 * p * p);
+    }
+    return bound + work[P_LM] * sqrt(ew_sq) * curvature;
+}
+
+/* The transpose step (rad) from the unscaled step_j = (W J_j)^T K W e: damped (the feedback
+ * v = gain K e + ff through damped_solve, damping lm sqrt(|W e|^2 max alpha)), else
+ * dt gain s_j step_j plus the feed-forward mapped by the transpose (S J^T W^2 ff) or damped. */
+static void transpose_apply(Mat J, const double *e, const double *ff, int has_ff,
+                            const double *alpha, const double *s, double *work, double gain,
+                            double ew_sq, double *step)
+{
+    Py_ssize_t m = J.m, n = J.n;
+    double dt = work[P_DT];
+    Py_ssize_t rows = (Py_ssize_t)work[P_ROWS], scratch = (Py_ssize_t)work[P_SCRATCH];
+    const double *sw = work + rows, *k = work + rows + m;
+    double ff_mode = work[P_FF_MODE];
+    if (work[P_FB_MODE] == FB_DAMPED) {
+        double *v = work + scratch + 3 * m + 6 * n;
+        for (Py_ssize_t i = 0; i < m; i++) {
+            v[i] = gain * k[i] * e[i];
+            if (has_ff) v[i] += ff[i];
+        }
+        for (Py_ssize_t j = 0; j < n; j++) step[j] = 0.0;
+        double alpha_max = 0.0;
+        for (Py_ssize_t j = 0; j < n; j++) alpha_max = dmax(alpha_max, alpha[j]);
+        damped_solve(J, v, sw, alpha, work, dt, step, work[P_LM] * sqrt(ew_sq * alpha_max));
+        return;
+    }
+    for (Py_ssize_t j = 0; j < n; j++) step[j] *= dt * gain * s[j];
+    if (has_ff && ff_mode == FF_TRANSPOSE) {
+        for (Py_ssize_t j = 0; j < n; j++)
+            step[j] += dt * s[j] * squared_weight_column_dot(J, sw, ff, j);
+    } else if (has_ff && ff_mode == FF_DAMPED) {
+        damped_solve(J, ff, sw, alpha, work, dt, step, 0.0);
+    }
+}
 
 /* the transpose-type mapping (JT eq. 10, SJT eq. 21, and the damped forms) on the joints of
  * mask; see transpose_step's docstring in sjt_pin/kernels/__init__.py */
@@ -330,90 +463,23 @@ static Core transpose_core(Mat J, const double *e, const double *ff, int has_ff,
     const double *sw = work + rows, *k = work + rows + m;
     Py_ssize_t scratch = (Py_ssize_t)work[P_SCRATCH];
     double *kew = work + scratch, *alpha = work + scratch + m, *s = work + scratch + m + n;
-    double tol = work[P_COL_TOL], length2 = work[P_LENGTH2];
-    int scaled = work[P_SCALED] != 0.0, damped = work[P_FB_MODE] == FB_DAMPED;
-    Py_ssize_t error_rows = (Py_ssize_t)work[P_ERROR_ROWS];
     Core r = {0};
-    double kew_sq = 0.0;
-    for (Py_ssize_t i = 0; i < m; i++) {
-        double ew = sw[i] * e[i];
-        kew[i] = k[i] * ew;
-        if (i < error_rows) {
-            r.e_sq += e[i] * e[i];
-            r.ew_sq += ew * ew;
-            kew_sq += kew[i] * kew[i];
-        }
-    }
+    double kew_sq = weighted_error(e, sw, k, m, (Py_ssize_t)work[P_ERROR_ROWS], kew, &r);
     double trace = 0.0, stall = 0.0, curvature = 0.0;
-    for (Py_ssize_t j = 0; j < n; j++) {
-        double norm = 0.0, acc = 0.0, acc_task = 0.0;
-        if (mask[j] != 0.0) {
-            for (Py_ssize_t i = 0; i < m; i++) {
-                double wij = sw[i] * AT(J, i, j);
-                norm += wij * wij;
-                acc += wij * kew[i];
-                if (i < error_rows) acc_task += wij * kew[i];
-            }
-        }
-        alpha[j] = norm > tol ? 1.0 / dmax(norm, length2) : 0.0;
-        s[j] = scaled ? alpha[j] : mask[j];
-        trace += s[j] * norm;
-        stall += s[j] * acc_task * acc_task;
-        if (norm > tol) curvature = dmax(curvature, sqrt(norm) * s[j]);
-        step[j] = acc;
-    }
+    column_scales(J, sw, kew, mask, work, alpha, s, step, &trace, &stall, &curvature);
     stall = kew_sq > 0.0 && trace > 0.0 ? stall / (kew_sq * trace) : 0.0;
     double bound = 1.0, gain;
     if (work[P_GAIN_MODE] == GAIN_FIXED) {
         gain = 1.0;
-    } else if (damped) {
+    } else if (work[P_FB_MODE] == FB_DAMPED) {
         gain = work[P_GAIN_ARG] / dt;
     } else {
-        double *A = matrices(work, m, n);
-        Py_ssize_t mt = (Py_ssize_t)work[P_IDENTITY_ROWS] == n && m > n ? m - n : -1;
-        if (mt >= 0) {
-            /* lambda_max of the stacked loop matrix <= the task block's + the posture block's
-             * (diagonal: s_j w_j), for PSD block matrices */
-            Mat task = {J.p, mt, n, J.s0, J.s1};
-            Py_ssize_t p = mt < n ? mt : n;
-            double posture = 0.0;
-            for (Py_ssize_t j = 0; j < n; j++)
-                posture = dmax(posture, s[j] * sw[mt + j] * sw[mt + j]);
-            gram(task, sw, s, mt <= n, A);
-            bound = loop_bound_c(A, p, BOUND_PRODUCTS, A + p * p, A + 2 * p * p) + posture;
-        } else {
-            Py_ssize_t p = m < n ? m : n;
-            gram(J, sw, s, m <= n, A);
-            bound = loop_bound_c(A, p, BOUND_PRODUCTS, A + p * p, A + 2 * p * p);
-        }
-        bound += work[P_LM] * sqrt(r.ew_sq) * curvature;
+        bound = transpose_bound(J, sw, s, work, r.ew_sq, curvature);
         gain = bound > 0.0 ? work[P_GAIN_ARG] / (dt * bound) : 0.0;
     }
     if (has_ff)
         for (Py_ssize_t i = 0; i < m; i++) r.ff_sq += ff[i] * ff[i];
-    double ff_mode = work[P_FF_MODE];
-    if (damped) {
-        double *v = work + scratch + 3 * m + 6 * n;
-        for (Py_ssize_t i = 0; i < m; i++) {
-            v[i] = gain * k[i] * e[i];
-            if (has_ff) v[i] += ff[i];
-        }
-        for (Py_ssize_t j = 0; j < n; j++) step[j] = 0.0;
-        double alpha_max = 0.0;
-        for (Py_ssize_t j = 0; j < n; j++) alpha_max = dmax(alpha_max, alpha[j]);
-        damped_solve(J, v, sw, alpha, work, dt, step, work[P_LM] * sqrt(r.ew_sq * alpha_max));
-    } else {
-        for (Py_ssize_t j = 0; j < n; j++) step[j] *= dt * gain * s[j];
-        if (has_ff && ff_mode == FF_TRANSPOSE) {
-            for (Py_ssize_t j = 0; j < n; j++) {
-                double acc = 0.0;
-                for (Py_ssize_t i = 0; i < m; i++) acc += sw[i] * sw[i] * AT(J, i, j) * ff[i];
-                step[j] += dt * s[j] * acc;
-            }
-        } else if (has_ff && ff_mode == FF_DAMPED) {
-            damped_solve(J, ff, sw, alpha, work, dt, step, 0.0);
-        }
-    }
+    transpose_apply(J, e, ff, has_ff, alpha, s, work, gain, r.ew_sq, step);
     r.gain = gain;
     r.bound = bound;
     r.stall = stall;
@@ -471,9 +537,55 @@ static void pseudo_solve(double *A, double *V, Py_ssize_t p, const double *rhs, 
     damped_pseudo_solve(A, V, p, rhs, sol, rcond, 0.0);
 }
 
-/* the least-squares mapping (JP eq. 8, DLS) on the joints of mask, damped by
- * mu^2 + P_LM |e_w| (m^2): DLS's lambda^2 plus the Levenberg-Marquardt term that grows with
- * the error (P_LM = w L in m here; 0 for the textbook JP and DLS) */
+/* The least-squares right-hand side v = gain K W e (+ W ff) (task units/s, per row), and
+ * |e|^2, |W e|^2 on the error rows and |ff|^2 into out. */
+static void least_squares_rhs(const double *e, const double *ff, int has_ff, const double *sw,
+                              const double *k, Py_ssize_t m, Py_ssize_t error_rows, double gain,
+                              double *v, Core *out)
+{
+    for (Py_ssize_t i = 0; i < m; i++) {
+        double ew = sw[i] * e[i];
+        if (i < error_rows) {
+            out->e_sq += e[i] * e[i];
+            out->ew_sq += ew * ew;
+        }
+        v[i] = gain * k[i] * ew;
+        if (has_ff) {
+            v[i] += sw[i] * ff[i];
+            out->ff_sq += ff[i] * ff[i];
+        }
+    }
+}
+
+/* The least-squares step (rad) with posture rows (the last n rows an identity block below m_t
+ * task rows): the normal equations are diagonal plus rank m_t, solved by Woodbury's identity
+ * with the damping mu^2 + lm. */
+static void least_squares_posture(Mat J, const double *mask, const double *v, double *work,
+                                  Py_ssize_t mt, double lm, double *r, double *sol,
+                                  double *step)
+{
+    Py_ssize_t m = J.m, n = J.n;
+    const double *sw = work + (Py_ssize_t)work[P_ROWS];
+    double dt = work[P_DT], damping = work[P_MU];
+    double *A = matrices(work, m, n);
+    double *U = A, *Dg = A + n * mt, *space = Dg + n;
+    for (Py_ssize_t j = 0; j < n; j++) {
+        double acc = 0.0;
+        for (Py_ssize_t a = 0; a < mt; a++) {
+            U[j * mt + a] = mask[j] * sw[a] * AT(J, a, j);
+            acc += sw[a] * AT(J, a, j) * v[a];
+        }
+        Dg[j] = mask[j] * sw[mt + j] * sw[mt + j] + damping * damping + lm;
+        r[j] = mask[j] * (acc + sw[mt + j] * v[mt + j]);
+    }
+    woodbury(U, Dg, n, mt, r, sol, space);
+    for (Py_ssize_t j = 0; j < n; j++) step[j] = dt * mask[j] * sol[j];
+}
+
+/* the least-squares mapping (JP eq. 8, DLS) on the joints of mask: the normal equations of the
+ * weighted rows (the row or the column space, the smaller), damped by mu^2 + P_LM |e_w| (m^2):
+ * DLS's lambda^2 plus the Levenberg-Marquardt term that grows with the error (P_LM = w L in m;
+ * 0 for the textbook JP and DLS), by Cholesky, else (mu = 0) by damped_pseudo_solve */
 static Core least_squares_core(Mat J, const double *e, const double *ff, int has_ff,
                                const double *mask, double *work, double *step)
 {
@@ -487,64 +599,27 @@ static Core least_squares_core(Mat J, const double *e, const double *ff, int has
     double *v = work + scratch, *r = work + scratch + m, *sol = work + scratch + m + n;
     double *A = matrices(work, m, n), *V = A + p * p;
     Core out = {0};
-    Py_ssize_t error_rows = (Py_ssize_t)work[P_ERROR_ROWS];
-    for (Py_ssize_t i = 0; i < m; i++) {
-        double ew = sw[i] * e[i];
-        if (i < error_rows) {
-            out.e_sq += e[i] * e[i];
-            out.ew_sq += ew * ew;
-        }
-        v[i] = gain * k[i] * ew;
-        if (has_ff) {
-            v[i] += sw[i] * ff[i];
-            out.ff_sq += ff[i] * ff[i];
-        }
-    }
+    out.gain = gain;
+    out.bound = 1.0;
+    out.stall = 1.0;
+    least_squares_rhs(e, ff, has_ff, sw, k, m, (Py_ssize_t)work[P_ERROR_ROWS], gain, v, &out);
     double damping = work[P_MU], lm = work[P_LM] * sqrt(out.ew_sq);
     Py_ssize_t mt = identity_block(work, m, n);
     if (mt >= 0) {  /* task rows, then posture rows: diagonal plus rank m_t */
-        double *U = A, *Dg = A + n * mt, *space = Dg + n;
-        for (Py_ssize_t j = 0; j < n; j++) {
-            double acc = 0.0;
-            for (Py_ssize_t a = 0; a < mt; a++) {
-                U[j * mt + a] = mask[j] * sw[a] * AT(J, a, j);
-                acc += sw[a] * AT(J, a, j) * v[a];
-            }
-            Dg[j] = mask[j] * sw[mt + j] * sw[mt + j] + damping * damping + lm;
-            r[j] = mask[j] * (acc + sw[mt + j] * v[mt + j]);
-        }
-        woodbury(U, Dg, n, mt, r, sol, space);
-        for (Py_ssize_t j = 0; j < n; j++) step[j] = dt * mask[j] * sol[j];
-        out.gain = gain;
-        out.bound = 1.0;
-        out.stall = 1.0;
+        least_squares_posture(J, mask, v, work, mt, lm, r, sol, step);
         return out;
     }
     gram(J, sw, mask, use_rows, A);
     if (!use_rows)
-        for (Py_ssize_t j = 0; j < n; j++) {
-            double acc = 0.0;
-            for (Py_ssize_t i = 0; i < m; i++) acc += sw[i] * AT(J, i, j) * v[i];
-            r[j] = mask[j] * acc;
-        }
+        for (Py_ssize_t j = 0; j < n; j++) r[j] = mask[j] * weighted_column_dot(J, sw, v, j);
     const double *rhs = use_rows ? v : r;
     if (damping > 0.0)
         cholesky_solve_c(A, p, damping * damping + lm, rhs, sol);
     else
         damped_pseudo_solve(A, V, p, rhs, sol, work[P_RCOND], lm);
-    for (Py_ssize_t j = 0; j < n; j++) {
-        if (use_rows) {
-            double acc = 0.0;
-            for (Py_ssize_t i = 0; i < m; i++) acc += sw[i] * AT(J, i, j) * sol[i];
-            step[j] = dt * mask[j] * acc;
-        } else {
-            step[j] = dt * mask[j] * sol[j];
-        }
-    }
-    out.gain = gain;
-    out.bound = 1.0;
-    out.stall = 1.0;
-    out.trace = 0.0;
+    for (Py_ssize_t j = 0; j < n; j++)
+        step[j] = use_rows ? dt * mask[j] * weighted_column_dot(J, sw, sol, j)
+                           : dt * mask[j] * sol[j];
     return out;
 }
 
@@ -607,9 +682,7 @@ static int spans_c(Mat J, const double *sw, Py_ssize_t rows, const double *free_
 {
     Py_ssize_t n = J.n, count = 0;
     for (Py_ssize_t j = 0; j < n; j++) {
-        double acc = 0.0;
-        if (free_[j] != 0.0)
-            for (Py_ssize_t i = 0; i < rows; i++) acc += (sw[i] * AT(J, i, j)) * (sw[i] * AT(J, i, j));
+        double acc = free_[j] != 0.0 ? weighted_column_norm2(J, sw, rows, j) : 0.0;
         norm[j] = acc > 0.0 ? 1.0 / acc : 0.0;
         if (acc > 0.0) count++;
     }
@@ -628,15 +701,36 @@ static int spans_c(Mat J, const double *sw, Py_ssize_t rows, const double *free_
     return cholesky_factor(G, rows, -RANK_TOL * RANK_TOL * trace);
 }
 
+/* Entry c of the position box in work (the joints with position limits): its velocity index
+ * v, its coordinate x = q[index] (rad or m), its range [lower, upper] and its recovery speed
+ * back (rad/s or m/s) toward the range from outside it. */
+typedef struct { Py_ssize_t v; double x, lower, upper, back; } BoxEntry;
+
+static inline BoxEntry box_entry(const double *q, const double *work, Py_ssize_t c)
+{
+    Py_ssize_t box = (Py_ssize_t)work[P_BOX], count = (Py_ssize_t)work[P_BOX_COUNT];
+    BoxEntry b = {(Py_ssize_t)work[box + count + c], q[(Py_ssize_t)work[box + c]],
+                  work[box + 2 * count + c], work[box + 3 * count + c],
+                  work[box + 4 * count + c]};
+    return b;
+}
+
+/* The speed limit of velocity coordinate j (rad/s or m/s; INFINITY for none): work keeps its
+ * inverse, 0 for none. */
+static inline double speed_limit(const double *work, Py_ssize_t j)
+{
+    double inv = work[(Py_ssize_t)work[P_SPEED] + j];
+    return inv > 0.0 ? 1.0 / inv : INFINITY;
+}
+
 /* a joint inside its range moves exactly onto a limit, never a rounding error past it */
 static void exact_position(const double *q, const double *work, double *step)
 {
-    Py_ssize_t box = (Py_ssize_t)work[P_BOX], count = (Py_ssize_t)work[P_BOX_COUNT];
+    Py_ssize_t count = (Py_ssize_t)work[P_BOX_COUNT];
     for (Py_ssize_t c = 0; c < count; c++) {
-        Py_ssize_t v = (Py_ssize_t)work[box + count + c];
-        double x = q[(Py_ssize_t)work[box + c]];
-        double lower = work[box + 2 * count + c], upper = work[box + 3 * count + c];
-        if (lower <= x && x <= upper) step[v] = dmin(dmax(step[v], lower - x), upper - x);
+        BoxEntry b = box_entry(q, work, c);
+        if (b.lower <= b.x && b.x <= b.upper)
+            step[b.v] = dmin(dmax(step[b.v], b.lower - b.x), b.upper - b.x);
     }
 }
 
@@ -666,6 +760,84 @@ static void core_scaled(int kind, Mat J, const double *e, const double *ff, int 
     memcpy(k, save, (size_t)m * sizeof(double));
 }
 
+/* SNS's vectors in work's clamped part (n each unless noted): the held flags, the candidate
+ * dq = b + s a (a: the method on the free joints, b: what the held ones leave them to make up,
+ * hv: the held joints' velocities, rad/s), the free joints, the best candidate so far, and
+ * scratch (ff2: m, G: m x m, norm: n). */
+typedef struct {
+    double *held, *a, *b, *hv, *free_;
+    double *best_a, *best_b, *best_hv, *best_held;
+    double *ff2, *G, *norm;
+} Sns;
+
+static Sns sns_parts(double *work, Py_ssize_t m, Py_ssize_t n)
+{
+    Sns s;
+    s.held = work + (Py_ssize_t)work[P_CLAMPED];
+    s.a = s.held + 3 * n;
+    s.b = s.a + n;
+    s.hv = s.b + n;
+    s.free_ = s.hv + n;
+    s.best_a = s.free_ + n;
+    s.best_b = s.best_a + n;
+    s.best_hv = s.best_b + n;
+    s.best_held = s.best_hv + n;
+    s.ff2 = s.best_held + n;
+    s.G = s.ff2 + m;
+    s.norm = s.G + m * m;
+    return s;
+}
+
+/* the candidate (a, b, hv, held) becomes the best so far */
+static inline void sns_keep(const Sns *s, Py_ssize_t n)
+{
+    memcpy(s->best_a, s->a, (size_t)n * sizeof(double));
+    memcpy(s->best_b, s->b, (size_t)n * sizeof(double));
+    memcpy(s->best_hv, s->hv, (size_t)n * sizeof(double));
+    memcpy(s->best_held, s->held, (size_t)n * sizeof(double));
+}
+
+/* The method solved again on the free joints (Flacco, De Luca and Khatib's SNS step, rad/s):
+ * a = M_free(v) / dt, b = M_free(v - J hv) / dt - a, with the gain factor `factor`
+ * (core_scaled) and the escape's velocity added to a when escaping. */
+static void sns_resolve(int kind, Mat J, const double *e, const double *ff, int has_ff,
+                        double *work, const Sns *s, double factor, double *save, int escaping)
+{
+    Py_ssize_t m = J.m, n = J.n;
+    double dt = work[P_DT];
+    Py_ssize_t extra = (Py_ssize_t)work[P_EXTRA];
+    core_scaled(kind, J, e, ff, has_ff, s->free_, work, s->a, factor, save);
+    int moving = 0;  /* held joints at rest leave the others nothing to make up for */
+    for (Py_ssize_t j = 0; j < n; j++) moving |= s->hv[j] != 0.0;
+    if (moving) {
+        for (Py_ssize_t i = 0; i < m; i++) {
+            double acc = has_ff ? ff[i] : 0.0;
+            for (Py_ssize_t j = 0; j < n; j++) acc -= AT(J, i, j) * s->hv[j];
+            s->ff2[i] = acc;
+        }
+        core_scaled(kind, J, e, s->ff2, 1, s->free_, work, s->b, factor, save);
+    }
+    for (Py_ssize_t j = 0; j < n; j++) {
+        s->a[j] /= dt;
+        s->b[j] = moving ? s->b[j] / dt - s->a[j] : 0.0;
+        if (escaping) s->a[j] += work[extra + j];
+    }
+}
+
+/* Joint k is held at the bound its motion heads for (rad/s). Returns whether joints are left
+ * free. */
+static int sns_hold(const Sns *s, Py_ssize_t k, const double *lo, const double *hi, Py_ssize_t n)
+{
+    double *a = s->a, *b = s->b;
+    double direction = a[k] != 0.0 ? a[k] : (b[k] > hi[k] ? b[k] - hi[k] : b[k]);
+    s->held[k] = 1.0;
+    s->free_[k] = 0.0;
+    s->hv[k] = direction > 0.0 ? hi[k] : lo[k];
+    int left = 0;
+    for (Py_ssize_t j = 0; j < n; j++) left |= s->free_[j] != 0.0;
+    return left;
+}
+
 /* Saturation in the Null Space (sjt_pin/constraints.py, saturate) on the box [lo, hi] (rad/s):
  * the joint that limits the task most is held at its bound and the method solved again on the
  * others (gain factor `factor`, see core_scaled); when the free joints no longer span the task,
@@ -678,73 +850,40 @@ static int sns_c(int kind, Mat J, const double *e, const double *ff, int has_ff,
                  double *dq, double factor, double *save, int escaping, double *scale_out)
 {
     Py_ssize_t m = J.m, n = J.n;
-    double dt = work[P_DT];
-    Py_ssize_t extra = (Py_ssize_t)work[P_EXTRA];
-    double *held = work + (Py_ssize_t)work[P_CLAMPED];
-    double *a = held + 3 * n, *b = a + n, *hv = b + n, *free_ = hv + n;
-    double *best_a = free_ + n, *best_b = best_a + n, *best_hv = best_b + n;
-    double *best_held = best_hv + n, *ff2 = best_held + n, *G = ff2 + m, *norm = G + m * m;
+    Sns s = sns_parts(work, m, n);
     const double *sw = work + (Py_ssize_t)work[P_ROWS];
     Py_ssize_t rows = (Py_ssize_t)work[P_ERROR_ROWS];
     for (Py_ssize_t j = 0; j < n; j++) {
-        a[j] = dq[j];
-        b[j] = 0.0;
-        hv[j] = 0.0;
-        held[j] = 0.0;
-        free_[j] = mask[j] != 0.0 ? mask[j] : 0.0;
+        s.a[j] = dq[j];
+        s.b[j] = 0.0;
+        s.hv[j] = 0.0;
+        s.held[j] = 0.0;
+        s.free_[j] = mask[j] != 0.0 ? mask[j] : 0.0;
     }
     Py_ssize_t k;
-    double best = task_scale_c(a, b, lo, hi, free_, n, &k);
-    memcpy(best_a, a, (size_t)n * sizeof(double));
-    memcpy(best_b, b, (size_t)n * sizeof(double));
-    memcpy(best_hv, hv, (size_t)n * sizeof(double));
-    memcpy(best_held, held, (size_t)n * sizeof(double));
+    double best = task_scale_c(s.a, s.b, lo, hi, s.free_, n, &k);
+    sns_keep(&s, n);
     int any_held = 0;
     for (Py_ssize_t round = 0; round < n; round++) {
-        double s = task_scale_c(a, b, lo, hi, free_, n, &k);
-        if (any_held && !spans_c(J, sw, rows, free_, G, norm)) break;
-        if (s > best) {
-            best = s;
-            memcpy(best_a, a, (size_t)n * sizeof(double));
-            memcpy(best_b, b, (size_t)n * sizeof(double));
-            memcpy(best_hv, hv, (size_t)n * sizeof(double));
-            memcpy(best_held, held, (size_t)n * sizeof(double));
+        double scale = task_scale_c(s.a, s.b, lo, hi, s.free_, n, &k);
+        if (any_held && !spans_c(J, sw, rows, s.free_, s.G, s.norm)) break;
+        if (scale > best) {
+            best = scale;
+            sns_keep(&s, n);
         }
-        if (s >= 1.0 || k < 0) break;
-        double direction = a[k] != 0.0 ? a[k] : (b[k] > hi[k] ? b[k] - hi[k] : b[k]);
-        held[k] = 1.0;
-        free_[k] = 0.0;
-        hv[k] = direction > 0.0 ? hi[k] : lo[k];
+        if (scale >= 1.0 || k < 0) break;
         any_held = 1;
-        int left = 0;
-        for (Py_ssize_t j = 0; j < n; j++) left |= free_[j] != 0.0;
-        if (!left) break;
-        /* a = M_free(v); b = M_free(v - J hv) - a */
-        core_scaled(kind, J, e, ff, has_ff, free_, work, a, factor, save);
-        int moving = 0;  /* held joints at rest leave the others nothing to make up for */
-        for (Py_ssize_t j = 0; j < n; j++) moving |= hv[j] != 0.0;
-        if (moving) {
-            for (Py_ssize_t i = 0; i < m; i++) {
-                double acc = has_ff ? ff[i] : 0.0;
-                for (Py_ssize_t j = 0; j < n; j++) acc -= AT(J, i, j) * hv[j];
-                ff2[i] = acc;
-            }
-            core_scaled(kind, J, e, ff2, 1, free_, work, b, factor, save);
-        }
-        for (Py_ssize_t j = 0; j < n; j++) {
-            a[j] /= dt;
-            b[j] = moving ? b[j] / dt - a[j] : 0.0;
-            if (escaping) a[j] += work[extra + j];
-        }
+        if (!sns_hold(&s, k, lo, hi, n)) break;
+        sns_resolve(kind, J, e, ff, has_ff, work, &s, factor, save, escaping);
     }
     double scale = dmax(best, 0.0);
     int status = 0;
     for (Py_ssize_t j = 0; j < n; j++) {
-        double v = best_held[j] != 0.0 ? best_hv[j] : best_b[j] + scale * best_a[j];
+        double v = s.best_held[j] != 0.0 ? s.best_hv[j] : s.best_b[j] + scale * s.best_a[j];
         if (mask[j] == 0.0) v = 0.0;
         dq[j] = dmin(dmax(v, lo[j]), hi[j]);
-        held[j] = best_held[j];
-        if (held[j] != 0.0) status |= CLAMPED;
+        s.held[j] = s.best_held[j];
+        if (s.held[j] != 0.0) status |= CLAMPED;
     }
     *scale_out = best >= 0.0 ? scale : 0.0;
     if (scale < 1.0) status |= SCALED;
@@ -760,28 +899,25 @@ static int saturate_c(int kind, Mat J, const double *e, const double *ff, int ha
 {
     Py_ssize_t n = J.n;
     double dt = work[P_DT];
-    Py_ssize_t box = (Py_ssize_t)work[P_BOX], count = (Py_ssize_t)work[P_BOX_COUNT];
-    Py_ssize_t speed = (Py_ssize_t)work[P_SPEED];
     double *held = work + (Py_ssize_t)work[P_CLAMPED];
     double *lo = held + n, *hi = lo + n, *a = hi + n;
     for (Py_ssize_t j = 0; j < n; j++) {
-        double inv = work[speed + j], vmax = inv > 0.0 ? 1.0 / inv : INFINITY;
+        double vmax = speed_limit(work, j);
         lo[j] = -vmax;
         hi[j] = vmax;
         held[j] = 0.0;
     }
+    Py_ssize_t count = (Py_ssize_t)work[P_BOX_COUNT];
     for (Py_ssize_t c = 0; c < count; c++) {
-        Py_ssize_t v = (Py_ssize_t)work[box + count + c];
-        double x = q[(Py_ssize_t)work[box + c]];
-        double lower = work[box + 2 * count + c], upper = work[box + 3 * count + c];
-        double back = work[box + 4 * count + c];
-        if (x > upper) {
-            lo[v] = hi[v] = -dmin(back, (x - upper) / dt);
-        } else if (x < lower) {
-            lo[v] = hi[v] = dmin(back, (lower - x) / dt);
+        BoxEntry b = box_entry(q, work, c);
+        Py_ssize_t v = b.v;
+        if (b.x > b.upper) {
+            lo[v] = hi[v] = -dmin(b.back, (b.x - b.upper) / dt);
+        } else if (b.x < b.lower) {
+            lo[v] = hi[v] = dmin(b.back, (b.lower - b.x) / dt);
         } else {
-            lo[v] = dmax(lo[v], (lower - x) / dt);
-            hi[v] = dmin(hi[v], (upper - x) / dt);
+            lo[v] = dmax(lo[v], (b.lower - b.x) / dt);
+            hi[v] = dmin(hi[v], (b.upper - b.x) / dt);
         }
     }
     int inside = 1;
@@ -811,6 +947,15 @@ static int saturate_c(int kind, Mat J, const double *e, const double *ff, int ha
 /* -- the acceleration and jerk stage, compiled (sjt_pin/constraints.py and sjt_pin/limits are
  * its reference: Solver._constrain, _brake_feedback, ConstraintStage.box/enforce, smooth,
  * PositionLimit.bounds, braking_speed, stopping_distance, AccelerationLimit, JerkLimit) --- */
+
+/* The speed (rad/s or m/s) at which a ramp at `rate` (rad/s^2, or rad/s^3 for a change of
+ * acceleration) still comes to rest within `room` (rad, or rad/s) when it starts after one step
+ * of dt (s): the positive root of v dt + v^2 / (2 rate) = room, as rate (-dt + sqrt(dt^2 +
+ * 2 room / rate)) (sjt_pin/limits/position.py, braking_speed without jerk). */
+static inline double ramp_speed(double rate, double room, double dt)
+{
+    return rate * (-dt + sqrt(dt * dt + 2.0 * room / rate));
+}
 
 /* Distance (rad or m) to stop from velocity w > 0 with acceleration a0 along it, braking at the
  * acceleration limit A reached and left at the jerk limit J (inf: instantly); see
@@ -862,7 +1007,7 @@ static double braking_speed_c(double room, double v, double dt, double A, double
 {
     if (!isfinite(A)) return INFINITY;
     room = dmax(room, 0.0);
-    if (!has_jerk) return A * (-dt + sqrt(dt * dt + 2.0 * room / A));
+    if (!has_jerk) return ramp_speed(A, room, dt);
     double top = fabs(v) + 2.0 * A * dt;
     if (!(room < top * dt + stopping_distance_c(top, 2.0 * A, A, J))) return INFINITY;
     double low = v - 2.0 * A * dt, high = v + 2.0 * A * dt;
@@ -897,6 +1042,240 @@ static double braking_speed_c(double room, double v, double dt, double A, double
     return lo;
 }
 
+/* The stage's vectors in work (n each, SM_* parts of sjt_pin/kernels/layout.py): the motion
+ * state, the limits, the boxes and the codes of the limits that set them, and scratch. */
+typedef struct {
+    double *pdq, *pddq;                   /* previous velocity (rad/s) and acceleration */
+    double *A, *Jk, *vj, *BA, *BJ;        /* accel., jerk, jerk's speed, braking accel./jerk */
+    double *hlo, *hhi, *slo, *shi;        /* hard and smoothness boxes (rad/s) */
+    double *hlb, *hhb, *slb, *shb;        /* the L_* code that set each bound, -1 none */
+    double *desired, *out, *torn;         /* velocity before smoothing, result, hard box won */
+    double *dqff, *save;                  /* feed-forward velocity / line base; saved gains */
+} Stage;
+
+static Stage stage_parts(double *work, Py_ssize_t n)
+{
+    double *S = work + (Py_ssize_t)work[P_SMOOTH];
+    Stage st = {
+        S + SM_DQ * n, S + SM_DDQ * n,
+        S + SM_ACC * n, S + SM_JERK * n, S + SM_JERK_SPEED * n, S + SM_BRAKE_ACC * n,
+        S + SM_BRAKE_JERK * n,
+        S + SM_HARD_LO * n, S + SM_HARD_HI * n, S + SM_SOFT_LO * n, S + SM_SOFT_HI * n,
+        S + SM_HARD_LO_BY * n, S + SM_HARD_HI_BY * n, S + SM_SOFT_LO_BY * n,
+        S + SM_SOFT_HI_BY * n,
+        S + SM_DESIRED * n, S + SM_OUT * n, S + SM_TORN * n,
+        S + SM_FF * n, S + SM_GAINS * n,
+    };
+    return st;
+}
+
+/* Narrow [*lo, *hi] to [lo_new, hi_new] where that is tighter, noting `code` (an L_* limit) as
+ * what set each side. */
+static inline void tighten(double *lo, double *hi, double *lo_by, double *hi_by, double lo_new,
+                           double hi_new, double code)
+{
+    if (lo_new > *lo) {
+        *lo = lo_new;
+        *lo_by = code;
+    }
+    if (hi_new < *hi) {
+        *hi = hi_new;
+        *hi_by = code;
+    }
+}
+
+/* Step 1 (Solver._brake_feedback): the feedback part of out (rad/s; out minus the feed-forward
+ * velocity dqff, the method's map of ff plus the escape) slowed by sigma <= 1 so that a stop at
+ * the target, 1/k of the feedback away (k the mean gain, 1/s), fits the acceleration limits:
+ * sigma = ramp_speed(a_min, 1, dt) / rate. Returns sigma, the gain factor of SNS's re-solves. */
+static double brake_feedback(int kind, Mat J, const double *e, const double *ff, int has_ff,
+                             const double *mask, double *work, const Stage *st, int escaping)
+{
+    Py_ssize_t n = J.n, m = J.m;
+    double dt = work[P_DT], *out = st->out, *dqff = st->dqff;
+    Py_ssize_t extra = (Py_ssize_t)work[P_EXTRA];
+    if (has_ff) {  /* (without a feed-forward the method maps 0 to 0: no solve) */
+        core_scaled(kind, J, e, ff, has_ff, mask, work, dqff, 0.0, st->save);
+    } else {
+        for (Py_ssize_t j = 0; j < n; j++) dqff[j] = 0.0;
+    }
+    for (Py_ssize_t j = 0; j < n; j++)
+        dqff[j] = escaping ? (dqff[j] + dt * work[extra + j]) / dt : dqff[j] / dt;
+    Py_ssize_t rows_e = (Py_ssize_t)work[P_ERROR_ROWS];
+    const double *gains = work + (Py_ssize_t)work[P_ROWS] + m;
+    double k = 0.0;
+    for (Py_ssize_t i = 0; i < rows_e; i++) k += gains[i];
+    k /= (double)rows_e;
+    if (work[P_GAIN_MODE] != GAIN_FIXED) k *= work[INFO + I_GAIN];
+    if (!(k > 0.0)) return 1.0;
+    double size = 0.0, dot = 0.0, a_min = INFINITY;
+    for (Py_ssize_t j = 0; j < n; j++) {
+        double fb = out[j] - dqff[j], d = fb / k;
+        size += d * d;
+        dot += fb * d;
+        if (fabs(d) > 0.0) a_min = dmin(a_min, st->A[j] / fabs(d));
+    }
+    double rate = size > 0.0 ? dot / size : 0.0;
+    if (!(rate > 0.0)) return 1.0;
+    double allowed = isfinite(a_min) ? ramp_speed(a_min, 1.0, dt) : INFINITY;
+    double sigma = dmin(1.0, dmax(allowed, 0.0) / rate);
+    if (!(sigma < 1.0)) return 1.0;
+    for (Py_ssize_t j = 0; j < n; j++) out[j] = dqff[j] + sigma * (out[j] - dqff[j]);
+    return sigma;
+}
+
+/* The speed (rad/s or m/s) toward the range of a joint outside it (`above`: past its upper
+ * limit): its velocity toward the range plus one step of a push at the braking acceleration BA;
+ * with jerk limits the push also grows from the acceleration aa by at most BJ dt and stays small
+ * enough to ramp back to 0 before the cap (p dt / 2 + p^2 / (2 BJ) <= the gap to it); at most
+ * the recovery speed `rec` and never past the range's other side (`room` away) in one step. */
+static double recovery_speed(int above, double room, double rec, double vv, double aa,
+                             double BA, double BJ, double dt, int has_jerk)
+{
+    double toward = above ? -vv : vv;
+    double cap = dmin(rec, room / dt);
+    double push = BA;
+    if (has_jerk && isfinite(BJ)) {
+        double gap = dmax(cap - toward, 0.0);
+        push = dmin(dmin(BA, dmax(above ? -aa : aa, 0.0) + BJ * dt),
+                    sqrt((0.5 * BJ * dt) * (0.5 * BJ * dt) + 2.0 * BJ * gap) - 0.5 * BJ * dt);
+    }
+    return dmin(cap, toward + push * dt);
+}
+
+/* Step 2, the hard box's positions (PositionLimit.bounds): a joint inside its range may move at
+ * most as fast as it can still brake to a stop at either limit (braking_speed_c, within the
+ * braking acceleration and jerk) and never past it in one step; outside, it returns at
+ * recovery_speed. Bounds in rad/s (m/s), codes L_POSITION. */
+static void position_box(const double *q, const double *work, const Stage *st, int has_jerk)
+{
+    double dt = work[P_DT];
+    Py_ssize_t count = (Py_ssize_t)work[P_BOX_COUNT];
+    for (Py_ssize_t c = 0; c < count; c++) {
+        BoxEntry b = box_entry(q, work, c);
+        Py_ssize_t v = b.v;
+        double room_up = b.upper - b.x, room_down = b.x - b.lower, vv = st->pdq[v];
+        double BA = st->BA[v], BJ = st->BJ[v];
+        double up = dmin(braking_speed_c(room_up, vv, dt, BA, BJ, has_jerk), room_up / dt);
+        double lw = -dmin(braking_speed_c(room_down, -vv, dt, BA, BJ, has_jerk),
+                          room_down / dt);
+        int above = room_up < 0.0, below = room_down < 0.0;
+        if (above || below) {  /* back toward the range, a ramp within the limits */
+            double back = recovery_speed(above, above ? room_down : room_up,
+                                         b.back, vv, st->pddq[v], BA, BJ,
+                                         dt, has_jerk);
+            lw = up = above ? -back : back;
+        }
+        tighten(st->hlo + v, st->hhi + v, st->hlb + v, st->hhb + v, lw, up, L_POSITION);
+    }
+}
+
+/* Step 2, the hard box (rad/s): position braking (position_box), speeds (L_VELOCITY), and
+ * joints the solver does not move held at rest. Returns whether out lies inside it. */
+static int hard_box(const double *q, const double *mask, const double *work, const Stage *st,
+                    Py_ssize_t n, int has_jerk)
+{
+    for (Py_ssize_t j = 0; j < n; j++) {
+        st->hlo[j] = -INFINITY;
+        st->hhi[j] = INFINITY;
+        st->hlb[j] = st->hhb[j] = -1.0;
+    }
+    position_box(q, work, st, has_jerk);
+    int inside = 1;
+    for (Py_ssize_t j = 0; j < n; j++) {
+        double vmax = speed_limit(work, j);
+        tighten(st->hlo + j, st->hhi + j, st->hlb + j, st->hhb + j, -vmax, vmax, L_VELOCITY);
+        if (mask[j] == 0.0) {  /* joints the solver does not move stay at rest */
+            st->hlo[j] = dmin(st->hlo[j], 0.0);
+            st->hhi[j] = dmax(st->hhi[j], 0.0);
+        }
+        if (st->out[j] < st->hlo[j] - BOUND_TOL || st->out[j] > st->hhi[j] + BOUND_TOL)
+            inside = 0;
+    }
+    return inside;
+}
+
+/* Step 3, the smoothness box (rad/s, AccelerationLimit and JerkLimit): the previous velocity
+ * pdq changed by at most A dt, and with jerk limits the previous acceleration pddq changed by at
+ * most Jk dt, the velocity approaching the jerk's speed vj no faster than a ramp of the
+ * acceleration can end there (ramp_speed); limits that contradict each other give the middle.
+ * Codes L_ACCELERATION, L_JERK. */
+static void smoothness_bounds(const double *work, const Stage *st, Py_ssize_t n, int has_jerk)
+{
+    double dt = work[P_DT];
+    for (Py_ssize_t j = 0; j < n; j++) {
+        double pdq = st->pdq[j], change = st->A[j] * dt, Jk = st->Jk[j];
+        st->slo[j] = -INFINITY;
+        st->shi[j] = INFINITY;
+        st->slb[j] = st->shb[j] = -1.0;
+        tighten(st->slo + j, st->shi + j, st->slb + j, st->shb + j, pdq - change, pdq + change,
+                L_ACCELERATION);
+        if (has_jerk && isfinite(Jk)) {
+            change = Jk * dt;
+            double lo = pdq + dt * (st->pddq[j] - change), hi = pdq + dt * (st->pddq[j] + change);
+            double bound = pdq + dt * ramp_speed(Jk, dmax(st->vj[j] - pdq, 0.0), dt);
+            if (isfinite(bound)) hi = dmin(hi, bound);
+            bound = pdq - dt * ramp_speed(Jk, dmax(st->vj[j] + pdq, 0.0), dt);
+            if (isfinite(bound)) lo = dmax(lo, bound);
+            tighten(st->slo + j, st->shi + j, st->slb + j, st->shb + j, lo, hi, L_JERK);
+        }
+        if (st->slo[j] > st->shi[j])  /* limits that contradict each other: the middle */
+            st->slo[j] = st->shi[j] = 0.5 * (st->slo[j] + st->shi[j]);
+    }
+}
+
+/* Step 5 (ConstraintStage.smooth): the velocity moves from the smoothness box's centre (within
+ * the hard box where both meet) toward out along a line, as far tau in [0, 1] as the smoothness
+ * box allows, its bounds first narrowed so that with jerk limits out is reached without
+ * overshooting it (ramp_speed of the gap); the hard box wins where it clips the result (marked
+ * in torn). Writes desired (out before), dqff (the line's base), out and step (rad). */
+static void smooth_line(const double *work, const Stage *st, Py_ssize_t n, int has_jerk,
+                        double *step)
+{
+    double dt = work[P_DT], tau = 1.0;
+    double *slo = st->slo, *shi = st->shi, *out = st->out, *base = st->dqff;
+    for (Py_ssize_t j = 0; j < n; j++) {
+        st->desired[j] = out[j];
+        if (has_jerk && isfinite(st->Jk[j])) {
+            double gap = out[j] - st->pdq[j];
+            double a_max = ramp_speed(st->Jk[j], fabs(gap), dt);
+            double room = isfinite(a_max) ? dt * a_max : INFINITY;
+            double lo = gap < 0.0 ? st->pdq[j] - room : -INFINITY;
+            double hi = gap > 0.0 ? st->pdq[j] + room : INFINITY;
+            slo[j] = dmax(slo[j], dmin(lo, shi[j]));
+            shi[j] = dmin(shi[j], dmax(hi, slo[j]));
+        }
+        double l = isfinite(slo[j]) ? slo[j] : shi[j], u = isfinite(shi[j]) ? shi[j] : slo[j];
+        double b = 0.5 * (l + u);
+        if (!isfinite(b)) b = out[j];
+        double both_lo = dmax(slo[j], st->hlo[j]), both_hi = dmin(shi[j], st->hhi[j]);
+        if (both_lo <= both_hi) b = dmin(dmax(b, both_lo), both_hi);
+        base[j] = b;
+        double change = out[j] - b;
+        double room = change > 0.0 ? (shi[j] - b) / change
+                      : change < 0.0 ? (slo[j] - b) / change : INFINITY;
+        tau = dmin(tau, room);
+    }
+    tau = dmin(dmax(tau, 0.0), 1.0);
+    for (Py_ssize_t j = 0; j < n; j++) {
+        double v = base[j] + tau * (out[j] - base[j]);
+        st->torn[j] = v < st->hlo[j] || v > st->hhi[j] ? 1.0 : 0.0;
+        out[j] = dmin(dmax(v, st->hlo[j]), st->hhi[j]);
+        step[j] = out[j] * dt;
+    }
+}
+
+/* Step 6: the motion state for the next step, the velocity (rad/s) and acceleration (rad/s^2)
+ * the step (rad) commands. */
+static void motion_state(const double *step, double dt, const Stage *st, Py_ssize_t n)
+{
+    for (Py_ssize_t j = 0; j < n; j++) {
+        double v = step[j] / dt;
+        st->pddq[j] = (v - st->pdq[j]) / dt;
+        st->pdq[j] = v;
+    }
+}
+
 /* The acceleration/jerk stage on the method's step (rad, overwritten): the feedback slowed so
  * that every joint can stop where the error says the target is; the hard box (position braking
  * within the acceleration and jerk limits, speeds) and the smoothness box (acceleration, jerk,
@@ -910,199 +1289,67 @@ static int smooth_stage_c(int kind, Mat J, const double *e, const double *ff, in
                           const double *q, const double *mask, double *work, double *step,
                           int escaping)
 {
-    Py_ssize_t n = J.n, m = J.m;
+    Py_ssize_t n = J.n;
     double dt = work[P_DT];
-    double *S = work + (Py_ssize_t)work[P_SMOOTH];
-    double *pdq = S + SM_DQ * n, *pddq = S + SM_DDQ * n, *A = S + SM_ACC * n;
-    double *Jk = S + SM_JERK * n, *vj = S + SM_JERK_SPEED * n, *BA = S + SM_BRAKE_ACC * n;
-    double *BJ = S + SM_BRAKE_JERK * n, *hlo = S + SM_HARD_LO * n, *hhi = S + SM_HARD_HI * n;
-    double *slo = S + SM_SOFT_LO * n, *shi = S + SM_SOFT_HI * n;
-    double *hlb = S + SM_HARD_LO_BY * n, *hhb = S + SM_HARD_HI_BY * n;
-    double *slb = S + SM_SOFT_LO_BY * n, *shb = S + SM_SOFT_HI_BY * n;
-    double *desired = S + SM_DESIRED * n, *out = S + SM_OUT * n, *torn = S + SM_TORN * n;
-    double *dqff = S + SM_FF * n, *save = S + SM_GAINS * n;
+    Stage st = stage_parts(work, n);
     double *held = work + (Py_ssize_t)work[P_CLAMPED];
     int has_jerk = work[P_JERK] != 0.0;
-    Py_ssize_t extra = (Py_ssize_t)work[P_EXTRA], speed = (Py_ssize_t)work[P_SPEED];
-    Py_ssize_t box = (Py_ssize_t)work[P_BOX], count = (Py_ssize_t)work[P_BOX_COUNT];
-    for (Py_ssize_t j = 0; j < n; j++) out[j] = step[j] / dt;
-    /* 1. the feedback, slowed so that a stop at the target fits the acceleration limits */
-    double factor = 1.0;
-    if (has_ff) {  /* (without a feed-forward the method maps 0 to 0: no solve) */
-        core_scaled(kind, J, e, ff, has_ff, mask, work, dqff, 0.0, save);
-    } else {
-        for (Py_ssize_t j = 0; j < n; j++) dqff[j] = 0.0;
-    }
-    for (Py_ssize_t j = 0; j < n; j++)
-        dqff[j] = escaping ? (dqff[j] + dt * work[extra + j]) / dt : dqff[j] / dt;
-    Py_ssize_t rows_e = (Py_ssize_t)work[P_ERROR_ROWS];
-    const double *gains = work + (Py_ssize_t)work[P_ROWS] + m;
-    double k = 0.0;
-    for (Py_ssize_t i = 0; i < rows_e; i++) k += gains[i];
-    k /= (double)rows_e;
-    if (work[P_GAIN_MODE] != GAIN_FIXED) k *= work[INFO + I_GAIN];
-    if (k > 0.0) {
-        double size = 0.0, dot = 0.0, a_min = INFINITY;
-        for (Py_ssize_t j = 0; j < n; j++) {
-            double fb = out[j] - dqff[j], d = fb / k;
-            size += d * d;
-            dot += fb * d;
-            if (fabs(d) > 0.0) a_min = dmin(a_min, A[j] / fabs(d));
-        }
-        double rate = size > 0.0 ? dot / size : 0.0;
-        if (rate > 0.0) {
-            double allowed = isfinite(a_min) ? a_min * (-dt + sqrt(dt * dt + 2.0 * 1.0 / a_min))
-                                             : INFINITY;
-            double sigma = dmin(1.0, dmax(allowed, 0.0) / rate);
-            if (sigma < 1.0) {
-                for (Py_ssize_t j = 0; j < n; j++) out[j] = dqff[j] + sigma * (out[j] - dqff[j]);
-                factor = sigma;
-            }
-        }
-    }
-    /* 2. the hard box: position braking (or the way back into the range), speeds */
-    for (Py_ssize_t j = 0; j < n; j++) {
-        hlo[j] = -INFINITY;
-        hhi[j] = INFINITY;
-        hlb[j] = hhb[j] = -1.0;
-    }
-    for (Py_ssize_t c = 0; c < count; c++) {
-        Py_ssize_t v = (Py_ssize_t)work[box + count + c];
-        double x = q[(Py_ssize_t)work[box + c]];
-        double lower = work[box + 2 * count + c], upper = work[box + 3 * count + c];
-        double room_up = upper - x, room_down = x - lower, vv = pdq[v], aa = pddq[v];
-        double up = dmin(braking_speed_c(room_up, vv, dt, BA[v], BJ[v], has_jerk), room_up / dt);
-        double lw = -dmin(braking_speed_c(room_down, -vv, dt, BA[v], BJ[v], has_jerk),
-                          room_down / dt);
-        int above = room_up < 0.0, below = room_down < 0.0;
-        if (above || below) {  /* back toward the range, a ramp within the limits */
-            double rec = work[box + 4 * count + c];
-            double toward = above ? -vv : vv;
-            double cap = dmin(rec, (above ? room_down : room_up) / dt);
-            double push = BA[v], Jb = BJ[v];
-            if (has_jerk && isfinite(Jb)) {
-                double gap = dmax(cap - toward, 0.0);
-                push = dmin(dmin(BA[v], dmax(above ? -aa : aa, 0.0) + Jb * dt),
-                            sqrt((0.5 * Jb * dt) * (0.5 * Jb * dt) + 2.0 * Jb * gap)
-                            - 0.5 * Jb * dt);
-            }
-            double back = dmin(cap, toward + push * dt);
-            lw = up = above ? -back : back;
-        }
-        if (lw > hlo[v]) {
-            hlo[v] = lw;
-            hlb[v] = L_POSITION;
-        }
-        if (up < hhi[v]) {
-            hhi[v] = up;
-            hhb[v] = L_POSITION;
-        }
-    }
-    int inside = 1;
-    for (Py_ssize_t j = 0; j < n; j++) {
-        double inv = work[speed + j];
-        if (inv > 0.0) {
-            double vmax = 1.0 / inv;
-            if (-vmax > hlo[j]) {
-                hlo[j] = -vmax;
-                hlb[j] = L_VELOCITY;
-            }
-            if (vmax < hhi[j]) {
-                hhi[j] = vmax;
-                hhb[j] = L_VELOCITY;
-            }
-        }
-        if (mask[j] == 0.0) {  /* joints the solver does not move stay at rest */
-            hlo[j] = dmin(hlo[j], 0.0);
-            hhi[j] = dmax(hhi[j], 0.0);
-        }
-        if (out[j] < hlo[j] - BOUND_TOL || out[j] > hhi[j] + BOUND_TOL) inside = 0;
-        /* 3. the smoothness box: acceleration, jerk (and its approach to the speed limit) */
-        double change = A[j] * dt, lo = pdq[j] - change, hi = pdq[j] + change;
-        slo[j] = -INFINITY;
-        shi[j] = INFINITY;
-        slb[j] = shb[j] = -1.0;
-        if (lo > slo[j]) {
-            slo[j] = lo;
-            slb[j] = L_ACCELERATION;
-        }
-        if (hi < shi[j]) {
-            shi[j] = hi;
-            shb[j] = L_ACCELERATION;
-        }
-        if (has_jerk && isfinite(Jk[j])) {
-            change = Jk[j] * dt;
-            lo = pdq[j] + dt * (pddq[j] - change);
-            hi = pdq[j] + dt * (pddq[j] + change);
-            double left = dmax(vj[j] - pdq[j], 0.0);
-            double bound = pdq[j] + dt * (Jk[j] * (-dt + sqrt(dt * dt + 2.0 * left / Jk[j])));
-            if (isfinite(bound)) hi = dmin(hi, bound);
-            left = dmax(vj[j] + pdq[j], 0.0);
-            bound = pdq[j] - dt * (Jk[j] * (-dt + sqrt(dt * dt + 2.0 * left / Jk[j])));
-            if (isfinite(bound)) lo = dmax(lo, bound);
-            if (lo > slo[j]) {
-                slo[j] = lo;
-                slb[j] = L_JERK;
-            }
-            if (hi < shi[j]) {
-                shi[j] = hi;
-                shb[j] = L_JERK;
-            }
-        }
-        if (slo[j] > shi[j])  /* limits that contradict each other: the middle */
-            slo[j] = shi[j] = 0.5 * (slo[j] + shi[j]);
-        held[j] = 0.0;
-    }
+    for (Py_ssize_t j = 0; j < n; j++) st.out[j] = step[j] / dt;
+    double factor = brake_feedback(kind, J, e, ff, has_ff, mask, work, &st, escaping);
+    int inside = hard_box(q, mask, work, &st, n, has_jerk);
+    smoothness_bounds(work, &st, n, has_jerk);
+    for (Py_ssize_t j = 0; j < n; j++) held[j] = 0.0;
     /* 4. SNS on the hard box */
     double scale = 1.0;
     int status = 0;
     if (!inside)
-        status = sns_c(kind, J, e, ff, has_ff, mask, work, hlo, hhi, out, factor, save,
-                       escaping, &scale);
+        status = sns_c(kind, J, e, ff, has_ff, mask, work, st.hlo, st.hhi, st.out, factor,
+                       st.save, escaping, &scale);
     work[INFO + I_SCALE] = scale;
-    /* 5. reach the wanted velocity without overshooting it (the jerk's approach bounds),
-     * then along the line from the smoothness box's centre, the hard box winning */
-    double tau = 1.0;
-    for (Py_ssize_t j = 0; j < n; j++) {
-        desired[j] = out[j];
-        if (has_jerk && isfinite(Jk[j])) {
-            double gap = out[j] - pdq[j];
-            double a_max = Jk[j] * (-dt + sqrt(dt * dt + 2.0 * fabs(gap) / Jk[j]));
-            double room = isfinite(a_max) ? dt * a_max : INFINITY;
-            double lo = gap < 0.0 ? pdq[j] - room : -INFINITY;
-            double hi = gap > 0.0 ? pdq[j] + room : INFINITY;
-            slo[j] = dmax(slo[j], dmin(lo, shi[j]));
-            shi[j] = dmin(shi[j], dmax(hi, slo[j]));
-        }
-        double l = isfinite(slo[j]) ? slo[j] : shi[j], u = isfinite(shi[j]) ? shi[j] : slo[j];
-        double base = 0.5 * (l + u);
-        if (!isfinite(base)) base = out[j];
-        double both_lo = dmax(slo[j], hlo[j]), both_hi = dmin(shi[j], hhi[j]);
-        if (both_lo <= both_hi) base = dmin(dmax(base, both_lo), both_hi);
-        dqff[j] = base;
-        double change = out[j] - base;
-        double room = change > 0.0 ? (shi[j] - base) / change
-                      : change < 0.0 ? (slo[j] - base) / change : INFINITY;
-        tau = dmin(tau, room);
-    }
-    tau = dmin(dmax(tau, 0.0), 1.0);
-    for (Py_ssize_t j = 0; j < n; j++) {
-        double v = dqff[j] + tau * (out[j] - dqff[j]);
-        torn[j] = v < hlo[j] || v > hhi[j] ? 1.0 : 0.0;
-        out[j] = dmin(dmax(v, hlo[j]), hhi[j]);
-        step[j] = out[j] * dt;
-    }
+    smooth_line(work, &st, n, has_jerk, step);
     /* 6. exactly onto a position limit; the motion state for the next step */
     exact_position(q, work, step);
-    for (Py_ssize_t j = 0; j < n; j++) {
-        double v = step[j] / dt;
-        pddq[j] = (v - pdq[j]) / dt;
-        pdq[j] = v;
-    }
+    motion_state(step, dt, &st, n);
     return status;
 }
 
-/* the mapping, then the limits; returns the status bits */
+/* The mapping's results into work's info part (StepInfo), and |step| / dt (rad/s) as the
+ * regular velocity. */
+static void record_core(const Core *r, const double *step, Py_ssize_t n, double *work)
+{
+    double *info = work + INFO, regular = 0.0;
+    info[I_E_SQ] = r->e_sq;
+    info[I_FF_SQ] = r->ff_sq;
+    info[I_EW_SQ] = r->ew_sq;
+    info[I_GAIN] = r->gain;
+    info[I_LOOP] = r->bound;
+    info[I_STALL] = r->stall;
+    info[I_TRACE] = r->trace;
+    if (!isfinite(r->e_sq + r->ff_sq)) return;
+    for (Py_ssize_t j = 0; j < n; j++) regular += step[j] * step[j];
+    info[I_REGULAR] = sqrt(regular) / work[P_DT];
+}
+
+/* A stall (loop gain along the command below P_STALL_RATIO of tr, |e| above the floor) is
+ * Python's (STALLED) on the first stalled step of a run and when the run reaches P_STALL_WAIT
+ * (the escape's window; Python then restarts the count at 0): a lasting stall, such as a
+ * target out of reach, stays on the fast path in between. Counts the run in work. */
+static int stall_status(const Core *r, double *work)
+{
+    if (!(r->stall < work[P_STALL_RATIO] && r->ew_sq > work[P_STALL_ERROR])) {
+        work[P_STALL_RUN] = -1.0;
+        return 0;
+    }
+    if (work[P_STALL_RUN] < 0.0) {
+        work[P_STALL_RUN] = 1.0;
+        return STALLED;
+    }
+    return (work[P_STALL_RUN] += 1.0) >= work[P_STALL_WAIT] ? STALLED : 0;
+}
+
+/* One step's pipeline: the method (core), the stall check, the escape's velocity, then the
+ * limits: the acceleration/jerk stage (smooth_stage_c) or the position and speed bounds
+ * (saturate_c). Returns the status bits. */
 static int step_c(int kind, Mat J, const double *e, const double *ff, const double *q,
                   double *work, double *step)
 {
@@ -1111,33 +1358,9 @@ static int step_c(int kind, Mat J, const double *e, const double *ff, const doub
     const double *mask = work + (Py_ssize_t)work[P_MASK];
     int has_ff = work[P_HAS_FF] != 0.0;
     Core r = core(kind, J, e, ff, has_ff, mask, work, step);
-    double *info = work + INFO;
-    info[I_E_SQ] = r.e_sq;
-    info[I_FF_SQ] = r.ff_sq;
-    info[I_EW_SQ] = r.ew_sq;
-    info[I_GAIN] = r.gain;
-    info[I_LOOP] = r.bound;
-    info[I_STALL] = r.stall;
-    info[I_TRACE] = r.trace;
+    record_core(&r, step, n, work);
     if (!isfinite(r.e_sq + r.ff_sq)) return NON_FINITE;
-    double regular = 0.0;
-    for (Py_ssize_t j = 0; j < n; j++) regular += step[j] * step[j];
-    info[I_REGULAR] = sqrt(regular) / dt;
-    int status = 0;
-    /* a stall (loop gain along the command below P_STALL_RATIO of tr, |e| above the floor)
-     * is Python's on the first stalled step of a run and when the run reaches P_STALL_WAIT
-     * (the escape's window; Python then restarts the count at 0): a lasting stall, such as
-     * a target out of reach, stays on the fast path in between */
-    if (r.stall < work[P_STALL_RATIO] && r.ew_sq > work[P_STALL_ERROR]) {
-        if (work[P_STALL_RUN] < 0.0) {
-            work[P_STALL_RUN] = 1.0;
-            status = STALLED;
-        } else if ((work[P_STALL_RUN] += 1.0) >= work[P_STALL_WAIT]) {
-            status = STALLED;
-        }
-    } else {
-        work[P_STALL_RUN] = -1.0;
-    }
+    int status = stall_status(&r, work);
     int escaping = work[P_ESCAPING] != 0.0;
     Py_ssize_t extra = (Py_ssize_t)work[P_EXTRA];
     if (escaping)
@@ -1203,13 +1426,11 @@ static void limited_step(Mat J, const double *e, const double *q, const double *
             v[i] = acc;
         }
         for (Py_ssize_t j = 0; j < n; j++) {
-            double norm = 0.0;
-            if (free_[j] != 0.0)
-                for (Py_ssize_t i = 0; i < m; i++) norm += (sw[i] * AT(J, i, j)) * (sw[i] * AT(J, i, j));
+            double norm = free_[j] != 0.0 ? weighted_column_norm2(J, sw, m, j) : 0.0;
             if (norm <= tol)
                 alpha[j] = 0.0;
             else if (scaled)
-                alpha[j] = 1.0 / dmax(norm, length2);
+                alpha[j] = sjt_alpha(norm, length2);
             else
                 alpha[j] = 1.0;
             step[j] = 0.0;
@@ -1845,6 +2066,99 @@ done:
     return result;
 }
 
+/* The Jacobian (6 x n) that jacobian(*arguments) returns, acquired in *Ja and viewed in *Jm
+ * (Pinocchio's one-dimensional Jacobian of a robot with one joint as a column). Returns the
+ * Python object to release with *Ja after use; NULL with the exception set on an error. */
+static PyObject *search_jacobian(PyObject *jacobian, PyObject *arguments, Py_ssize_t n, Arg *Ja,
+                                 Mat *Jm)
+{
+    PyObject *J = PyObject_Call(jacobian, arguments, NULL);
+    if (!J) return NULL;
+    if (acquire(J, Ja, 0, -1, "the Jacobian")) {
+        Py_DECREF(J);
+        return NULL;
+    }
+    Mat view = {(const double *)Ja->view.buf, 0, 0, 0, 0};
+    if (Ja->view.ndim == 2) {
+        view = mat(Ja);
+    } else if (Ja->view.ndim == 1) {  /* Pinocchio's Jacobian of a robot with one joint */
+        Mat column = {(const double *)Ja->view.buf, Ja->view.shape[0], 1,
+                      Ja->view.strides[0] / 8, 1};
+        view = column;
+    }
+    if (view.m != 6 || view.n != n) {
+        PyErr_SetString(PyExc_ValueError, "search_pose: the Jacobian is not 6 x nv");
+        release(Ja);
+        Py_DECREF(J);
+        return NULL;
+    }
+    *Jm = view;
+    return J;
+}
+
+/* The acquired buffers of search_pose, in its argument order. */
+typedef struct {
+    Arg R, p, Md, tab, q, qc, Jc, e, ec, lim, work, state, step;
+} SearchArgs;
+
+/* Up to `count` iterations of the set-point search on a pose task: the pose error (rad, m) of
+ * the frame whose rotation and translation views follow q, one search_iteration_c, and the
+ * integration of its step, until it stops. Returns (status, iterations), NULL on an error. */
+static PyObject *search_pose_loop(PyObject *jacobian, PyObject *arguments, SearchArgs *a,
+                                  long count)
+{
+    double *tabv = (double *)a->tab.view.buf, *qv = (double *)a->q.view.buf;
+    double *qcv = (double *)a->qc.view.buf, *Jcv = (double *)a->Jc.view.buf;
+    double *ev = (double *)a->e.view.buf, *ecv = (double *)a->ec.view.buf;
+    double *limv = (double *)a->lim.view.buf, *wv = (double *)a->work.view.buf;
+    double *sv = (double *)a->state.view.buf, *stv = (double *)a->step.view.buf;
+    Mat Rm = mat(&a->R), Mm = mat(&a->Md);
+    Py_ssize_t n = length(&a->step), nq = length(&a->q), k = a->tab.view.shape[1];
+    const double *pv = (const double *)a->p.view.buf;
+    Py_ssize_t p_stride = a->p.view.strides[0] / 8;
+    int status = CONTINUE;
+    long done = 0;
+    while (done < count) {
+        Arg Ja = {0};
+        Mat Jm;
+        PyObject *J = search_jacobian(jacobian, arguments, n, &Ja, &Jm);
+        if (!J) return NULL;
+        search_pose_error(Rm, pv, p_stride, Mm, ev);
+        status = search_iteration_c(Jm, ev, qv, nq, Jcv, ecv, qcv, limv,
+                                    a->lim.view.shape[1], wv, sv, stv);
+        release(&Ja);
+        Py_DECREF(J);
+        done++;
+        if (status != CONTINUE) break;
+        search_integrate(qcv, stv, tabv, k, nq, qv);
+    }
+    return Py_BuildValue("(il)", status, done);
+}
+
+/* search_pose's checks of the acquired arrays' shapes and tables; 0 when they fit */
+static int search_pose_fits(SearchArgs *a)
+{
+    double *tabv = out_mat(&a->tab, "joints"), *qv = out_vec(&a->q, "q");
+    double *qcv = out_vec(&a->qc, "q_cur"), *Jcv = out_mat(&a->Jc, "J_cur");
+    double *ev = out_vec(&a->e, "e"), *ecv = out_vec(&a->ec, "e_cur");
+    double *limv = out_mat(&a->lim, "limits"), *wv = out_vec(&a->work, "work");
+    double *sv = out_vec(&a->state, "state"), *stv = out_vec(&a->step, "step");
+    if (!tabv || !qv || !qcv || !Jcv || !ev || !ecv || !limv || !wv || !sv || !stv) return -1;
+    Mat Rm = mat(&a->R), Mm = mat(&a->Md);
+    Py_ssize_t n = length(&a->step), nq = length(&a->q), k = a->tab.view.shape[1];
+    if (Rm.m != 3 || Rm.n != 3 || length(&a->p) != 3 || Mm.m != 4 || Mm.n != 4
+        || a->tab.view.shape[0] != 3 || a->Jc.view.shape[0] != 6 || a->Jc.view.shape[1] != n
+        || length(&a->e) != 6 || length(&a->ec) != 6 || length(&a->qc) != nq
+        || a->lim.view.shape[0] != 4 || length(&a->state) < S_COUNT) {
+        PyErr_SetString(PyExc_ValueError, "search_pose: the arrays do not fit a pose task");
+        return -1;
+    }
+    if (check_work(&a->work, 6, n, nq)
+        || table_ok(limv, a->lim.view.shape[1], nq, n, 0, "limits")
+        || table_ok(tabv, k, nq, n, 1, "joints")) return -1;
+    return 0;
+}
+
 /* search_pose(jacobian, arguments, rotation, translation, target, joints, q, q_cur, J_cur, e,
  *             e_cur, limits, work, state, step, count) -> (status, iterations) */
 static PyObject *py_search_pose(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
@@ -1856,74 +2170,25 @@ static PyObject *py_search_pose(PyObject *self, PyObject *const *args, Py_ssize_
                         "a tuple");
         return NULL;
     }
-    Arg R = {0}, p = {0}, Md = {0}, tab = {0}, q = {0}, qc = {0}, Jc = {0}, e = {0}, ec = {0},
-        lim = {0}, work = {0}, state = {0}, step = {0};
+    SearchArgs a;
+    memset(&a, 0, sizeof a);
     PyObject *result = NULL;
     long count = PyLong_AsLong(args[15]);
     if (count == -1 && PyErr_Occurred()) return NULL;
-    if (acquire(args[2], &R, 0, 2, "rotation") || acquire(args[3], &p, 0, 1, "translation")
-        || acquire(args[4], &Md, 0, 2, "target") || acquire(args[5], &tab, 0, 2, "joints")
-        || acquire(args[6], &q, 1, 1, "q") || acquire(args[7], &qc, 1, 1, "q_cur")
-        || acquire(args[8], &Jc, 1, 2, "J_cur") || acquire(args[9], &e, 1, 1, "e")
-        || acquire(args[10], &ec, 1, 1, "e_cur") || acquire(args[11], &lim, 0, 2, "limits")
-        || acquire(args[12], &work, 1, 1, "work") || acquire(args[13], &state, 1, 1, "state")
-        || acquire(args[14], &step, 1, 1, "step"))
+    if (acquire(args[2], &a.R, 0, 2, "rotation") || acquire(args[3], &a.p, 0, 1, "translation")
+        || acquire(args[4], &a.Md, 0, 2, "target") || acquire(args[5], &a.tab, 0, 2, "joints")
+        || acquire(args[6], &a.q, 1, 1, "q") || acquire(args[7], &a.qc, 1, 1, "q_cur")
+        || acquire(args[8], &a.Jc, 1, 2, "J_cur") || acquire(args[9], &a.e, 1, 1, "e")
+        || acquire(args[10], &a.ec, 1, 1, "e_cur") || acquire(args[11], &a.lim, 0, 2, "limits")
+        || acquire(args[12], &a.work, 1, 1, "work")
+        || acquire(args[13], &a.state, 1, 1, "state")
+        || acquire(args[14], &a.step, 1, 1, "step"))
         goto done;
-    double *tabv = out_mat(&tab, "joints"), *qv = out_vec(&q, "q"), *qcv = out_vec(&qc, "q_cur");
-    double *Jcv = out_mat(&Jc, "J_cur"), *ev = out_vec(&e, "e"), *ecv = out_vec(&ec, "e_cur");
-    double *limv = out_mat(&lim, "limits"), *wv = out_vec(&work, "work");
-    double *sv = out_vec(&state, "state"), *stv = out_vec(&step, "step");
-    if (!tabv || !qv || !qcv || !Jcv || !ev || !ecv || !limv || !wv || !sv || !stv) goto done;
-    Mat Rm = mat(&R), Mm = mat(&Md);
-    Py_ssize_t n = length(&step), nq = length(&q), k = tab.view.shape[1];
-    if (Rm.m != 3 || Rm.n != 3 || length(&p) != 3 || Mm.m != 4 || Mm.n != 4
-        || tab.view.shape[0] != 3 || Jc.view.shape[0] != 6 || Jc.view.shape[1] != n
-        || length(&e) != 6 || length(&ec) != 6 || length(&qc) != nq
-        || lim.view.shape[0] != 4 || length(&state) < S_COUNT) {
-        PyErr_SetString(PyExc_ValueError, "search_pose: the arrays do not fit a pose task");
-        goto done;
-    }
-    if (check_work(&work, 6, n, nq) || table_ok(limv, lim.view.shape[1], nq, n, 0, "limits")
-        || table_ok(tabv, k, nq, n, 1, "joints")) goto done;
-    const double *pv = (const double *)p.view.buf;
-    Py_ssize_t p_stride = p.view.strides[0] / 8;
-    int status = CONTINUE;
-    long done_ = 0;
-    while (done_ < count) {
-        PyObject *J = PyObject_Call(jacobian, arguments, NULL);
-        if (!J) goto done;
-        Arg Ja = {0};
-        if (acquire(J, &Ja, 0, -1, "the Jacobian")) {
-            Py_DECREF(J);
-            goto done;
-        }
-        Mat Jm = {(const double *)Ja.view.buf, 0, 0, 0, 0};
-        if (Ja.view.ndim == 2)
-            Jm = mat(&Ja);
-        else if (Ja.view.ndim == 1) {  /* Pinocchio's Jacobian of a robot with one joint */
-            Mat column = {(const double *)Ja.view.buf, Ja.view.shape[0], 1, Ja.view.strides[0] / 8, 1};
-            Jm = column;
-        }
-        if (Jm.m != 6 || Jm.n != n) {
-            PyErr_SetString(PyExc_ValueError, "search_pose: the Jacobian is not 6 x nv");
-            release(&Ja);
-            Py_DECREF(J);
-            goto done;
-        }
-        search_pose_error(Rm, pv, p_stride, Mm, ev);
-        status = search_iteration_c(Jm, ev, qv, nq, Jcv, ecv, qcv, limv, lim.view.shape[1], wv,
-                                    sv, stv);
-        release(&Ja);
-        Py_DECREF(J);
-        done_++;
-        if (status != CONTINUE) break;
-        search_integrate(qcv, stv, tabv, k, nq, qv);
-    }
-    result = Py_BuildValue("(il)", status, done_);
+    if (search_pose_fits(&a) == 0) result = search_pose_loop(jacobian, arguments, &a, count);
 done:
-    release(&R); release(&p); release(&Md); release(&tab); release(&q); release(&qc);
-    release(&Jc); release(&e); release(&ec); release(&lim); release(&work); release(&state);
-    release(&step);
+    release(&a.R); release(&a.p); release(&a.Md); release(&a.tab); release(&a.q);
+    release(&a.qc); release(&a.Jc); release(&a.e); release(&a.ec); release(&a.lim);
+    release(&a.work); release(&a.state); release(&a.step);
     return result;
 }
 
