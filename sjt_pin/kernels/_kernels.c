@@ -957,6 +957,21 @@ static inline double ramp_speed(double rate, double room, double dt)
     return rate * (-dt + sqrt(dt * dt + 2.0 * room / rate));
 }
 
+/* The jerk limit Jk's bounds [*lo, *hi] on this step's velocity (rad/s) from the state (v, a)
+ * the step starts from: an acceleration within Jk dt of a, and the speed limit vj approached
+ * with an acceleration that can still ramp down to 0 before it (sjt_pin/limits/jerk.py) */
+static inline void jerk_bounds(double v, double a, double Jk, double vj, double dt, double *lo,
+                               double *hi)
+{
+    double change = Jk * dt;
+    *lo = v + dt * (a - change);
+    *hi = v + dt * (a + change);
+    double bound = v + dt * ramp_speed(Jk, dmax(vj - v, 0.0), dt);
+    if (isfinite(bound)) *hi = dmin(*hi, bound);
+    bound = v - dt * ramp_speed(Jk, dmax(vj + v, 0.0), dt);
+    if (isfinite(bound)) *lo = dmax(*lo, bound);
+}
+
 /* Distance (rad or m) to stop from velocity w > 0 with acceleration a0 along it, braking at the
  * acceleration limit A reached and left at the jerk limit J (inf: instantly); see
  * sjt_pin/limits/position.py, stopping_distance. */
@@ -1211,12 +1226,8 @@ static void smoothness_bounds(const double *work, const Stage *st, Py_ssize_t n,
         tighten(st->slo + j, st->shi + j, st->slb + j, st->shb + j, pdq - change, pdq + change,
                 L_ACCELERATION);
         if (has_jerk && isfinite(Jk)) {
-            change = Jk * dt;
-            double lo = pdq + dt * (st->pddq[j] - change), hi = pdq + dt * (st->pddq[j] + change);
-            double bound = pdq + dt * ramp_speed(Jk, dmax(st->vj[j] - pdq, 0.0), dt);
-            if (isfinite(bound)) hi = dmin(hi, bound);
-            bound = pdq - dt * ramp_speed(Jk, dmax(st->vj[j] + pdq, 0.0), dt);
-            if (isfinite(bound)) lo = dmax(lo, bound);
+            double lo, hi;
+            jerk_bounds(pdq, st->pddq[j], Jk, st->vj[j], dt, &lo, &hi);
             tighten(st->slo + j, st->shi + j, st->slb + j, st->shb + j, lo, hi, L_JERK);
         }
         if (st->slo[j] > st->shi[j])  /* limits that contradict each other: the middle */
@@ -2637,14 +2648,8 @@ static void smoothness_box(const double *S, Py_ssize_t n, Py_ssize_t j, double v
     double A = S[SM_ACC * n + j], Jk = S[SM_JERK * n + j], vj = S[SM_JERK_SPEED * n + j];
     double lo = v - A * dt, hi = v + A * dt;
     if (has_jerk && isfinite(Jk)) {
-        double change = Jk * dt;
-        double jl = v + dt * (a - change), jh = v + dt * (a + change);
-        double left = dmax(vj - v, 0.0);
-        double bound = v + dt * (Jk * (-dt + sqrt(dt * dt + 2.0 * left / Jk)));
-        if (isfinite(bound)) jh = dmin(jh, bound);
-        left = dmax(vj + v, 0.0);
-        bound = v - dt * (Jk * (-dt + sqrt(dt * dt + 2.0 * left / Jk)));
-        if (isfinite(bound)) jl = dmax(jl, bound);
+        double jl, jh;
+        jerk_bounds(v, a, Jk, vj, dt, &jl, &jh);
         lo = dmax(lo, jl);
         hi = dmin(hi, jh);
     }
