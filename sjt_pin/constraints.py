@@ -149,8 +149,9 @@ class ConstraintStage:
             smooth_box.lower[torn] = smooth_box.upper[torn] = middle[torn]
         return box
 
-    def general_rows(self, kinematics, motion: Motion):
-        """Every limit's general rows: ``(A, b, owners)`` or ``None``."""
+    def general_rows(self, kinematics, motion: Motion, check: bool = True):
+        """Every limit's general rows: ``(A, b, owners)`` or ``None``; ``check=False`` leaves
+        the test for NaN to a compiled caller (``kernels.rows_step`` checks them itself)."""
         blocks, owners = [], []
         for limit in self.limits:
             rows = limit.rows(kinematics, motion)
@@ -164,7 +165,7 @@ class ConstraintStage:
             if A.shape != (b.size, self.nv):
                 raise ValueError(f"{limit!r}.rows() must return A of shape (k, {self.nv}) and "
                                  f"b of shape (k,), got {A.shape} and {b.shape}")
-            if not math.isfinite(float(A.sum())) or math.isnan(float(b.sum())):
+            if check and (not math.isfinite(float(A.sum())) or math.isnan(float(b.sum()))):
                 raise ValueError(f"{limit!r}.rows() returned NaN or inf in A or NaN in b: a row "
                                  "that bounds nothing would let the joints move freely")
             blocks.append((A, b))
@@ -182,8 +183,8 @@ class ConstraintStage:
         :meth:`general_rows`; ``None`` when a smoothness limit bounds the step (only
         :meth:`enforce` weighs those)."""
         lower = upper = None
-        for limit in self.limits:
-            bounds = _checked(limit, limit.bounds(kinematics, motion), self.nv)
+        for limit in self.limits:  # (the kernels check the bounds and rows for NaN)
+            bounds = limit.bounds(kinematics, motion)
             if bounds is None:
                 continue
             if not limit.hard:
@@ -192,7 +193,13 @@ class ConstraintStage:
                 lower, upper = bounds
             else:
                 lower, upper = np.maximum(lower, bounds[0]), np.minimum(upper, bounds[1])
-        return lower, upper, self.general_rows(kinematics, motion)
+        return lower, upper, self.general_rows(kinematics, motion, check=False)
+
+    def check(self, kinematics, motion: Motion) -> None:
+        """Raise the ``ValueError`` that names the limit whose bounds or rows are broken
+        (NaN, wrong shape) at this step, if any (after a compiled check refused them)."""
+        self.box(kinematics, motion)
+        self.general_rows(kinematics, motion)
 
     # -- enforcing ---------------------------------------------------------------------------
     def enforce(self, dq: np.ndarray, solve: Solve, kinematics, motion: Motion,

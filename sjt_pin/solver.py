@@ -460,7 +460,11 @@ class Solver:
         A, b = (rows[0], rows[1]) if rows is not None else self._no_rows
         if lower is None:  # (lower and upper come together)
             upper = None
-        done = K.smooth_rows_step(J, q, A, b, lower, upper, before, work, step)
+        try:
+            done = K.smooth_rows_step(J, q, A, b, lower, upper, before, work, step)
+        except ValueError:  # rows or bounds that do not fit or hold NaN: name the limit
+            user.check(self.stack.kinematics, motion)
+            raise
         if done < 0:
             return status | _STAGE
         self._checked_rows = (self._count + 1, rows)  # (the step counts after its kernel)
@@ -484,9 +488,14 @@ class Solver:
                 if rows is None and lower is None:
                     return step
                 A, b = (rows[0], rows[1]) if rows is not None else self._no_rows
-                done = K.rows_step(J, q, A, b, self._no_bounds[0] if lower is None else lower,
-                                   self._no_bounds[1] if upper is None else upper, self._work,
-                                   step)
+                try:
+                    done = K.rows_step(J, q, A, b,
+                                       self._no_bounds[0] if lower is None else lower,
+                                       self._no_bounds[1] if upper is None else upper,
+                                       self._work, step)
+                except ValueError:  # rows or bounds that do not fit or hold NaN: name it
+                    self._user_stage.check(stack.kinematics, motion)
+                    raise
                 if done >= 0:
                     self._checked_rows = (self._count, rows)
                     return step

@@ -2597,6 +2597,30 @@ static int rows_step_c(Mat J, const double *q, Mat A, const double *b, const dou
     return 1;
 }
 
+/* Whether a limit's rows A, b and bounds lower, upper (any may be unset) hold no NaN, and A no
+ * inf (inf in b or a bound means no bound): a NaN bounds nothing, so the joints would move
+ * freely. Sets ValueError otherwise (the caller names the limit). */
+static int rows_finite(Mat A, const Arg *b, const Arg *lo, const Arg *hi)
+{
+    for (Py_ssize_t i = 0; i < A.m; i++)
+        for (Py_ssize_t j = 0; j < A.n; j++)
+            if (!isfinite(AT(A, i, j))) goto bad;
+    const Arg *vectors[3] = {b, lo, hi};
+    for (int k = 0; k < 3; k++) {
+        const Arg *a = vectors[k];
+        if (!a->view.buf) continue;
+        Py_ssize_t len = length(a), stride = a->view.ndim ? a->view.strides[0] / 8 : 1;
+        const double *x = (const double *)a->view.buf;
+        for (Py_ssize_t i = 0; i < len; i++)
+            if (isnan(x[i * stride])) goto bad;
+    }
+    return 0;
+bad:
+    PyErr_SetString(PyExc_ValueError, "a limit's rows or bounds hold NaN (or A holds inf): a "
+                    "row or bound that bounds nothing would let the joints move freely");
+    return -1;
+}
+
 /* rows_step(J, q, A, b, lower, upper, work, step) -> int (rows_step_c) */
 static PyObject *py_rows_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
@@ -2616,7 +2640,7 @@ static PyObject *py_rows_step(PyObject *self, PyObject *const *args, Py_ssize_t 
                      "step (n,) do not fit", Jm.m, n, Am.m, Am.n, length(&b));
         goto done;
     }
-    if (check_work(&work, Jm.m, n, length(&q))) goto done;
+    if (check_work(&work, Jm.m, n, length(&q)) || rows_finite(Am, &b, &lo, &hi)) goto done;
     if (((const double *)work.view.buf)[P_SMOOTH] != 0.0) {
         PyErr_SetString(PyExc_ValueError, "rows_step: a work vector with the acceleration/jerk "
                         "stage (Layout(..., smooth=True)) keeps no step box");
@@ -2791,7 +2815,7 @@ static PyObject *py_smooth_rows_step(PyObject *self, PyObject *const *args, Py_s
                      length(&b));
         goto done;
     }
-    if (check_work(&work, Jm.m, n, length(&q))) goto done;
+    if (check_work(&work, Jm.m, n, length(&q)) || rows_finite(Am, &b, &lo, &hi)) goto done;
     double *wv = out_vec(&work, "work");
     if (!wv) goto done;
     if (!(wv[P_SMOOTH] > 0.0)) {
