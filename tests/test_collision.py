@@ -20,16 +20,6 @@ def at(dt):
     return Motion(np.zeros(0), np.zeros(0), np.zeros(0), dt)
 
 
-@pytest.fixture(scope="module")
-def panda():
-    return sjt.Robot.from_example("panda")
-
-
-@pytest.fixture(scope="module")
-def ur5():
-    return sjt.Robot.from_example("ur5")
-
-
 UR5_Q = np.array([0.3, -1.2, 1.5, -1.8, -1.5, 0.2])
 
 

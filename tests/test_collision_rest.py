@@ -18,16 +18,6 @@ DT = 1e-3
 MARGIN = 0.01
 
 
-@pytest.fixture(scope="module")
-def panda():
-    return sjt.Robot.from_example("panda")
-
-
-@pytest.fixture(scope="module")
-def ur5():
-    return sjt.Robot.from_example("ur5")
-
-
 def _run(robot, q0, target, limit, method, seconds=6.0):
     """The configurations of a run at DT (N+1, nq)."""
     solver = sjt.make_solver(method, robot, dt=DT, limits=[limit])

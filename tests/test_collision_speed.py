@@ -12,7 +12,6 @@ import pinocchio as pin
 import pytest
 from scipy.optimize import minimize
 
-import sjt_pin as sjt
 from sjt_pin import kernels as K
 from sjt_pin.constraints import nonnegative_qp, project, project_reference, rest_target
 from sjt_pin.kinematics import Kinematics
@@ -21,16 +20,6 @@ from sjt_pin.limits.collision import CollisionLimit, damper_rows_reference
 from sjt_pin.solvers import make_solver
 
 FIXTURE = Path(__file__).parent / "fixtures" / "qp" / "degenerate_panda_meshes.npz"
-
-
-@pytest.fixture(scope="module")
-def panda():
-    return sjt.Robot.from_example("panda")
-
-
-@pytest.fixture(scope="module")
-def ur5():
-    return sjt.Robot.from_example("ur5")
 
 
 def _instance(rng, degenerate=False):

@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 import sjt_pin as sjt
 
-from .test_random_urdfs import random_urdf_semantics
+from .test_random_urdfs import random_semantic_robot
 
 
 def run(solver, q, targets):
@@ -108,12 +108,8 @@ def test_copies_step_as_the_original_on_random_robots(seed, joints, cut, how, me
     """On random trees (mimic, planar and locked joints), a solver copied after ``cut`` steps
     of a random target sequence — reachable and unreachable targets, so escapes and limits
     happen — makes the same next steps as the original, bitwise."""
-    xml, leaf = random_urdf_semantics(seed, joints)
-    try:
-        robot = sjt.Robot.from_urdf(xml, ee_frame=leaf, load_visuals=False)
-    except sjt.URDFError:
-        return  # the documented refusal (mimic limits with no common range)
-    if robot.nv == 0:
+    robot = random_semantic_robot(seed, joints)
+    if robot is None:
         return
     rng = np.random.default_rng(seed)
     targets = []

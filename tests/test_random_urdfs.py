@@ -150,6 +150,17 @@ def distance_outside(robot: sjt.Robot, q: np.ndarray) -> np.ndarray:
     return np.maximum(robot.lower_limits - q, 0.0) + np.maximum(q - robot.upper_limits, 0.0)
 
 
+def random_semantic_robot(seed: int, joints: int) -> sjt.Robot | None:
+    """The robot of :func:`random_urdf_semantics`, or ``None`` where that URDF is the
+    documented refusal (mimic limits with no common range) or has no moving joint."""
+    xml, leaf = random_urdf_semantics(seed, joints)
+    try:
+        robot = sjt.Robot.from_urdf(xml, ee_frame=leaf, load_visuals=False)
+    except sjt.URDFError:
+        return None
+    return robot if robot.nv > 0 else None
+
+
 @settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(seed=st.integers(0, 2**32 - 1), joints=st.integers(1, 16))
 def test_random_trees_with_mimic_planar_and_locked_joints_from_seeds_outside(seed, joints):

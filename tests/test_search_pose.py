@@ -10,7 +10,8 @@ import pytest
 
 import sjt_pin as sjt
 from sjt_pin.bench.ik import problems
-from sjt_pin.limits import Limit
+
+from .test_constraints import JointBand
 
 
 def _pair(robot, method="sjt"):
@@ -86,27 +87,10 @@ def test_restarts_draw_what_numpy_draws(panda):
         np.testing.assert_array_equal(a.q, c.q)
 
 
-class _Band(Limit):
-    """One joint kept in [lower, upper] (rad)."""
-
-    name = "band"
-
-    def __init__(self, robot, joint, lower, upper):
-        j = robot.model.joints[robot.model.getJointId(joint)]
-        self.iq, self.iv, self.nv = j.idx_q, j.idx_v, robot.nv
-        self.lower, self.upper = lower, upper
-
-    def bounds(self, kinematics, motion):
-        lo, hi = np.full(self.nv, -np.inf), np.full(self.nv, np.inf)
-        x = motion.q[self.iq]
-        lo[self.iv], hi[self.iv] = (self.lower - x) / motion.dt, (self.upper - x) / motion.dt
-        return lo, hi
-
-
 def test_a_pose_task_with_user_limits_keeps_them(ur5):
     """User limits take the loop that enforces them at every iteration: the pose task's
     solutions keep the elbow in its band."""
-    solver = sjt.SJTSolver(ur5, limits=[_Band(ur5, "elbow_joint", 0.5, 1.6)])
+    solver = sjt.SJTSolver(ur5, limits=[JointBand(ur5, "elbow_joint", 0.5, 1.6)])
     assert solver.search().pose is None
     rng = np.random.default_rng(24)
     for _ in range(5):

@@ -24,7 +24,7 @@ from sjt_pin.bench.limits import PANDA_ACCELERATION, PANDA_JERK  # Franka's publ
 from sjt_pin.limits import Limit
 from sjt_pin.limits.position import braking_speed
 
-from .test_random_urdfs import random_urdf_semantics
+from .test_random_urdfs import random_semantic_robot
 
 DT = 1e-3
 
@@ -306,14 +306,10 @@ def test_random_rows_beside_acceleration_limits_on_random_robots(seed, joints, m
     speeds: the rows and the hard limits hold on every step; every run of steps that breaks an
     acceleration or jerk limit starts with a step that reports it; until the rows first act
     the stream is bitwise the one without them."""
-    xml, leaf = random_urdf_semantics(seed, joints)
-    try:
-        robot = sjt.Robot.from_urdf(xml, ee_frame=leaf, load_visuals=False)
-    except sjt.URDFError:
+    robot = random_semantic_robot(seed, joints)
+    if robot is None:
         return
     n = robot.nv
-    if n == 0:
-        return
     rng = np.random.default_rng(seed)
     accel = rng.uniform(2.0, 40.0, n)
     jerks = rng.uniform(500.0, 20000.0, n) if jerk else None
