@@ -1,7 +1,14 @@
-"""The compiled kernels (plain C on the CPython API): built by ``pip install``, never at run time.
-Everything else about the package is in pyproject.toml."""
+"""The compiled kernels (plain C on the CPython API, sjt_pin/kernels/src/: one file per idea):
+built by ``pip install``, never at run time. Everything else about the package is in
+pyproject.toml."""
+
+from pathlib import Path
 
 from setuptools import Extension, setup
 
-setup(ext_modules=[Extension("sjt_pin.kernels._kernels", ["sjt_pin/kernels/_kernels.c"],
-                             extra_compile_args=["-O2", "-std=c99"])])
+SOURCES = sorted(str(path) for path in Path("sjt_pin/kernels/src").glob("*.c"))
+
+setup(ext_modules=[Extension(
+    "sjt_pin.kernels._kernels", SOURCES, depends=["sjt_pin/kernels/src/kernels.h"],
+    # one module's files: only PyInit__kernels is visible outside the shared object
+    extra_compile_args=["-O2", "-std=c99", "-fvisibility=hidden"])])

@@ -25,7 +25,7 @@ a start outside the range, limits changed between steps: the velocity is then th
 hard box nearest the smoothness box, and the step reports it.
 
 A solver with a built-in method runs this stage on the built-in limits (position, speed,
-acceleration, jerk) inside its step kernel (``smooth_stage_c`` in ``kernels/_kernels.c``); a
+acceleration, jerk) inside its step kernel (``smooth_stage_c`` in ``kernels/src/smooth_stage.c``); a
 user's limits then correct that step only where it breaks them (``kernels.rows_step``,
 ``kernels.smooth_rows_step``), and a user's bound that the hard box does not meet leaves the
 step to this module. This module is the compiled stage's reference

@@ -2,7 +2,7 @@
 
 On arrays of 6 x n numbers every numpy call costs about 0.3 us whatever it computes, so a step
 would spend more in call overhead than in arithmetic. The kernels are plain C on the CPython
-API (``_kernels.c``), compiled once by ``pip install`` — nothing is compiled at run time — and
+API (``src/``: one C file per idea, ``kernels.h`` their shared declarations), compiled once by ``pip install`` — nothing is compiled at run time — and
 called with numpy arrays through the buffer protocol. ``tests/test_kernels.py`` checks them
 against the numpy reference formulas of :mod:`sjt_pin.mappings` and against Pinocchio.
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-# -- slots: their numbers are the compiled module's (_kernels.c names each slot once) ---------
+# -- slots: their numbers are the compiled module's (src/kernels.h names each slot once) ---------
 from ._kernels import (  # noqa: F401 (re-exported: the kernels' vocabulary)
     BOUND_PRODUCTS,
     BOUND_TOL,

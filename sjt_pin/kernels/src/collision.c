@@ -1,0 +1,478 @@
+/* The collision limit's compiled parts: velocity-damper and witness rows, Pinocchio's
+ * distance queries, the broad phase's skip. */
+
+#include "kernels.h"
+
+/* -- collision dampers (sjt_pin/limits/collision.py) ------------------------------------------ */
+
+/* damper_rows(J, support, pairs, gain_rate, A, b): one velocity-damper row per pair. J (6, N):
+ * Pinocchio's WORLD joint Jacobians (data.J, rows linear then angular); support (njoints, N):
+ * 1 where a column moves a joint's frame; pairs (k, 13): distance d, margin, the joints of
+ * the two geometries (a, b), the unit normal n from a to b (coal's), the closest points p_a
+ * and p_b (world). Row i: A_i = (u_a^T J) support[a] - (u_b^T J) support[b] with
+ * u_x = [n; p_x x n], and b_i = gain_rate (d - margin); A (k, N) and b (k,) are written. */
+static void damper_rows_c(Mat J, Mat support, Mat pairs, double rate, double *A, double *b)
+{
+    Py_ssize_t N = J.n;
+    for (Py_ssize_t i = 0; i < pairs.m; i++) {
+        double u[2][6];
+        Py_ssize_t joint[2];
+        double nx = AT(pairs, i, 4), ny = AT(pairs, i, 5), nz = AT(pairs, i, 6);
+        for (int side = 0; side < 2; side++) {
+            double px = AT(pairs, i, 7 + 3 * side), py = AT(pairs, i, 8 + 3 * side);
+            double pz = AT(pairs, i, 9 + 3 * side);
+            u[side][0] = nx;
+            u[side][1] = ny;
+            u[side][2] = nz;
+            u[side][3] = py * nz - pz * ny;
+            u[side][4] = pz * nx - px * nz;
+            u[side][5] = px * ny - py * nx;
+            joint[side] = (Py_ssize_t)AT(pairs, i, 2 + side);
+        }
+        for (Py_ssize_t c = 0; c < N; c++) {
+            double va = 0.0, vb = 0.0;
+            for (int r = 0; r < 6; r++) {
+                va += u[0][r] * AT(J, r, c);
+                vb += u[1][r] * AT(J, r, c);
+            }
+            A[i * N + c] = va * AT(support, joint[0], c) - vb * AT(support, joint[1], c);
+        }
+        b[i] = rate * (AT(pairs, i, 0) - AT(pairs, i, 1));
+    }
+}
+
+PyObject *py_damper_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (!nargs_ok(nargs, 6, "damper_rows")) return NULL;
+    double rate = PyFloat_AsDouble(args[3]);
+    if (rate == -1.0 && PyErr_Occurred()) return NULL;
+    Arg J = {0}, sup = {0}, pairs = {0}, A = {0}, b = {0};
+    PyObject *result = NULL;
+    if (acquire(args[0], &J, 0, 2, "J") || acquire(args[1], &sup, 0, 2, "support")
+        || acquire(args[2], &pairs, 0, 2, "pairs") || acquire(args[4], &A, 1, 2, "A")
+        || acquire(args[5], &b, 1, 1, "b"))
+        goto done;
+    Mat Jm = mat(&J), Sm = mat(&sup), Pm = mat(&pairs);
+    double *Av = out_mat(&A, "A"), *bv = out_vec(&b, "b");
+    if (!Av || !bv) goto done;
+    if (Jm.m != 6 || Sm.n != Jm.n || Pm.n != 13 || A.view.shape[0] != Pm.m
+        || A.view.shape[1] != Jm.n || length(&b) != Pm.m) {
+        PyErr_Format(PyExc_ValueError, "J (6, N), support (njoints, N), pairs (k, 13), A (k, N) "
+                     "and b (k,) do not fit: J (%zd, %zd), support (%zd, %zd), pairs (%zd, %zd)",
+                     Jm.m, Jm.n, Sm.m, Sm.n, Pm.m, Pm.n);
+        goto done;
+    }
+    for (Py_ssize_t i = 0; i < Pm.m; i++)
+        for (int side = 0; side < 2; side++) {
+            double j = AT(Pm, i, 2 + side);
+            if (!(j >= 0.0 && j < (double)Sm.m)) {
+                PyErr_Format(PyExc_ValueError, "pairs[%zd] names joint %zd; support has %zd",
+                             i, (Py_ssize_t)j, Sm.m);
+                goto done;
+            }
+        }
+    damper_rows_c(Jm, Sm, Pm, rate, Av, bv);
+    result = Py_None;
+    Py_INCREF(result);
+done:
+    release(&J); release(&sup); release(&pairs); release(&A); release(&b);
+    return result;
+}
+
+/* witness_rows(oMi, poses, rows, found, memory, state, tick, keep, apart, owners) -> int: the
+ * collision limit's witness rows (limits/collision.py, "Witnesses"). rows (N, 13) holds the
+ * step's exact rows of the pairs `found` (count,) in its first count rows (as damper_rows
+ * reads them); poses (njoints, 16): the 4x4 world pose of each joint the rows name (row-major),
+ * taken here from Pinocchio's data.oMi (joint 0: the identity) unless oMi is None. A pair
+ * whose d - margin is not under keep remembers nothing. memory (npairs * W, 6): per pair up to W remembered closest points, each
+ * in its joint's frame (p_a, p_b); state (npairs, 2): how many are remembered and the tick of
+ * the call that last saw the pair within influence (a pair missed by the previous call,
+ * tick - 1, forgets them). Each remembered pair of points that lies farther than `apart`
+ * (either point, its frame) from this step's and whose separation s = n^T (p_b - p_a) along
+ * this step's normal is under d + keep becomes a row after the exact ones (d = s, the points
+ * in the world, the rest as its pair's row), its pair written to owners; the pair then
+ * remembers those (the last W - 1) and this step's points. Returns the number of rows. */
+static Py_ssize_t witness_rows_c(const double *poses, double *rows, const double *found,
+                                 Py_ssize_t count, double *memory, Py_ssize_t W, double *state,
+                                 double tick, double keep, double apart, double *owners)
+{
+    Py_ssize_t total = count;
+    for (Py_ssize_t i = 0; i < count; i++) {
+        Py_ssize_t k = (Py_ssize_t)found[i];
+        double *row = rows + 13 * i, *st = state + 2 * k, *mem = memory + 6 * W * k;
+        const double *H[2] = {poses + 16 * (Py_ssize_t)row[2], poses + 16 * (Py_ssize_t)row[3]};
+        Py_ssize_t filled = st[1] == tick - 1.0 ? (Py_ssize_t)st[0] : 0;
+        st[1] = tick;
+        if (!(row[0] - row[1] < keep)) {  /* far from its margin: its row binds nothing */
+            st[0] = 0.0;
+            continue;
+        }
+        double now[6];
+        for (int side = 0; side < 2; side++) {
+            const double *M = H[side], *p = row + 7 + 3 * side;
+            double dx = p[0] - M[3], dy = p[1] - M[7], dz = p[2] - M[11];
+            for (int c = 0; c < 3; c++)  /* R^T (p - t) */
+                now[3 * side + c] = M[c] * dx + M[4 + c] * dy + M[8 + c] * dz;
+        }
+        double kept[64][6];
+        Py_ssize_t nk = 0;
+        for (Py_ssize_t w = 0; w < filled; w++) {
+            const double *m = mem + 6 * w;
+            double far = 0.0, world[6];
+            for (int c = 0; c < 6; c++) far = dmax(far, fabs(m[c] - now[c]));
+            if (!(far > apart)) continue;
+            for (int side = 0; side < 2; side++) {
+                const double *M = H[side], *l = m + 3 * side;
+                for (int r = 0; r < 3; r++)
+                    world[3 * side + r] = M[4 * r] * l[0] + M[4 * r + 1] * l[1]
+                                          + M[4 * r + 2] * l[2] + M[4 * r + 3];
+            }
+            double s = row[4] * (world[3] - world[0]) + row[5] * (world[4] - world[1])
+                       + row[6] * (world[5] - world[2]);
+            if (!(s - row[0] < keep)) continue;
+            double *out = rows + 13 * total;
+            for (int c = 0; c < 13; c++) out[c] = row[c];
+            out[0] = s;
+            for (int c = 0; c < 6; c++) out[7 + c] = world[c];
+            owners[total - count] = (double)k;
+            total++;
+            if (nk < 64) {
+                for (int c = 0; c < 6; c++) kept[nk][c] = m[c];
+                nk++;
+            }
+        }
+        Py_ssize_t start = nk > W - 1 ? nk - (W - 1) : 0, n = 0;
+        for (Py_ssize_t w = start; w < nk; w++, n++)
+            for (int c = 0; c < 6; c++) mem[6 * n + c] = kept[w][c];
+        for (int c = 0; c < 6; c++) mem[6 * n + c] = now[c];
+        st[0] = (double)(n + 1);
+    }
+    return total;
+}
+
+/* the 4x4 world pose of joint j (Pinocchio's data.oMi[j].homogeneous) into out (row-major) */
+static int fetch_pose(PyObject *oMi, Py_ssize_t j, double *out)
+{
+    static PyObject *s_homogeneous = NULL;
+    if (!s_homogeneous && !(s_homogeneous = PyUnicode_InternFromString("homogeneous")))
+        return -1;
+    PyObject *index = PyLong_FromSsize_t(j);
+    PyObject *M = index ? PyObject_GetItem(oMi, index) : NULL;
+    Py_XDECREF(index);
+    PyObject *H = M ? PyObject_GetAttr(M, s_homogeneous) : NULL;
+    Py_XDECREF(M);
+    if (!H) return -1;
+    Arg a = {0};
+    int bad = acquire(H, &a, 0, 2, "oMi[j].homogeneous");
+    if (!bad) {
+        Mat Hm = mat(&a);
+        if (Hm.m != 4 || Hm.n != 4) {
+            PyErr_SetString(PyExc_ValueError, "oMi[j].homogeneous must be 4x4");
+            bad = 1;
+        } else {
+            for (int r = 0; r < 4; r++)
+                for (int c = 0; c < 4; c++) out[4 * r + c] = AT(Hm, r, c);
+        }
+        release(&a);
+    }
+    Py_DECREF(H);
+    return bad ? -1 : 0;
+}
+
+PyObject *py_witness_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (!nargs_ok(nargs, 10, "witness_rows")) return NULL;
+    PyObject *oMi = args[0];
+    args++;  /* the rest as without oMi */
+    double tick = PyFloat_AsDouble(args[5]), keep = PyFloat_AsDouble(args[6]);
+    double apart = PyFloat_AsDouble(args[7]);
+    if (PyErr_Occurred()) return NULL;
+    Arg poses = {0}, rows = {0}, memory = {0}, state = {0}, owners = {0};
+    PyObject *result = NULL, *found = NULL;
+    double *fv = NULL;
+    char *fetched = NULL;
+    if (acquire(args[0], &poses, oMi != Py_None, 2, "poses")
+        || acquire(args[1], &rows, 1, 2, "rows")
+        || acquire(args[3], &memory, 1, 2, "memory") || acquire(args[4], &state, 1, 2, "state")
+        || acquire(args[8], &owners, 1, 1, "owners"))
+        goto done;
+    double *pv = out_mat(&poses, "poses"), *rv = out_mat(&rows, "rows");
+    double *mv = out_mat(&memory, "memory");
+    double *sv = out_mat(&state, "state"), *ov = out_vec(&owners, "owners");
+    if (!pv || !rv || !mv || !sv || !ov) goto done;
+    found = PySequence_Fast(args[2], "found must be a sequence of pair indices");
+    if (!found) goto done;
+    Py_ssize_t count = PySequence_Fast_GET_SIZE(found), N = rows.view.shape[0];
+    Py_ssize_t npairs = state.view.shape[0];
+    fv = (double *)malloc((size_t)(count > 0 ? count : 1) * sizeof(double));
+    if (!fv) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    for (Py_ssize_t i = 0; i < count; i++) {
+        fv[i] = PyFloat_AsDouble(PySequence_Fast_GET_ITEM(found, i));
+        if (fv[i] == -1.0 && PyErr_Occurred()) goto done;
+    }
+    Py_ssize_t W = npairs > 0 ? memory.view.shape[0] / npairs : 0;
+    if (poses.view.shape[1] != 16 || rows.view.shape[1] != 13
+        || memory.view.shape[1] != 6 || state.view.shape[1] != 2 || W < 1 || W > 64
+        || memory.view.shape[0] != W * npairs || N < count * (1 + W)
+        || length(&owners) < count * W) {
+        PyErr_Format(PyExc_ValueError, "witness_rows: poses (njoints, 16), rows (>= count (1 + W), "
+                     "13), memory (npairs W, 6) with 1 <= W <= 64, state (npairs, 2) and owners "
+                     "(>= count W,) do not fit (count %zd, rows %zd, npairs %zd)", count, N,
+                     npairs);
+        goto done;
+    }
+    for (Py_ssize_t i = 0; i < count; i++) {
+        if (!(fv[i] >= 0.0 && fv[i] < (double)npairs)) {
+            PyErr_Format(PyExc_ValueError, "found[%zd] is no pair (npairs %zd)", i, npairs);
+            goto done;
+        }
+        for (int side = 0; side < 2; side++) {
+            double j = rv[13 * i + 2 + side];
+            if (!(j >= 0.0 && j < (double)poses.view.shape[0])) {
+                PyErr_Format(PyExc_ValueError, "rows[%zd] names joint %zd; poses has %zd", i,
+                             (Py_ssize_t)j, poses.view.shape[0]);
+                goto done;
+            }
+        }
+    }
+    if (oMi != Py_None) {  /* the poses of the joints of the pairs that remember */
+        Py_ssize_t nj = poses.view.shape[0];
+        fetched = (char *)calloc((size_t)nj, 1);
+        if (!fetched) {
+            PyErr_NoMemory();
+            goto done;
+        }
+        double *P = (double *)poses.view.buf;
+        for (int c = 0; c < 16; c++) P[c] = c % 5 == 0 ? 1.0 : 0.0;
+        fetched[0] = 1;
+        for (Py_ssize_t i = 0; i < count; i++) {
+            const double *row = rv + 13 * i;
+            if (!(row[0] - row[1] < keep)) continue;
+            for (int side = 0; side < 2; side++) {
+                Py_ssize_t j = (Py_ssize_t)row[2 + side];
+                if (fetched[j]) continue;
+                if (fetch_pose(oMi, j, P + 16 * j)) goto done;
+                fetched[j] = 1;
+            }
+        }
+    }
+    result = PyLong_FromSsize_t(witness_rows_c(pv, rv, fv, count, mv, W, sv, tick, keep, apart,
+                                               ov));
+done:
+    Py_XDECREF(found);
+    free(fv);
+    free(fetched);
+    release(&poses); release(&rows); release(&memory); release(&state); release(&owners);
+    return result;
+}
+
+/* 3 doubles from a float64 array-like (coal's vectors) */
+static int read3(PyObject *obj, double *out, const char *name)
+{
+    Arg a = {0};
+    if (acquire(obj, &a, 0, 1, name)) return -1;
+    double *v = length(&a) == 3 ? vec(&a, name) : NULL;
+    if (!v) {
+        if (!PyErr_Occurred())
+            PyErr_Format(PyExc_ValueError, "%s must hold 3 numbers", name);
+        release(&a);
+        return -1;
+    }
+    out[0] = v[0];
+    out[1] = v[1];
+    out[2] = v[2];
+    release(&a);
+    return 0;
+}
+
+/* query_rows(compute, geometry, geometry_data, near, bound, floor, margins, joints, influence,
+ * rows) -> list: the collision limit's exact distance queries (limits/collision.py, _rows):
+ * for each pair k of the list `near`, res = compute(geometry, geometry_data, k) (Pinocchio's
+ * computeDistance), d = res.min_distance; with a bound (npairs,) (else None) floor[k] =
+ * d - bound[k] (-inf for a failed query: d -inf or NaN); a pair with -inf < d < influence
+ * gets the next row of rows (N, 13) as damper_rows reads it: d, margins[k], joints[k] (npairs,
+ * 2), res.normal, res.getNearestPoint1(), res.getNearestPoint2(). Returns those pairs. */
+PyObject *py_query_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (!nargs_ok(nargs, 10, "query_rows")) return NULL;
+    static PyObject *s_distance = NULL, *s_normal = NULL, *s_p1 = NULL, *s_p2 = NULL;
+    if (!s_distance) {
+        s_distance = PyUnicode_InternFromString("min_distance");
+        s_normal = PyUnicode_InternFromString("normal");
+        s_p1 = PyUnicode_InternFromString("getNearestPoint1");
+        s_p2 = PyUnicode_InternFromString("getNearestPoint2");
+        if (!s_distance || !s_normal || !s_p1 || !s_p2) return NULL;
+    }
+    double influence = PyFloat_AsDouble(args[8]);
+    if (influence == -1.0 && PyErr_Occurred()) return NULL;
+    int has_bound = args[4] != Py_None;
+    Arg bound = {0}, floor_ = {0}, margins = {0}, joints = {0}, rows = {0};
+    PyObject *found = NULL, *near = NULL, *result = NULL;
+    if ((has_bound && acquire(args[4], &bound, 0, 1, "bound"))
+        || acquire(args[5], &floor_, 1, 1, "floor") || acquire(args[6], &margins, 0, 1, "margins")
+        || acquire(args[7], &joints, 0, 2, "joints") || acquire(args[9], &rows, 1, 2, "rows"))
+        goto done;
+    double *bv = has_bound ? vec(&bound, "bound") : NULL, *fv = out_vec(&floor_, "floor");
+    double *mv = vec(&margins, "margins"), *rv = out_mat(&rows, "rows");
+    if ((has_bound && !bv) || !fv || !mv || !rv) goto done;
+    Mat Jm = mat(&joints);
+    Py_ssize_t npairs = length(&floor_), N = rows.view.shape[0];
+    if (length(&margins) != npairs || Jm.m != npairs || Jm.n != 2 || rows.view.shape[1] != 13
+        || (has_bound && length(&bound) != npairs)) {
+        PyErr_Format(PyExc_ValueError, "query_rows: bound, floor, margins (npairs,), joints "
+                     "(npairs, 2) and rows (N, 13) do not fit (npairs %zd)", npairs);
+        goto done;
+    }
+    near = PySequence_Fast(args[3], "near must be a sequence of pair indices");
+    if (!near) goto done;
+    found = PyList_New(0);
+    if (!found) goto done;
+    Py_ssize_t m = PySequence_Fast_GET_SIZE(near), count = 0;
+    PyObject **items = PySequence_Fast_ITEMS(near);
+    for (Py_ssize_t i = 0; i < m; i++) {
+        Py_ssize_t k = PyLong_AsSsize_t(items[i]);
+        if (k == -1 && PyErr_Occurred()) goto fail;
+        if (k < 0 || k >= npairs) {
+            PyErr_Format(PyExc_ValueError, "near[%zd] = %zd is no pair (npairs %zd)", i, k,
+                         npairs);
+            goto fail;
+        }
+        PyObject *call[3] = {args[1], args[2], items[i]};
+        PyObject *res = PyObject_Vectorcall(args[0], call, 3, NULL);
+        if (!res) goto fail;
+        PyObject *dobj = PyObject_GetAttr(res, s_distance);
+        double d = dobj ? PyFloat_AsDouble(dobj) : -1.0;
+        Py_XDECREF(dobj);
+        if (!dobj || (d == -1.0 && PyErr_Occurred())) {
+            Py_DECREF(res);
+            goto fail;
+        }
+        if (has_bound) fv[k] = d > -INFINITY ? d - bv[k] : -INFINITY;  /* NaN: -inf */
+        if (!(d > -INFINITY && d < influence)) {
+            Py_DECREF(res);
+            continue;
+        }
+        if (count >= N) {
+            Py_DECREF(res);
+            PyErr_SetString(PyExc_ValueError, "query_rows: more pairs within influence than rows");
+            goto fail;
+        }
+        double *row = rv + 13 * count;
+        PyObject *normal = PyObject_GetAttr(res, s_normal);
+        PyObject *p1 = normal ? PyObject_CallMethodNoArgs(res, s_p1) : NULL;
+        PyObject *p2 = p1 ? PyObject_CallMethodNoArgs(res, s_p2) : NULL;
+        int bad = !p2 || read3(normal, row + 4, "normal") || read3(p1, row + 7, "nearest point 1")
+                  || read3(p2, row + 10, "nearest point 2");
+        Py_XDECREF(normal);
+        Py_XDECREF(p1);
+        Py_XDECREF(p2);
+        Py_DECREF(res);
+        if (bad) goto fail;
+        row[0] = d;
+        row[1] = mv[k];
+        row[2] = AT(Jm, k, 0);
+        row[3] = AT(Jm, k, 1);
+        if (PyList_Append(found, items[i]) < 0) goto fail;
+        count++;
+    }
+    result = found;
+    found = NULL;
+    goto done;
+fail:
+    Py_CLEAR(found);
+done:
+    Py_XDECREF(near);
+    Py_XDECREF(found);
+    if (has_bound) release(&bound);
+    release(&floor_); release(&margins); release(&joints); release(&rows);
+    return result;
+}
+
+/* near_pairs(q, reference, lower, upper, lever, slack, bound, near, floor, influence) ->
+ * list | None: the collision limit's skip of its broad phase and of its queries
+ * (limits/collision.py, _near and _rows) for q in its own tangent space (revolute and
+ * prismatic joints): bound (npairs,) = lever (npairs, nv) |q - reference|; None when q leaves
+ * the box lower <= q <= upper (n,) the levers hold in, or when some pair's bound reaches its
+ * slack (npairs,) (the broad phase must run again); else the pairs of the list `near` whose floor - bound is
+ * not above influence (those to query). */
+PyObject *py_near_pairs(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (!nargs_ok(nargs, 10, "near_pairs")) return NULL;
+    double influence = PyFloat_AsDouble(args[9]);
+    if (influence == -1.0 && PyErr_Occurred()) return NULL;
+    Arg q = {0}, ref = {0}, lo = {0}, hi = {0}, lever = {0}, slack = {0}, bound = {0},
+        floor_ = {0};
+    PyObject *result = NULL, *near = NULL, *out = NULL;
+    double *moved = NULL;
+    if (acquire(args[0], &q, 0, 1, "q") || acquire(args[1], &ref, 0, 1, "reference")
+        || acquire(args[2], &lo, 0, 1, "lower") || acquire(args[3], &hi, 0, 1, "upper")
+        || acquire(args[4], &lever, 0, 2, "lever") || acquire(args[5], &slack, 0, 1, "slack")
+        || acquire(args[6], &bound, 1, 1, "bound") || acquire(args[8], &floor_, 0, 1, "floor"))
+        goto done;
+    double *qv = vec(&q, "q"), *rv = vec(&ref, "reference"), *sv = vec(&slack, "slack");
+    double *lov = vec(&lo, "lower"), *hiv = vec(&hi, "upper");
+    double *bv = out_vec(&bound, "bound"), *fv = vec(&floor_, "floor");
+    if (!qv || !rv || !lov || !hiv || !sv || !bv || !fv) goto done;
+    Mat L = mat(&lever);
+    Py_ssize_t n = length(&q), npairs = L.m;
+    if (length(&ref) != n || length(&lo) != n || length(&hi) != n || L.n != n
+        || length(&slack) != npairs || length(&bound) != npairs || length(&floor_) != npairs) {
+        PyErr_Format(PyExc_ValueError, "near_pairs: q, reference, lower, upper (n,), lever "
+                     "(npairs, n), slack, bound and floor (npairs,) do not fit (n %zd, "
+                     "npairs %zd)", n, npairs);
+        goto done;
+    }
+    for (Py_ssize_t j = 0; j < n; j++) {
+        if (!(qv[j] >= lov[j] && qv[j] <= hiv[j])) {
+            result = Py_None;
+            Py_INCREF(result);
+            goto done;
+        }
+    }
+    moved = (double *)malloc((size_t)(n > 0 ? n : 1) * sizeof(double));
+    if (!moved) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    for (Py_ssize_t j = 0; j < n; j++) moved[j] = fabs(qv[j] - rv[j]);
+    int within = 1;
+    for (Py_ssize_t k = 0; k < npairs; k++) {
+        double acc = 0.0;
+        for (Py_ssize_t j = 0; j < n; j++) acc += AT(L, k, j) * moved[j];
+        bv[k] = acc;
+        if (!(acc < sv[k])) within = 0;
+    }
+    if (!within) {
+        result = Py_None;
+        Py_INCREF(result);
+        goto done;
+    }
+    near = PySequence_Fast(args[7], "near must be a sequence of pair indices");
+    if (!near) goto done;
+    out = PyList_New(0);
+    if (!out) goto done;
+    Py_ssize_t m = PySequence_Fast_GET_SIZE(near);
+    PyObject **items = PySequence_Fast_ITEMS(near);
+    for (Py_ssize_t i = 0; i < m; i++) {
+        Py_ssize_t k = PyLong_AsSsize_t(items[i]);
+        if (k == -1 && PyErr_Occurred()) goto done;
+        if (k < 0 || k >= npairs) {
+            PyErr_Format(PyExc_ValueError, "near[%zd] = %zd is no pair (npairs %zd)", i, k,
+                         npairs);
+            goto done;
+        }
+        if (!(fv[k] - bv[k] > influence) && PyList_Append(out, items[i]) < 0) goto done;
+    }
+    result = out;
+    out = NULL;
+done:
+    Py_XDECREF(out);
+    Py_XDECREF(near);
+    free(moved);
+    release(&q); release(&ref); release(&lo); release(&hi); release(&lever); release(&slack); release(&bound);
+    release(&floor_);
+    return result;
+}

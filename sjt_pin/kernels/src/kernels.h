@@ -1,0 +1,274 @@
+/* The compiled kernels' shared declarations: the work vector's slots (exported by name to
+ * sjt_pin/kernels/layout.py), modes, status bits and tolerances, the matrix view, and the
+ * functions one file of sjt_pin/kernels/src/ offers the others. */
+
+#ifndef SJT_KERNELS_H
+#define SJT_KERNELS_H
+
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#ifndef M_PI
+#define M_PI 3.14159265358979323846
+#endif
+
+/* -- the work vector's slots: named here once, exported by name to sjt_pin/kernels/layout.py - */
+#define PARAMETERS(X) X(P_DT) X(P_GAIN_MODE) X(P_GAIN_ARG) X(P_FF_MODE) X(P_MU) X(P_COL_TOL) \
+    X(P_SCALED) X(P_RCOND) X(P_LENGTH2) X(P_FB_MODE) X(P_LM) X(P_ERROR_ROWS) X(P_STALL_RATIO) \
+    X(P_STALL_ERROR) X(P_ROWS) X(P_MASK) X(P_BOX) X(P_BOX_COUNT) X(P_SPEED) X(P_SCRATCH) \
+    X(P_EXTRA) X(P_CLAMPED) X(P_ESCAPING) X(P_HAS_FF) X(P_IDENTITY_ROWS) X(P_STALL_RUN) \
+    X(P_STALL_WAIT) X(P_SMOOTH) X(P_JERK)
+#define RESULTS(X) X(I_E_SQ) X(I_FF_SQ) X(I_GAIN) X(I_LOOP) X(I_STALL) X(I_TRACE) X(I_EW_SQ) \
+    X(I_SCALE) X(I_REGULAR)
+#define SEARCH_STATE(X) X(S_F) X(S_NU) X(S_ITER) X(S_BEST) X(S_STALE) X(S_TOL_SQ) \
+    X(S_MAX_STEP) X(S_ERROR_ROWS) X(S_E_SQ) \
+    X(S_STALE_LIMIT) X(S_PROGRESS) \
+    X(S_HELD_BEST) X(S_HELD_STALE) X(S_HELD_LIMIT) X(S_HELD_PROGRESS)
+/* the acceleration/jerk stage's part of work (at P_SMOOTH; n numbers each, then m): the
+ * motion state, the limits, the step's boxes and what they did (see smooth_stage_c) */
+#define SMOOTH_PARTS(X) X(SM_DQ) X(SM_DDQ) X(SM_ACC) X(SM_JERK) X(SM_JERK_SPEED) \
+    X(SM_BRAKE_ACC) X(SM_BRAKE_JERK) X(SM_HARD_LO) X(SM_HARD_HI) X(SM_SOFT_LO) X(SM_SOFT_HI) \
+    X(SM_HARD_LO_BY) X(SM_HARD_HI_BY) X(SM_SOFT_LO_BY) X(SM_SOFT_HI_BY) X(SM_DESIRED) \
+    X(SM_OUT) X(SM_TORN) X(SM_FF) X(SM_GAINS)
+/* which limit set a bound of the acceleration/jerk stage's boxes (its *_BY parts) */
+#define LIMIT_CODES(X) X(L_POSITION) X(L_VELOCITY) X(L_ACCELERATION) X(L_JERK)
+#define SLOT_ENUM(name) name,
+#define SLOT_NAME(name) #name,
+enum { PARAMETERS(SLOT_ENUM) P_COUNT };
+enum { RESULTS(SLOT_ENUM) I_COUNT };
+enum { SEARCH_STATE(SLOT_ENUM) S_COUNT };
+enum { SMOOTH_PARTS(SLOT_ENUM) SM_COUNT };
+enum { LIMIT_CODES(SLOT_ENUM) L_COUNT };
+/* the results follow the parameters */
+#define INFO P_COUNT
+#define GAIN_FIXED 0
+#define GAIN_AUTO 1
+#define FF_TRANSPOSE 1
+#define FF_DAMPED 2
+#define FB_TRANSPOSE 0
+#define FB_DAMPED 1
+#define NON_FINITE 1
+#define STALLED 2
+#define CLAMPED 4
+#define SCALED 8
+#define BOUND_PRODUCTS 2
+#define EIGEN_FLOOR (1e3 * 2.220446049250313e-16)
+#define TRANSPOSE 0
+#define LEAST_SQUARES 1
+#define CONTINUE 0
+#define CONVERGED 1
+#define SEARCH_STALLED 2
+#define NU_DOWN 3.0
+#define NU_UP 4.0
+#define NU_MIN 1e-6
+#define NU_MAX 1e8
+
+/* a read-only matrix with element strides */
+typedef struct { const double *p; Py_ssize_t m, n, s0, s1; } Mat;
+#define AT(M, i, j) ((M).p[(i) * (M).s0 + (j) * (M).s1])
+
+static inline double dmin(double a, double b) { return a < b ? a : b; }
+static inline double dmax(double a, double b) { return a > b ? a : b; }
+
+/* results of a mapping: |e|^2, |ff|^2, |e_w|^2, gain, lambda_hat, stall ratio, trace */
+typedef struct { double e_sq, ff_sq, ew_sq, gain, bound, stall, trace; } Core;
+
+/* a bound counts as reached within this many rad/s (m/s) of it (sjt_pin/constraints.py) */
+#define BOUND_TOL 1e-12
+/* the free joints span the task space while the smallest singular value of their normalised
+ * task columns is above this fraction of the largest (Flacco's rank test) */
+#define RANK_TOL 1e-6
+/* the braking speed's root search (sjt_pin/limits/position.py, BRAKING_TOL, BRAKING_STEPS) */
+#define BRAKING_TOL 9.094947017729282e-13
+#define BRAKING_STEPS 60
+/* Entry c of the position box in work (the joints with position limits): its velocity index
+ * v, its coordinate x = q[index] (rad or m), its range [lower, upper] and its recovery speed
+ * back (rad/s or m/s) toward the range from outside it. */
+typedef struct { Py_ssize_t v; double x, lower, upper, back; } BoxEntry;
+
+/* SNS's vectors in work's clamped part (n each unless noted): the held flags, the candidate
+ * dq = b + s a (a: the method on the free joints, b: what the held ones leave them to make up,
+ * hv: the held joints' velocities, rad/s), the free joints, the best candidate so far, and
+ * scratch (ff2: m, G: m x m, norm: n). */
+typedef struct {
+    double *held, *a, *b, *hv, *free_;
+    double *best_a, *best_b, *best_hv, *best_held;
+    double *ff2, *G, *norm;
+} Sns;
+
+/* The stage's vectors in work (n each, SM_* parts of sjt_pin/kernels/layout.py): the motion
+ * state, the limits, the boxes and the codes of the limits that set them, and scratch. */
+typedef struct {
+    double *pdq, *pddq;                   /* previous velocity (rad/s) and acceleration */
+    double *A, *Jk, *vj, *BA, *BJ;        /* accel., jerk, jerk's speed, braking accel./jerk */
+    double *hlo, *hhi, *slo, *shi;        /* hard and smoothness boxes (rad/s) */
+    double *hlb, *hhb, *slb, *shb;        /* the L_* code that set each bound, -1 none */
+    double *desired, *out, *torn;         /* velocity before smoothing, result, hard box won */
+    double *dqff, *save;                  /* feed-forward velocity / line base; saved gains */
+} Stage;
+
+/* a float64 buffer acquired from a Python object */
+typedef struct {
+    Py_buffer view;
+    int held;
+    double *copy; /* a contiguous copy of a strided 1-D input */
+} Arg;
+
+/* The acquired buffers of search_pose, in its argument order. */
+typedef struct {
+    Arg R, p, Md, tab, q, qc, Jc, e, ec, lim, work, state, step;
+} SearchArgs;
+
+/* the dual's ridge relative to its largest diagonal entry (constraints.DUAL_RIDGE) */
+#define DUAL_RIDGE 1e-13
+/* rest_target_c's ridge of Jw Jw^T, relative to its mean diagonal (constraints.REST_RIDGE) */
+#define REST_RIDGE 1e-12
+/* how far the smoothness box widens, around its centre, in the rounds that look for the
+ * smallest breach of the acceleration and jerk limits that lets the rows hold */
+#define SMOOTH_WIDEN_ROUNDS 6
+
+/* |W J_j|^2 over the first `rows` rows: the squared norm of weighted column j (task units^2) */
+static inline double weighted_column_norm2(Mat J, const double *sw, Py_ssize_t rows,
+                                           Py_ssize_t j)
+{
+    double acc = 0.0;
+    for (Py_ssize_t i = 0; i < rows; i++) acc += (sw[i] * AT(J, i, j)) * (sw[i] * AT(J, i, j));
+    return acc;
+}
+
+/* SJT's scale of a column of squared norm `norm` (above the column tolerance), eq. (18) with the
+ * floor l^2 = length2 under the norm: alpha = 1 / max(|W J_j|^2, l^2) */
+static inline double sjt_alpha(double norm, double length2) { return 1.0 / dmax(norm, length2); }
+
+/* (W J_j)^T v = sum_i w_i J_ij v_i: column j of the weighted rows against v */
+static inline double weighted_column_dot(Mat J, const double *sw, const double *v, Py_ssize_t j)
+{
+    double acc = 0.0;
+    for (Py_ssize_t i = 0; i < J.m; i++) acc += sw[i] * AT(J, i, j) * v[i];
+    return acc;
+}
+
+/* the length of a 1-D buffer (1 for a 0-D one) */
+static inline Py_ssize_t length(const Arg *a) { return a->view.ndim == 0 ? 1 : a->view.shape[0]; }
+
+static inline BoxEntry box_entry(const double *q, const double *work, Py_ssize_t c)
+{
+    Py_ssize_t box = (Py_ssize_t)work[P_BOX], count = (Py_ssize_t)work[P_BOX_COUNT];
+    BoxEntry b = {(Py_ssize_t)work[box + count + c], q[(Py_ssize_t)work[box + c]],
+                  work[box + 2 * count + c], work[box + 3 * count + c],
+                  work[box + 4 * count + c]};
+    return b;
+}
+
+/* The speed limit of velocity coordinate j (rad/s or m/s; INFINITY for none): work keeps its
+ * inverse, 0 for none. */
+static inline double speed_limit(const double *work, Py_ssize_t j)
+{
+    double inv = work[(Py_ssize_t)work[P_SPEED] + j];
+    return inv > 0.0 ? 1.0 / inv : INFINITY;
+}
+
+/* The speed (rad/s or m/s) at which a ramp at `rate` (rad/s^2, or rad/s^3 for a change of
+ * acceleration) still comes to rest within `room` (rad, or rad/s) when it starts after one step
+ * of dt (s): the positive root of v dt + v^2 / (2 rate) = room, as rate (-dt + sqrt(dt^2 +
+ * 2 room / rate)) (sjt_pin/limits/position.py, braking_speed without jerk). */
+static inline double ramp_speed(double rate, double room, double dt)
+{
+    return rate * (-dt + sqrt(dt * dt + 2.0 * room / rate));
+}
+
+/* The jerk limit Jk's bounds [*lo, *hi] on this step's velocity (rad/s) from the state (v, a)
+ * the step starts from: an acceleration within Jk dt of a, and the speed limit vj approached
+ * with an acceleration that can still ramp down to 0 before it (sjt_pin/limits/jerk.py) */
+static inline void jerk_bounds(double v, double a, double Jk, double vj, double dt, double *lo,
+                               double *hi)
+{
+    double change = Jk * dt;
+    *lo = v + dt * (a - change);
+    *hi = v + dt * (a + change);
+    double bound = v + dt * ramp_speed(Jk, dmax(vj - v, 0.0), dt);
+    if (isfinite(bound)) *hi = dmin(*hi, bound);
+    bound = v - dt * ramp_speed(Jk, dmax(vj + v, 0.0), dt);
+    if (isfinite(bound)) *lo = dmax(*lo, bound);
+}
+
+/* linalg.c */
+void gram(Mat J, const double *sw, const double *s, int use_rows, double *out);
+double loop_bound_c(const double *A, Py_ssize_t p, int products, double *B, double *C);
+int cholesky_factor(double *A, Py_ssize_t p, double shift);
+void cholesky_substitute(const double *L, Py_ssize_t p, const double *rhs, double *out);
+int cholesky_solve_c(double *A, Py_ssize_t p, double shift, const double *rhs, double *out);
+void symmetric_eigen_c(double *A, double *V, Py_ssize_t p);
+PyObject *py_cholesky_solve(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
+PyObject *py_loop_bound(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
+PyObject *py_symmetric_eigen(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
+
+/* methods.c */
+void damped_solve(Mat J, const double *v, const double *sw, const double *alpha,
+                  double *work, double dt, double *step, double extra);
+void pseudo_solve(double *A, double *V, Py_ssize_t p, const double *rhs, double *sol,
+                  double rcond);
+Core core(int kind, Mat J, const double *e, const double *ff, int has_ff,
+          const double *mask, double *work, double *step);
+
+/* saturation.c */
+void exact_position(const double *q, const double *work, double *step);
+void core_scaled(int kind, Mat J, const double *e, const double *ff, int has_ff,
+                 const double *mask, double *work, double *step, double factor,
+                 double *save);
+int sns_c(int kind, Mat J, const double *e, const double *ff, int has_ff,
+          const double *mask, double *work, const double *lo, const double *hi,
+          double *dq, double factor, double *save, int escaping, double *scale_out);
+int saturate_c(int kind, Mat J, const double *e, const double *ff, int has_ff,
+               const double *q, const double *mask, double *work, double *step,
+               int escaping);
+
+/* smooth_stage.c */
+int smooth_stage_c(int kind, Mat J, const double *e, const double *ff, int has_ff,
+                   const double *q, const double *mask, double *work, double *step,
+                   int escaping);
+
+/* step.c */
+int step_c(int kind, Mat J, const double *e, const double *ff, const double *q,
+           double *work, double *step);
+PyObject *py_transpose_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
+PyObject *py_least_squares_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
+
+/* search.c */
+PyObject *py_search_iteration(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
+PyObject *py_search_pose(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
+
+/* transforms.c */
+PyObject *py_frame_velocity(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
+PyObject *py_rotation_defect(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
+PyObject *py_position_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
+PyObject *py_unit_defect(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
+
+/* args.c */
+void release(Arg *a);
+int acquire(PyObject *obj, Arg *a, int writable, int ndim, const char *name);
+double *vec(Arg *a, const char *name);
+double *out_vec(Arg *a, const char *name);
+Mat mat(const Arg *a);
+double *out_mat(Arg *a, const char *name);
+int nargs_ok(Py_ssize_t got, Py_ssize_t want, const char *name);
+int check_work(const Arg *work, Py_ssize_t m, Py_ssize_t n, Py_ssize_t nq);
+int table_ok(const double *table, Py_ssize_t c, Py_ssize_t nq, Py_ssize_t n, int pairs,
+             const char *name);
+
+/* projection.c */
+PyObject *py_nonnegative_qp(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
+PyObject *py_project_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
+PyObject *py_rows_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
+PyObject *py_smooth_rows_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
+
+/* collision.c */
+PyObject *py_damper_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
+PyObject *py_witness_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
+PyObject *py_query_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
+PyObject *py_near_pairs(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
+
+#endif

@@ -1,0 +1,634 @@
+/* The constraint stage's correction: the smallest change of a step onto general rows
+ * A dq <= b within the bounds (NNLS on the dual), and a step checked against them. */
+
+#include "kernels.h"
+
+/* -- the constraint stage's correction (sjt_pin/constraints.py: project, nonnegative_qp) -------- */
+
+/* argmin 1/2 y^T Q y + r^T y over y >= 0 for the symmetric PSD Q (k x k, row-major) plus
+ * DUAL_RIDGE max(diag Q) I: the active-set method of Lawson and Hanson's NNLS on the normal
+ * equations of the passive set, step for step as constraints.nonnegative_qp (the reference;
+ * the passive set's system by Cholesky where numpy's lstsq solves it). scratch: 3 k + 2 k k
+ * doubles, then k + k passive/inert flags and k indices. Returns the passive-set solves. */
+static int nonnegative_qp_c(const double *Q, const double *r, Py_ssize_t k, double tol,
+                            double *y, double *scratch)
+{
+    double *w = scratch, *s = w + k, *rhs = s + k, *sub = rhs + k, *V = sub + k * k;
+    double *passive = V + k * k, *inert = passive + k;
+    Py_ssize_t *idx = (Py_ssize_t *)(inert + k);
+    double top = 0.0, rmax = 0.0;
+    for (Py_ssize_t i = 0; i < k; i++) {
+        y[i] = passive[i] = 0.0;
+        top = dmax(top, Q[i * k + i]);
+        rmax = dmax(rmax, fabs(r[i]));
+    }
+    double scale = tol * (1.0 + rmax), ridge = DUAL_RIDGE * top;
+    for (Py_ssize_t i = 0; i < k; i++)
+        inert[i] = Q[i * k + i] <= 1e-14 * dmax(top, 1e-300) ? 1.0 : 0.0;
+    int solves = 0;
+    for (Py_ssize_t outer = 0; outer < 3 * k + 10; outer++) {
+        Py_ssize_t t = -1;
+        double best = -INFINITY;
+        for (Py_ssize_t i = 0; i < k; i++) {
+            if (passive[i] != 0.0 || inert[i] != 0.0) continue;
+            double acc = -r[i] - ridge * y[i];
+            for (Py_ssize_t j = 0; j < k; j++) acc -= Q[i * k + j] * y[j];
+            w[i] = acc;
+            if (acc > best) {
+                best = acc;
+                t = i;
+            }
+        }
+        if (t < 0 || best <= scale) break;
+        passive[t] = 1.0;
+        for (Py_ssize_t inner = 0; inner < 3 * k + 10; inner++) {
+            Py_ssize_t p = 0;
+            for (Py_ssize_t i = 0; i < k; i++)
+                if (passive[i] != 0.0) idx[p++] = i;
+            for (Py_ssize_t a = 0; a < p; a++) {
+                rhs[a] = -r[idx[a]];
+                for (Py_ssize_t c = 0; c < p; c++) sub[a * p + c] = Q[idx[a] * k + idx[c]];
+                sub[a * p + a] += ridge;
+            }
+            double *sol = w;  /* w is recomputed before it is read again */
+            /* the ridge makes the passive set's system positive definite: Cholesky, and the
+             * pseudo-inverse only if rounding made a pivot vanish */
+            memcpy(V, sub, (size_t)(p * p) * sizeof(double));
+            if (cholesky_factor(V, p, 0.0))
+                cholesky_substitute(V, p, rhs, sol);
+            else
+                pseudo_solve(sub, V, p, rhs, sol, 0.0);
+            solves++;
+            for (Py_ssize_t i = 0; i < k; i++) s[i] = 0.0;
+            int positive = 1;
+            for (Py_ssize_t a = 0; a < p; a++) {
+                s[idx[a]] = sol[a];
+                if (!(sol[a] > 0.0)) positive = 0;
+            }
+            if (positive) {
+                memcpy(y, s, (size_t)k * sizeof(double));
+                break;
+            }
+            /* the step toward s stops where the first of those at or below 0 reaches 0 (one
+             * already at 0 with s = 0 too stops it at once) */
+            double alpha = INFINITY;
+            for (Py_ssize_t a = 0; a < p; a++) {
+                Py_ssize_t i = idx[a];
+                if (s[i] > 0.0) continue;
+                double gap = y[i] - s[i];
+                alpha = dmin(alpha, gap > 0.0 ? y[i] / gap : 0.0);
+            }
+            int any = 0;
+            for (Py_ssize_t i = 0; i < k; i++) {
+                y[i] += alpha * (s[i] - y[i]);
+                if (passive[i] != 0.0 && !(y[i] > 1e-15)) passive[i] = 0.0;
+                if (passive[i] == 0.0) y[i] = 0.0;
+                any |= passive[i] != 0.0;
+            }
+            if (!any) break;
+        }
+    }
+    return solves;
+}
+
+/* doubles of scratch nonnegative_qp_c needs for k rows (its flags and indices included) */
+static Py_ssize_t nonnegative_qp_scratch(Py_ssize_t k) { return 6 * k + 2 * k * k + 1; }
+
+/* out = argmin (x - dq)^T H (x - dq), H = Jw_c^T Jw_c + rho I on the moving joints c (rho the
+ * mean of H's diagonal), subject to A x <= b and lower <= x <= upper, the others at dq: as
+ * constraints.project (its reference), on the dual of the Cholesky-whitened problem; when no
+ * x meets them all, within the bounds. Returns the passive-set solves, -1 when out of memory. */
+static int project_once_c(const double *dq, Mat Jw, Mat A, const double *b,
+                          const double *lower, const double *upper, const double *moving,
+                          double *out)
+{
+    Py_ssize_t n = Jw.n, m = Jw.m, k = A.m, nc = 0, rows;
+    Py_ssize_t lo_count = 0, hi_count = 0;
+    for (Py_ssize_t j = 0; j < n; j++) {
+        out[j] = dq[j];
+        if (moving[j] != 0.0) {
+            nc++;
+            lo_count += isfinite(lower[j]) ? 1 : 0;
+            hi_count += isfinite(upper[j]) ? 1 : 0;
+        }
+    }
+    rows = k + lo_count + hi_count;
+    size_t size = (size_t)(n + nc * nc + rows * nc + 2 * rows + rows * rows + 2 * nc
+                           + nonnegative_qp_scratch(rows));
+    double *mem = (double *)malloc(size * sizeof(double));
+    if (!mem) return -1;
+    Py_ssize_t *cols = (Py_ssize_t *)mem;
+    double *L = mem + n, *C = L + nc * nc, *h = C + rows * nc, *y = h + rows, *Q = y + rows;
+    double *x0 = Q + rows * rows, *z = x0 + nc, *scratch = z + nc;
+    nc = 0;
+    for (Py_ssize_t j = 0; j < n; j++)
+        if (moving[j] != 0.0) cols[nc++] = j;
+    double trace = 0.0;
+    for (Py_ssize_t a = 0; a < nc; a++) {
+        x0[a] = dq[cols[a]];
+        for (Py_ssize_t c = 0; c <= a; c++) {
+            double acc = 0.0;
+            for (Py_ssize_t i = 0; i < m; i++) acc += AT(Jw, i, cols[a]) * AT(Jw, i, cols[c]);
+            L[a * nc + c] = L[c * nc + a] = acc;
+        }
+        trace += L[a * nc + a];
+    }
+    double rho = dmax(trace / (double)(nc > 0 ? nc : 1), 1e-12);
+    int solves = 0;
+    if (nc > 0 && !cholesky_factor(L, nc, rho)) {
+        free(mem);
+        return 0;  /* not reached: H + rho I is positive definite */
+    }
+    /* G: A's moving columns, then -e_c for each finite lower bound, e_c for each upper;
+     * C = G L^-T row by row (forward substitution), r = h - G x0 (into h) */
+    Py_ssize_t row = 0;
+    for (Py_ssize_t i = 0; i < rows; i++) {
+        double *g = C + i * nc;
+        double hi_;
+        if (i < k) {
+            hi_ = b[i];
+            for (Py_ssize_t j = 0; j < n; j++)
+                if (moving[j] == 0.0) hi_ -= AT(A, i, j) * dq[j];
+            for (Py_ssize_t a = 0; a < nc; a++) g[a] = AT(A, i, cols[a]);
+        } else {
+            for (Py_ssize_t a = 0; a < nc; a++) g[a] = 0.0;
+            int upper_row = i >= k + lo_count;
+            /* the next column with a finite bound of this kind */
+            if (i == k || i == k + lo_count) row = 0;
+            while (!isfinite(upper_row ? upper[cols[row]] : lower[cols[row]])) row++;
+            g[row] = upper_row ? 1.0 : -1.0;
+            hi_ = upper_row ? upper[cols[row]] : -lower[cols[row]];
+            row++;
+        }
+        for (Py_ssize_t a = 0; a < nc; a++) hi_ -= g[a] * x0[a];
+        h[i] = hi_;
+        for (Py_ssize_t a = 0; a < nc; a++) {
+            double acc = g[a];
+            for (Py_ssize_t c = 0; c < a; c++) acc -= L[a * nc + c] * g[c];
+            g[a] = acc / L[a * nc + a];
+        }
+    }
+    for (Py_ssize_t i = 0; i < rows; i++)
+        for (Py_ssize_t j = 0; j <= i; j++) {
+            double acc = 0.0;
+            for (Py_ssize_t a = 0; a < nc; a++) acc += C[i * nc + a] * C[j * nc + a];
+            Q[i * rows + j] = Q[j * rows + i] = acc;
+        }
+    solves = nonnegative_qp_c(Q, h, rows, 1e-13, y, scratch);
+    /* z = -C^T y, then x - x0 = L^-T z (back substitution) */
+    for (Py_ssize_t a = 0; a < nc; a++) {
+        double acc = 0.0;
+        for (Py_ssize_t i = 0; i < rows; i++) acc -= C[i * nc + a] * y[i];
+        z[a] = acc;
+    }
+    for (Py_ssize_t a = nc - 1; a >= 0; a--) {
+        double acc = z[a];
+        for (Py_ssize_t c = a + 1; c < nc; c++) acc -= L[c * nc + a] * z[c];
+        z[a] = acc / L[a * nc + a];
+    }
+    /* the bounds are hard: rows that no velocity within them meets (the dual unbounded but
+     * for its ridge) leave the answer on them, not beyond */
+    for (Py_ssize_t a = 0; a < nc; a++) {
+        Py_ssize_t j = cols[a];
+        out[j] = dmin(dmax(x0[a] + z[a], lower[j]), upper[j]);
+    }
+    free(mem);
+    return solves;
+}
+
+/* The step the projection starts from when it had to correct dq (constraints.rest_target):
+ * dq's self-motion (dq minus its least-norm part with the same task motion Jw dq, on the
+ * moving joints) scaled by the share phi = |Jw x| / |Jw dq| of the task motion the first
+ * projection x kept. A method's step (SJT's per-joint scaling, a saturated step) carries
+ * self-motion along with its push on the task; where the rows stop that push (a target inside
+ * an obstacle) its self-motion would go on alone and the arm drift in its null space. Writes
+ * into target (n) and returns 1, or 0 where it keeps dq (no task motion asked or kept whole,
+ * a singular Jw, out of memory). */
+static int rest_target_c(const double *dq, Mat Jw, const double *moving, const double *x,
+                         double *target)
+{
+    Py_ssize_t n = Jw.n, m = Jw.m;
+    if (m == 0) return 0;
+    double *S = (double *)malloc((size_t)(m * m + 3 * m) * sizeof(double));
+    if (!S) return 0;
+    double *t0 = S + m * m, *t1 = t0 + m, *w = t1 + m;
+    double asked = 0.0, kept = 0.0, trace = 0.0;
+    for (Py_ssize_t i = 0; i < m; i++) {
+        double a0 = 0.0, a1 = 0.0;
+        for (Py_ssize_t j = 0; j < n; j++)
+            if (moving[j] != 0.0) {
+                a0 += AT(Jw, i, j) * dq[j];
+                a1 += AT(Jw, i, j) * x[j];
+            }
+        t0[i] = a0;
+        t1[i] = a1;
+        asked += a0 * a0;
+        kept += a1 * a1;
+        for (Py_ssize_t r = 0; r <= i; r++) {
+            double acc = 0.0;
+            for (Py_ssize_t j = 0; j < n; j++)
+                if (moving[j] != 0.0) acc += AT(Jw, i, j) * AT(Jw, r, j);
+            S[i * m + r] = S[r * m + i] = acc;
+        }
+        trace += S[i * m + i];
+    }
+    double phi = asked > 0.0 ? sqrt(kept / asked) : 1.0;
+    if (!(phi < 1.0) || !cholesky_factor(S, m, REST_RIDGE * dmax(trace / (double)m, 1e-300))) {
+        free(S);
+        return 0;
+    }
+    cholesky_substitute(S, m, t0, w);
+    for (Py_ssize_t j = 0; j < n; j++) {
+        target[j] = dq[j];
+        if (moving[j] == 0.0) continue;
+        double task = 0.0;
+        for (Py_ssize_t i = 0; i < m; i++) task += AT(Jw, i, j) * w[i];
+        target[j] = task + phi * (dq[j] - task);
+    }
+    free(S);
+    return 1;
+}
+
+/* project_once_c, from rest_target_c's start where the first projection corrected dq: the
+ * stage's correction (constraints.project) */
+static int project_c(const double *dq, Mat Jw, Mat A, const double *b, const double *lower,
+                     const double *upper, const double *moving, double *out)
+{
+    int solves = project_once_c(dq, Jw, A, b, lower, upper, moving, out);
+    if (solves < 0) return solves;
+    Py_ssize_t n = Jw.n;
+    int changed = 0;
+    for (Py_ssize_t j = 0; j < n && !changed; j++) changed = out[j] != dq[j];
+    if (!changed) return solves;
+    double *target = (double *)malloc((size_t)(n > 0 ? n : 1) * sizeof(double));
+    if (!target) return -1;
+    if (rest_target_c(dq, Jw, moving, out, target)) {
+        int again = project_once_c(target, Jw, A, b, lower, upper, moving, out);
+        solves = again < 0 ? again : solves + again;
+    }
+    free(target);
+    return solves;
+}
+
+/* nonnegative_qp(Q, r, y) -> int: y = argmin 1/2 y^T Q y + r^T y over y >= 0 */
+PyObject *py_nonnegative_qp(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (!nargs_ok(nargs, 3, "nonnegative_qp")) return NULL;
+    Arg Qa = {0}, ra = {0}, ya = {0};
+    PyObject *result = NULL;
+    double *mem = NULL;
+    if (acquire(args[0], &Qa, 0, 2, "Q") || acquire(args[1], &ra, 0, 1, "r")
+        || acquire(args[2], &ya, 1, 1, "y"))
+        goto done;
+    Py_ssize_t k = length(&ra);
+    Mat Qm = mat(&Qa);
+    double *rv = vec(&ra, "r"), *yv = out_vec(&ya, "y");
+    if (!rv || !yv) goto done;
+    if (Qm.m != k || Qm.n != k || length(&ya) != k) {
+        PyErr_Format(PyExc_ValueError, "Q (%zd, %zd), r (%zd,) and y (%zd,) do not fit", Qm.m,
+                     Qm.n, k, length(&ya));
+        goto done;
+    }
+    mem = (double *)malloc((size_t)(k * k + nonnegative_qp_scratch(k)) * sizeof(double));
+    if (!mem) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    for (Py_ssize_t i = 0; i < k; i++)
+        for (Py_ssize_t j = 0; j < k; j++) mem[i * k + j] = AT(Qm, i, j);
+    int solves = nonnegative_qp_c(mem, rv, k, 1e-13, yv, mem + k * k);
+    result = PyLong_FromLong(solves);
+done:
+    free(mem);
+    release(&Qa); release(&ra); release(&ya);
+    return result;
+}
+
+/* project_rows(dq, Jw, A, b, lower, upper, moving, out) -> int */
+PyObject *py_project_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (!nargs_ok(nargs, 8, "project_rows")) return NULL;
+    Arg dq = {0}, Jw = {0}, A = {0}, b = {0}, lo = {0}, hi = {0}, mv = {0}, out = {0};
+    PyObject *result = NULL;
+    if (acquire(args[0], &dq, 0, 1, "dq") || acquire(args[1], &Jw, 0, 2, "Jw")
+        || acquire(args[2], &A, 0, 2, "A") || acquire(args[3], &b, 0, 1, "b")
+        || acquire(args[4], &lo, 0, 1, "lower") || acquire(args[5], &hi, 0, 1, "upper")
+        || acquire(args[6], &mv, 0, 1, "moving") || acquire(args[7], &out, 1, 1, "out"))
+        goto done;
+    Mat Jm = mat(&Jw), Am = mat(&A);
+    Py_ssize_t n = length(&dq);
+    if (Jm.n != n || Am.n != n || length(&b) != Am.m || length(&lo) != n || length(&hi) != n
+        || length(&mv) != n || length(&out) != n) {
+        PyErr_Format(PyExc_ValueError, "dq (%zd,), Jw (%zd, %zd), A (%zd, %zd), b (%zd,), lower, "
+                     "upper, moving and out (n,) do not fit", n, Jm.m, Jm.n, Am.m, Am.n,
+                     length(&b));
+        goto done;
+    }
+    double *dv = vec(&dq, "dq"), *bv = vec(&b, "b"), *lv = vec(&lo, "lower");
+    double *hv = vec(&hi, "upper"), *mvv = vec(&mv, "moving"), *ov = out_vec(&out, "out");
+    if (!dv || !bv || !lv || !hv || !mvv || !ov) goto done;
+    int solves;
+    Py_BEGIN_ALLOW_THREADS
+    solves = project_c(dv, Jm, Am, bv, lv, hv, mvv, ov);
+    Py_END_ALLOW_THREADS
+    if (solves < 0) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    result = PyLong_FromLong(solves);
+done:
+    release(&dq); release(&Jw); release(&A); release(&b); release(&lo); release(&hi);
+    release(&mv); release(&out);
+    return result;
+}
+
+/* A kernel step (step, written by step_c) against a user's general rows A q_dot <= b and
+ * bounds [lower, upper] (rad/s; -inf/inf where none): 0 when it meets them all (step
+ * untouched), -1 when it breaks one of the bounds (the caller's whole constraint stage must
+ * saturate it), else 1 with step projected onto the rows within those bounds and the kernel's
+ * own box of this step (project_c in the metric of the weighted task rows, the moving joints
+ * of the mask; every joint inside its range exactly onto a limit it reaches); -2 when out of
+ * memory. */
+static int rows_step_c(Mat J, const double *q, Mat A, const double *b, const double *lower,
+                       const double *upper, double *work, double *step)
+{
+    Py_ssize_t m = J.m, n = J.n, k = A.m;
+    double dt = work[P_DT];
+    const double *mask = work + (Py_ssize_t)work[P_MASK];
+    const double *sw = work + (Py_ssize_t)work[P_ROWS];
+    const double *box_lo = work + (Py_ssize_t)work[P_CLAMPED] + n, *box_hi = box_lo + n;
+    for (Py_ssize_t j = 0; j < n; j++) {
+        double v = step[j] / dt;
+        if (v < lower[j] - BOUND_TOL || v > upper[j] + BOUND_TOL) return -1;
+    }
+    int broken = 0;
+    for (Py_ssize_t i = 0; i < k && !broken; i++) {
+        double acc = -b[i];
+        for (Py_ssize_t j = 0; j < n; j++) acc += AT(A, i, j) * step[j] / dt;
+        if (acc > BOUND_TOL * (1.0 + fabs(b[i]))) broken = 1;
+    }
+    if (!broken) return 0;
+    double *mem = (double *)malloc((size_t)(m * n + 5 * n + 1) * sizeof(double));
+    if (!mem) return -2;
+    double *Jw = mem, *dq = Jw + m * n, *lo = dq + n, *hi = lo + n, *moving = hi + n;
+    double *out = moving + n;
+    for (Py_ssize_t i = 0; i < m; i++)
+        for (Py_ssize_t j = 0; j < n; j++) Jw[i * n + j] = sw[i] * AT(J, i, j) * mask[j];
+    for (Py_ssize_t j = 0; j < n; j++) {
+        dq[j] = step[j] / dt;
+        lo[j] = dmax(box_lo[j], lower[j]);
+        hi[j] = dmin(box_hi[j], upper[j]);
+        moving[j] = mask[j] != 0.0 ? 1.0 : 0.0;
+    }
+    Mat Jm = {Jw, m, n, n, 1};
+    int solves = project_c(dq, Jm, A, b, lo, hi, moving, out);
+    if (solves < 0) {
+        free(mem);
+        return -2;
+    }
+    for (Py_ssize_t j = 0; j < n; j++) step[j] = out[j] * dt;
+    exact_position(q, work, step);
+    free(mem);
+    return 1;
+}
+
+/* Whether a limit's rows A, b and bounds lower, upper (any may be unset) hold no NaN, and A no
+ * inf (inf in b or a bound means no bound): a NaN bounds nothing, so the joints would move
+ * freely. Sets ValueError otherwise (the caller names the limit). */
+static int rows_finite(Mat A, const Arg *b, const Arg *lo, const Arg *hi)
+{
+    for (Py_ssize_t i = 0; i < A.m; i++)
+        for (Py_ssize_t j = 0; j < A.n; j++)
+            if (!isfinite(AT(A, i, j))) goto bad;
+    const Arg *vectors[3] = {b, lo, hi};
+    for (int k = 0; k < 3; k++) {
+        const Arg *a = vectors[k];
+        if (!a->view.buf) continue;
+        Py_ssize_t len = length(a), stride = a->view.ndim ? a->view.strides[0] / 8 : 1;
+        const double *x = (const double *)a->view.buf;
+        for (Py_ssize_t i = 0; i < len; i++)
+            if (isnan(x[i * stride])) goto bad;
+    }
+    return 0;
+bad:
+    PyErr_SetString(PyExc_ValueError, "a limit's rows or bounds hold NaN (or A holds inf): a "
+                    "row or bound that bounds nothing would let the joints move freely");
+    return -1;
+}
+
+/* rows_step(J, q, A, b, lower, upper, work, step) -> int (rows_step_c) */
+PyObject *py_rows_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (!nargs_ok(nargs, 8, "rows_step")) return NULL;
+    Arg J = {0}, q = {0}, A = {0}, b = {0}, lo = {0}, hi = {0}, work = {0}, step = {0};
+    PyObject *result = NULL;
+    if (acquire(args[0], &J, 0, 2, "J") || acquire(args[1], &q, 0, 1, "q")
+        || acquire(args[2], &A, 0, 2, "A") || acquire(args[3], &b, 0, 1, "b")
+        || acquire(args[4], &lo, 0, 1, "lower") || acquire(args[5], &hi, 0, 1, "upper")
+        || acquire(args[6], &work, 1, 1, "work") || acquire(args[7], &step, 1, 1, "step"))
+        goto done;
+    Mat Jm = mat(&J), Am = mat(&A);
+    Py_ssize_t n = Jm.n;
+    if (Am.n != n || length(&b) != Am.m || length(&lo) != n || length(&hi) != n
+        || length(&step) != n) {
+        PyErr_Format(PyExc_ValueError, "J (%zd, %zd), A (%zd, %zd), b (%zd,), lower, upper and "
+                     "step (n,) do not fit", Jm.m, n, Am.m, Am.n, length(&b));
+        goto done;
+    }
+    if (check_work(&work, Jm.m, n, length(&q)) || rows_finite(Am, &b, &lo, &hi)) goto done;
+    if (((const double *)work.view.buf)[P_SMOOTH] != 0.0) {
+        PyErr_SetString(PyExc_ValueError, "rows_step: a work vector with the acceleration/jerk "
+                        "stage (Layout(..., smooth=True)) keeps no step box");
+        goto done;
+    }
+    double *qv = vec(&q, "q"), *bv = vec(&b, "b"), *lv = vec(&lo, "lower");
+    double *hv = vec(&hi, "upper"), *wv = out_vec(&work, "work"), *sv = out_vec(&step, "step");
+    if (!qv || !bv || !lv || !hv || !wv || !sv) goto done;
+    int status;
+    Py_BEGIN_ALLOW_THREADS
+    status = rows_step_c(Jm, qv, Am, bv, lv, hv, wv, sv);
+    Py_END_ALLOW_THREADS
+    if (status == -2) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    result = PyLong_FromLong(status);
+done:
+    release(&J); release(&q); release(&A); release(&b); release(&lo); release(&hi);
+    release(&work); release(&step);
+    return result;
+}
+
+/* the acceleration and jerk limits' box of joint j around the state (v, a) a step starts from
+ * (smooth_stage_c's step 3, without the approach to the wanted velocity) */
+static void smoothness_box(const double *S, Py_ssize_t n, Py_ssize_t j, double v, double a,
+                           double dt, int has_jerk, double *lo_out, double *hi_out)
+{
+    double A = S[SM_ACC * n + j], Jk = S[SM_JERK * n + j], vj = S[SM_JERK_SPEED * n + j];
+    double lo = v - A * dt, hi = v + A * dt;
+    if (has_jerk && isfinite(Jk)) {
+        double jl, jh;
+        jerk_bounds(v, a, Jk, vj, dt, &jl, &jh);
+        lo = dmax(lo, jl);
+        hi = dmin(hi, jh);
+    }
+    if (lo > hi) lo = hi = 0.5 * (lo + hi);  /* limits that contradict each other */
+    *lo_out = lo;
+    *hi_out = hi;
+}
+
+/* A step of the compiled acceleration/jerk stage (step and the stage's part of work, written by
+ * smooth_stage_c) against a user's general rows A q_dot <= b and bounds [lower, upper] (rad/s;
+ * -inf/inf where none; both NULL: none at all); `previous` (2 nv) is the motion state the step started from (the
+ * velocity, then the acceleration, commanded the step before). 0 when the step meets them all
+ * (step and work untouched); -1 when a user's bound leaves nothing of the stage's hard box on
+ * some joint (the caller's whole constraint stage must weigh them); else step is projected
+ * (project_c in the metric of the weighted task rows, the moving joints of the mask) onto the
+ * rows within the user's bounds, the stage's hard box (positions with their braking, speeds)
+ * and the acceleration/jerk box around the previous state: 1 when that holds; 2 when no velocity
+ * in it meets the rows, and the hard limits and the rows win (the stage's rule): the
+ * smoothness box is widened around its centre, 2, 4, ... 32 times, until they hold (else it is
+ * dropped), and the joints that leave it are marked in SM_TORN. After a projection every joint
+ * inside its range lands exactly on a limit it reaches, SM_OUT holds the new velocity and the
+ * motion state (SM_DQ, SM_DDQ) the one it commands. -2 when out of memory. */
+static int smooth_rows_c(Mat J, const double *q, Mat A, const double *b, const double *lower,
+                         const double *upper, const double *previous, double *work,
+                         double *step)
+{
+    Py_ssize_t m = J.m, n = J.n, k = A.m;
+    double dt = work[P_DT];
+    const double *mask = work + (Py_ssize_t)work[P_MASK];
+    const double *sw = work + (Py_ssize_t)work[P_ROWS];
+    double *S = work + (Py_ssize_t)work[P_SMOOTH];
+    double *pdq = S + SM_DQ * n, *pddq = S + SM_DDQ * n;
+    const double *hlo = S + SM_HARD_LO * n, *hhi = S + SM_HARD_HI * n;
+    double *out = S + SM_OUT * n, *torn = S + SM_TORN * n;
+    int has_jerk = work[P_JERK] != 0.0;
+    int broken = 0;
+    for (Py_ssize_t j = 0; j < n && !broken && lower; j++) {
+        double v = step[j] / dt;
+        if (v < lower[j] - BOUND_TOL || v > upper[j] + BOUND_TOL) broken = 1;
+    }
+    for (Py_ssize_t i = 0; i < k && !broken; i++) {
+        double acc = -b[i];
+        for (Py_ssize_t j = 0; j < n; j++) acc += AT(A, i, j) * step[j] / dt;
+        if (acc > BOUND_TOL * (1.0 + fabs(b[i]))) broken = 1;
+    }
+    if (!broken) return 0;
+    double *mem = (double *)malloc((size_t)(m * n + 10 * n + 1) * sizeof(double));
+    if (!mem) return -2;
+    double *Jw = mem, *dq = Jw + m * n, *lo = dq + n, *hi = lo + n, *moving = hi + n;
+    double *res = moving + n, *hard_lo = res + n, *hard_hi = hard_lo + n;
+    double *soft_lo = hard_hi + n, *soft_hi = soft_lo + n;
+    for (Py_ssize_t i = 0; i < m; i++)
+        for (Py_ssize_t j = 0; j < n; j++) Jw[i * n + j] = sw[i] * AT(J, i, j) * mask[j];
+    for (Py_ssize_t j = 0; j < n; j++) {
+        dq[j] = step[j] / dt;
+        moving[j] = mask[j] != 0.0 ? 1.0 : 0.0;
+        hard_lo[j] = lower ? dmax(hlo[j], lower[j]) : hlo[j];
+        hard_hi[j] = upper ? dmin(hhi[j], upper[j]) : hhi[j];
+        if (hard_lo[j] > hard_hi[j]) {  /* the user's bound against the hard box */
+            free(mem);
+            return -1;
+        }
+        smoothness_box(S, n, j, previous[j], previous[n + j], dt, has_jerk, soft_lo + j,
+                       soft_hi + j);
+    }
+    Mat Jm = {Jw, m, n, n, 1};
+    int status = 1;
+    for (int round = 0; round <= SMOOTH_WIDEN_ROUNDS; round++) {
+        /* round r: the smoothness box widened 2^r times (the last round: none), within the
+         * hard box */
+        double widen = (double)(1 << (round < SMOOTH_WIDEN_ROUNDS ? round : 0));
+        for (Py_ssize_t j = 0; j < n; j++) {
+            double l = hard_lo[j], u = hard_hi[j];
+            if (round < SMOOTH_WIDEN_ROUNDS) {
+                double c = 0.5 * (soft_lo[j] + soft_hi[j]), r = 0.5 * (soft_hi[j] - soft_lo[j]);
+                double sl = dmax(l, c - widen * r), su = dmin(u, c + widen * r);
+                if (sl <= su) {  /* else the hard box lies beyond: it wins on this joint */
+                    l = sl;
+                    u = su;
+                } else {
+                    status = 2;
+                }
+            }
+            lo[j] = l;
+            hi[j] = u;
+        }
+        if (project_c(dq, Jm, A, b, lo, hi, moving, res) < 0) {
+            free(mem);
+            return -2;
+        }
+        int kept = 1;  /* the rows met within the box (to the dual's ridge) */
+        for (Py_ssize_t i = 0; i < k && kept; i++) {
+            double acc = -b[i];
+            for (Py_ssize_t j = 0; j < n; j++) acc += AT(A, i, j) * res[j];
+            if (acc > 1e-9 * (1.0 + fabs(b[i]))) kept = 0;
+        }
+        if (kept || round == SMOOTH_WIDEN_ROUNDS) break;
+        status = 2;
+    }
+    for (Py_ssize_t j = 0; j < n; j++) step[j] = res[j] * dt;
+    exact_position(q, work, step);
+    for (Py_ssize_t j = 0; j < n; j++) {
+        double v = step[j] / dt;
+        if (v < soft_lo[j] - BOUND_TOL || v > soft_hi[j] + BOUND_TOL) torn[j] = 1.0;
+        out[j] = v;
+        pddq[j] = (v - previous[j]) / dt;
+        pdq[j] = v;
+    }
+    free(mem);
+    return status;
+}
+
+/* smooth_rows_step(J, q, A, b, lower, upper, previous, work, step) -> int (smooth_rows_c;
+ * lower and upper both None: no bounds, two buffers fewer to acquire) */
+PyObject *py_smooth_rows_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (!nargs_ok(nargs, 9, "smooth_rows_step")) return NULL;
+    Arg J = {0}, q = {0}, A = {0}, b = {0}, lo = {0}, hi = {0}, pv = {0}, work = {0};
+    Arg step = {0};
+    PyObject *result = NULL;
+    int bounded = args[4] != Py_None || args[5] != Py_None;
+    if (acquire(args[0], &J, 0, 2, "J") || acquire(args[1], &q, 0, 1, "q")
+        || acquire(args[2], &A, 0, 2, "A") || acquire(args[3], &b, 0, 1, "b")
+        || (bounded && (acquire(args[4], &lo, 0, 1, "lower")
+                        || acquire(args[5], &hi, 0, 1, "upper")))
+        || acquire(args[6], &pv, 0, 1, "previous") || acquire(args[7], &work, 1, 1, "work")
+        || acquire(args[8], &step, 1, 1, "step"))
+        goto done;
+    Mat Jm = mat(&J), Am = mat(&A);
+    Py_ssize_t n = Jm.n;
+    if (Am.n != n || length(&b) != Am.m || (bounded && (length(&lo) != n || length(&hi) != n))
+        || length(&pv) != 2 * n || length(&step) != n) {
+        PyErr_Format(PyExc_ValueError, "J (%zd, %zd), A (%zd, %zd), b (%zd,), lower, upper, "
+                     "step (n,) and previous (2 n,) do not fit", Jm.m, n, Am.m, Am.n,
+                     length(&b));
+        goto done;
+    }
+    if (check_work(&work, Jm.m, n, length(&q)) || rows_finite(Am, &b, &lo, &hi)) goto done;
+    double *wv = out_vec(&work, "work");
+    if (!wv) goto done;
+    if (!(wv[P_SMOOTH] > 0.0)) {
+        PyErr_SetString(PyExc_ValueError, "work has no acceleration/jerk stage "
+                        "(Layout(..., smooth=True))");
+        goto done;
+    }
+    double *qv = vec(&q, "q"), *bv = vec(&b, "b");
+    double *lv = bounded ? vec(&lo, "lower") : NULL, *hv = bounded ? vec(&hi, "upper") : NULL;
+    double *pvv = vec(&pv, "previous"), *sv = out_vec(&step, "step");
+    if (!qv || !bv || (bounded && (!lv || !hv)) || !pvv || !sv) goto done;
+    int status;
+    Py_BEGIN_ALLOW_THREADS
+    status = smooth_rows_c(Jm, qv, Am, bv, lv, hv, pvv, wv, sv);
+    Py_END_ALLOW_THREADS
+    if (status == -2) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    result = PyLong_FromLong(status);
+done:
+    release(&J); release(&q); release(&A); release(&b); release(&lo); release(&hi);
+    release(&pv); release(&work); release(&step);
+    return result;
+}
