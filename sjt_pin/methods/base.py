@@ -17,7 +17,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from .. import kernels as K
+from .. import kernels
 from ..gains import Gain
 from ..tasks.base import Task
 
@@ -34,9 +34,9 @@ class Method(ABC):
 
     def configure(self, work: np.ndarray, gain: Gain, dt: float, n_chain: int) -> None:
         """Write the kernel's parameters into ``work`` (its ``P_*`` slots)."""
-        work[K.P_DT] = dt
-        work[K.P_GAIN_MODE] = gain.mode
-        work[K.P_GAIN_ARG] = self.gain_argument(gain, n_chain)
+        work[kernels.P_DT] = dt
+        work[kernels.P_GAIN_MODE] = gain.mode
+        work[kernels.P_GAIN_ARG] = self.gain_argument(gain, n_chain)
 
     def adapt(self, tasks: Sequence[Task], length: float) -> None:  # noqa: B027
         """Adapt the parameters that depend on the solver's tasks: ``tasks`` are its bound
@@ -63,7 +63,7 @@ class Method(ABC):
 
     def feedforward_mode(self) -> int:
         """The kernels' ``P_FF_MODE``: how a desired velocity is mapped."""
-        return K.FF_TRANSPOSE
+        return kernels.FF_TRANSPOSE
 
     def python_step(self, J: np.ndarray, e: np.ndarray, ff: np.ndarray, q: np.ndarray,
                     work: np.ndarray, step: np.ndarray) -> int:
@@ -72,34 +72,36 @@ class Method(ABC):
         ``J_w = diag(sw) J`` and "auto" ``gain = c / (dt lambda_max(J_w M))``; writes the
         kernel's results into ``work`` and returns its status bits."""
         m, n = J.shape
-        rows, mask_at = int(work[K.P_ROWS]), int(work[K.P_MASK])
+        rows, mask_at = int(work[kernels.P_ROWS]), int(work[kernels.P_MASK])
         sw, k = work[rows:rows + m], work[rows + m:rows + 2 * m]
         mask = work[mask_at:mask_at + n]
-        dt = work[K.P_DT]
+        dt = work[kernels.P_DT]
         Jw = sw[:, None] * J * mask
         ew = sw * e
         M = np.asarray(self.matrix(Jw), dtype=float)
         loop = float(np.max(np.linalg.eigvals(Jw @ M).real, initial=0.0)) if m else 0.0
-        if work[K.P_GAIN_MODE] == K.GAIN_FIXED:
+        if work[kernels.P_GAIN_MODE] == kernels.GAIN_FIXED:
             gain = 1.0
         else:
-            gain = work[K.P_GAIN_ARG] / (dt * loop) if loop > 0.0 else 0.0
+            gain = work[kernels.P_GAIN_ARG] / (dt * loop) if loop > 0.0 else 0.0
         v = gain * k * ew
-        has_ff = work[K.P_HAS_FF] != 0.0
+        has_ff = work[kernels.P_HAS_FF] != 0.0
         if has_ff:
             v = v + sw * ff
         step[:] = dt * (M @ v) * mask
-        if work[K.P_ESCAPING] != 0.0:
-            step += dt * work[int(work[K.P_EXTRA]):int(work[K.P_EXTRA]) + n]
-        rows_e = int(work[K.P_ERROR_ROWS])
-        info = work[K.INFO:K.INFO + K.INFO_SIZE]
-        info[K.I_E_SQ] = float(e[:rows_e] @ e[:rows_e])
-        info[K.I_FF_SQ] = float(ff @ ff) if has_ff else 0.0
-        info[K.I_EW_SQ] = float(ew[:rows_e] @ ew[:rows_e])
-        info[K.I_GAIN], info[K.I_LOOP], info[K.I_STALL] = gain, max(loop, 1.0), 1.0
-        info[K.I_TRACE], info[K.I_SCALE] = float(np.trace(Jw @ M)), 1.0
-        info[K.I_REGULAR] = float(np.linalg.norm(step)) / dt
-        return 0 if np.isfinite(info[K.I_E_SQ] + info[K.I_FF_SQ]) else K.NON_FINITE
+        if work[kernels.P_ESCAPING] != 0.0:
+            step += dt * work[int(work[kernels.P_EXTRA]):int(work[kernels.P_EXTRA]) + n]
+        rows_e = int(work[kernels.P_ERROR_ROWS])
+        info = work[kernels.INFO:kernels.INFO + kernels.INFO_SIZE]
+        info[kernels.I_E_SQ] = float(e[:rows_e] @ e[:rows_e])
+        info[kernels.I_FF_SQ] = float(ff @ ff) if has_ff else 0.0
+        info[kernels.I_EW_SQ] = float(ew[:rows_e] @ ew[:rows_e])
+        info[kernels.I_GAIN], info[kernels.I_LOOP] = gain, max(loop, 1.0)
+        info[kernels.I_STALL] = 1.0
+        info[kernels.I_TRACE], info[kernels.I_SCALE] = float(np.trace(Jw @ M)), 1.0
+        info[kernels.I_REGULAR] = float(np.linalg.norm(step)) / dt
+        finite = np.isfinite(info[kernels.I_E_SQ] + info[kernels.I_FF_SQ])
+        return 0 if finite else kernels.NON_FINITE
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}()"

@@ -2,15 +2,15 @@
 
 from __future__ import annotations
 
-from .. import kernels as K
+from .. import kernels
 from ..mappings import COLUMN_TOL
 from ..tasks import OrientationTask, PoseTask
 from ..validation import positive, real_number
 from .base import Method
 
 #: Feed-forward and feedback modes of the transpose methods.
-FEEDFORWARDS = {"damped": K.FF_DAMPED, "transpose": K.FF_TRANSPOSE}
-FEEDBACKS = {"damped": K.FB_DAMPED, "transpose": K.FB_TRANSPOSE}
+FEEDFORWARDS = {"damped": kernels.FF_DAMPED, "transpose": kernels.FF_TRANSPOSE}
+FEEDBACKS = {"damped": kernels.FB_DAMPED, "transpose": kernels.FB_TRANSPOSE}
 #: Levenberg-Marquardt weight of the damped feedback: its damping is mu^2 + LM_WEIGHT |e_w|
 #: sqrt(max alpha), a bound of the curvature of 1/2 |e_w|^2 on the unit-norm columns that the
 #: linear model leaves out (unit-free); the same term bounds the transpose feedback's gain.
@@ -55,7 +55,7 @@ class TransposeMethod(Method):
     """
 
     stalls = True
-    kernel = staticmethod(K.transpose_step)
+    kernel = staticmethod(kernels.transpose_step)
     scaled = False
 
     def __init__(self, feedforward: str = "damped", ff_damping: float = FF_DAMPING,
@@ -89,12 +89,12 @@ class TransposeMethod(Method):
 
     def configure(self, work, gain, dt, n_chain):
         super().configure(work, gain, dt, n_chain)
-        work[K.P_MU] = self.ff_damping
-        work[K.P_COL_TOL] = self.column_tol
-        work[K.P_SCALED] = 1.0 if self.scaled else 0.0
-        work[K.P_LENGTH2] = self.length**2
-        work[K.P_FB_MODE] = FEEDBACKS[self.feedback]
-        work[K.P_LM] = self.lm_weight
+        work[kernels.P_MU] = self.ff_damping
+        work[kernels.P_COL_TOL] = self.column_tol
+        work[kernels.P_SCALED] = 1.0 if self.scaled else 0.0
+        work[kernels.P_LENGTH2] = self.length**2
+        work[kernels.P_FB_MODE] = FEEDBACKS[self.feedback]
+        work[kernels.P_LM] = self.lm_weight
 
     def bound(self, n_chain):
         return 1.0 if self.feedback == "damped" else None
