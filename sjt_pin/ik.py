@@ -151,7 +151,7 @@ class Search:
         q, iterations = q0, 0
         clock = time.perf_counter
         while iterations < limit:
-            J, e, _ = stack.evaluate(q, targets, None)
+            J, e = stack.search_rows(q, targets)
             status = search_iteration(J, e, q, self.J, self.e, self.q, self.limits, self.work,
                                       self.state, self.step)
             iterations += 1

@@ -197,6 +197,17 @@ class TaskStack:
                 ff[rows] = 0.0
         return J, e, None if velocities is None else ff
 
+    def search_rows(self, q: np.ndarray, targets: list) -> tuple[np.ndarray, np.ndarray]:
+        """``(J, e)`` at ``q`` for the set-point search: as :meth:`evaluate`, with each task's
+        rows replaced by the exact derivative of its error (:meth:`Task.error_jacobian`)."""
+        J, e, _ = self.evaluate(q, targets, None)
+        if self.single:
+            return self.task.error_jacobian(J), e
+        exact = J.copy()
+        for _, task, rows, _ in self._plan:
+            exact[rows] = task.error_jacobian(J[rows])
+        return exact, e
+
     def poses(self):
         """The task frames' world poses at the last evaluation: one ``pin.SE3``, or a
         ``{frame: pin.SE3}`` dict with several target-taking tasks."""

@@ -15,10 +15,14 @@ from .test_constraints import JointBand
 
 
 def _pair(robot, method="sjt"):
-    """A solver on the one-call path and one made to take the Python loop."""
+    """A solver on the one-call path and one made to take the Python loop, with the model of
+    the one-call path: the pose task's rows J (the Python loop's own model is the exact
+    derivative of log6, ``Jlog6 J``; see test_solve's floating base)."""
     fast, loop = sjt.make_solver(method, robot), sjt.make_solver(method, robot)
     assert fast.search().pose is not None
-    loop.search().pose = None
+    search = loop.search()
+    search.pose = None
+    search.stack.task.error_jacobian = lambda J: J
     return fast, loop
 
 

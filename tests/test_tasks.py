@@ -110,3 +110,47 @@ def test_rows_are_the_derivative_of_the_measured_quantity(all_robots, robot_name
         _, plus = rows(robot, task, pin.integrate(robot.model, q, dv), task.target(here))
         _, minus = rows(robot, task, pin.integrate(robot.model, q, -dv), task.target(here))
         np.testing.assert_allclose((plus - minus) / (2 * H), -J[:, i], atol=1e-6)
+
+
+@pytest.mark.parametrize("task_name", sorted(TASKS))
+@pytest.mark.parametrize("robot_name", ["ur5", "panda", "continuous + prismatic"])
+def test_error_jacobian_is_the_exact_derivative_far_from_the_target(all_robots, robot_name,
+                                                                   task_name, rng):
+    """``task.error_jacobian(J)`` (the set-point search's model) is minus the error's finite
+    differences on the manifold at targets far from the frame, where the rows J of a pose
+    or orientation task alone are not (checked: the test tells them apart)."""
+    robot = all_robots[robot_name]
+    task = TASKS[task_name]().bind(robot)
+    for _ in range(3):
+        q = robot.random_configuration(rng)
+        if task.takes_target:
+            target = task.target(robot.fk(robot.random_configuration(rng), task.frame))
+        else:
+            target, task.q_ref = None, robot.random_configuration(rng)
+        kinematics = sjt.Kinematics(robot.model)
+        kinematics.update(q)
+        J, _, _ = task.compute(kinematics, target, None)
+        exact = task.error_jacobian(J.copy())
+        np.testing.assert_allclose(exact, -error_derivative(robot, task, q, target), atol=1e-9)
+        if task_name in ("pose", "orientation") and robot_name != "continuous + prismatic":
+            assert np.abs(exact - J).max() > 1e-2  # (that arm turns about one axis only)
+
+
+def test_relative_pose_error_jacobian_against_finite_differences(rng):
+    """The same for a task over two frames (Panda's hand placed in its link 3)."""
+    robot = sjt.Robot.from_example("panda")
+    task = sjt.RelativePoseTask("panda_hand", "panda_link3").bind(robot)
+    for _ in range(3):
+        q, other = robot.random_configuration(rng), robot.random_configuration(rng)
+        target = robot.fk(other, "panda_link3").actInv(robot.fk(other, "panda_hand"))
+        _, e = rows(robot, task, q, target)
+        assert np.linalg.norm(e) > 0.05
+        finite = np.empty((6, robot.nv))
+        for i in range(robot.nv):
+            dv = np.zeros(robot.nv)
+            dv[i] = H
+            _, plus = rows(robot, task, pin.integrate(robot.model, q, dv), target)
+            _, minus = rows(robot, task, pin.integrate(robot.model, q, -dv), target)
+            finite[:, i] = (plus - minus) / (2 * H)
+        J, _ = rows(robot, task, q, target)
+        np.testing.assert_allclose(task.error_jacobian(J), -finite, atol=1e-6)

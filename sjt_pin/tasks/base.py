@@ -117,6 +117,15 @@ class Task(ABC):
         """``(J, e, x_dot_d)`` at the configuration of ``kinematics``: Jacobian rows (dim, nv),
         error (dim,) and desired task velocity (dim,), or ``None`` when ``velocity`` is."""
 
+    def error_jacobian(self, J: np.ndarray) -> np.ndarray:
+        """The exact derivative ``de/dq`` of the error at the last :meth:`compute`, from its
+        rows ``J`` (dim, nv): the set-point search's Gauss-Newton model. The CLIK law's rows
+        are the task velocity, ``e_dot = x_dot_d - J q_dot`` holds to first order near the
+        target; a logarithmic error (``log6``, ``log3``) bends away from it as the error grows,
+        and a search step along ``J`` alone can point uphill (a floating base far from its
+        target). Default: ``J`` (an error linear in the task coordinates)."""
+        return J
+
     def __repr__(self) -> str:
         frame = f"frame={self.frame!r}" if self.frame else "end effector"
         return f"{type(self).__name__}({frame})"

@@ -33,6 +33,7 @@ class OrientationTask(Task):
     def __init__(self, frame: str | None = None, weight=None, length: float | None = None):
         super().__init__(frame, weight)
         self.length = checked_length(length)
+        self._offset = np.eye(3)  # R^T R_d at the last compute
 
     def bind(self, robot):
         bound = super().bind(robot)
@@ -47,11 +48,16 @@ class OrientationTask(Task):
         oMf = kinematics.placement(self.frame_id)
         self.placement = oMf
         J = kinematics.jacobian(self.frame_id)[3:]
-        e = pin.log3(oMf.actInv(target).rotation)
+        self._offset = offset = oMf.actInv(target).rotation
+        e = pin.log3(offset)
         if velocity is None:
             return J, e, None
         frame_velocity(oMf.np, target.np, velocity, self._ff)
         return J, e, self._ff[3:]
+
+    def error_jacobian(self, J):
+        """``Jlog3(R_d^T R) J``: the derivative of ``log3(R^T R_d)``."""
+        return pin.Jlog3(self._offset.T) @ J
 
     def __repr__(self) -> str:
         frame = f"frame={self.frame!r}" if self.frame else "end effector"

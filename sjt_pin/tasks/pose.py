@@ -67,7 +67,7 @@ class PoseTask(Task):
 
     ``e = log6(oMf^-1 oMd)`` (Pinocchio's ``log6``, [m; rad]) with the frame's LOCAL Jacobian,
     the CLIK law's choice (pink and mink use ``-Jlog6 J`` instead, which agrees to first
-    order). The desired velocity ``[p_dot_d, omega_d]`` (world axes at the desired origin)
+    order; :meth:`error_jacobian` is that exact derivative, the set-point search's model). The desired velocity ``[p_dot_d, omega_d]`` (world axes at the desired origin)
     becomes the twist of the frame in LOCAL axes. Targets are ``pin.SE3`` or 4x4 homogeneous
     matrices.
 
@@ -96,6 +96,7 @@ class PoseTask(Task):
         super().__init__(frame, weight)
         self.length = checked_length(length)
         self._ff = np.zeros(6)
+        self._offset = pin.SE3.Identity()  # oMf^-1 oMd at the last compute
 
     def bind(self, robot):
         bound = super().bind(robot)
@@ -114,11 +115,17 @@ class PoseTask(Task):
         oMf = kinematics.placement(self.frame_id)
         self.placement = oMf
         J = kinematics.jacobian(self.frame_id)
-        e = pin.log6(oMf.actInv(target)).vector
+        self._offset = offset = oMf.actInv(target)
+        e = pin.log6(offset).vector
         if velocity is None:
             return J, e, None
         frame_velocity(oMf.np, target.np, velocity, self._ff)
         return J, e, self._ff
+
+    def error_jacobian(self, J):
+        """``Jlog6(oMd^-1 oMf) J``: the derivative of ``log6(oMf^-1 oMd)`` (Pinocchio's
+        ``Jlog6``, as in its own IK example)."""
+        return pin.Jlog6(self._offset.inverse()) @ J
 
     def __repr__(self) -> str:
         frame = f"frame={self.frame!r}" if self.frame else "end effector"

@@ -46,6 +46,7 @@ class RelativePoseTask(Task):
         self.reference_id = -1
         self._J = np.zeros((6, 0))
         self._ff = np.zeros(6)
+        self._offset = pin.SE3.Identity()  # aMb^-1 aMd at the last compute
 
     @property
     def key(self) -> str:
@@ -69,7 +70,8 @@ class RelativePoseTask(Task):
         oMb = kinematics.placement(self.frame_id)
         self.placement = oMb
         aMb = oMa.actInv(oMb)
-        e = pin.log6(aMb.actInv(target)).vector
+        self._offset = offset = aMb.actInv(target)
+        e = pin.log6(offset).vector
         # the twist of b relative to a, in b's axes: J_b - Ad(bMa) J_a
         np.subtract(kinematics.jacobian(self.frame_id),
                     aMb.inverse().action @ kinematics.jacobian(self.reference_id), out=self._J)
@@ -77,6 +79,10 @@ class RelativePoseTask(Task):
             return self._J, e, None
         frame_velocity(aMb.np, target.np, velocity, self._ff)
         return self._J, e, self._ff
+
+    def error_jacobian(self, J):
+        """``Jlog6(aMd^-1 aMb) J``: the derivative of ``log6(aMb^-1 aMd)``."""
+        return pin.Jlog6(self._offset.inverse()) @ J
 
     def __repr__(self) -> str:
         return f"RelativePoseTask({self.frame!r}, reference={self.reference!r})"
