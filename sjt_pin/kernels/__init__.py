@@ -2,8 +2,9 @@
 
 On arrays of 6 x n numbers every numpy call costs about 0.3 us whatever it computes, so a step
 would spend more in call overhead than in arithmetic. The kernels are plain C on the CPython
-API (``src/``: one C file per idea, ``kernels.h`` their shared declarations), compiled once by ``pip install`` — nothing is compiled at run time — and
-called with numpy arrays through the buffer protocol. ``tests/test_kernels.py`` checks them
+API (``src/``: one C file per idea, ``kernels.h`` their shared declarations), compiled once by
+``pip install`` — nothing is compiled at run time — and called with numpy arrays through the
+buffer protocol. ``tests/test_kernels.py`` checks them
 against the numpy reference formulas of :mod:`sjt_pin.mappings` and against Pinocchio.
 
 - :mod:`.layout`: where a solver's parameters, constants, results and scratch sit in its

@@ -67,8 +67,9 @@ class PoseTask(Task):
 
     ``e = log6(oMf^-1 oMd)`` (Pinocchio's ``log6``, [m; rad]) with the frame's LOCAL Jacobian,
     the CLIK law's choice (pink and mink use ``-Jlog6 J`` instead, which agrees to first
-    order; :meth:`error_jacobian` is that exact derivative, the set-point search's model). The desired velocity ``[p_dot_d, omega_d]`` (world axes at the desired origin)
-    becomes the twist of the frame in LOCAL axes. Targets are ``pin.SE3`` or 4x4 homogeneous
+    order; :meth:`error_jacobian` is that exact derivative, the set-point search's model).
+    The desired velocity ``[p_dot_d, omega_d]`` (world axes at the desired origin) becomes the
+    twist of the frame in LOCAL axes. Targets are ``pin.SE3`` or 4x4 homogeneous
     matrices.
 
     Args:
