@@ -183,8 +183,8 @@ def test_position_rows(rng):
 
 def test_the_slots_are_the_compiled_module_s_and_no_python_module_numbers_one():
     """The slot numbers come from the compiled module (src/kernels.h names each slot once):
-    the parameters are 0..INFO-1, the results and the search's state each 0..size-1, and no module of the package
-    assigns a number to a slot name."""
+    the parameters are 0..INFO-1, the results and the search's state each 0..size-1, and no
+    module of the package assigns a number to a slot name."""
     import re
     from pathlib import Path
 
