@@ -330,3 +330,19 @@ def test_a_work_vector_or_table_that_does_not_fit_raises_instead_of_reading_past
     with pytest.raises(ValueError, match="limits: column 0"):
         K.search_iteration(rng.random((6, 6)), rng.random(6), q, Jc, ec, qc, limits, w,
                            np.zeros(K.STATE_SIZE), np.zeros(6))
+
+
+@pytest.mark.parametrize("angle", [0.0, 1e-9, 1e-5, 0.0099, 0.0101, 0.29, 0.31, 1.0, 2.0, 3.0,
+                                   np.pi - 1e-6])
+def test_jlog6_inverse_is_pinocchio_s(angle):
+    """jlog6_inverse(log6(N)) is Pinocchio's Jlog6(N^-1), on both sides of its series' and
+    closed forms' thresholds (0.01 and 0.3 rad) and near pi."""
+    from sjt_pin.kernels import jlog6_inverse
+
+    rng = np.random.default_rng(int(angle * 1e4))
+    for _ in range(10):
+        axis = rng.normal(size=3)
+        N = pin.SE3(pin.exp3(angle * axis / np.linalg.norm(axis)), rng.normal(size=3))
+        G = np.zeros((6, 6))
+        jlog6_inverse(pin.log6(N).vector, G)
+        np.testing.assert_allclose(G, pin.Jlog6(N.inverse()), rtol=0, atol=1e-12)

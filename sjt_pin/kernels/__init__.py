@@ -18,6 +18,8 @@ against the numpy reference formulas of :mod:`sjt_pin.mappings` and against Pino
 - ``search_iteration(...)``: one Levenberg-Marquardt iteration of ``solve()`` on SJT's
   normalised columns, within the joint limits; ``search_pose(...)``: every iteration of one
   start on a single pose task in one call (it calls Pinocchio's Jacobian once per iteration);
+  ``jlog6_inverse(xi, out)``: ``Jlog6(N^-1)`` from ``xi = log6(N)``, the exact derivative of a
+  pose error in the rows of its Jacobian (the search's model);
 - ``damper_rows``: the collision limit's velocity-damper rows from its pairs' closest points;
   ``witness_rows``: the rows of its pairs' remembered closest points (and their memory);
   ``query_rows``: its exact distance queries (through Pinocchio's ``computeDistance``) and rows;
@@ -40,6 +42,7 @@ from ._kernels import (  # noqa: F401
     cholesky_solve,
     damper_rows,
     frame_velocity,
+    jlog6_inverse,
     least_squares_step,
     loop_bound,
     near_pairs,

@@ -17,7 +17,7 @@ from typing import Any, ClassVar
 import numpy as np
 import pinocchio as pin
 
-from ..kernels import rotation_defect
+from ..kernels import jlog6_inverse, rotation_defect
 from ..kinematics import Kinematics
 from ..validation import RIGID_TOL, as_motion, as_pose, as_vector, real_number
 
@@ -34,6 +34,14 @@ def checked_weight(weight) -> np.ndarray:
     if not np.all(np.isfinite(w)) or np.any(w <= 0):
         raise ValueError(f"weight must be positive (a number or one per row), got {weight!r}")
     return w
+
+
+def jlog6_rows(error: np.ndarray, J: np.ndarray) -> np.ndarray:
+    """``Jlog6(N^-1) J`` for a pose error ``error = log6(N)`` (6,) and its rows ``J`` (6, nv):
+    the exact derivative of the error (``Task.error_jacobian`` of the pose tasks)."""
+    G = np.empty((6, 6))
+    jlog6_inverse(error, G)
+    return G @ J
 
 
 class Task(ABC):

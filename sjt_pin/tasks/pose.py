@@ -7,7 +7,7 @@ import pinocchio as pin
 
 from ..kernels import frame_velocity
 from ..validation import real_number
-from .base import Task
+from .base import Task, jlog6_rows
 
 
 def characteristic_length(robot, frame_id: int) -> float:
@@ -97,7 +97,7 @@ class PoseTask(Task):
         super().__init__(frame, weight)
         self.length = checked_length(length)
         self._ff = np.zeros(6)
-        self._offset = pin.SE3.Identity()  # oMf^-1 oMd at the last compute
+        self._error = np.zeros(6)  # e at the last compute
 
     def bind(self, robot):
         bound = super().bind(robot)
@@ -116,17 +116,16 @@ class PoseTask(Task):
         oMf = kinematics.placement(self.frame_id)
         self.placement = oMf
         J = kinematics.jacobian(self.frame_id)
-        self._offset = offset = oMf.actInv(target)
-        e = pin.log6(offset).vector
+        self._error = e = pin.log6(oMf.actInv(target)).vector
         if velocity is None:
             return J, e, None
         frame_velocity(oMf.np, target.np, velocity, self._ff)
         return J, e, self._ff
 
     def error_jacobian(self, J):
-        """``Jlog6(oMd^-1 oMf) J``: the derivative of ``log6(oMf^-1 oMd)`` (Pinocchio's
-        ``Jlog6``, as in its own IK example)."""
-        return pin.Jlog6(self._offset.inverse()) @ J
+        """``Jlog6(oMd^-1 oMf) J``: the derivative of ``e = log6(oMf^-1 oMd)`` (Pinocchio's
+        ``Jlog6``, as in its own IK example; computed from e, compiled)."""
+        return jlog6_rows(self._error, J)
 
     def __repr__(self) -> str:
         frame = f"frame={self.frame!r}" if self.frame else "end effector"

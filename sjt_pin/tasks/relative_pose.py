@@ -6,7 +6,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..kernels import frame_velocity
-from .base import Task
+from .base import Task, jlog6_rows
 
 
 class RelativePoseTask(Task):
@@ -46,7 +46,7 @@ class RelativePoseTask(Task):
         self.reference_id = -1
         self._J = np.zeros((6, 0))
         self._ff = np.zeros(6)
-        self._offset = pin.SE3.Identity()  # aMb^-1 aMd at the last compute
+        self._error = np.zeros(6)  # e at the last compute
 
     @property
     def key(self) -> str:
@@ -70,8 +70,7 @@ class RelativePoseTask(Task):
         oMb = kinematics.placement(self.frame_id)
         self.placement = oMb
         aMb = oMa.actInv(oMb)
-        self._offset = offset = aMb.actInv(target)
-        e = pin.log6(offset).vector
+        self._error = e = pin.log6(aMb.actInv(target)).vector
         # the twist of b relative to a, in b's axes: J_b - Ad(bMa) J_a
         np.subtract(kinematics.jacobian(self.frame_id),
                     aMb.inverse().action @ kinematics.jacobian(self.reference_id), out=self._J)
@@ -82,7 +81,7 @@ class RelativePoseTask(Task):
 
     def error_jacobian(self, J):
         """``Jlog6(aMd^-1 aMb) J``: the derivative of ``log6(aMb^-1 aMd)``."""
-        return pin.Jlog6(self._offset.inverse()) @ J
+        return jlog6_rows(self._error, J)
 
     def __repr__(self) -> str:
         return f"RelativePoseTask({self.frame!r}, reference={self.reference!r})"

@@ -259,6 +259,10 @@ int check_work(const Arg *work, Py_ssize_t m, Py_ssize_t n, Py_ssize_t nq);
 int table_ok(const double *table, Py_ssize_t c, Py_ssize_t nq, Py_ssize_t n, int pairs,
              const char *name);
 
+/* lie.c */
+void jlog6_inverse_c(const double *xi, double *G);
+PyObject *py_jlog6_inverse(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
+
 /* projection.c */
 PyObject *py_nonnegative_qp(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
 PyObject *py_project_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
