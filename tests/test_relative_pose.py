@@ -72,7 +72,8 @@ def branch_indices(robot, side):
 
 def test_rows_against_finite_differences_of_the_error(tree, rng):
     """d e/dq by central differences on the manifold equals -Jlog6(M) Ad(M^-1) J with
-    M = aMb^-1 aMd; the trunk that carries both frames has zero columns."""
+    M = aMb^-1 aMd, and minus the task's error_jacobian (the search's model); the trunk that
+    carries both frames has zero columns."""
     task = task_on(tree)
     for _ in range(3):
         q = tree.random_configuration(rng)
@@ -88,6 +89,7 @@ def test_rows_against_finite_differences_of_the_error(tree, rng):
             finite[:, i] = (plus - minus) / (2 * H)
         M = relative(tree, q).actInv(target)
         np.testing.assert_allclose(finite, -pin.Jlog6(M) @ M.inverse().action @ J, atol=1e-6)
+        np.testing.assert_allclose(task.error_jacobian(J), -finite, atol=1e-6)
         trunk = tree.model.joints[tree.model.getJointId("trunk")].idx_v
         assert np.abs(J[:, trunk]).max() < 1e-12
 

@@ -38,6 +38,15 @@ def all_robots():
     return robots()
 
 
+def far_target(robot, task, rng):
+    """The pose of the task's frame at a random configuration (a posture task: its q_ref set
+    to one, and no target)."""
+    if task.takes_target:
+        return task.target(robot.fk(robot.random_configuration(rng), task.frame))
+    task.q_ref = robot.random_configuration(rng)
+    return None
+
+
 def error_derivative(robot, task, q, target):
     """d e / d q from J exactly, away from zero error: -J for position and posture rows;
     -Jlog(M) Ad(M^-1) J for pose rows (M = oMf^-1 oMd) and its rotation part for orientation."""
@@ -58,11 +67,7 @@ def test_rows_against_finite_differences_of_the_error(all_robots, robot_name, ta
     robot = all_robots[robot_name]
     task = TASKS[task_name]().bind(robot)
     for _ in range(3):
-        q = robot.random_configuration(rng)
-        if task.takes_target:
-            target = task.target(robot.fk(robot.random_configuration(rng), task.frame))
-        else:  # a posture task pulls toward its own q_ref
-            target, task.q_ref = None, robot.random_configuration(rng)
+        q, target = robot.random_configuration(rng), far_target(robot, task, rng)
         _, e = rows(robot, task, q, target)
         assert np.linalg.norm(e) > 0.05  # well away from zero error
         finite = np.empty((task.dim, robot.nv))
@@ -83,11 +88,7 @@ def test_the_transpose_direction_is_the_gradient_for_position_and_orientation(al
     order in |e| (on SE(3), Jlog6^T log6 != log6)."""
     robot = all_robots["panda"]
     task = TASKS[task_name]().bind(robot)
-    q = robot.random_configuration(rng)
-    if task.takes_target:
-        target = task.target(robot.fk(robot.random_configuration(rng), task.frame))
-    else:
-        target, task.q_ref = None, robot.random_configuration(rng)
+    q, target = robot.random_configuration(rng), far_target(robot, task, rng)
     J, e = rows(robot, task, q, target)
     np.testing.assert_allclose(e @ error_derivative(robot, task, q, target), -e @ J, atol=1e-9)
 
@@ -122,11 +123,7 @@ def test_error_jacobian_is_the_exact_derivative_far_from_the_target(all_robots, 
     robot = all_robots[robot_name]
     task = TASKS[task_name]().bind(robot)
     for _ in range(3):
-        q = robot.random_configuration(rng)
-        if task.takes_target:
-            target = task.target(robot.fk(robot.random_configuration(rng), task.frame))
-        else:
-            target, task.q_ref = None, robot.random_configuration(rng)
+        q, target = robot.random_configuration(rng), far_target(robot, task, rng)
         kinematics = sjt.Kinematics(robot.model)
         kinematics.update(q)
         J, _, _ = task.compute(kinematics, target, None)
@@ -135,22 +132,3 @@ def test_error_jacobian_is_the_exact_derivative_far_from_the_target(all_robots, 
         if task_name in ("pose", "orientation") and robot_name != "continuous + prismatic":
             assert np.abs(exact - J).max() > 1e-2  # (that arm turns about one axis only)
 
-
-def test_relative_pose_error_jacobian_against_finite_differences(rng):
-    """The same for a task over two frames (Panda's hand placed in its link 3)."""
-    robot = sjt.Robot.from_example("panda")
-    task = sjt.RelativePoseTask("panda_hand", "panda_link3").bind(robot)
-    for _ in range(3):
-        q, other = robot.random_configuration(rng), robot.random_configuration(rng)
-        target = robot.fk(other, "panda_link3").actInv(robot.fk(other, "panda_hand"))
-        _, e = rows(robot, task, q, target)
-        assert np.linalg.norm(e) > 0.05
-        finite = np.empty((6, robot.nv))
-        for i in range(robot.nv):
-            dv = np.zeros(robot.nv)
-            dv[i] = H
-            _, plus = rows(robot, task, pin.integrate(robot.model, q, dv), target)
-            _, minus = rows(robot, task, pin.integrate(robot.model, q, -dv), target)
-            finite[:, i] = (plus - minus) / (2 * H)
-        J, _ = rows(robot, task, q, target)
-        np.testing.assert_allclose(task.error_jacobian(J), -finite, atol=1e-6)
