@@ -6,7 +6,10 @@ from pathlib import Path
 
 from setuptools import Extension, setup
 
-SOURCES = sorted(str(path) for path in Path("sjt_pin/kernels/src").glob("*.c"))
+HERE = Path(__file__).resolve().parent
+SOURCES = sorted(path.relative_to(HERE).as_posix()
+                 for path in (HERE / "sjt_pin/kernels/src").glob("*.c"))
+assert SOURCES, "the kernels' C sources (sjt_pin/kernels/src/*.c) are missing"
 
 setup(ext_modules=[Extension(
     "sjt_pin.kernels._kernels", SOURCES, depends=["sjt_pin/kernels/src/kernels.h"],

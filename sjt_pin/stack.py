@@ -199,7 +199,7 @@ class TaskStack:
 
     def search_rows(self, q: np.ndarray, targets: list) -> tuple[np.ndarray, np.ndarray]:
         """``(J, e)`` at ``q`` for the set-point search: as :meth:`evaluate`, with each task's
-        rows replaced by the exact derivative of its error (:meth:`Task.error_jacobian`)."""
+        rows replaced by the exact rows of its error (:meth:`Task.error_jacobian`)."""
         J, e, _ = self.evaluate(q, targets, None)
         if self.single:
             return self.task.error_jacobian(J), e

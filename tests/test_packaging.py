@@ -62,16 +62,6 @@ def test_the_version_is_one():
         sjt_pin.__version__
 
 
-def test_the_core_is_type_clean():
-    """mypy on the core (pyproject.toml's [tool.mypy]): no error."""
-    from pathlib import Path
-
-    root = Path(__file__).resolve().parents[1]
-    done = subprocess.run([sys.executable, "-m", "mypy"], cwd=root, capture_output=True,
-                          text=True, timeout=600)
-    assert done.returncode == 0, done.stdout[-3000:]
-
-
 def test_the_core_runs_without_the_extras():
     """With the viewer's and the paper's packages unimportable (as after a bare
     ``pip install .``), a robot steps and solves, and importing the viewer or the figures

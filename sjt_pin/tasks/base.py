@@ -38,7 +38,7 @@ def checked_weight(weight) -> np.ndarray:
 
 def jlog6_rows(error: np.ndarray, J: np.ndarray) -> np.ndarray:
     """``Jlog6(N^-1) J`` for a pose error ``error = log6(N)`` (6,) and its rows ``J`` (6, nv):
-    the exact derivative of the error (``Task.error_jacobian`` of the pose tasks)."""
+    the pose tasks' :meth:`Task.error_jacobian`."""
     G = np.empty((6, 6))
     jlog6_inverse(error, G)
     return G @ J
@@ -126,12 +126,15 @@ class Task(ABC):
         error (dim,) and desired task velocity (dim,), or ``None`` when ``velocity`` is."""
 
     def error_jacobian(self, J: np.ndarray) -> np.ndarray:
-        """The exact derivative ``de/dq`` of the error at the last :meth:`compute`, from its
-        rows ``J`` (dim, nv): the set-point search's Gauss-Newton model. The CLIK law's rows
-        are the task velocity, ``e_dot = x_dot_d - J q_dot`` holds to first order near the
-        target; a logarithmic error (``log6``, ``log3``) bends away from it as the error grows,
-        and a search step along ``J`` alone can point uphill (a floating base far from its
-        target). Default: ``J`` (an error linear in the task coordinates)."""
+        """The exact rows of the error at the last :meth:`compute`: ``J_e`` with
+        ``e_dot = -J_e q_dot`` for a fixed target (the rows' convention), from its rows ``J``
+        (dim, nv); the set-point search's Gauss-Newton model. The CLIK law's rows are the task
+        velocity: they give ``e_dot`` only to first order near the target, and a logarithmic
+        error (``log6``, ``log3``) bends away from them as it grows, so that a search step along
+        ``J`` alone can point uphill (a floating base far from its target). Default: ``J``,
+        exact for an error linear in q (position rows; posture rows of joints that are vector
+        spaces: a posture task keeps its identity rows on a free flyer too). A new task whose
+        rows are only first order overrides it."""
         return J
 
     def __repr__(self) -> str:

@@ -56,7 +56,7 @@ class OrientationTask(Task):
         return J, e, self._ff[3:]
 
     def error_jacobian(self, J):
-        """``Jlog3(R_d^T R) J``: the derivative of ``log3(R^T R_d)``."""
+        """``Jlog3(R_d^T R) J``: the exact rows of ``e = log3(R^T R_d)`` (``-de/dq``)."""
         return pin.Jlog3(self._offset.T) @ J
 
     def __repr__(self) -> str:

@@ -67,7 +67,7 @@ class PoseTask(Task):
 
     ``e = log6(oMf^-1 oMd)`` (Pinocchio's ``log6``, [m; rad]) with the frame's LOCAL Jacobian,
     the CLIK law's choice (pink and mink use ``-Jlog6 J`` instead, which agrees to first
-    order; :meth:`error_jacobian` is that exact derivative, the set-point search's model).
+    order; :meth:`error_jacobian` gives those exact rows, the set-point search's model).
     The desired velocity ``[p_dot_d, omega_d]`` (world axes at the desired origin) becomes the
     twist of the frame in LOCAL axes. Targets are ``pin.SE3`` or 4x4 homogeneous
     matrices.
@@ -123,8 +123,8 @@ class PoseTask(Task):
         return J, e, self._ff
 
     def error_jacobian(self, J):
-        """``Jlog6(oMd^-1 oMf) J``: the derivative of ``e = log6(oMf^-1 oMd)`` (Pinocchio's
-        ``Jlog6``, as in its own IK example; computed from e, compiled)."""
+        """``Jlog6(oMd^-1 oMf) J``: the exact rows of ``e = log6(oMf^-1 oMd)`` (``-de/dq``;
+        Pinocchio's ``Jlog6``, as in its own IK example, computed from e, compiled)."""
         return jlog6_rows(self._error, J)
 
     def __repr__(self) -> str:

@@ -80,7 +80,7 @@ class RelativePoseTask(Task):
         return self._J, e, self._ff
 
     def error_jacobian(self, J):
-        """``Jlog6(aMd^-1 aMb) J``: the derivative of ``log6(aMb^-1 aMd)``."""
+        """``Jlog6(aMd^-1 aMb) J``: the exact rows of ``e = log6(aMb^-1 aMd)`` (``-de/dq``)."""
         return jlog6_rows(self._error, J)
 
     def __repr__(self) -> str:
