@@ -89,27 +89,6 @@ typedef struct { double e_sq, ff_sq, ew_sq, gain, bound, stall, trace; } Core;
  * back (rad/s or m/s) toward the range from outside it. */
 typedef struct { Py_ssize_t v; double x, lower, upper, back; } BoxEntry;
 
-/* SNS's vectors in work's clamped part (n each unless noted): the held flags, the candidate
- * dq = b + s a (a: the method on the free joints, b: what the held ones leave them to make up,
- * hv: the held joints' velocities, rad/s), the free joints, the best candidate so far, and
- * scratch (ff2: m, G: m x m, norm: n). */
-typedef struct {
-    double *held, *a, *b, *hv, *free_;
-    double *best_a, *best_b, *best_hv, *best_held;
-    double *ff2, *G, *norm;
-} Sns;
-
-/* The stage's vectors in work (n each, SM_* parts of sjt_pin/kernels/layout.py): the motion
- * state, the limits, the boxes and the codes of the limits that set them, and scratch. */
-typedef struct {
-    double *pdq, *pddq;                   /* previous velocity (rad/s) and acceleration */
-    double *A, *Jk, *vj, *BA, *BJ;        /* accel., jerk, jerk's speed, braking accel./jerk */
-    double *hlo, *hhi, *slo, *shi;        /* hard and smoothness boxes (rad/s) */
-    double *hlb, *hhb, *slb, *shb;        /* the L_* code that set each bound, -1 none */
-    double *desired, *out, *torn;         /* velocity before smoothing, result, hard box won */
-    double *dqff, *save;                  /* feed-forward velocity / line base; saved gains */
-} Stage;
-
 /* a float64 buffer acquired from a Python object */
 typedef struct {
     Py_buffer view;
@@ -260,7 +239,6 @@ int table_ok(const double *table, Py_ssize_t c, Py_ssize_t nq, Py_ssize_t n, int
              const char *name);
 
 /* lie.c */
-void jlog6_inverse_c(const double *xi, double *G);
 PyObject *py_jlog6_inverse(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
 
 /* projection.c */

@@ -45,7 +45,7 @@ static void coupling_coefficients(double t, double *c1, double *c2, double *c3)
 /* G = Jlog6(N^-1) (6 x 6, row-major, [linear; angular]) from xi = (v, w) = log6(N):
  * [[A, -A Q(v, w) A], [0, A]] with A = Jlog3(-w) = I - W/2 + k W^2, k = 1/t^2 - cot(t/2)/(2t),
  * and Q the coupling block of SE(3)'s left Jacobian at (v, w). */
-void jlog6_inverse_c(const double *xi, double *G)
+static void jlog6_inverse_c(const double *xi, double *G)
 {
     double W[9], V[9], WW[9], WV[9], VW[9], WVW[9], T[9], A[9], Q[9], AQ[9], B[9];
     skew(xi, V);

@@ -3,6 +3,16 @@
 
 #include "kernels.h"
 
+/* SNS's vectors in work's clamped part (n each unless noted): the held flags, the candidate
+ * dq = b + s a (a: the method on the free joints, b: what the held ones leave them to make up,
+ * hv: the held joints' velocities, rad/s), the free joints, the best candidate so far, and
+ * scratch (ff2: m, G: m x m, norm: n). */
+typedef struct {
+    double *held, *a, *b, *hv, *free_;
+    double *best_a, *best_b, *best_hv, *best_held;
+    double *ff2, *G, *norm;
+} Sns;
+
 /* The largest s in [0, 1] with lower <= b + s a <= upper on the free joints, and the joint
  * that limits it (*k; -1 when s = 1 fits); -1 when no s fits (constraints.task_scale). */
 static double task_scale_c(const double *a, const double *b, const double *lo,

@@ -2,6 +2,17 @@
 
 #include "kernels.h"
 
+/* The stage's vectors in work (n each, SM_* parts of sjt_pin/kernels/layout.py): the motion
+ * state, the limits, the boxes and the codes of the limits that set them, and scratch. */
+typedef struct {
+    double *pdq, *pddq;                   /* previous velocity (rad/s) and acceleration */
+    double *A, *Jk, *vj, *BA, *BJ;        /* accel., jerk, jerk's speed, braking accel./jerk */
+    double *hlo, *hhi, *slo, *shi;        /* hard and smoothness boxes (rad/s) */
+    double *hlb, *hhb, *slb, *shb;        /* the L_* code that set each bound, -1 none */
+    double *desired, *out, *torn;         /* velocity before smoothing, result, hard box won */
+    double *dqff, *save;                  /* feed-forward velocity / line base; saved gains */
+} Stage;
+
 /* -- the acceleration and jerk stage, compiled (sjt_pin/constraints.py and sjt_pin/limits are
  * its reference: Solver._constrain, _brake_feedback, ConstraintStage.box/enforce, smooth,
  * PositionLimit.bounds, braking_speed, stopping_distance, AccelerationLimit, JerkLimit) --- */
