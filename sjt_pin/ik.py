@@ -1,5 +1,7 @@
 """Solve to a pose (set-point IK): Levenberg-Marquardt on SJT's normalised columns, restarted
-from random configurations within the limits until it succeeds or its budget runs out.
+until it succeeds or its budget runs out: on a single pose task first from the configurations
+of a seeded table whose poses are nearest the target, then from random configurations within
+the limits (:mod:`sjt_pin.restarts`).
 
 Each iteration evaluates the task rows once, at the trial configuration, accepts or rejects the
 trial and computes the next step ``S J^T (J S J^T + lambda I)^-1 e`` — S = D for SJT (the
@@ -12,8 +14,8 @@ damping), with ``nu`` adapted as in Levenberg-Marquardt. Joint limits hold at ev
 joint that would leave its range is fixed onto its limit and the others solved again; a joint
 whose range spans a full turn wraps by 2 pi instead; no joint moves more than ``MAX_STEP`` in
 one iteration. A start ends when the error is below ``tol`` (success), or when it stops falling
-(a local minimum: its best |e_w|^2 has not fallen by 1 % in 6 iterations, or by 10 % in 4 while
-a joint is held at a limit): then a new start.
+(a local minimum: its best |e_w|^2 has not fallen by 1 % in 6 iterations, or has not halved in
+3 while a joint is held at a limit): then a new start.
 
 On a single :class:`~sjt_pin.tasks.PoseTask` (the usual case) every iteration of a start runs
 in one compiled call (``sjt_pin.kernels.search_pose``): per iteration one Pinocchio call for the
@@ -53,6 +55,7 @@ from .kernels import (
 from .kinematics import Kinematics
 from .limits.base import Motion
 from .mappings import COLUMN_TOL
+from .restarts import NearStarts, Sampler
 from .tasks import PoseTask
 from .validation import integer, positive, raise_non_finite_targets
 
@@ -68,9 +71,13 @@ TIMEOUT: float | None = None
 MAX_STEP = 2.0
 #: a start has stalled (a local minimum) when its best error has not fallen below ``PROGRESS``
 #: times itself (in |e_w|^2 / 2) for ``STALE_ITERS`` iterations; with a joint held at one of
-#: its limits (heading for a minimum on the boundary), ``HELD_PROGRESS`` in ``HELD_ITERS``
+#: its limits (heading for a minimum on the boundary), ``HELD_PROGRESS`` in ``HELD_ITERS``. A
+#: stalled start costs the iterations of this test: the tail of solve()'s times
 STALE_ITERS, PROGRESS = 6, 0.99
-HELD_ITERS, HELD_PROGRESS = 4, 0.9
+HELD_ITERS, HELD_PROGRESS = 3, 0.5
+#: restarts taken from the table of configurations nearest the target (single pose task) before
+#: random ones
+NEAREST = 8
 #: the initial nu of the damping lambda = mu^2 + nu |e_w|^2, and its floor mu^2
 NU_START, MU = 1.0, 1e-6
 
@@ -124,7 +131,9 @@ class Search:
         self.e = np.zeros(m)
         self.q = np.zeros(robot.nq)
         self.step = np.zeros(n)
-        self._sampler = _Sampler(robot)
+        self._sampler = Sampler(robot)
+        self._near: NearStarts | None = None  # built on the first restart (see near)
+        self._near_built = False
         self._seed = None  # (seed, its generator, its first state)
         self.pose = None if self.user_limits is not None else _PoseLoop.of(robot, stack)
 
@@ -190,7 +199,25 @@ class Search:
         return math.sqrt(self.state[S_E_SQ])
 
     def random(self, seed: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """A random start: ``seed`` with the drawn joints drawn from ``rng`` (see
+        :class:`~sjt_pin.restarts.Sampler`)."""
         return self._sampler(seed, rng)
+
+    def near(self, attempt: int) -> np.ndarray | None:
+        """The start of restart ``attempt`` (1, 2, ...) from the table of configurations whose
+        poses are nearest the target of :meth:`aim` (:class:`~sjt_pin.restarts.NearStarts`,
+        built on first use), or ``None``: past ``NEAREST`` restarts, or not a single pose task
+        (see :meth:`NearStarts.of <sjt_pin.restarts.NearStarts.of>`)."""
+        if attempt > NEAREST:
+            return None
+        if not self._near_built:
+            self._near = NearStarts.of(self.robot, self.stack, self._sampler)
+            self._near_built = True
+        if self._near is None:
+            return None
+        if attempt == 1:
+            self._near.aim(self.targets[0].homogeneous)
+        return self._near.next()
 
     def generator(self, rng) -> np.random.Generator:
         """``rng`` as a generator of random starts (``None``: seed 0). An int seed's generator
@@ -301,53 +328,6 @@ def _joint_table(model: pin.Model) -> np.ndarray | None:
     return np.array(rows, dtype=float).reshape(-1, 3).T.copy()
 
 
-#: the width of a uniform angle in [-pi, pi) (rad), as numpy's uniform computes it
-_TURN = np.pi - (-np.pi)
-
-
-class _Sampler:
-    """Random starts: limited joints uniform within their limits, unlimited revolute and
-    continuous joints a random angle (about the seed's), the rest (a floating base, prismatic
-    joints without limits) as in the seed."""
-
-    def __init__(self, robot):
-        model = robot.model
-        lower, upper = robot.lower_limits, robot.upper_limits
-        self.limited, self.turning, self.circle = [], [], []
-        for j in range(1, model.njoints):
-            joint = model.joints[j]
-            kind = joint.shortname()
-            if joint.nq == 1 and joint.nv == 1:
-                i = joint.idx_q
-                if np.isfinite(lower[i]) and np.isfinite(upper[i]):
-                    self.limited.append(i)
-                elif "Revolute" in kind:
-                    self.turning.append(i)
-            elif joint.nq == 2 and joint.nv == 1:  # continuous: (cos, sin)
-                self.circle.append(joint.idx_q)
-        self.limited = np.array(self.limited, dtype=np.int64)
-        self.lower, self.upper = lower[self.limited], upper[self.limited]
-        self.turning = np.array(self.turning, dtype=np.int64)
-        self.circle = np.array(self.circle, dtype=np.int64)
-        self.span = self.upper - self.lower
-        self.draws = self.limited.size + self.turning.size + self.circle.size
-
-    def __call__(self, seed: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        """The numbers of ``rng.uniform(lower, upper)`` for the limited joints, then of
-        ``rng.uniform(-pi, pi)`` for the others, bitwise (``low + (high - low) u`` on one draw
-        of ``rng.random``: numpy's uniform checks array bounds at 10 us a call)."""
-        q = seed.copy()
-        u = rng.random(self.draws)
-        k, t = self.limited.size, self.limited.size + self.turning.size
-        q[self.limited] = self.lower + self.span * u[:k]
-        if t > k:
-            q[self.turning] += -np.pi + _TURN * u[k:t]
-        if self.circle.size:
-            angles = -np.pi + _TURN * u[t:]
-            q[self.circle], q[self.circle + 1] = np.cos(angles), np.sin(angles)
-        return q
-
-
 def solve(solver, target, q0, *, tol: float = TOL, max_iters: int = MAX_ITERS,
           restarts: int | None = None, timeout: float | None = TIMEOUT, budget: int = BUDGET,
           rng: np.random.Generator | int | None = None) -> IKResult:
@@ -356,8 +336,10 @@ def solve(solver, target, q0, *, tol: float = TOL, max_iters: int = MAX_ITERS,
     Args:
         target: as for ``step`` (a pose, or ``{frame: target}`` with several tasks).
         q0: the first start (nq,), clipped into the position limits first (``IKResult.clipped``
-            names the joints moved); later starts are random within the limits (a floating
-            base and prismatic joints without limits keep ``q0``'s values).
+            names the joints moved). On a single pose task the next ``NEAREST`` (8) starts
+            are the configurations of a seeded table (:mod:`sjt_pin.restarts`) whose poses are
+            nearest ``target``; later starts are random within the limits (a floating base
+            and prismatic joints without limits keep ``q0``'s values).
         tol: success when the tasks' error norm is below ``tol`` (m and rad; > 0).
         max_iters: iterations of one start.
         restarts: most restarts after the first start (``None``: as many as the budget allows).
@@ -367,7 +349,7 @@ def solve(solver, target, q0, *, tol: float = TOL, max_iters: int = MAX_ITERS,
         budget: iterations over all starts (the default limit: 2000, about 2.5 ms on Panda at
             1.2 us per iteration).
         rng: a ``numpy.random.Generator`` or a seed for the random starts (``None``: seed 0,
-            so a call repeats).
+            so a call repeats; the table's starts do not depend on it).
 
     Returns the first start that succeeds, or the best one (lowest error) when none did.
     """
@@ -388,9 +370,11 @@ def solve(solver, target, q0, *, tol: float = TOL, max_iters: int = MAX_ITERS,
     while True:
         if attempt == 0:
             start = q
-        else:  # the generator only when a restart needs it (it costs as much as a start)
-            generator = search.generator(rng) if generator is None else generator
-            start = search.random(q, generator)
+        else:
+            start = search.near(attempt)
+            if start is None:  # the generator only when a restart needs it (it costs as
+                generator = search.generator(rng) if generator is None else generator
+                start = search.random(q, generator)  # much as a start)
         success, used = search.run(start, min(max_iters, budget - total), deadline)
         total += used
         error = search.error()
