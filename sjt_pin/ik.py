@@ -14,8 +14,9 @@ damping), with ``nu`` adapted as in Levenberg-Marquardt. Joint limits hold at ev
 joint that would leave its range is fixed onto its limit and the others solved again; a joint
 whose range spans a full turn wraps by 2 pi instead; no joint moves more than ``MAX_STEP`` in
 one iteration. A start ends when the error is below ``tol`` (success), or when it stops falling
-(a local minimum: its best |e_w|^2 has not fallen by 1 % in 6 iterations, or has not halved in
-3 while a joint is held at a limit): then a new start.
+(a local minimum: its best |e_w|^2 has not fallen by 1 % in 6 iterations, or, on the first
+starts, has not halved in 4 while a joint is held at a limit or after a rejected step): then a
+new start.
 
 On a single :class:`~sjt_pin.tasks.PoseTask` (the usual case) every iteration of a start runs
 in one compiled call (``sjt_pin.kernels.search_pose``): per iteration one Pinocchio call for the
@@ -70,11 +71,15 @@ TIMEOUT: float | None = None
 #: the largest joint motion of one iteration (rad or m): a trust region
 MAX_STEP = 2.0
 #: a start has stalled (a local minimum) when its best error has not fallen below ``PROGRESS``
-#: times itself (in |e_w|^2 / 2) for ``STALE_ITERS`` iterations; with a joint held at one of
-#: its limits (heading for a minimum on the boundary), ``HELD_PROGRESS`` in ``HELD_ITERS``. A
-#: stalled start costs the iterations of this test: the tail of solve()'s times
+#: times itself (in |e_w|^2 / 2) for ``STALE_ITERS`` iterations (the patient test); on the first
+#: start and the table's (``NEAREST``) also when it has not fallen below ``HELD_PROGRESS`` times
+#: itself for ``HELD_ITERS`` iterations while a joint is held at one of its limits (heading for
+#: a minimum on the boundary) or once a step of the start has been rejected (its damping found:
+#: Levenberg-Marquardt then converges fast or not at all) — the quick test. A stalled start
+#: costs the iterations of its test: the tail of solve()'s times. Later starts, on a pose hard
+#: enough to need them, keep only the patient test, which lets a slow start finish.
 STALE_ITERS, PROGRESS = 6, 0.99
-HELD_ITERS, HELD_PROGRESS = 3, 0.5
+HELD_ITERS, HELD_PROGRESS = 4, 0.5
 #: restarts taken from the table of configurations nearest the target (single pose task) before
 #: random ones
 NEAREST = 8
@@ -150,10 +155,14 @@ class Search:
         if self.pose is not None:
             self.pose.aim(self, targets[0])
 
-    def run(self, q0: np.ndarray, limit: int, deadline: float) -> tuple[bool, int]:
+    def run(self, q0: np.ndarray, limit: int, deadline: float,
+            quick: bool = True) -> tuple[bool, int]:
         """One start from ``q0`` towards the targets of :meth:`aim`, of at most ``limit``
-        iterations: (converged, iterations used)."""
+        iterations: (converged, iterations used). ``quick``: with the quick stall test (see
+        ``HELD_ITERS``) as well as the patient one."""
         self.state[:] = self._initial
+        if not quick:
+            self.state[S_HELD_LIMIT] = math.inf
         if self.pose is not None:
             return self.pose.run(q0, limit, deadline)
         stack, model, targets = self.stack, self.robot.model, self.targets
@@ -375,7 +384,8 @@ def solve(solver, target, q0, *, tol: float = TOL, max_iters: int = MAX_ITERS,
             if start is None:  # the generator only when a restart needs it (it costs as
                 generator = search.generator(rng) if generator is None else generator
                 start = search.random(q, generator)  # much as a start)
-        success, used = search.run(start, min(max_iters, budget - total), deadline)
+        success, used = search.run(start, min(max_iters, budget - total), deadline,
+                                   attempt <= NEAREST)
         total += used
         error = search.error()
         if not math.isfinite(error):  # a NaN target, or one so far that |e|^2 overflows

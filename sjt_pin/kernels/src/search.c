@@ -116,6 +116,7 @@ static int search_iteration_c(Mat J, const double *e, const double *q, Py_ssize_
         if (e_sq <= state[S_TOL_SQ]) return CONVERGED;
     } else {
         state[S_NU] *= NU_UP;
+        state[S_REJECTED] = 1.0;
     }
     if (f < state[S_PROGRESS] * state[S_BEST] || first) {
         state[S_BEST] = dmin(f, state[S_F]);
@@ -125,15 +126,19 @@ static int search_iteration_c(Mat J, const double *e, const double *q, Py_ssize_
     }
     if (state[S_STALE] >= state[S_STALE_LIMIT] || state[S_NU] > NU_MAX || !isfinite(f))
         return SEARCH_STALLED;
-    /* with a joint held at its limit the start is heading for a minimum on the boundary of the
-     * box: it stalls sooner (a stricter progress over fewer iterations) */
+    /* the quick test (a stricter progress over fewer iterations): with a joint held at its limit
+     * (heading for a minimum on the boundary of the box), or once a step of the start has been
+     * rejected (its damping found: Levenberg-Marquardt then converges fast or not at all; before
+     * that, on a robot of metres-long links, the first damping holds a good start back for
+     * several iterations) */
     if (f < state[S_HELD_PROGRESS] * state[S_HELD_BEST] || first) {
         state[S_HELD_BEST] = dmin(f, state[S_F]);
         state[S_HELD_STALE] = 0.0;
     } else {
         state[S_HELD_STALE] += 1.0;
     }
-    if (state[S_HELD_STALE] >= state[S_HELD_LIMIT] && search_held(q_cur, limits, c))
+    if (state[S_HELD_STALE] >= state[S_HELD_LIMIT]
+        && (state[S_REJECTED] != 0.0 || search_held(q_cur, limits, c)))
         return SEARCH_STALLED;
     Mat cur = {J_cur, m, n, n, 1};
     limited_step(cur, e_cur, q_cur, limits, c, work, state, step);
