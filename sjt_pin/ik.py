@@ -136,6 +136,7 @@ class Search:
         self.e = np.zeros(m)
         self.q = np.zeros(robot.nq)
         self.step = np.zeros(n)
+        self.best_q = np.zeros(robot.nq)  # the best start's q of run_nearest
         self._sampler = Sampler(robot)
         self._near: NearStarts | None = None  # built on the first restart (see near)
         self._near_built = False
@@ -212,21 +213,34 @@ class Search:
         :class:`~sjt_pin.restarts.Sampler`)."""
         return self._sampler(seed, rng)
 
-    def near(self, attempt: int) -> np.ndarray | None:
-        """The start of restart ``attempt`` (1, 2, ...) from the table of configurations whose
-        poses are nearest the target of :meth:`aim` (:class:`~sjt_pin.restarts.NearStarts`,
-        built on first use), or ``None``: past ``NEAREST`` restarts, or not a single pose task
-        (see :meth:`NearStarts.of <sjt_pin.restarts.NearStarts.of>`)."""
+    def nearest(self, attempt: int) -> NearStarts | None:
+        """The table of configurations whose poses are nearest the target of :meth:`aim`
+        (:class:`~sjt_pin.restarts.NearStarts`, built on first use, ranked for the target on
+        restart 1) for restart ``attempt`` (1, 2, ...), or ``None``: past ``NEAREST`` restarts,
+        or not a single pose task (see :meth:`NearStarts.of
+        <sjt_pin.restarts.NearStarts.of>`)."""
         if attempt > NEAREST:
             return None
         if not self._near_built:
             self._near = NearStarts.of(self.robot, self.stack, self._sampler)
             self._near_built = True
-        if self._near is None:
-            return None
-        if attempt == 1:
+        if self._near is not None and attempt == 1:
             self._near.aim(self.targets[0].homogeneous)
-        return self._near.next()
+        return self._near
+
+    def run_nearest(self, table: NearStarts, attempt: int, last: int, max_iters: int,
+                    count: int, best: float) -> tuple[bool, int, int, float]:
+        """Restarts ``attempt`` .. ``last`` from ``table`` (ranked: see :meth:`nearest`) in one
+        compiled call on the pose loop, each of at most ``max_iters`` iterations, ``count`` in
+        all, until one converges: (converged, iterations used, the last restart made, the
+        lowest |e| of a start, ``best`` if none was lower; its q is then in ``best_q``). As
+        many starts of :meth:`run`, without a Python round trip between them (no clock: for
+        solves without a ``timeout``)."""
+        assert self.pose is not None
+        status, used, made, lowest = search_pose(
+            *self.pose.call, count, table.configurations, table.distance, self._initial,
+            self.best_q, last - attempt + 1, max_iters, best)
+        return status == CONVERGED, used, attempt + made - 1, lowest
 
     def generator(self, rng) -> np.random.Generator:
         """``rng`` as a generator of random starts (``None``: seed 0). An int seed's generator
@@ -377,15 +391,24 @@ def solve(solver, target, q0, *, tol: float = TOL, max_iters: int = MAX_ITERS,
         deadline = time.perf_counter() + timeout
     total, best, attempt, generator = 0, None, 0, None
     while True:
-        if attempt == 0:
-            start = q
+        table = search.nearest(attempt) if attempt else None
+        if table is not None and search.pose is not None and deadline == math.inf:
+            assert best is not None  # the first start has run
+            last = NEAREST if restarts is None else min(NEAREST, restarts)
+            success, used, attempt, lowest = search.run_nearest(table, attempt, last, max_iters,
+                                                                budget - total, best[1])
+            if lowest < best[1]:
+                best = (search.best_q.copy(), lowest)
         else:
-            start = search.near(attempt)
-            if start is None:  # the generator only when a restart needs it (it costs as
+            if attempt == 0:
+                start = q
+            elif table is not None:
+                start = table.next()
+            else:  # the generator only when a restart needs it (it costs as much as a start)
                 generator = search.generator(rng) if generator is None else generator
-                start = search.random(q, generator)  # much as a start)
-        success, used = search.run(start, min(max_iters, budget - total), deadline,
-                                   attempt <= NEAREST)
+                start = search.random(q, generator)
+            success, used = search.run(start, min(max_iters, budget - total), deadline,
+                                       attempt <= NEAREST)
         total += used
         error = search.error()
         if not math.isfinite(error):  # a NaN target, or one so far that |e|^2 overflows

@@ -95,6 +95,7 @@ class NearStarts:
         rng = np.random.default_rng(seed)
         neutral = pin.neutral(model)
         self.configurations = np.array([sampler(neutral, rng) for _ in range(size)])
+        self.configurations.flags.writeable = False  # next() hands out views
         frames = np.empty((size, 3, 4))
         for i, q in enumerate(self.configurations):
             pin.forwardKinematics(model, data, q)
@@ -128,7 +129,8 @@ class NearStarts:
         self.distance += self.offset
 
     def next(self) -> np.ndarray:
-        """The nearest configuration not yet given since :meth:`aim` (a copy)."""
+        """The nearest configuration not yet given since :meth:`aim` (a read-only view; the
+        compiled search takes them in the same order, ``search_pose`` with the table)."""
         i = int(self.distance.argmin())
         self.distance[i] = math.inf
-        return self.configurations[i].copy()
+        return self.configurations[i]

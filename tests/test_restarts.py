@@ -81,3 +81,43 @@ def test_solve_still_solves_every_pose(name):
     solver = sjt.SJTSolver(robot)
     pairs = problems(robot, 200, seed=8)
     assert all(solved(robot, solver.solve(t, s).q, t) for t, s in pairs)
+
+
+@pytest.mark.parametrize("name", ["panda", "ur5"])
+def test_the_table_s_starts_in_one_call_are_those_of_one_call_each(name):
+    """Without a timeout the table's restarts run in one compiled call; with one (the clock
+    read between starts), one call each: the same starts, iterations, restarts, error and q,
+    bitwise, on poses that restart."""
+    robot = sjt.Robot.from_example(name)
+    solver = sjt.SJTSolver(robot)
+    restarted = 0
+    for t, s in problems(robot, 60, seed=9):
+        a, b = solver.solve(t, s), solver.solve(t, s, timeout=1e9)
+        assert (a.iterations, a.restarts, a.error, a.success) == (b.iterations, b.restarts,
+                                                                  b.error, b.success)
+        np.testing.assert_array_equal(a.q, b.q)
+        restarted += a.restarts > 0
+    assert restarted >= 5
+    far = pin.SE3(np.eye(3), np.array([0.0, 0.0, 3.0]))  # out of reach: every start fails
+    a, b = solver.solve(far, robot.q0, budget=300), solver.solve(far, robot.q0, budget=300,
+                                                                timeout=1e9)
+    assert (a.iterations, a.restarts, a.error) == (b.iterations, b.restarts, b.error)
+    np.testing.assert_array_equal(a.q, b.q)
+    c = solver.solve(far, robot.q0, restarts=3)  # fewer restarts than the table has
+    assert c.restarts == 3 and not c.success
+
+
+def test_a_table_that_does_not_fit_the_robot_is_refused(panda):
+    """search_pose with a table whose configurations are not the robot's q (or a distance of
+    another length) raises ValueError instead of reading past them."""
+    from sjt_pin.kernels import search_pose
+
+    solver = sjt.SJTSolver(panda)
+    search = solver.search()
+    search.aim([panda.fk(panda.q0)], 1e-6)
+    call = search.pose.call
+    for configurations, distance in ((np.zeros((5, panda.nq - 1)), np.zeros(5)),
+                                     (np.zeros((5, panda.nq)), np.zeros(4))):
+        with pytest.raises(ValueError, match="table's arrays do not fit"):
+            search_pose(*call, 10, configurations, distance, search.state.copy(),
+                        np.zeros(panda.nq), 1, 10, np.inf)
