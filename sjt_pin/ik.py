@@ -213,20 +213,24 @@ class Search:
         :class:`~sjt_pin.restarts.Sampler`)."""
         return self._sampler(seed, rng)
 
-    def nearest(self, attempt: int) -> NearStarts | None:
-        """The table of configurations whose poses are nearest the target of :meth:`aim`
-        (:class:`~sjt_pin.restarts.NearStarts`, built on first use, ranked for the target on
-        restart 1) for restart ``attempt`` (1, 2, ...), or ``None``: past ``NEAREST`` restarts,
-        or not a single pose task (see :meth:`NearStarts.of
+    def restart_table(self) -> NearStarts | None:
+        """The table of configurations the first restarts take (built on first use: about
+        6 ms on Panda), or ``None`` where it does not apply (see :meth:`NearStarts.of
         <sjt_pin.restarts.NearStarts.of>`)."""
-        if attempt > NEAREST:
-            return None
         if not self._near_built:
             self._near = NearStarts.of(self.robot, self.stack, self._sampler)
             self._near_built = True
-        if self._near is not None and attempt == 1:
-            self._near.aim(self.targets[0].homogeneous)
         return self._near
+
+    def nearest(self, attempt: int) -> NearStarts | None:
+        """:meth:`restart_table` for restart ``attempt`` (1, 2, ...), ranked for the target of
+        :meth:`aim` on restart 1; ``None`` past ``NEAREST`` restarts or without a table."""
+        if attempt > NEAREST:
+            return None
+        table = self.restart_table()
+        if table is not None and attempt == 1:
+            table.aim(self.targets[0].homogeneous)
+        return table
 
     def run_nearest(self, table: NearStarts, attempt: int, last: int, max_iters: int,
                     count: int, best: float) -> tuple[bool, int, int, float]:
@@ -368,7 +372,8 @@ def solve(solver, target, q0, *, tol: float = TOL, max_iters: int = MAX_ITERS,
         restarts: most restarts after the first start (``None``: as many as the budget allows).
         timeout: no new iteration once this many seconds have passed (default ``None``: no
             time limit, so the result depends only on the inputs and ``rng``, never on the
-            machine's speed or load; the clock starts after the search is set up).
+            machine's speed or load; the clock starts after the search is set up, its restart
+            table built).
         budget: iterations over all starts (the default limit: 2000, about 2.5 ms on Panda at
             1.2 us per iteration).
         rng: a ``numpy.random.Generator`` or a seed for the random starts (``None``: seed 0,
@@ -388,6 +393,7 @@ def solve(solver, target, q0, *, tol: float = TOL, max_iters: int = MAX_ITERS,
     else:
         timeout = positive(timeout, "timeout", "s")
         search.stack.evaluate(q, targets, None)  # anything loaded on first use: before the clock
+        search.restart_table()  # built on first use too: before the clock
         deadline = time.perf_counter() + timeout
     total, best, attempt, generator = 0, None, 0, None
     while True:
