@@ -285,9 +285,10 @@ static PyObject *search_jacobian(PyObject *jacobian, PyObject *arguments, Py_ssi
 
 /* Up to `count` iterations of the set-point search on a pose task: the pose error (rad, m) of
  * the frame whose rotation and translation views follow q, one search_iteration_c, and the
- * integration of its step, until it stops. Returns (status, iterations), NULL on an error. */
-static PyObject *search_pose_loop(PyObject *jacobian, PyObject *arguments, SearchArgs *a,
-                                  long count)
+ * integration of its step, until it stops. Returns the status and the iterations in *done;
+ * -1 with the exception set on an error. */
+static int search_pose_run(PyObject *jacobian, PyObject *arguments, SearchArgs *a, long count,
+                           long *done_)
 {
     double *tabv = (double *)a->tab.view.buf, *qv = (double *)a->q.view.buf;
     double *qcv = (double *)a->qc.view.buf, *Jcv = (double *)a->Jc.view.buf;
@@ -300,11 +301,12 @@ static PyObject *search_pose_loop(PyObject *jacobian, PyObject *arguments, Searc
     Py_ssize_t p_stride = a->p.view.strides[0] / 8;
     int status = CONTINUE;
     long done = 0;
+    *done_ = 0;
     while (done < count) {
         Arg Ja = {0};
         Mat Jm;
         PyObject *J = search_jacobian(jacobian, arguments, n, &Ja, &Jm);
-        if (!J) return NULL;
+        if (!J) return -1;
         search_pose_error(Rm, pv, p_stride, Mm, ev);
         status = search_iteration_c(Jm, ev, qv, nq, Jcv, ecv, qcv, limv,
                                     a->lim.view.shape[1], wv, sv, stv);
@@ -314,14 +316,15 @@ static PyObject *search_pose_loop(PyObject *jacobian, PyObject *arguments, Searc
         if (status != CONTINUE) break;
         search_integrate(qcv, stv, tabv, k, nq, qv);
     }
-    return Py_BuildValue("(il)", status, done);
+    *done_ = done;
+    return status;
 }
 
 /* The table's starts of solve() (sjt_pin.restarts.NearStarts) in one call: up to `starts` starts,
  * each from the configuration of the table whose distance is the smallest left (then marked
  * used: +inf), its state reset to `initial`, of at most min(max_iters, iterations left of
- * `count`) iterations (search_pose_loop), until one converges, the iterations run out, or a
- * start ends with a non-finite error (for Python to report). `*best` (|e| of the best start so
+ * `count`) iterations (search_pose_run), until one converges, the iterations run out, or a
+ * start ends with a non-finite error (for Python to report). best (|e| of the best start so
  * far, task units) and best_q follow every start whose |e| is below it, as solve() keeps them.
  * Returns (status of the last start, iterations, starts made, best |e|), NULL on an error. */
 static PyObject *search_table_loop(PyObject *jacobian, PyObject *arguments, SearchArgs *a,
@@ -341,12 +344,9 @@ static PyObject *search_table_loop(PyObject *jacobian, PyObject *arguments, Sear
         distance[nearest] = INFINITY;
         memcpy(qv, configurations + nearest * nq, (size_t)nq * sizeof(double));
         memcpy(sv, initial, S_COUNT * sizeof(double));
-        long limit = count - used < max_iters ? count - used : max_iters;
-        PyObject *run = search_pose_loop(jacobian, arguments, a, limit);
-        if (!run) return NULL;
-        long done = PyLong_AsLong(PyTuple_GET_ITEM(run, 1));
-        status = (int)PyLong_AsLong(PyTuple_GET_ITEM(run, 0));
-        Py_DECREF(run);
+        long limit = count - used < max_iters ? count - used : max_iters, done;
+        status = search_pose_run(jacobian, arguments, a, limit, &done);
+        if (status < 0) return NULL;
         used += done;
         made++;
         double error = sqrt(sv[S_E_SQ]);
@@ -417,7 +417,9 @@ PyObject *py_search_pose(PyObject *self, PyObject *const *args, Py_ssize_t nargs
         goto done;
     if (search_pose_fits(&a) != 0) goto done;
     if (nargs == 16) {
-        result = search_pose_loop(jacobian, arguments, &a, count);
+        long iterations;
+        int status = search_pose_run(jacobian, arguments, &a, count, &iterations);
+        if (status >= 0) result = Py_BuildValue("(il)", status, iterations);
         goto done;
     }
     Arg conf = {0}, dist = {0}, init = {0}, bq = {0};
