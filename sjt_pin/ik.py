@@ -21,7 +21,8 @@ new start.
 On a single :class:`~sjt_pin.tasks.PoseTask` (the usual case) every iteration of a start runs
 in one compiled call (``sjt_pin.kernels.search_pose``): per iteration one Pinocchio call for the
 kinematics and the frame's Jacobian, then the error (log6), the update, the limits and
-``integrate`` in C, about 1 us on a 6-joint arm. Other task stacks, and user limits (the
+``integrate`` in C, about 1 us on a 6-joint arm; without a ``timeout``, the table's restarts
+run in one such call too. Other task stacks, and user limits (the
 constraint stage's, which hold at every iteration too), make one Python round trip per
 iteration: the stack's rows, then one compiled call (``sjt_pin.kernels.search_iteration``).
 """
