@@ -1,5 +1,7 @@
 """Solve to a pose (set-point IK): Levenberg-Marquardt on SJT's normalised columns, restarted
-from random configurations within the limits until it succeeds or its budget runs out.
+until it succeeds or its budget runs out: on a single pose task first from the configurations
+of a seeded table whose poses are nearest the target, then from random configurations within
+the limits (:mod:`sjt_pin.restarts`).
 
 Each iteration evaluates the task rows once, at the trial configuration, accepts or rejects the
 trial and computes the next step ``S J^T (J S J^T + lambda I)^-1 e`` — S = D for SJT (the
@@ -12,13 +14,15 @@ damping), with ``nu`` adapted as in Levenberg-Marquardt. Joint limits hold at ev
 joint that would leave its range is fixed onto its limit and the others solved again; a joint
 whose range spans a full turn wraps by 2 pi instead; no joint moves more than ``MAX_STEP`` in
 one iteration. A start ends when the error is below ``tol`` (success), or when it stops falling
-(a local minimum: its best |e_w|^2 has not fallen by 1 % in 6 iterations, or by 10 % in 4 while
-a joint is held at a limit): then a new start.
+(a local minimum: its best |e_w|^2 has not fallen by 1 % in 6 iterations, or, on the first
+starts, has not halved in 4 while a joint is held at a limit or after a rejected step): then a
+new start.
 
 On a single :class:`~sjt_pin.tasks.PoseTask` (the usual case) every iteration of a start runs
 in one compiled call (``sjt_pin.kernels.search_pose``): per iteration one Pinocchio call for the
 kinematics and the frame's Jacobian, then the error (log6), the update, the limits and
-``integrate`` in C, about 1 us on a 6-joint arm. Other task stacks, and user limits (the
+``integrate`` in C, about 1 us on a 6-joint arm; without a ``timeout``, the table's restarts
+run in one such call too. Other task stacks, and user limits (the
 constraint stage's, which hold at every iteration too), make one Python round trip per
 iteration: the stack's rows, then one compiled call (``sjt_pin.kernels.search_iteration``).
 """
@@ -53,6 +57,7 @@ from .kernels import (
 from .kinematics import Kinematics
 from .limits.base import Motion
 from .mappings import COLUMN_TOL
+from .restarts import NearStarts, Sampler
 from .tasks import PoseTask
 from .validation import integer, positive, raise_non_finite_targets
 
@@ -67,10 +72,18 @@ TIMEOUT: float | None = None
 #: the largest joint motion of one iteration (rad or m): a trust region
 MAX_STEP = 2.0
 #: a start has stalled (a local minimum) when its best error has not fallen below ``PROGRESS``
-#: times itself (in |e_w|^2 / 2) for ``STALE_ITERS`` iterations; with a joint held at one of
-#: its limits (heading for a minimum on the boundary), ``HELD_PROGRESS`` in ``HELD_ITERS``
+#: times itself (in |e_w|^2 / 2) for ``STALE_ITERS`` iterations (the patient test); on the first
+#: start and the table's (``NEAREST``) also when it has not fallen below ``HELD_PROGRESS`` times
+#: itself for ``HELD_ITERS`` iterations while a joint is held at one of its limits (heading for
+#: a minimum on the boundary) or once a step of the start has been rejected (its damping found:
+#: Levenberg-Marquardt then converges fast or not at all) — the quick test. A stalled start
+#: costs the iterations of its test: the tail of solve()'s times. Later starts, on a pose hard
+#: enough to need them, keep only the patient test, which lets a slow start finish.
 STALE_ITERS, PROGRESS = 6, 0.99
-HELD_ITERS, HELD_PROGRESS = 4, 0.9
+HELD_ITERS, HELD_PROGRESS = 4, 0.5
+#: restarts taken from the table of configurations nearest the target (single pose task) before
+#: random ones
+NEAREST = 8
 #: the initial nu of the damping lambda = mu^2 + nu |e_w|^2, and its floor mu^2
 NU_START, MU = 1.0, 1e-6
 
@@ -124,7 +137,10 @@ class Search:
         self.e = np.zeros(m)
         self.q = np.zeros(robot.nq)
         self.step = np.zeros(n)
-        self._sampler = _Sampler(robot)
+        self.best_q = np.zeros(robot.nq)  # the best start's q of run_nearest
+        self._sampler = Sampler(robot)
+        self._near: NearStarts | None = None  # built on the first restart (see near)
+        self._near_built = False
         self._seed = None  # (seed, its generator, its first state)
         self.pose = None if self.user_limits is not None else _PoseLoop.of(robot, stack)
 
@@ -141,10 +157,14 @@ class Search:
         if self.pose is not None:
             self.pose.aim(self, targets[0])
 
-    def run(self, q0: np.ndarray, limit: int, deadline: float) -> tuple[bool, int]:
+    def run(self, q0: np.ndarray, limit: int, deadline: float,
+            quick: bool = True) -> tuple[bool, int]:
         """One start from ``q0`` towards the targets of :meth:`aim`, of at most ``limit``
-        iterations: (converged, iterations used)."""
+        iterations: (converged, iterations used). ``quick``: with the quick stall test (see
+        ``HELD_ITERS``) as well as the patient one."""
         self.state[:] = self._initial
+        if not quick:
+            self.state[S_HELD_LIMIT] = math.inf
         if self.pose is not None:
             return self.pose.run(q0, limit, deadline)
         stack, model, targets = self.stack, self.robot.model, self.targets
@@ -190,7 +210,42 @@ class Search:
         return math.sqrt(self.state[S_E_SQ])
 
     def random(self, seed: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """A random start: ``seed`` with the drawn joints drawn from ``rng`` (see
+        :class:`~sjt_pin.restarts.Sampler`)."""
         return self._sampler(seed, rng)
+
+    def restart_table(self) -> NearStarts | None:
+        """The table of configurations the first restarts take (built on first use: about
+        6 ms on Panda), or ``None`` where it does not apply (see :meth:`NearStarts.of
+        <sjt_pin.restarts.NearStarts.of>`)."""
+        if not self._near_built:
+            self._near = NearStarts.of(self.robot, self.stack, self._sampler)
+            self._near_built = True
+        return self._near
+
+    def nearest(self, attempt: int) -> NearStarts | None:
+        """:meth:`restart_table` for restart ``attempt`` (1, 2, ...), ranked for the target of
+        :meth:`aim` on restart 1; ``None`` past ``NEAREST`` restarts or without a table."""
+        if attempt > NEAREST:
+            return None
+        table = self.restart_table()
+        if table is not None and attempt == 1:
+            table.aim(self.targets[0].homogeneous)
+        return table
+
+    def run_nearest(self, table: NearStarts, attempt: int, last: int, max_iters: int,
+                    count: int, best: float) -> tuple[bool, int, int, float]:
+        """Restarts ``attempt`` .. ``last`` from ``table`` (ranked: see :meth:`nearest`) in one
+        compiled call on the pose loop, each of at most ``max_iters`` iterations, ``count`` in
+        all, until one converges: (converged, iterations used, the last restart made, the
+        lowest |e| of a start, ``best`` if none was lower; its q is then in ``best_q``). As
+        many starts of :meth:`run`, without a Python round trip between them (no clock: for
+        solves without a ``timeout``)."""
+        assert self.pose is not None
+        status, used, made, lowest = search_pose(
+            *self.pose.call, count, table.configurations, table.distance, self._initial,
+            self.best_q, last - attempt + 1, max_iters, best)
+        return status == CONVERGED, used, attempt + made - 1, lowest
 
     def generator(self, rng) -> np.random.Generator:
         """``rng`` as a generator of random starts (``None``: seed 0). An int seed's generator
@@ -301,53 +356,6 @@ def _joint_table(model: pin.Model) -> np.ndarray | None:
     return np.array(rows, dtype=float).reshape(-1, 3).T.copy()
 
 
-#: the width of a uniform angle in [-pi, pi) (rad), as numpy's uniform computes it
-_TURN = np.pi - (-np.pi)
-
-
-class _Sampler:
-    """Random starts: limited joints uniform within their limits, unlimited revolute and
-    continuous joints a random angle (about the seed's), the rest (a floating base, prismatic
-    joints without limits) as in the seed."""
-
-    def __init__(self, robot):
-        model = robot.model
-        lower, upper = robot.lower_limits, robot.upper_limits
-        self.limited, self.turning, self.circle = [], [], []
-        for j in range(1, model.njoints):
-            joint = model.joints[j]
-            kind = joint.shortname()
-            if joint.nq == 1 and joint.nv == 1:
-                i = joint.idx_q
-                if np.isfinite(lower[i]) and np.isfinite(upper[i]):
-                    self.limited.append(i)
-                elif "Revolute" in kind:
-                    self.turning.append(i)
-            elif joint.nq == 2 and joint.nv == 1:  # continuous: (cos, sin)
-                self.circle.append(joint.idx_q)
-        self.limited = np.array(self.limited, dtype=np.int64)
-        self.lower, self.upper = lower[self.limited], upper[self.limited]
-        self.turning = np.array(self.turning, dtype=np.int64)
-        self.circle = np.array(self.circle, dtype=np.int64)
-        self.span = self.upper - self.lower
-        self.draws = self.limited.size + self.turning.size + self.circle.size
-
-    def __call__(self, seed: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        """The numbers of ``rng.uniform(lower, upper)`` for the limited joints, then of
-        ``rng.uniform(-pi, pi)`` for the others, bitwise (``low + (high - low) u`` on one draw
-        of ``rng.random``: numpy's uniform checks array bounds at 10 us a call)."""
-        q = seed.copy()
-        u = rng.random(self.draws)
-        k, t = self.limited.size, self.limited.size + self.turning.size
-        q[self.limited] = self.lower + self.span * u[:k]
-        if t > k:
-            q[self.turning] += -np.pi + _TURN * u[k:t]
-        if self.circle.size:
-            angles = -np.pi + _TURN * u[t:]
-            q[self.circle], q[self.circle + 1] = np.cos(angles), np.sin(angles)
-        return q
-
-
 def solve(solver, target, q0, *, tol: float = TOL, max_iters: int = MAX_ITERS,
           restarts: int | None = None, timeout: float | None = TIMEOUT, budget: int = BUDGET,
           rng: np.random.Generator | int | None = None) -> IKResult:
@@ -356,18 +364,21 @@ def solve(solver, target, q0, *, tol: float = TOL, max_iters: int = MAX_ITERS,
     Args:
         target: as for ``step`` (a pose, or ``{frame: target}`` with several tasks).
         q0: the first start (nq,), clipped into the position limits first (``IKResult.clipped``
-            names the joints moved); later starts are random within the limits (a floating
-            base and prismatic joints without limits keep ``q0``'s values).
+            names the joints moved). On a single pose task the next ``NEAREST`` (8) starts
+            are the configurations of a seeded table (:mod:`sjt_pin.restarts`) whose poses are
+            nearest ``target``; later starts are random within the limits (a floating base
+            and prismatic joints without limits keep ``q0``'s values).
         tol: success when the tasks' error norm is below ``tol`` (m and rad; > 0).
         max_iters: iterations of one start.
         restarts: most restarts after the first start (``None``: as many as the budget allows).
         timeout: no new iteration once this many seconds have passed (default ``None``: no
             time limit, so the result depends only on the inputs and ``rng``, never on the
-            machine's speed or load; the clock starts after the search is set up).
+            machine's speed or load; the clock starts after the search is set up, its restart
+            table built).
         budget: iterations over all starts (the default limit: 2000, about 2.5 ms on Panda at
             1.2 us per iteration).
         rng: a ``numpy.random.Generator`` or a seed for the random starts (``None``: seed 0,
-            so a call repeats).
+            so a call repeats; the table's starts do not depend on it).
 
     Returns the first start that succeeds, or the best one (lowest error) when none did.
     """
@@ -383,15 +394,28 @@ def solve(solver, target, q0, *, tol: float = TOL, max_iters: int = MAX_ITERS,
     else:
         timeout = positive(timeout, "timeout", "s")
         search.stack.evaluate(q, targets, None)  # anything loaded on first use: before the clock
+        search.restart_table()  # built on first use too: before the clock
         deadline = time.perf_counter() + timeout
     total, best, attempt, generator = 0, None, 0, None
     while True:
-        if attempt == 0:
-            start = q
-        else:  # the generator only when a restart needs it (it costs as much as a start)
-            generator = search.generator(rng) if generator is None else generator
-            start = search.random(q, generator)
-        success, used = search.run(start, min(max_iters, budget - total), deadline)
+        table = search.nearest(attempt) if attempt else None
+        if table is not None and search.pose is not None and deadline == math.inf:
+            assert best is not None  # the first start has run
+            last = NEAREST if restarts is None else min(NEAREST, restarts)
+            success, used, attempt, lowest = search.run_nearest(table, attempt, last, max_iters,
+                                                                budget - total, best[1])
+            if lowest < best[1]:
+                best = (search.best_q.copy(), lowest)
+        else:
+            if attempt == 0:
+                start = q
+            elif table is not None:
+                start = table.next()
+            else:  # the generator only when a restart needs it (it costs as much as a start)
+                generator = search.generator(rng) if generator is None else generator
+                start = search.random(q, generator)
+            success, used = search.run(start, min(max_iters, budget - total), deadline,
+                                       attempt <= NEAREST)
         total += used
         error = search.error()
         if not math.isfinite(error):  # a NaN target, or one so far that |e|^2 overflows

@@ -85,7 +85,7 @@ def test_restarts_draw_what_numpy_draws(panda):
     solver.solve(*pairs[0], rng=np.random.default_rng(8))
     again = [solver.solve(t, s, rng=7) for t, s in pairs]
     fresh = [sjt.SJTSolver(panda).solve(t, s, rng=np.random.default_rng(7)) for t, s in pairs]
-    assert any(r.restarts for r in first)  # the generator was used
+    assert any(r.restarts for r in first)  # restarts were made (the table's first)
     for a, b, c in zip(first, again, fresh, strict=True):
         np.testing.assert_array_equal(a.q, b.q)
         np.testing.assert_array_equal(a.q, c.q)
@@ -114,3 +114,43 @@ def test_other_task_stacks_take_the_python_loop(ur5):
         assert solver.search().pose is None
     equal = sjt.SJTSolver(ur5, task=sjt.PoseTask(weight=[2.0, 2.0, 2.0, 1.0, 1.0, 1.0]))
     assert equal.search().pose is not None
+
+
+def _iterations_until_stop(errors, quick_limit):
+    """search_iteration fed the error vectors ``errors`` in turn (J fixed, no limits): the
+    iterations until it returns a status other than CONTINUE (None: it never did)."""
+    from sjt_pin import ik
+    from sjt_pin import kernels as K
+
+    layout = K.Layout(6, 6, 0)
+    work = layout.allocate()
+    layout.sqrt_weight(work)[:] = 1.0
+    layout.joint_mask(work)[:] = 1.0
+    work[K.P_MU] = ik.MU
+    state = np.zeros(K.STATE_SIZE)
+    state[K.S_NU], state[K.S_BEST], state[K.S_TOL_SQ] = ik.NU_START, math.inf, 1e-12
+    state[K.S_MAX_STEP], state[K.S_ERROR_ROWS] = ik.MAX_STEP, 6
+    state[K.S_STALE_LIMIT], state[K.S_PROGRESS] = ik.STALE_ITERS, ik.PROGRESS
+    state[K.S_HELD_LIMIT], state[K.S_HELD_PROGRESS] = quick_limit, ik.HELD_PROGRESS
+    J, q = np.eye(6), np.zeros(6)
+    Jc, ec, qc, step = np.zeros((6, 6)), np.zeros(6), np.zeros(6), np.zeros(6)
+    for k, e in enumerate(errors, 1):
+        if K.search_iteration(J, e, q, Jc, ec, qc, np.zeros((4, 0)), work, state, step):
+            return k
+    return None
+
+
+def test_the_quick_stall_test_waits_for_a_rejected_step():
+    """The quick test (halve within HELD_ITERS) stops a start whose steps are rejected (its
+    error does not fall: it is in a local minimum) after HELD_ITERS rejections, sooner than the
+    patient test, and only with the quick test on; a start whose every step is accepted, its
+    error falling by 5 % an iteration (the damping of its first iterations holding it back),
+    runs on."""
+    from sjt_pin import ik
+
+    stuck = [np.full(6, 0.1)] * 20  # every trial no better than the first: rejected
+    assert _iterations_until_stop(stuck, ik.HELD_ITERS) == 1 + ik.HELD_ITERS
+    assert _iterations_until_stop(stuck, math.inf) == 1 + ik.STALE_ITERS
+    assert ik.HELD_ITERS < ik.STALE_ITERS
+    slow = [np.full(6, 0.1 * 0.95**k) for k in range(20)]  # accepted, 5 % better each time
+    assert _iterations_until_stop(slow, ik.HELD_ITERS) is None

@@ -26,7 +26,7 @@
 #define SEARCH_STATE(X) X(S_F) X(S_NU) X(S_ITER) X(S_BEST) X(S_STALE) X(S_TOL_SQ) \
     X(S_MAX_STEP) X(S_ERROR_ROWS) X(S_E_SQ) \
     X(S_STALE_LIMIT) X(S_PROGRESS) \
-    X(S_HELD_BEST) X(S_HELD_STALE) X(S_HELD_LIMIT) X(S_HELD_PROGRESS)
+    X(S_HELD_BEST) X(S_HELD_STALE) X(S_HELD_LIMIT) X(S_HELD_PROGRESS) X(S_REJECTED)
 /* the acceleration/jerk stage's part of work (at P_SMOOTH; n numbers each, then m): the
  * motion state, the limits, the step's boxes and what they did (see smooth_stage_c) */
 #define SMOOTH_PARTS(X) X(SM_DQ) X(SM_DDQ) X(SM_ACC) X(SM_JERK) X(SM_JERK_SPEED) \

@@ -44,7 +44,9 @@ static PyMethodDef methods[] = {
     {"search_pose", (PyCFunction)(void (*)(void))py_search_pose, METH_FASTCALL,
      "search_pose(jacobian, arguments, rotation, translation, target, joints, q, q_cur, J_cur, "
      "e, e_cur, limits, work, state, step, count) -> (status, iterations): up to count "
-     "iterations of solve() on one pose task, each calling jacobian(*arguments) once."},
+     "iterations of solve() on one pose task, each calling jacobian(*arguments) once; with "
+     "configurations, distance, initial, best_q, starts, max_iters, best as well -> (status, "
+     "iterations, starts, best): the restarts from the table of sjt_pin.restarts."},
     {"jlog6_inverse", (PyCFunction)(void (*)(void))py_jlog6_inverse, METH_FASTCALL,
      "jlog6_inverse(xi, out): out (6 x 6) = Jlog6(N^-1) for xi = log6(N), [linear; angular]: "
      "the exact derivative of a pose error log6 in the rows of its Jacobian."},

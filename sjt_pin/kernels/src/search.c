@@ -116,6 +116,7 @@ static int search_iteration_c(Mat J, const double *e, const double *q, Py_ssize_
         if (e_sq <= state[S_TOL_SQ]) return CONVERGED;
     } else {
         state[S_NU] *= NU_UP;
+        state[S_REJECTED] = 1.0;
     }
     if (f < state[S_PROGRESS] * state[S_BEST] || first) {
         state[S_BEST] = dmin(f, state[S_F]);
@@ -125,15 +126,19 @@ static int search_iteration_c(Mat J, const double *e, const double *q, Py_ssize_
     }
     if (state[S_STALE] >= state[S_STALE_LIMIT] || state[S_NU] > NU_MAX || !isfinite(f))
         return SEARCH_STALLED;
-    /* with a joint held at its limit the start is heading for a minimum on the boundary of the
-     * box: it stalls sooner (a stricter progress over fewer iterations) */
+    /* the quick test (a stricter progress over fewer iterations): with a joint held at its limit
+     * (heading for a minimum on the boundary of the box), or once a step of the start has been
+     * rejected (its damping found: Levenberg-Marquardt then converges fast or not at all; before
+     * that, on a robot of metres-long links, the first damping holds a good start back for
+     * several iterations) */
     if (f < state[S_HELD_PROGRESS] * state[S_HELD_BEST] || first) {
         state[S_HELD_BEST] = dmin(f, state[S_F]);
         state[S_HELD_STALE] = 0.0;
     } else {
         state[S_HELD_STALE] += 1.0;
     }
-    if (state[S_HELD_STALE] >= state[S_HELD_LIMIT] && search_held(q_cur, limits, c))
+    if (state[S_HELD_STALE] >= state[S_HELD_LIMIT]
+        && (state[S_REJECTED] != 0.0 || search_held(q_cur, limits, c)))
         return SEARCH_STALLED;
     Mat cur = {J_cur, m, n, n, 1};
     limited_step(cur, e_cur, q_cur, limits, c, work, state, step);
@@ -280,9 +285,10 @@ static PyObject *search_jacobian(PyObject *jacobian, PyObject *arguments, Py_ssi
 
 /* Up to `count` iterations of the set-point search on a pose task: the pose error (rad, m) of
  * the frame whose rotation and translation views follow q, one search_iteration_c, and the
- * integration of its step, until it stops. Returns (status, iterations), NULL on an error. */
-static PyObject *search_pose_loop(PyObject *jacobian, PyObject *arguments, SearchArgs *a,
-                                  long count)
+ * integration of its step, until it stops. Returns the status and the iterations in *done;
+ * -1 with the exception set on an error. */
+static int search_pose_run(PyObject *jacobian, PyObject *arguments, SearchArgs *a, long count,
+                           long *done_)
 {
     double *tabv = (double *)a->tab.view.buf, *qv = (double *)a->q.view.buf;
     double *qcv = (double *)a->qc.view.buf, *Jcv = (double *)a->Jc.view.buf;
@@ -295,11 +301,12 @@ static PyObject *search_pose_loop(PyObject *jacobian, PyObject *arguments, Searc
     Py_ssize_t p_stride = a->p.view.strides[0] / 8;
     int status = CONTINUE;
     long done = 0;
+    *done_ = 0;
     while (done < count) {
         Arg Ja = {0};
         Mat Jm;
         PyObject *J = search_jacobian(jacobian, arguments, n, &Ja, &Jm);
-        if (!J) return NULL;
+        if (!J) return -1;
         search_pose_error(Rm, pv, p_stride, Mm, ev);
         status = search_iteration_c(Jm, ev, qv, nq, Jcv, ecv, qcv, limv,
                                     a->lim.view.shape[1], wv, sv, stv);
@@ -309,7 +316,48 @@ static PyObject *search_pose_loop(PyObject *jacobian, PyObject *arguments, Searc
         if (status != CONTINUE) break;
         search_integrate(qcv, stv, tabv, k, nq, qv);
     }
-    return Py_BuildValue("(il)", status, done);
+    *done_ = done;
+    return status;
+}
+
+/* The table's starts of solve() (sjt_pin.restarts.NearStarts) in one call: up to `starts` starts,
+ * each from the configuration of the table whose distance is the smallest left (then marked
+ * used: +inf), its state reset to `initial`, of at most min(max_iters, iterations left of
+ * `count`) iterations (search_pose_run), until one converges, the iterations run out, or a
+ * start ends with a non-finite error (for Python to report). best (|e| of the best start so
+ * far, task units) and best_q follow every start whose |e| is below it, as solve() keeps them.
+ * Returns (status of the last start, iterations, starts made, best |e|), NULL on an error. */
+static PyObject *search_table_loop(PyObject *jacobian, PyObject *arguments, SearchArgs *a,
+                                   const double *configurations, Py_ssize_t size,
+                                   double *distance, const double *initial, double *best_q,
+                                   long count, long max_iters, long starts, double best)
+{
+    double *qv = (double *)a->q.view.buf, *qcv = (double *)a->qc.view.buf;
+    double *sv = (double *)a->state.view.buf;
+    Py_ssize_t nq = length(&a->q);
+    int status = CONTINUE;
+    long used = 0, made = 0;
+    while (made < starts && used < count) {
+        Py_ssize_t nearest = 0;
+        for (Py_ssize_t i = 1; i < size; i++)
+            if (distance[i] < distance[nearest]) nearest = i;
+        distance[nearest] = INFINITY;
+        memcpy(qv, configurations + nearest * nq, (size_t)nq * sizeof(double));
+        memcpy(sv, initial, S_COUNT * sizeof(double));
+        long limit = count - used < max_iters ? count - used : max_iters, done;
+        status = search_pose_run(jacobian, arguments, a, limit, &done);
+        if (status < 0) return NULL;
+        used += done;
+        made++;
+        double error = sqrt(sv[S_E_SQ]);
+        if (!isfinite(error)) break;
+        if (error < best) {
+            best = error;
+            memcpy(best_q, qcv, (size_t)nq * sizeof(double));
+        }
+        if (status == CONVERGED) break;
+    }
+    return Py_BuildValue("(illd)", status, used, made, best);
 }
 
 /* search_pose's checks of the acquired arrays' shapes and tables; 0 when they fit */
@@ -337,10 +385,16 @@ static int search_pose_fits(SearchArgs *a)
 }
 
 /* search_pose(jacobian, arguments, rotation, translation, target, joints, q, q_cur, J_cur, e,
- *             e_cur, limits, work, state, step, count) -> (status, iterations) */
+ *             e_cur, limits, work, state, step, count) -> (status, iterations): one start;
+ * with seven more arguments (configurations, distance, initial, best_q, starts, max_iters,
+ * best) -> (status, iterations, starts made, best |e|): the table's starts (search_table_loop),
+ * count iterations over all of them */
 PyObject *py_search_pose(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
-    if (!nargs_ok(nargs, 16, "search_pose")) return NULL;
+    if (nargs != 16 && nargs != 23) {
+        PyErr_Format(PyExc_TypeError, "search_pose takes 16 or 23 arguments (%zd given)", nargs);
+        return NULL;
+    }
     PyObject *jacobian = args[0], *arguments = args[1];
     if (!PyCallable_Check(jacobian) || !PyTuple_Check(arguments)) {
         PyErr_SetString(PyExc_TypeError, "search_pose: jacobian must be callable and arguments "
@@ -361,7 +415,33 @@ PyObject *py_search_pose(PyObject *self, PyObject *const *args, Py_ssize_t nargs
         || acquire(args[13], &a.state, 1, 1, "state")
         || acquire(args[14], &a.step, 1, 1, "step"))
         goto done;
-    if (search_pose_fits(&a) == 0) result = search_pose_loop(jacobian, arguments, &a, count);
+    if (search_pose_fits(&a) != 0) goto done;
+    if (nargs == 16) {
+        long iterations;
+        int status = search_pose_run(jacobian, arguments, &a, count, &iterations);
+        if (status >= 0) result = Py_BuildValue("(il)", status, iterations);
+        goto done;
+    }
+    Arg conf = {0}, dist = {0}, init = {0}, bq = {0};
+    long starts = PyLong_AsLong(args[20]), max_iters = PyLong_AsLong(args[21]);
+    double best = PyFloat_AsDouble(args[22]);
+    if (!PyErr_Occurred() && !acquire(args[16], &conf, 0, 2, "configurations")
+        && !acquire(args[17], &dist, 1, 1, "distance") && !acquire(args[18], &init, 0, 1, "initial")
+        && !acquire(args[19], &bq, 1, 1, "best_q")) {
+        double *cv = out_mat(&conf, "configurations"), *dv = out_vec(&dist, "distance");
+        double *iv = vec(&init, "initial"), *bv = out_vec(&bq, "best_q");
+        Py_ssize_t nq = length(&a.q);
+        if (cv && dv && iv && bv) {
+            if (conf.view.ndim != 2 || conf.view.shape[1] != nq
+                || length(&dist) != conf.view.shape[0] || conf.view.shape[0] < 1
+                || length(&init) < S_COUNT || length(&bq) != nq)
+                PyErr_SetString(PyExc_ValueError, "search_pose: the table's arrays do not fit");
+            else
+                result = search_table_loop(jacobian, arguments, &a, cv, conf.view.shape[0], dv,
+                                           iv, bv, count, max_iters, starts, best);
+        }
+    }
+    release(&conf); release(&dist); release(&init); release(&bq);
 done:
     release(&a.R); release(&a.p); release(&a.Md); release(&a.tab); release(&a.q);
     release(&a.qc); release(&a.Jc); release(&a.e); release(&a.ec); release(&a.lim);
