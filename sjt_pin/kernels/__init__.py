@@ -17,7 +17,8 @@ against the numpy reference formulas of :mod:`sjt_pin.mappings` and against Pino
   reference: :mod:`sjt_pin.constraints` and :mod:`sjt_pin.limits`);
 - ``search_iteration(...)``: one Levenberg-Marquardt iteration of ``solve()`` on SJT's
   normalised columns, within the joint limits; ``search_pose(...)``: every iteration of one
-  start on a single pose task in one call (it calls Pinocchio's Jacobian once per iteration);
+  start on a single pose task in one call (it calls Pinocchio's Jacobian once per iteration),
+  or, given the restart table of :mod:`sjt_pin.restarts`, its nearest starts in turn;
   ``jlog6_inverse(xi, out)``: ``Jlog6(N^-1)`` from ``xi = log6(N)``, the exact derivative of a
   pose error in the rows of its Jacobian (the search's model);
 - ``damper_rows``: the collision limit's velocity-damper rows from its pairs' closest points;

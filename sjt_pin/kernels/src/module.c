@@ -49,7 +49,7 @@ static PyMethodDef methods[] = {
      "iterations, starts, best): the restarts from the table of sjt_pin.restarts."},
     {"jlog6_inverse", (PyCFunction)(void (*)(void))py_jlog6_inverse, METH_FASTCALL,
      "jlog6_inverse(xi, out): out (6 x 6) = Jlog6(N^-1) for xi = log6(N), [linear; angular]: "
-     "the exact derivative of a pose error log6 in the rows of its Jacobian."},
+     "the exact rows of a pose error log6 from its CLIK rows (-de/dq = G J)."},
     {"nonnegative_qp", (PyCFunction)(void (*)(void))py_nonnegative_qp, METH_FASTCALL,
      "nonnegative_qp(Q, r, y) -> int: y = argmin 1/2 y^T Q y + r^T y over y >= 0 (NNLS)."},
     {"project_rows", (PyCFunction)(void (*)(void))py_project_rows, METH_FASTCALL,
