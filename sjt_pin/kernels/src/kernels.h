@@ -11,10 +11,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-#ifndef M_PI
-#define M_PI 3.14159265358979323846
-#endif
-
 /* -- the work vector's slots: named here once, exported by name to sjt_pin/kernels/layout.py - */
 #define PARAMETERS(X) X(P_DT) X(P_GAIN_MODE) X(P_GAIN_ARG) X(P_FF_MODE) X(P_MU) X(P_COL_TOL) \
     X(P_SCALED) X(P_RCOND) X(P_LENGTH2) X(P_FB_MODE) X(P_LM) X(P_ERROR_ROWS) X(P_STALL_RATIO) \
@@ -61,10 +57,6 @@ enum { LIMIT_CODES(SLOT_ENUM) L_COUNT };
 #define CONTINUE 0
 #define CONVERGED 1
 #define SEARCH_STALLED 2
-#define NU_DOWN 3.0
-#define NU_UP 4.0
-#define NU_MIN 1e-6
-#define NU_MAX 1e8
 
 /* a read-only matrix with element strides */
 typedef struct { const double *p; Py_ssize_t m, n, s0, s1; } Mat;
@@ -95,11 +87,6 @@ typedef struct {
     int held;
     double *copy; /* a contiguous copy of a strided 1-D input */
 } Arg;
-
-/* The acquired buffers of search_pose, in its argument order. */
-typedef struct {
-    Arg R, p, Md, tab, q, qc, Jc, e, ec, lim, work, state, step;
-} SearchArgs;
 
 /* the dual's ridge relative to its largest diagonal entry (constraints.DUAL_RIDGE) */
 #define DUAL_RIDGE 1e-13

@@ -3,6 +3,21 @@
 
 #include "kernels.h"
 
+#ifndef M_PI
+#define M_PI 3.14159265358979323846
+#endif
+
+/* the Levenberg-Marquardt damping's factors down and up, and its range */
+#define NU_DOWN 3.0
+#define NU_UP 4.0
+#define NU_MIN 1e-6
+#define NU_MAX 1e8
+
+/* The acquired buffers of search_pose, in its argument order. */
+typedef struct {
+    Arg R, p, Md, tab, q, qc, Jc, e, ec, lim, work, state, step;
+} SearchArgs;
+
 /* -- the set-point search ---------------------------------------------------------------------- */
 
 /* Wrap or fix the free joints that q + step takes out of their range; 1 if one was fixed */
