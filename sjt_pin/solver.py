@@ -632,9 +632,9 @@ class Solver:
 
     @property
     def displacement(self) -> np.ndarray:
-        """The last step's joint displacement ``q_dot dt`` (nv,), as a view that the next step
-        overwrites."""
-        return self._step if self._record is None else self._record[2]
+        """The last step's joint displacement ``q_dot dt`` (nv,; zeros before the first): the
+        same array after every step, which the next step overwrites (copy it to keep it)."""
+        return self._step  # (every path of a step writes its result there)
 
     @property
     def last(self) -> StepInfo | None:
