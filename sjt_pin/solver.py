@@ -70,6 +70,7 @@ _STAGE = 64
 #: user's limit for the stage in Python (joints held at the position and speed bounds, a task
 #: scaled for them: the kernel's own work)
 _PYTHON = K.NON_FINITE | K.STALLED | _STAGE
+_I_SCALE = K.I_SCALE  # (read per step by task_scale)
 
 #: whether solvers made from now on run the acceleration/jerk stage compiled in their step
 #: kernel (a built-in method); ``False`` makes them run its reference, the stage in Python
@@ -337,9 +338,10 @@ class Solver:
 
     def _control(self, q, target, target_velocity=None) -> np.ndarray:
         """:meth:`step` itself."""
-        if not (type(q) is np.ndarray and q.shape == self._q_shape and q.dtype == _F64) or (
-                self._units and q is not self._returned
-                and not K.unit_defect(q, self._unit_blocks) <= _UNIT_EXACT):
+        # (the array the last step returned is checked: a loop that feeds it back skips this)
+        if q is not self._returned and (
+                not (type(q) is np.ndarray and q.shape == self._q_shape and q.dtype == _F64)
+                or (self._units and not K.unit_defect(q, self._unit_blocks) <= _UNIT_EXACT)):
             q = self.robot.check_q(q)
         # 1. the task rows at q
         stack = self.stack
@@ -350,7 +352,7 @@ class Solver:
             kinematics = stack.kinematics
             kinematics.update(q)
             J, e, ff = task.compute(kinematics, target, velocity)
-            targets = [target]
+            targets = None  # (made for the slow path only)
         else:
             targets, velocities = stack.targets(target, target_velocity)
             J, e, ff = stack.evaluate(q, targets, velocities)
@@ -366,7 +368,7 @@ class Solver:
         self._count += 1
         # 3. only when needed: errors, the stability check, the escape's state, other limits
         if status & _PYTHON or self._always:
-            step = self._slow(status, q, J, e, ff, targets)
+            step = self._slow(status, q, J, e, ff, [target] if targets is None else targets)
         # 4. integrate on the manifold; the record of the step (StepInfo) is built on demand
         self._record, self._last = (J, e, step, status, q, ff), None
         if self._tracks_motion:
@@ -533,6 +535,7 @@ class Solver:
         outcome = self.stage.enforce(dq, solve, stack.kinematics, motion,
                                      lambda: stack.sqrt_weight[:, None] * J * stack.chain)
         self._outcome, self._outcome_count = outcome, self._count
+        self._info[_I_SCALE] = outcome.scale  # (task_scale reads it there)
         step = self._exact_position(q, np.multiply(outcome.dq, dt, out=self._step))
         if self._compiled_smooth:  # the state the stage's step commands
             np.subtract(step / dt, motion.dq, out=motion.ddq)
@@ -624,11 +627,9 @@ class Solver:
     def task_scale(self) -> float:
         """The last step's task scale s in [0, 1] (1: the constraint stage kept the whole task;
         see :attr:`StepInfo.task_scale`), without building :attr:`last`."""
-        if self._outcome is not None and self._outcome_count == self._count:
-            return float(self._outcome.scale)
-        if self._record is not None and self.method.kernel is not None:
-            return float(self._info[K.I_SCALE])  # the kernel's saturation wrote it
-        return 1.0
+        # (the kernel's saturation or acceleration stage writes it; the stage in Python, when
+        # it runs, its own over it)
+        return float(self._info[_I_SCALE]) if self._record is not None else 1.0
 
     @property
     def displacement(self) -> np.ndarray:

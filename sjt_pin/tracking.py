@@ -13,7 +13,9 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
+from .kinematics import Kinematics
 from .solver import Solver
+from .tasks import OrientationTask, PoseTask, PositionTask, RelativePoseTask, Task
 from .trajectories import Trajectory
 from .validation import positive
 
@@ -154,6 +156,7 @@ class _Run:
         steps."""
         solver, step = self.solver, self.solver.step
         task, displacement = solver.stack.task, solver.displacement  # (the same array always)
+        frame = _frame_position(task, solver.stack.kinematics)
         qs, steps, errors, scales = self.qs, self.steps, self.errors, self.scales
         positions = self.positions
         positions_d, rotations_d, velocities_d = (np.asarray(x, dtype=float) for x in (
@@ -176,7 +179,8 @@ class _Run:
                             target.rotation = rotation
                         q_next = step(q, target, velocity)
                         qs[k], steps[k], errors[k] = q, displacement, solver.error
-                        positions[k] = task.placement.translation  # type: ignore[union-attr]
+                        positions[k] = (task.placement.translation  # type: ignore[union-attr]
+                                        if frame is None else frame)
                         scales[k] = solver.task_scale
                         k += 1
                         q = q_next
@@ -215,6 +219,21 @@ class _Run:
             error=self.errors[:end], error_norm=self.norms[:end], task_scale=self.scales[:end],
             diverged=bool(reason), reason=reason, method=solver.method.name, dt=solver.dt,
             gain=solver.gain)
+
+
+#: the built-in tasks' ``compute``: each sets ``placement`` to ``Kinematics.placement`` of its
+#: ``frame_id``, the pose Pinocchio's data holds for that frame
+_PLACED = (PoseTask.compute, PositionTask.compute, OrientationTask.compute,
+           RelativePoseTask.compute)
+
+
+def _frame_position(task: Task, kinematics: Kinematics) -> np.ndarray | None:
+    """The task frame's world position (3,) as a view on Pinocchio's data, which every step
+    updates in place (one copy logs it, instead of a ``pin.SE3`` and its translation made per
+    step); ``None`` for a task of the user's own, whose ``placement`` is read per step."""
+    if type(task).compute not in _PLACED or task.frame_id < 0:
+        return None
+    return kinematics.data.oMf[task.frame_id].translation
 
 
 def _norms(errors: np.ndarray, out: np.ndarray) -> None:
