@@ -89,7 +89,15 @@ def _assert_same(log, rows, end=None):
         np.testing.assert_array_equal(logged, by_hand[:end])
 
 
-@pytest.mark.parametrize("case", ["circle", "no feed-forward", "posture", "user trajectory"])
+class _OwnPose(sjt.PoseTask):
+    """A user's task (its own ``compute``): track reads its ``placement`` on every step."""
+
+    def compute(self, kinematics, target, velocity):
+        return super().compute(kinematics, target, velocity)
+
+
+@pytest.mark.parametrize("case", ["circle", "no feed-forward", "posture", "user trajectory",
+                                  "user task"])
 def test_track_logs_bitwise_what_stepping_by_hand_gives(ur5, case):
     """Every logged row is the step's own values (``solver.last``), bitwise: the held
     orientation set once, the norms summed after the run, the configurations and poses stacked
@@ -97,6 +105,8 @@ def test_track_logs_bitwise_what_stepping_by_hand_gives(ur5, case):
     q0 = np.array([0.3, -1.2, 1.5, -1.8, -1.5, 0.2])
     start = ur5.fk(q0)
     options = dict(posture=sjt.PostureTask(weight=0.1)) if case == "posture" else {}
+    if case == "user task":
+        options = dict(task=_OwnPose())
     if case == "user trajectory":
         trajectory = _Wave(start, 0.6)
     elif case == "posture":  # an orientation that turns: set on every step
