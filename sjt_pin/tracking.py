@@ -101,8 +101,10 @@ def track(
     A position-only ``Line`` or ``Circle`` (made without ``rotation=``) is tracked holding the
     task frame's orientation at ``q0``.
 
-    A diverging run (non-finite state, ``max_step`` or ``max_error`` exceeded) stops there with
-    ``diverged=True`` and the reason, instead of raising.
+    A diverging run (non-finite state, ``max_step`` or ``max_error`` exceeded) is logged up to
+    there, with ``diverged=True`` and the reason, instead of raising (``max_error`` is tested
+    every 256 steps and ``max_step`` after the run, not per step: the solver may have stepped
+    past the log's end).
     """
     max_step, max_error = _check(solver, trajectory, max_step, max_error)
     q = solver.robot.check_q(q0, "q0").copy()
