@@ -71,6 +71,7 @@ _STAGE = 64
 #: scaled for them: the kernel's own work)
 _PYTHON = K.NON_FINITE | K.STALLED | _STAGE
 _I_SCALE = K.I_SCALE  # (read per step by task_scale)
+_integrate = pin.integrate
 
 #: whether solvers made from now on run the acceleration/jerk stage compiled in their step
 #: kernel (a built-in method); ``False`` makes them run its reference, the stage in Python
@@ -326,59 +327,61 @@ class Solver:
         :class:`~sjt_pin.exceptions.ConcurrentStepError`: a solver's buffers are one thread's.
         """
         if self._stepping:
-            raise ConcurrentStepError(
-                f"{type(self).__name__} is being stepped by another thread: a solver's buffers "
-                "and pin.Data are one thread's; give each thread its own solver "
-                "(copy.deepcopy(solver) makes one in the same state)")
-        self._stepping = True
+            self._refuse_concurrent()
+        self._stepping = True  # (the body is here, not in a call: a call per step costs)
         try:
-            return self._control(q, target, target_velocity)
+            # the array the last step returned is checked: a loop that feeds it back skips this
+            if q is not self._returned and (
+                    not (type(q) is np.ndarray and q.shape == self._q_shape and q.dtype == _F64)
+                    or (self._units and not K.unit_defect(q, self._unit_blocks) <= _UNIT_EXACT)):
+                q = self.robot.check_q(q)
+            # 1. the task rows at q
+            stack = self.stack
+            if stack.single:
+                task, kinematics = stack.task, stack.kinematics
+                target = task.target(target)
+                velocity = None if target_velocity is None else task.velocity(target_velocity)
+                kinematics.update(q)
+                J, e, ff = task.compute(kinematics, target, velocity)
+                targets = None  # (made for the slow path only)
+            else:
+                targets, velocities = stack.targets(target, target_velocity)
+                J, e, ff = stack.evaluate(q, targets, velocities)
+            # 2. gain, mapping, escape velocity and limits, in one compiled call
+            if (ff is not None) != self._ff_on:  # the feed-forward starts or stops
+                self._ff_on = ff is not None
+                self._work[K.P_HAS_FF] = float(self._ff_on)
+            if ff is None:
+                ff = self._no_ff
+            step = self._step
+            status = self._kernel(J, e, ff, q, self._work, step)
+            self._count += 1
+            # 3. only when needed: errors, the stability check, the escape's state, other limits
+            if status & _PYTHON or self._always:
+                step = self._slow(status, q, J, e, ff, [target] if targets is None else targets)
+            # 4. integrate on the manifold; the record of the step (StepInfo) is built on demand
+            self._record, self._last = (J, e, step, status, q, ff), None
+            if self._tracks_motion:
+                self._follow_motion(step)
+            self._returned = q_next = _integrate(self._model, q, step)
+            return q_next
         finally:
             self._stepping = False
 
-    def _control(self, q, target, target_velocity=None) -> np.ndarray:
-        """:meth:`step` itself."""
-        # (the array the last step returned is checked: a loop that feeds it back skips this)
-        if q is not self._returned and (
-                not (type(q) is np.ndarray and q.shape == self._q_shape and q.dtype == _F64)
-                or (self._units and not K.unit_defect(q, self._unit_blocks) <= _UNIT_EXACT)):
-            q = self.robot.check_q(q)
-        # 1. the task rows at q
-        stack = self.stack
-        if stack.single:
-            task = stack.task
-            target = task.target(target)
-            velocity = None if target_velocity is None else task.velocity(target_velocity)
-            kinematics = stack.kinematics
-            kinematics.update(q)
-            J, e, ff = task.compute(kinematics, target, velocity)
-            targets = None  # (made for the slow path only)
-        else:
-            targets, velocities = stack.targets(target, target_velocity)
-            J, e, ff = stack.evaluate(q, targets, velocities)
-        # 2. gain, mapping, escape velocity and limits, in one compiled call
-        if ff is None:
-            if self._ff_on:
-                self._work[K.P_HAS_FF], self._ff_on = 0.0, False
-            ff = self._no_ff
-        elif not self._ff_on:
-            self._work[K.P_HAS_FF], self._ff_on = 1.0, True
-        step = self._step
-        status = self._kernel(J, e, ff, q, self._work, step)
-        self._count += 1
-        # 3. only when needed: errors, the stability check, the escape's state, other limits
-        if status & _PYTHON or self._always:
-            step = self._slow(status, q, J, e, ff, [target] if targets is None else targets)
-        # 4. integrate on the manifold; the record of the step (StepInfo) is built on demand
-        self._record, self._last = (J, e, step, status, q, ff), None
-        if self._tracks_motion:
-            motion, dt = self._motion, self._dt
-            dq = step / dt
-            np.subtract(dq, motion.dq, out=motion.ddq)
-            motion.ddq /= dt
-            motion.dq[:] = dq
-        self._returned = q_next = pin.integrate(self._model, q, step)
-        return q_next
+    def _refuse_concurrent(self) -> None:
+        raise ConcurrentStepError(
+            f"{type(self).__name__} is being stepped by another thread: a solver's buffers "
+            "and pin.Data are one thread's; give each thread its own solver "
+            "(copy.deepcopy(solver) makes one in the same state)")
+
+    def _follow_motion(self, step: np.ndarray) -> None:
+        """The commanded velocity and acceleration of this step (the state of the stage in
+        Python)."""
+        motion, dt = self._motion, self._dt
+        dq = step / dt
+        np.subtract(dq, motion.dq, out=motion.ddq)
+        motion.ddq /= dt
+        motion.dq[:] = dq
 
     def _slow(self, status, q, J, e, ff, targets) -> np.ndarray:
         """What the fast path skips: errors, the stability check, the escape's state (its
@@ -435,7 +438,7 @@ class Solver:
         if idle:
             warnings.warn(f"joints {idle} start outside their URDF position range and no task "
                           "moves them: they stay there (stack a PostureTask within the range "
-                          "to bring them back)", UserWarning, stacklevel=5)
+                          "to bring them back)", UserWarning, stacklevel=4)
 
     # -- the constraint stage ------------------------------------------------------------------
     def _smooth_user_step(self, J, e, ff, q, work, step) -> int:
