@@ -103,7 +103,7 @@ def track(
 
     A diverging run (non-finite state, ``max_step`` or ``max_error`` exceeded) is logged up to
     there, with ``diverged=True`` and the reason, instead of raising (``max_error`` is tested
-    every 256 steps and ``max_step`` after the run, not per step: the solver may have stepped
+    every 1024 steps and ``max_step`` after the run, not per step: the solver may have stepped
     past the log's end).
     """
     max_step, max_error = _check(solver, trajectory, max_step, max_error)
@@ -137,7 +137,7 @@ def _check(solver, trajectory, max_step, max_error) -> tuple[float, float]:
 
 #: steps between two checks of the logged error against ``max_error``: a run that exceeds it
 #: is cut at its first step above it, having made at most this many more
-_BLOCK = 256
+_BLOCK = 1024
 
 
 class _Run:

@@ -130,13 +130,13 @@ def test_track_stops_at_the_first_step_above_max_error(ur5):
     gives."""
     q0 = np.array([0.3, -1.2, 1.5, -1.8, -1.5, 0.2])
     start = ur5.fk(q0)
-    line = sjt.Line(start.translation, start.translation + [0.0, 0.5, 0.0], duration=1.0,
+    line = sjt.Line(start.translation, start.translation + [0.0, 0.5, 0.0], duration=2.0,
                     rotation=start.rotation)
     options = dict(velocity_limits=np.full(ur5.nv, 0.05))
     rows = _by_hand(sjt.SJTSolver(**options, robot=ur5), line, q0)
-    limit = float(rows[3][400])
+    limit = float(rows[3][1500])
     first = int(np.flatnonzero(rows[3] >= limit)[0])
-    assert 256 < first <= 400  # (in a later block than the first)
+    assert 1024 < first <= 1500  # (in a later block than the first)
     log = sjt.track(sjt.SJTSolver(ur5, **options), line, q0, max_error=limit)
     assert log.diverged and log.reason.startswith(f"error above {limit:g} at t = ")
     assert len(log) == first + 1
