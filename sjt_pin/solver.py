@@ -70,6 +70,8 @@ _STAGE = 64
 #: user's limit for the stage in Python (joints held at the position and speed bounds, a task
 #: scaled for them: the kernel's own work)
 _PYTHON = K.NON_FINITE | K.STALLED | _STAGE
+_I_SCALE = K.I_SCALE  # (read per step by task_scale)
+_integrate = pin.integrate
 
 #: whether solvers made from now on run the acceleration/jerk stage compiled in their step
 #: kernel (a built-in method); ``False`` makes them run its reference, the stage in Python
@@ -325,58 +327,61 @@ class Solver:
         :class:`~sjt_pin.exceptions.ConcurrentStepError`: a solver's buffers are one thread's.
         """
         if self._stepping:
-            raise ConcurrentStepError(
-                f"{type(self).__name__} is being stepped by another thread: a solver's buffers "
-                "and pin.Data are one thread's; give each thread its own solver "
-                "(copy.deepcopy(solver) makes one in the same state)")
-        self._stepping = True
+            self._refuse_concurrent()
+        self._stepping = True  # (the body is here, not in a call: a call per step costs)
         try:
-            return self._control(q, target, target_velocity)
+            # the array the last step returned is checked: a loop that feeds it back skips this
+            if q is not self._returned and (
+                    not (type(q) is np.ndarray and q.shape == self._q_shape and q.dtype == _F64)
+                    or (self._units and not K.unit_defect(q, self._unit_blocks) <= _UNIT_EXACT)):
+                q = self.robot.check_q(q)
+            # 1. the task rows at q
+            stack = self.stack
+            if stack.single:
+                task, kinematics = stack.task, stack.kinematics
+                target = task.target(target)
+                velocity = None if target_velocity is None else task.velocity(target_velocity)
+                kinematics.update(q)
+                J, e, ff = task.compute(kinematics, target, velocity)
+                targets = None  # (made for the slow path only)
+            else:
+                targets, velocities = stack.targets(target, target_velocity)
+                J, e, ff = stack.evaluate(q, targets, velocities)
+            # 2. gain, mapping, escape velocity and limits, in one compiled call
+            if (ff is not None) != self._ff_on:  # the feed-forward starts or stops
+                self._ff_on = ff is not None
+                self._work[K.P_HAS_FF] = float(self._ff_on)
+            if ff is None:
+                ff = self._no_ff
+            step = self._step
+            status = self._kernel(J, e, ff, q, self._work, step)
+            self._count += 1
+            # 3. only when needed: errors, the stability check, the escape's state, other limits
+            if status & _PYTHON or self._always:
+                step = self._slow(status, q, J, e, ff, [target] if targets is None else targets)
+            # 4. integrate on the manifold; the record of the step (StepInfo) is built on demand
+            self._record, self._last = (J, e, step, status, q, ff), None
+            if self._tracks_motion:
+                self._follow_motion(step)
+            self._returned = q_next = _integrate(self._model, q, step)
+            return q_next
         finally:
             self._stepping = False
 
-    def _control(self, q, target, target_velocity=None) -> np.ndarray:
-        """:meth:`step` itself."""
-        if not (type(q) is np.ndarray and q.shape == self._q_shape and q.dtype == _F64) or (
-                self._units and q is not self._returned
-                and not K.unit_defect(q, self._unit_blocks) <= _UNIT_EXACT):
-            q = self.robot.check_q(q)
-        # 1. the task rows at q
-        stack = self.stack
-        if stack.single:
-            task = stack.task
-            target = task.target(target)
-            velocity = None if target_velocity is None else task.velocity(target_velocity)
-            kinematics = stack.kinematics
-            kinematics.update(q)
-            J, e, ff = task.compute(kinematics, target, velocity)
-            targets = [target]
-        else:
-            targets, velocities = stack.targets(target, target_velocity)
-            J, e, ff = stack.evaluate(q, targets, velocities)
-        # 2. gain, mapping, escape velocity and limits, in one compiled call
-        if ff is None:
-            if self._ff_on:
-                self._work[K.P_HAS_FF], self._ff_on = 0.0, False
-            ff = self._no_ff
-        elif not self._ff_on:
-            self._work[K.P_HAS_FF], self._ff_on = 1.0, True
-        step = self._step
-        status = self._kernel(J, e, ff, q, self._work, step)
-        self._count += 1
-        # 3. only when needed: errors, the stability check, the escape's state, other limits
-        if status & _PYTHON or self._always:
-            step = self._slow(status, q, J, e, ff, targets)
-        # 4. integrate on the manifold; the record of the step (StepInfo) is built on demand
-        self._record, self._last = (J, e, step, status, q, ff), None
-        if self._tracks_motion:
-            motion, dt = self._motion, self._dt
-            dq = step / dt
-            np.subtract(dq, motion.dq, out=motion.ddq)
-            motion.ddq /= dt
-            motion.dq[:] = dq
-        self._returned = q_next = pin.integrate(self._model, q, step)
-        return q_next
+    def _refuse_concurrent(self) -> None:
+        raise ConcurrentStepError(
+            f"{type(self).__name__} is being stepped by another thread: a solver's buffers "
+            "and pin.Data are one thread's; give each thread its own solver "
+            "(copy.deepcopy(solver) makes one in the same state)")
+
+    def _follow_motion(self, step: np.ndarray) -> None:
+        """The commanded velocity and acceleration of this step (the state of the stage in
+        Python)."""
+        motion, dt = self._motion, self._dt
+        dq = step / dt
+        np.subtract(dq, motion.dq, out=motion.ddq)
+        motion.ddq /= dt
+        motion.dq[:] = dq
 
     def _slow(self, status, q, J, e, ff, targets) -> np.ndarray:
         """What the fast path skips: errors, the stability check, the escape's state (its
@@ -433,7 +438,7 @@ class Solver:
         if idle:
             warnings.warn(f"joints {idle} start outside their URDF position range and no task "
                           "moves them: they stay there (stack a PostureTask within the range "
-                          "to bring them back)", UserWarning, stacklevel=5)
+                          "to bring them back)", UserWarning, stacklevel=4)
 
     # -- the constraint stage ------------------------------------------------------------------
     def _smooth_user_step(self, J, e, ff, q, work, step) -> int:
@@ -472,68 +477,68 @@ class Solver:
 
     def _constrain(self, q, J, e, ff, status, step) -> np.ndarray:
         """Run the constraint stage on the method's step (see :mod:`sjt_pin.constraints`)."""
-        dt, layout, raw = self._dt, self._layout, self._raw_work
-        motion, stack = self._motion, self.stack
+        motion = self._motion
         motion.q = q
         if self._compiled_smooth:  # the stage starts from the state before this step
             self._state[:] = self._before
-        elif self._user_stage is not None and self._kernel_bounds:
-            # the kernel kept the position and speed bounds; its step is checked against the
-            # user's limits and, when it breaks a row, projected onto the rows within every
-            # bound, in one compiled call (the kernel's saturation stands: the same as the
-            # whole stage's while the user's bounds do not cut the step)
-            parts = self._user_stage.hard_parts(stack.kinematics, motion)
-            if parts is not None:
-                lower, upper, rows = parts
-                if rows is None and lower is None:
-                    return step
-                A, b = (rows[0], rows[1]) if rows is not None else self._no_rows
-                try:
-                    done = K.rows_step(J, q, A, b,
-                                       self._no_bounds[0] if lower is None else lower,
-                                       self._no_bounds[1] if upper is None else upper,
-                                       self._work, step)
-                except ValueError:  # rows or bounds that do not fit or hold NaN: name it
-                    self._user_stage.check(stack.kinematics, motion)
-                    raise
-                if done >= 0:
-                    self._checked_rows = (self._count, rows)
-                    return step
-        np.copyto(raw, self._work)
-        raw[K.P_BOX_COUNT] = 0.0
-        raw[K.P_SMOOTH] = 0.0  # the method alone
-        layout.inverse_speeds(raw)[:] = 0.0
-        chain = stack.chain
-        ff_in = ff if self._ff_on else np.zeros(stack.dim)
-        out = np.empty_like(self._step)
-        feedback = [1.0]  # the factor of K e in the task velocity the stage re-solves with
-
-        def solve(free, held, scale=None):
-            scale = feedback[0] if scale is None else scale
-            v = ff_in if held is None else ff_in - J @ held
-            layout.joint_mask(raw)[:] = chain * free
-            raw[K.P_HAS_FF] = 1.0
-            if scale != 1.0:  # a fixed gain of scale times the one this step used
-                raw[K.P_GAIN_MODE] = K.GAIN_FIXED
-                gains = layout.gains(raw)
-                gains[:] = layout.gains(self._work) * scale
-                if self._gain.mode != K.GAIN_FIXED:
-                    gains *= float(self._info[K.I_GAIN])
-            self._method_step(J, e, v, q, raw, out)
-            raw[K.P_GAIN_MODE] = self._work[K.P_GAIN_MODE]
-            layout.gains(raw)[:] = layout.gains(self._work)
-            return out / dt
-
-        everything = np.ones(chain.size, dtype=bool)
-        dq = step / dt
+        elif self._user_stage is not None and self._kernel_bounds and self._user_rows_hold(
+                q, J, step):
+            return step
+        solve = self._method_solves(q, J, e, ff)
+        everything = np.ones(self.stack.chain.size, dtype=bool)
+        dq = step / self._dt
         if self._user_stage is not None and self._kernel_bounds:
             dq = solve(everything, None)  # a user's limit is broken: the method alone, then
             # the whole stage
         if self.acceleration_limit is not None:
-            dq, feedback[0] = self._brake_feedback(dq, solve(everything, None, 0.0), J, e)
+            dq, solve.feedback = self._brake_feedback(dq, solve(everything, None, 0.0), J, e)
+        return self._enforce(q, J, dq, solve)
+
+    def _user_rows_hold(self, q, J, step) -> bool:
+        """Whether the kernel's step, which kept the position and speed bounds, is left as it
+        is by the user's limits: checked against their bounds and rows and, when it breaks a
+        row, projected onto the rows within every bound, in one compiled call (the kernel's
+        saturation stands: the same as the whole stage's while the user's bounds do not cut
+        the step). False: the whole stage must run."""
+        stack, user = self.stack, self._user_stage
+        assert user is not None  # (for a user's limits)
+        parts = user.hard_parts(stack.kinematics, self._motion)
+        if parts is None:
+            return False
+        lower, upper, rows = parts
+        if rows is None and lower is None:
+            return True
+        A, b = (rows[0], rows[1]) if rows is not None else self._no_rows
+        try:
+            done = K.rows_step(J, q, A, b, self._no_bounds[0] if lower is None else lower,
+                               self._no_bounds[1] if upper is None else upper, self._work,
+                               step)
+        except ValueError:  # rows or bounds that do not fit or hold NaN: name the limit
+            user.check(stack.kinematics, self._motion)
+            raise
+        if done < 0:
+            return False
+        self._checked_rows = (self._count, rows)
+        return True
+
+    def _method_solves(self, q, J, e, ff) -> _MethodSolve:
+        """The stage's re-solve: the method alone (no box, no smoothing) on this step's rows,
+        on the joints it frees, with a task velocity less J times the held joints' velocity."""
+        raw, layout = self._raw_work, self._layout
+        np.copyto(raw, self._work)
+        raw[K.P_BOX_COUNT] = 0.0
+        raw[K.P_SMOOTH] = 0.0  # the method alone
+        layout.inverse_speeds(raw)[:] = 0.0
+        return _MethodSolve(self, q, J, e, ff if self._ff_on else np.zeros(self.stack.dim))
+
+    def _enforce(self, q, J, dq, solve) -> np.ndarray:
+        """The stage's enforcement of every limit on ``dq`` (its outcome kept for
+        :attr:`last`), the step it commands, and with the compiled stage the motion state."""
+        stack, motion, dt = self.stack, self._motion, self._dt
         outcome = self.stage.enforce(dq, solve, stack.kinematics, motion,
-                                     lambda: stack.sqrt_weight[:, None] * J * chain)
+                                     lambda: stack.sqrt_weight[:, None] * J * stack.chain)
         self._outcome, self._outcome_count = outcome, self._count
+        self._info[_I_SCALE] = outcome.scale  # (task_scale reads it there)
         step = self._exact_position(q, np.multiply(outcome.dq, dt, out=self._step))
         if self._compiled_smooth:  # the state the stage's step commands
             np.subtract(step / dt, motion.dq, out=motion.ddq)
@@ -625,17 +630,15 @@ class Solver:
     def task_scale(self) -> float:
         """The last step's task scale s in [0, 1] (1: the constraint stage kept the whole task;
         see :attr:`StepInfo.task_scale`), without building :attr:`last`."""
-        if self._outcome is not None and self._outcome_count == self._count:
-            return float(self._outcome.scale)
-        if self._record is not None and self.method.kernel is not None:
-            return float(self._info[K.I_SCALE])  # the kernel's saturation wrote it
-        return 1.0
+        # (the kernel's saturation or acceleration stage writes it; the stage in Python, when
+        # it runs, its own over it)
+        return float(self._info[_I_SCALE]) if self._record is not None else 1.0
 
     @property
     def displacement(self) -> np.ndarray:
-        """The last step's joint displacement ``q_dot dt`` (nv,), as a view that the next step
-        overwrites."""
-        return self._step if self._record is None else self._record[2]
+        """The last step's joint displacement ``q_dot dt`` (nv,; zeros before the first): the
+        same array after every step, which the next step overwrites (copy it to keep it)."""
+        return self._step  # (every path of a step writes its result there)
 
     @property
     def last(self) -> StepInfo | None:
@@ -789,6 +792,37 @@ class Solver:
         tasks = self.stack.tasks[0] if len(self.stack.tasks) == 1 else self.stack.tasks
         return (f"{type(self).__name__}({self.robot.name!r}, gain={self.gain!r}, "
                 f"dt={self._dt:g}, task={tasks!r})")
+
+
+class _MethodSolve:
+    """``solve(free, held, scale=None)``: the joint velocity (rad/s, m/s) of a solver's method
+    alone on one step's rows, moving only the joints ``free`` (bool per joint) with the
+    velocity ``held`` of the others taken out of the task velocity (``None``: none held), and
+    the feedback ``K e`` scaled by ``scale`` (default :attr:`feedback`, 1 until the braking of
+    acceleration limits sets it): what :meth:`ConstraintStage.enforce` re-solves with."""
+
+    def __init__(self, solver: Solver, q, J, e, ff_in):
+        self.solver, self.q, self.J, self.e, self.ff_in = solver, q, J, e, ff_in
+        self.feedback = 1.0  # the factor of K e in the task velocity the stage re-solves with
+        self.out = np.empty_like(solver._step)
+
+    def __call__(self, free, held, scale=None) -> np.ndarray:
+        solver = self.solver
+        layout, raw, work = solver._layout, solver._raw_work, solver._work
+        scale = self.feedback if scale is None else scale
+        v = self.ff_in if held is None else self.ff_in - self.J @ held
+        layout.joint_mask(raw)[:] = solver.stack.chain * free
+        raw[K.P_HAS_FF] = 1.0
+        if scale != 1.0:  # a fixed gain of scale times the one this step used
+            raw[K.P_GAIN_MODE] = K.GAIN_FIXED
+            gains = layout.gains(raw)
+            gains[:] = layout.gains(work) * scale
+            if solver._gain.mode != K.GAIN_FIXED:
+                gains *= float(solver._info[K.I_GAIN])
+        solver._method_step(self.J, self.e, v, self.q, raw, self.out)
+        raw[K.P_GAIN_MODE] = work[K.P_GAIN_MODE]
+        layout.gains(raw)[:] = layout.gains(work)
+        return self.out / solver._dt
 
 
 def _rebuild(cls, robot: Robot, method: Method, options: SolverOptions) -> Solver:

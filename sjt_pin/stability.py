@@ -59,4 +59,4 @@ class StabilityCheck:
             f"{self.method.name.upper()} gain {k:g} 1/s exceeds the stability bound "
             f"2 / (dt lambda_max(J M)) = {2.0 / (dt * lam):.4g} 1/s at the current "
             f"configuration (dt = {dt:g} s); the closed loop will oscillate or diverge",
-            GainWarning, stacklevel=5)
+            GainWarning, stacklevel=4)  # (check < Solver._slow < Solver.step < caller)

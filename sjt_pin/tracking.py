@@ -7,12 +7,15 @@ x_d(t_k) and velocity x_dot_d(t_k), as in the paper's eq. (5): the logged error
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
 
+from .kinematics import Kinematics
 from .solver import Solver
+from .tasks import OrientationTask, PoseTask, PositionTask, RelativePoseTask, Task
 from .trajectories import Trajectory
 from .validation import positive
 
@@ -98,8 +101,10 @@ def track(
     A position-only ``Line`` or ``Circle`` (made without ``rotation=``) is tracked holding the
     task frame's orientation at ``q0``.
 
-    A diverging run (non-finite state, ``max_step`` or ``max_error`` exceeded) stops there with
-    ``diverged=True`` and the reason, instead of raising.
+    A diverging run (non-finite state, ``max_step`` or ``max_error`` exceeded) is logged up to
+    there, with ``diverged=True`` and the reason, instead of raising (``max_error`` is tested
+    every 1024 steps and ``max_step`` after the run, not per step: the solver may have stepped
+    past the log's end).
     """
     max_step, max_error = _check(solver, trajectory, max_step, max_error)
     q = solver.robot.check_q(q0, "q0").copy()
@@ -130,6 +135,11 @@ def _check(solver, trajectory, max_step, max_error) -> tuple[float, float]:
             positive(max_error, "max_error", "task units"))
 
 
+#: steps between two checks of the logged error against ``max_error``: a run that exceeds it
+#: is cut at its first step above it, having made at most this many more
+_BLOCK = 1024
+
+
 class _Run:
     """The preallocated arrays of one :func:`track` run and its loop."""
 
@@ -137,41 +147,70 @@ class _Run:
         robot, m = solver.robot, solver.stack.target_dim
         self.solver = solver
         self.qs, self.steps = np.empty((n, robot.nq)), np.empty((n, robot.nv))
-        self.positions, self.errors, self.norms = np.empty((n, 3)), np.empty((n, m)), np.empty(n)
-        self.scales = np.ones(n)
+        self.positions = np.empty((n, 3))
+        self.errors, self.norms, self.scales = np.empty((n, m)), np.empty(n), np.ones(n)
         self.positions_d = np.empty((n, 3))
 
     def go(self, q, times, positions_d, rotations_d, velocities_d, feedforward: bool,
            max_error: float) -> tuple[int, str]:
-        """Step along the samples; returns how many steps were logged and why the run
-        stopped early ("" when it did not)."""
-        solver = self.solver
-        qs, steps, errors, norms = self.qs, self.steps, self.errors, self.norms
-        positions, scales = self.positions, self.scales
+        """Step along the samples; returns how many steps were logged and why the run stopped
+        early ("" when it did not). The error norms are checked after every :data:`_BLOCK`
+        steps."""
+        solver, step = self.solver, self.solver.step
+        task, displacement = solver.stack.task, solver.displacement  # (the same array always)
+        frame = _frame_position(task, solver.stack.kinematics)
+        qs, steps, errors, scales = self.qs, self.steps, self.errors, self.scales
+        positions = self.positions
+        positions_d, rotations_d, velocities_d = (np.asarray(x, dtype=float) for x in (
+            positions_d, rotations_d, velocities_d))
         self.positions_d[:] = positions_d
         target = pin.SE3(np.array(rotations_d[0]), np.array(positions_d[0]))
-        task, step = solver.stack.task, solver.step
-        k = -1
+        # one orientation for every sample (a Line's or a Circle's, broadcast): set once
+        rotations = (itertools.repeat(None) if rotations_d.strides[0] == 0
+                     else iter(rotations_d))
+        velocities = iter(velocities_d) if feedforward else itertools.repeat(None)
+        k = 0
         with np.errstate(all="ignore"):
-            for k in range(times.size):
-                target.translation = positions_d[k]
-                target.rotation = rotations_d[k]
+            for start in range(0, times.size, _BLOCK):
                 try:
-                    q_next = step(q, target, velocities_d[k] if feedforward else None)
+                    block = positions_d[start:start + _BLOCK]  # (first: zip stops at its end)
+                    for position, rotation, velocity in zip(block, rotations, velocities,
+                                                            strict=False):
+                        target.translation = position
+                        if rotation is not None:
+                            target.rotation = rotation
+                        q_next = step(q, target, velocity)
+                        qs[k], steps[k], errors[k] = q, displacement, solver.error
+                        positions[k] = (task.placement.translation  # type: ignore[union-attr]
+                                        if frame is None else frame)
+                        scales[k] = solver.task_scale
+                        k += 1
+                        q = q_next
                 except ValueError as exc:  # a non-finite state or error: the run blew up
+                    end, reason = self._above(times, start, k, max_error)
+                    if reason:
+                        return end, reason
                     if np.all(np.isfinite(q)):
                         raise
                     return k, f"non-finite state at t = {times[k]:.4g} s ({exc})"
-                qs[k], steps[k], errors[k] = q, solver.displacement, solver.error
-                norms[k] = norm = solver.error_norm
-                scales[k] = solver.task_scale
-                positions[k] = task.placement.translation  # type: ignore[union-attr]
-                if not norm < max_error:
-                    return k + 1, (f"error above {max_error:g} at t = {times[k]:.4g} s"
-                                   if np.isfinite(norm) else
-                                   f"non-finite state at t = {times[k]:.4g} s")
-                q = q_next
-        return k + 1, ""
+                end, reason = self._above(times, start, k, max_error)
+                if reason:
+                    return end, reason
+        return k, ""
+
+    def _above(self, times: np.ndarray, start: int, stop: int, max_error: float
+               ) -> tuple[int, str]:
+        """The norms of the errors logged from ``start`` to ``stop``; the rows to keep and why
+        when one is not below ``max_error`` (``(stop, "")`` when none)."""
+        norms = self.norms[start:stop]
+        _norms(self.errors[start:stop], norms)
+        above = np.flatnonzero(~(norms < max_error))
+        if not above.size:
+            return stop, ""
+        k = start + int(above[0])
+        return k + 1, (f"error above {max_error:g} at t = {times[k]:.4g} s"
+                       if np.isfinite(self.norms[k]) else
+                       f"non-finite state at t = {times[k]:.4g} s")
 
     def log(self, times: np.ndarray, end: int, reason: str) -> TrackingLog:
         """The first ``end`` rows as a :class:`TrackingLog`."""
@@ -182,3 +221,27 @@ class _Run:
             error=self.errors[:end], error_norm=self.norms[:end], task_scale=self.scales[:end],
             diverged=bool(reason), reason=reason, method=solver.method.name, dt=solver.dt,
             gain=solver.gain)
+
+
+#: the built-in tasks' ``compute``: each sets ``placement`` to ``Kinematics.placement`` of its
+#: ``frame_id``, the pose Pinocchio's data holds for that frame
+_PLACED = (PoseTask.compute, PositionTask.compute, OrientationTask.compute,
+           RelativePoseTask.compute)
+
+
+def _frame_position(task: Task, kinematics: Kinematics) -> np.ndarray | None:
+    """The task frame's world position (3,) as a view on Pinocchio's data, which every step
+    updates in place (one copy logs it, instead of a ``pin.SE3`` and its translation made per
+    step); ``None`` for a task of the user's own, whose ``placement`` is read per step."""
+    if type(task).compute not in _PLACED or task.frame_id < 0:
+        return None
+    return kinematics.data.oMf[task.frame_id].translation
+
+
+def _norms(errors: np.ndarray, out: np.ndarray) -> None:
+    """The row norms of ``errors`` into ``out``, summed in the order the step's kernel sums
+    them (so each is ``solver.error_norm`` of its step, bitwise)."""
+    np.multiply(errors[:, 0], errors[:, 0], out=out)
+    for i in range(1, errors.shape[1]):
+        out += errors[:, i] * errors[:, i]
+    np.sqrt(out, out=out)

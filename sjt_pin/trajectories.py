@@ -186,8 +186,9 @@ class Circle(Trajectory):
         s, ds = _progress(np.asarray(times, dtype=float), self.duration, "linear")
         sweep = 2.0 * np.pi * self.turns
         angle = (self.start_angle + sweep * s)[:, None]
-        radial = np.cos(angle) * self._u + np.sin(angle) * self._w
-        tangent = -np.sin(angle) * self._u + np.cos(angle) * self._w
+        cos, sin = np.cos(angle), np.sin(angle)
+        radial = cos * self._u + sin * self._w
+        tangent = -sin * self._u + cos * self._w
         velocities = np.zeros((s.size, 6))
         velocities[:, :3] = (self.radius * sweep * ds)[:, None] * tangent
         return (self.center + self.radius * radial,

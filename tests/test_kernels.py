@@ -282,6 +282,10 @@ def test_posture_rows_solved_linear_in_n_give_the_dense_solution(joints, method,
     assert kernel(J, e, ff, q, work, fast_step) == kernel(J, e, ff, q, dense, dense_step)
     # both to rounding (the dense Cholesky of a 100 x 100 with weights 1e-2 is the worse)
     np.testing.assert_allclose(fast_step, dense_step, atol=1e-8 * np.abs(dense_step).max())
+    # the column norms summed over the task rows and the one posture entry: the zeros of the
+    # identity rows add nothing, so the trace and the stall ratio are the dense ones, bitwise
+    for i in (K.I_TRACE, K.I_STALL, K.I_E_SQ, K.I_EW_SQ):
+        assert work[K.INFO + i] == dense[K.INFO + i]
 
 
 def test_unit_defect_is_the_largest_squared_norm_defect(rng):

@@ -6,7 +6,8 @@ that path makes* (its floor), timed the same way on the same configurations and 
 Jacobians with forward kinematics, per task frame its placement, its frame Jacobian and (pose
 tasks) ``actInv`` + ``log6``, ``difference`` for a posture task, and ``integrate``. The target
 moves on a 1 cm circle (one turn per second) so that no step is trivial. ``track()`` is timed
-per step over a whole run, against the floor of the step it makes. With ``--peers``, pink's
+per step over a whole run, against the floor of the step it makes timed the same way (whole
+runs of its calls, each right after a run of ``track()``). With ``--peers``, pink's
 ``solve_ik`` + integration on the same robot, frame and targets.
 """
 
@@ -252,22 +253,27 @@ def time_path(robot: Robot, q0: np.ndarray, path: Path, steps: int, warmup: int,
 
 
 def time_track(robot: Robot, q0: np.ndarray, steps: int, dt: float = 1e-3,
-               repeats: int = 7) -> SpeedRow:
-    """``track()`` on a 1 cm circle, per step (total time / steps), against the pose floor."""
+               repeats: int = 15) -> SpeedRow:
+    """``track()`` on a 1 cm circle, per step (a whole run's time / its steps), against the
+    pose floor timed the same way: its calls on the run's configurations and targets, a whole
+    run at a time, right after each run (medians of ``repeats`` pairs)."""
     frames = (robot.ee_frame,)
     circle = _circle(robot, q0, robot.ee_frame, steps * dt)
     solver = make_solver("sjt", robot, dt=dt)
     log = track(solver, circle, q0)
-    samples = []
+    floor = _floor(robot, frames, False, False)
+    floor_calls = list(zip(log.q, _targets(robot, q0, frames, len(log), dt), strict=True))
+    clock, runs, floors = time.perf_counter_ns, [], []
     for _ in range(repeats):
-        start = time.perf_counter_ns()
+        start = clock()
         track(solver, circle, q0)
-        samples.append((time.perf_counter_ns() - start) / len(log))
-    targets = _targets(robot, q0, frames, len(log), dt)
-    floor = Timing.of(_time(_floor(robot, frames, False, False),
-                            list(zip(log.q, targets, strict=True)), len(log) // 10))
-    return SpeedRow(robot.name, "track() per step (SJT, circle)", Timing.of(np.array(samples)),
-                    floor)
+        middle = clock()
+        for args in floor_calls:
+            floor(*args)
+        runs.append((middle - start) / len(log))
+        floors.append((clock() - middle) / len(log))
+    return SpeedRow(robot.name, "track() per step (SJT, circle)", Timing.of(np.array(runs)),
+                    Timing.of(np.array(floors)))
 
 
 def time_pink(robot: Robot, q0: np.ndarray, steps: int, warmup: int,

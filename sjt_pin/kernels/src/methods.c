@@ -20,18 +20,27 @@ static void woodbury(const double *U, const double *Dg, Py_ssize_t n, Py_ssize_t
                      const double *rhs, double *x, double *space)
 {
     double *S = space, *t = space + mt * mt, *t2 = t + mt;
-    for (Py_ssize_t j = 0; j < n; j++) x[j] = Dg[j] > 0.0 ? rhs[j] / Dg[j] : 0.0;
     for (Py_ssize_t a = 0; a < mt; a++) {
-        double acc = 0.0;
-        for (Py_ssize_t j = 0; j < n; j++) acc += U[j * mt + a] * x[j];
-        t[a] = acc;
-        for (Py_ssize_t b = 0; b <= a; b++) {
-            double g = a == b ? 1.0 : 0.0;
-            for (Py_ssize_t j = 0; j < n; j++)
-                if (Dg[j] > 0.0) g += U[j * mt + a] * U[j * mt + b] / Dg[j];
-            S[a * mt + b] = S[b * mt + a] = g;
+        t[a] = 0.0;
+        for (Py_ssize_t b = 0; b < mt; b++) S[a * mt + b] = a == b ? 1.0 : 0.0;
+    }
+    /* one pass over the joints (U's rows in order): x = Dg^-1 rhs, t = U^T x and the lower
+     * triangle of S = I + U^T Dg^-1 U */
+    for (Py_ssize_t j = 0; j < n; j++) {
+        if (!(Dg[j] > 0.0)) {
+            x[j] = 0.0;
+            continue;
+        }
+        const double *u = U + j * mt;
+        double xj = x[j] = rhs[j] / Dg[j], inverse = 1.0 / Dg[j];
+        for (Py_ssize_t a = 0; a < mt; a++) {
+            t[a] += u[a] * xj;
+            double ua = u[a] * inverse;
+            for (Py_ssize_t b = 0; b <= a; b++) S[a * mt + b] += ua * u[b];
         }
     }
+    for (Py_ssize_t a = 0; a < mt; a++)
+        for (Py_ssize_t b = 0; b < a; b++) S[b * mt + a] = S[a * mt + b];
     cholesky_solve_c(S, mt, 0.0, t, t2);
     for (Py_ssize_t j = 0; j < n; j++) {
         if (!(Dg[j] > 0.0)) continue;
@@ -134,14 +143,23 @@ static void column_scales(Mat J, const double *sw, const double *kew, const doub
     Py_ssize_t m = J.m, n = J.n, error_rows = (Py_ssize_t)work[P_ERROR_ROWS];
     double tol = work[P_COL_TOL], length2 = work[P_LENGTH2];
     int scaled = work[P_SCALED] != 0.0;
+    /* rows that end with n identity rows (a posture): column j has one entry there, row
+     * mt + j, so only the mt task rows are summed (the zeros add nothing) */
+    Py_ssize_t mt = identity_block(work, m, n), dense = mt >= 0 ? mt : m;
     for (Py_ssize_t j = 0; j < n; j++) {
         double norm = 0.0, acc = 0.0, acc_task = 0.0;
         if (mask[j] != 0.0) {
-            for (Py_ssize_t i = 0; i < m; i++) {
+            for (Py_ssize_t i = 0; i < dense; i++) {
                 double wij = sw[i] * AT(J, i, j);
                 norm += wij * wij;
                 acc += wij * kew[i];
                 if (i < error_rows) acc_task += wij * kew[i];
+            }
+            if (mt >= 0) {
+                double wij = sw[mt + j];
+                norm += wij * wij;
+                acc += wij * kew[mt + j];
+                if (mt + j < error_rows) acc_task += wij * kew[mt + j];
             }
         }
         alpha[j] = norm > tol ? sjt_alpha(norm, length2) : 0.0;
