@@ -216,6 +216,11 @@ int sns_c(int kind, Mat J, const double *e, const double *ff, int has_ff,
         if (scale >= 1.0 || k < 0) break;
         any_held = 1;
         if (!sns_hold(&s, k, lo, hi, n)) break;
+        /* fewer free joints than task rows cannot span them (spans_c): the next round would
+         * stop before using a re-solve */
+        Py_ssize_t left = 0;
+        for (Py_ssize_t j = 0; j < n; j++) left += s.free_[j] != 0.0;
+        if (left < rows) break;
         sns_resolve(kind, J, e, ff, has_ff, work, &s, factor, save, escaping);
     }
     double scale = dmax(best, 0.0);
