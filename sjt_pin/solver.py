@@ -747,8 +747,9 @@ class Solver:
     # -- other entry points ----------------------------------------------------------------------
     def solve(self, target, q0, **options):
         """Solve to ``target`` from ``q0`` (set-point IK): Levenberg-Marquardt on this
-        method's columns (SJT's normalised ones for SJT) within the limits, restarted from
-        random configurations until it succeeds or its budget (2000 iterations) runs out; see
+        method's columns (SJT's normalised ones for SJT) within the limits, restarted (from the
+        configurations of a seeded table whose poses are nearest the target, then from random
+        ones) until it succeeds or its budget (2000 iterations) runs out; see
         :func:`sjt_pin.ik.solve` for the options. Returns an :class:`~sjt_pin.IKResult`."""
         from .ik import solve
 

@@ -109,14 +109,6 @@ static inline double weighted_column_norm2(Mat J, const double *sw, Py_ssize_t r
  * floor l^2 = length2 under the norm: alpha = 1 / max(|W J_j|^2, l^2) */
 static inline double sjt_alpha(double norm, double length2) { return 1.0 / dmax(norm, length2); }
 
-/* (W J_j)^T v = sum_i w_i J_ij v_i: column j of the weighted rows against v */
-static inline double weighted_column_dot(Mat J, const double *sw, const double *v, Py_ssize_t j)
-{
-    double acc = 0.0;
-    for (Py_ssize_t i = 0; i < J.m; i++) acc += sw[i] * AT(J, i, j) * v[i];
-    return acc;
-}
-
 /* the length of a 1-D buffer (1 for a 0-D one) */
 static inline Py_ssize_t length(const Arg *a) { return a->view.ndim == 0 ? 1 : a->view.shape[0]; }
 

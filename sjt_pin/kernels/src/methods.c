@@ -3,6 +3,14 @@
 
 #include "kernels.h"
 
+/* (W J_j)^T v = sum_i w_i J_ij v_i: column j of the weighted rows against v */
+static inline double weighted_column_dot(Mat J, const double *sw, const double *v, Py_ssize_t j)
+{
+    double acc = 0.0;
+    for (Py_ssize_t i = 0; i < J.m; i++) acc += sw[i] * AT(J, i, j) * v[i];
+    return acc;
+}
+
 /* -- the step kernels ------------------------------------------------------------------------- */
 
 /* three p x p scratch matrices after the scratch vectors, p = min(m, n) */
