@@ -243,7 +243,7 @@ class CollisionLimit(Limit):
         #: the pairs (indices into pairs / pair_names) of the first rows of the last rows()
         #: (one each, from its exact distance), and of the witness rows that follow them
         self.active: list[int] = []
-        self.witness_pairs: list[int] = []
+        self._witness_count = 0  # the witness rows of the last rows() (_owners holds their pairs)
         self._prepare_broad_phase()
 
     def __getstate__(self) -> dict:
@@ -741,18 +741,24 @@ class CollisionLimit(Limit):
         key = (dt, self._version, None if q is None else q.tobytes())
         cache = self._cache
         if cache is not None and q is not None and cache[0] is data and cache[1] == key:
-            self.active, self.witness_pairs = list(cache[2]), list(cache[3])
+            self.active, self._witness_count = cache[2], cache[3]
             return cache[4]
         if not self._checked:
             self._check(model, data)
         out = self._rows(model, data, dt, q)
-        self._cache = (data, key, tuple(self.active), tuple(self.witness_pairs), out)
+        self._cache = (data, key, self.active, self._witness_count, out)
         return out
+
+    @property
+    def witness_pairs(self) -> list[int]:
+        """The pairs (indices into :attr:`pairs`) of the witness rows of the last
+        :meth:`rows`, which follow the rows of :attr:`active` (one each)."""
+        return self._owners[:self._witness_count].astype(int).tolist()
 
     def _rows(self, model, data, dt: float, q: np.ndarray | None = None
               ) -> tuple[np.ndarray, np.ndarray] | None:
         self.active = []  # indices into self.pairs / self.pair_names of the rows returned
-        self.witness_pairs = []
+        self._witness_count = 0
         influence, floor, ref = self.influence, self._floor, self._reference
         # a pair's distance changes by at most its bound's change (_near): one that was beyond
         # influence by more than that at its last query still is; both tests compiled where q
@@ -803,7 +809,7 @@ class CollisionLimit(Limit):
                              self._memory_state,
                              self._tick, 0.5 * (self.influence - self.margin), WITNESS_APART,
                              self._owners)
-        self.witness_pairs = self._owners[:total - count].astype(int).tolist()
+        self._witness_count = total - count
         return total
 
 
