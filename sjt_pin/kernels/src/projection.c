@@ -5,6 +5,103 @@
 
 /* -- the constraint stage's correction (sjt_pin/constraints.py: project, nonnegative_qp) -------- */
 
+/* The state of nonnegative_qp_c: Q (k x k) with its ridge, r, the iterate y, the flags of the
+ * passive set and of the inert rows (those no motion changes: Q_tt = 0), and its scratch. */
+typedef struct {
+    const double *Q, *r;
+    Py_ssize_t k;
+    double ridge, *y, *w, *s, *rhs, *sub, *V, *passive, *inert;
+    Py_ssize_t *idx;
+} Nnls;
+
+/* y = 0, nothing passive; the rows no motion changes are inert (they never enter: their
+ * gradient is zero and they would stall every round); returns the tolerance of the test for
+ * optimality, tol (1 + max |r|) */
+static double nnls_start(Nnls *p, double tol)
+{
+    double top = 0.0, rmax = 0.0;
+    for (Py_ssize_t i = 0; i < p->k; i++) {
+        p->y[i] = p->passive[i] = 0.0;
+        top = dmax(top, p->Q[i * p->k + i]);
+        rmax = dmax(rmax, fabs(p->r[i]));
+    }
+    p->ridge = DUAL_RIDGE * top;
+    for (Py_ssize_t i = 0; i < p->k; i++)
+        p->inert[i] = p->Q[i * p->k + i] <= 1e-14 * dmax(top, 1e-300) ? 1.0 : 0.0;
+    return tol * (1.0 + rmax);
+}
+
+/* The row that enters the passive set: the largest entry of the negative gradient
+ * -(Q y + r) among the rows neither passive nor inert, above `scale`; -1 when none (y is
+ * optimal). */
+static Py_ssize_t nnls_entering(const Nnls *p, double scale)
+{
+    Py_ssize_t t = -1, k = p->k;
+    double best = -INFINITY;
+    for (Py_ssize_t i = 0; i < k; i++) {
+        if (p->passive[i] != 0.0 || p->inert[i] != 0.0) continue;
+        double acc = -p->r[i] - p->ridge * p->y[i];
+        for (Py_ssize_t j = 0; j < k; j++) acc -= p->Q[i * k + j] * p->y[j];
+        if (acc > best) {
+            best = acc;
+            t = i;
+        }
+    }
+    return best > scale ? t : -1;
+}
+
+/* s: the passive set's unconstrained minimiser (0 elsewhere), its system by Cholesky (the
+ * ridge makes it positive definite) and the pseudo-inverse only if rounding made a pivot
+ * vanish; writes the passive indices to idx and their count to *count. Returns whether every
+ * passive entry of s is positive. */
+static int nnls_passive_solve(const Nnls *p, Py_ssize_t *count)
+{
+    Py_ssize_t k = p->k, n = 0;
+    for (Py_ssize_t i = 0; i < k; i++)
+        if (p->passive[i] != 0.0) p->idx[n++] = i;
+    for (Py_ssize_t a = 0; a < n; a++) {
+        p->rhs[a] = -p->r[p->idx[a]];
+        for (Py_ssize_t c = 0; c < n; c++) p->sub[a * n + c] = p->Q[p->idx[a] * k + p->idx[c]];
+        p->sub[a * n + a] += p->ridge;
+    }
+    double *sol = p->w;
+    memcpy(p->V, p->sub, (size_t)(n * n) * sizeof(double));
+    if (cholesky_factor(p->V, n, 0.0))
+        cholesky_substitute(p->V, n, p->rhs, sol);
+    else
+        pseudo_solve(p->sub, p->V, n, p->rhs, sol, 0.0);
+    for (Py_ssize_t i = 0; i < k; i++) p->s[i] = 0.0;
+    int positive = 1;
+    for (Py_ssize_t a = 0; a < n; a++) {
+        p->s[p->idx[a]] = sol[a];
+        if (!(sol[a] > 0.0)) positive = 0;
+    }
+    *count = n;
+    return positive;
+}
+
+/* The step from y toward s stops where the first passive entry at or below 0 in s reaches 0
+ * (one already at 0 with s = 0 too stops it at once); those at 0 leave the passive set.
+ * Returns whether any row is still passive. */
+static int nnls_step_back(const Nnls *p, Py_ssize_t count)
+{
+    double alpha = INFINITY;
+    for (Py_ssize_t a = 0; a < count; a++) {
+        Py_ssize_t i = p->idx[a];
+        if (p->s[i] > 0.0) continue;
+        double gap = p->y[i] - p->s[i];
+        alpha = dmin(alpha, gap > 0.0 ? p->y[i] / gap : 0.0);
+    }
+    int any = 0;
+    for (Py_ssize_t i = 0; i < p->k; i++) {
+        p->y[i] += alpha * (p->s[i] - p->y[i]);
+        if (p->passive[i] != 0.0 && !(p->y[i] > 1e-15)) p->passive[i] = 0.0;
+        if (p->passive[i] == 0.0) p->y[i] = 0.0;
+        any |= p->passive[i] != 0.0;
+    }
+    return any;
+}
+
 /* argmin 1/2 y^T Q y + r^T y over y >= 0 for the symmetric PSD Q (k x k, row-major) plus
  * DUAL_RIDGE max(diag Q) I: the active-set method of Lawson and Hanson's NNLS on the normal
  * equations of the passive set, step for step as constraints.nonnegative_qp (the reference;
@@ -13,79 +110,29 @@
 static int nonnegative_qp_c(const double *Q, const double *r, Py_ssize_t k, double tol,
                             double *y, double *scratch)
 {
-    double *w = scratch, *s = w + k, *rhs = s + k, *sub = rhs + k, *V = sub + k * k;
-    double *passive = V + k * k, *inert = passive + k;
-    Py_ssize_t *idx = (Py_ssize_t *)(inert + k);
-    double top = 0.0, rmax = 0.0;
-    for (Py_ssize_t i = 0; i < k; i++) {
-        y[i] = passive[i] = 0.0;
-        top = dmax(top, Q[i * k + i]);
-        rmax = dmax(rmax, fabs(r[i]));
-    }
-    double scale = tol * (1.0 + rmax), ridge = DUAL_RIDGE * top;
-    for (Py_ssize_t i = 0; i < k; i++)
-        inert[i] = Q[i * k + i] <= 1e-14 * dmax(top, 1e-300) ? 1.0 : 0.0;
+    Nnls p = {Q, r, k, 0.0, y, scratch, NULL, NULL, NULL, NULL, NULL, NULL, NULL};
+    p.s = p.w + k;
+    p.rhs = p.s + k;
+    p.sub = p.rhs + k;
+    p.V = p.sub + k * k;
+    p.passive = p.V + k * k;
+    p.inert = p.passive + k;
+    p.idx = (Py_ssize_t *)(p.inert + k);
+    double scale = nnls_start(&p, tol);
     int solves = 0;
     for (Py_ssize_t outer = 0; outer < 3 * k + 10; outer++) {
-        Py_ssize_t t = -1;
-        double best = -INFINITY;
-        for (Py_ssize_t i = 0; i < k; i++) {
-            if (passive[i] != 0.0 || inert[i] != 0.0) continue;
-            double acc = -r[i] - ridge * y[i];
-            for (Py_ssize_t j = 0; j < k; j++) acc -= Q[i * k + j] * y[j];
-            w[i] = acc;
-            if (acc > best) {
-                best = acc;
-                t = i;
-            }
-        }
-        if (t < 0 || best <= scale) break;
-        passive[t] = 1.0;
+        Py_ssize_t t = nnls_entering(&p, scale);
+        if (t < 0) break;
+        p.passive[t] = 1.0;
         for (Py_ssize_t inner = 0; inner < 3 * k + 10; inner++) {
-            Py_ssize_t p = 0;
-            for (Py_ssize_t i = 0; i < k; i++)
-                if (passive[i] != 0.0) idx[p++] = i;
-            for (Py_ssize_t a = 0; a < p; a++) {
-                rhs[a] = -r[idx[a]];
-                for (Py_ssize_t c = 0; c < p; c++) sub[a * p + c] = Q[idx[a] * k + idx[c]];
-                sub[a * p + a] += ridge;
-            }
-            double *sol = w;  /* w is recomputed before it is read again */
-            /* the ridge makes the passive set's system positive definite: Cholesky, and the
-             * pseudo-inverse only if rounding made a pivot vanish */
-            memcpy(V, sub, (size_t)(p * p) * sizeof(double));
-            if (cholesky_factor(V, p, 0.0))
-                cholesky_substitute(V, p, rhs, sol);
-            else
-                pseudo_solve(sub, V, p, rhs, sol, 0.0);
+            Py_ssize_t count;
+            int positive = nnls_passive_solve(&p, &count);
             solves++;
-            for (Py_ssize_t i = 0; i < k; i++) s[i] = 0.0;
-            int positive = 1;
-            for (Py_ssize_t a = 0; a < p; a++) {
-                s[idx[a]] = sol[a];
-                if (!(sol[a] > 0.0)) positive = 0;
-            }
             if (positive) {
-                memcpy(y, s, (size_t)k * sizeof(double));
+                memcpy(y, p.s, (size_t)k * sizeof(double));
                 break;
             }
-            /* the step toward s stops where the first of those at or below 0 reaches 0 (one
-             * already at 0 with s = 0 too stops it at once) */
-            double alpha = INFINITY;
-            for (Py_ssize_t a = 0; a < p; a++) {
-                Py_ssize_t i = idx[a];
-                if (s[i] > 0.0) continue;
-                double gap = y[i] - s[i];
-                alpha = dmin(alpha, gap > 0.0 ? y[i] / gap : 0.0);
-            }
-            int any = 0;
-            for (Py_ssize_t i = 0; i < k; i++) {
-                y[i] += alpha * (s[i] - y[i]);
-                if (passive[i] != 0.0 && !(y[i] > 1e-15)) passive[i] = 0.0;
-                if (passive[i] == 0.0) y[i] = 0.0;
-                any |= passive[i] != 0.0;
-            }
-            if (!any) break;
+            if (!nnls_step_back(&p, count)) break;
         }
     }
     return solves;
@@ -93,6 +140,144 @@ static int nonnegative_qp_c(const double *Q, const double *r, Py_ssize_t k, doub
 
 /* doubles of scratch nonnegative_qp_c needs for k rows (its flags and indices included) */
 static Py_ssize_t nonnegative_qp_scratch(Py_ssize_t k) { return 6 * k + 2 * k * k + 1; }
+
+/* The whitened dual of project_once_c on the moving joints cols (nc of n): L the Cholesky
+ * factor of H = Jw_c^T Jw_c + rho I, the rows G x <= h (A's moving columns, then -e_c for
+ * each finite lower bound and e_c for each finite upper one), C = G L^-T (rows x nc), the
+ * residual h - G x0 at x0 = dq_c, and the dual's Q = C C^T and solution y. */
+typedef struct {
+    Py_ssize_t n, nc, k, lo_count, hi_count, rows;
+    Py_ssize_t *cols;
+    double *L, *C, *h, *y, *Q, *x0, *z, *scratch;
+} Dual;
+
+/* the moving joints and the finite bounds among them; out = dq. Returns the doubles the
+ * dual's buffers need. */
+static size_t dual_sizes(Dual *d, const double *dq, const double *lower, const double *upper,
+                         const double *moving, Py_ssize_t k, double *out)
+{
+    d->nc = d->lo_count = d->hi_count = 0;
+    d->k = k;
+    for (Py_ssize_t j = 0; j < d->n; j++) {
+        out[j] = dq[j];
+        if (moving[j] == 0.0) continue;
+        d->nc++;
+        d->lo_count += isfinite(lower[j]) ? 1 : 0;
+        d->hi_count += isfinite(upper[j]) ? 1 : 0;
+    }
+    Py_ssize_t nc = d->nc, rows = d->rows = k + d->lo_count + d->hi_count;
+    return (size_t)(d->n + nc * nc + rows * nc + 2 * rows + rows * rows + 2 * nc
+                    + nonnegative_qp_scratch(rows));
+}
+
+/* the dual's buffers in mem (dual_sizes doubles) */
+static void dual_buffers(Dual *d, double *mem, const double *moving)
+{
+    Py_ssize_t nc = d->nc, rows = d->rows;
+    d->cols = (Py_ssize_t *)mem;
+    d->L = mem + d->n;
+    d->C = d->L + nc * nc;
+    d->h = d->C + rows * nc;
+    d->y = d->h + rows;
+    d->Q = d->y + rows;
+    d->x0 = d->Q + rows * rows;
+    d->z = d->x0 + nc;
+    d->scratch = d->z + nc;
+    Py_ssize_t c = 0;
+    for (Py_ssize_t j = 0; j < d->n; j++)
+        if (moving[j] != 0.0) d->cols[c++] = j;
+}
+
+/* x0 = dq_c and L: H = Jw_c^T Jw_c + rho I factored (rho the mean of Jw_c^T Jw_c's diagonal);
+ * returns 0 only if the factorisation failed (not reached: H is positive definite) */
+static int dual_metric(Dual *d, const double *dq, Mat Jw)
+{
+    Py_ssize_t nc = d->nc;
+    double trace = 0.0;
+    for (Py_ssize_t a = 0; a < nc; a++) {
+        d->x0[a] = dq[d->cols[a]];
+        for (Py_ssize_t c = 0; c <= a; c++) {
+            double acc = 0.0;
+            for (Py_ssize_t i = 0; i < Jw.m; i++)
+                acc += AT(Jw, i, d->cols[a]) * AT(Jw, i, d->cols[c]);
+            d->L[a * nc + c] = d->L[c * nc + a] = acc;
+        }
+        trace += d->L[a * nc + a];
+    }
+    double rho = dmax(trace / (double)(nc > 0 ? nc : 1), 1e-12);
+    return nc == 0 || cholesky_factor(d->L, nc, rho);
+}
+
+/* Row i of G into g (nc) and its h - G x0 into h[i]; *next walks the columns with a finite
+ * bound of the kind of row i */
+static void dual_row(Dual *d, Py_ssize_t i, Mat A, const double *b, const double *lower,
+                     const double *upper, const double *moving, const double *dq,
+                     Py_ssize_t *next, double *g)
+{
+    Py_ssize_t nc = d->nc, k = d->k;
+    double hi_;
+    if (i < k) {
+        hi_ = b[i];
+        for (Py_ssize_t j = 0; j < d->n; j++)
+            if (moving[j] == 0.0) hi_ -= AT(A, i, j) * dq[j];
+        for (Py_ssize_t a = 0; a < nc; a++) g[a] = AT(A, i, d->cols[a]);
+    } else {
+        for (Py_ssize_t a = 0; a < nc; a++) g[a] = 0.0;
+        int upper_row = i >= k + d->lo_count;
+        if (i == k || i == k + d->lo_count) *next = 0;
+        const double *bound = upper_row ? upper : lower;
+        while (!isfinite(bound[d->cols[*next]])) (*next)++;
+        g[*next] = upper_row ? 1.0 : -1.0;
+        hi_ = upper_row ? upper[d->cols[*next]] : -lower[d->cols[*next]];
+        (*next)++;
+    }
+    for (Py_ssize_t a = 0; a < nc; a++) hi_ -= g[a] * d->x0[a];
+    d->h[i] = hi_;
+}
+
+/* C = G L^-T row by row (forward substitution), r = h - G x0, and Q = C C^T */
+static void dual_problem(Dual *d, Mat A, const double *b, const double *lower,
+                         const double *upper, const double *moving, const double *dq)
+{
+    Py_ssize_t nc = d->nc, rows = d->rows, next = 0;
+    for (Py_ssize_t i = 0; i < rows; i++) {
+        double *g = d->C + i * nc;
+        dual_row(d, i, A, b, lower, upper, moving, dq, &next, g);
+        for (Py_ssize_t a = 0; a < nc; a++) {
+            double acc = g[a];
+            for (Py_ssize_t c = 0; c < a; c++) acc -= d->L[a * nc + c] * g[c];
+            g[a] = acc / d->L[a * nc + a];
+        }
+    }
+    for (Py_ssize_t i = 0; i < rows; i++)
+        for (Py_ssize_t j = 0; j <= i; j++) {
+            double acc = 0.0;
+            for (Py_ssize_t a = 0; a < nc; a++) acc += d->C[i * nc + a] * d->C[j * nc + a];
+            d->Q[i * rows + j] = d->Q[j * rows + i] = acc;
+        }
+}
+
+/* The primal from the dual's y: z = -C^T y, x - x0 = L^-T z (back substitution), each moving
+ * joint then within its bounds (the bounds are hard: rows that no velocity within them meets,
+ * the dual unbounded but for its ridge, leave the answer on them, not beyond) */
+static void dual_primal(const Dual *d, const double *lower, const double *upper, double *out)
+{
+    Py_ssize_t nc = d->nc, rows = d->rows;
+    for (Py_ssize_t a = 0; a < nc; a++) {
+        double acc = 0.0;
+        for (Py_ssize_t i = 0; i < rows; i++) acc -= d->C[i * nc + a] * d->y[i];
+        d->z[a] = acc;
+    }
+    for (Py_ssize_t a = nc - 1; a >= 0; a--) {
+        double acc = d->z[a];
+        for (Py_ssize_t c = a + 1; c < nc; c++) acc -= d->L[c * nc + a] * d->z[c];
+        d->z[a] = acc / d->L[a * nc + a];
+    }
+    for (Py_ssize_t a = 0; a < nc; a++) {
+        Py_ssize_t j = d->cols[a];
+        out[j] = dmin(dmax(d->x0[a] + d->z[a], lower[j]), upper[j]);
+    }
+}
 
 /* out = argmin (x - dq)^T H (x - dq), H = Jw_c^T Jw_c + rho I on the moving joints c (rho the
  * mean of H's diagonal), subject to A x <= b and lower <= x <= upper, the others at dq: as
@@ -102,96 +287,19 @@ static int project_once_c(const double *dq, Mat Jw, Mat A, const double *b,
                           const double *lower, const double *upper, const double *moving,
                           double *out)
 {
-    Py_ssize_t n = Jw.n, m = Jw.m, k = A.m, nc = 0, rows;
-    Py_ssize_t lo_count = 0, hi_count = 0;
-    for (Py_ssize_t j = 0; j < n; j++) {
-        out[j] = dq[j];
-        if (moving[j] != 0.0) {
-            nc++;
-            lo_count += isfinite(lower[j]) ? 1 : 0;
-            hi_count += isfinite(upper[j]) ? 1 : 0;
-        }
-    }
-    rows = k + lo_count + hi_count;
-    size_t size = (size_t)(n + nc * nc + rows * nc + 2 * rows + rows * rows + 2 * nc
-                           + nonnegative_qp_scratch(rows));
+    Dual d;
+    d.n = Jw.n;
+    size_t size = dual_sizes(&d, dq, lower, upper, moving, A.m, out);
     double *mem = (double *)malloc(size * sizeof(double));
     if (!mem) return -1;
-    Py_ssize_t *cols = (Py_ssize_t *)mem;
-    double *L = mem + n, *C = L + nc * nc, *h = C + rows * nc, *y = h + rows, *Q = y + rows;
-    double *x0 = Q + rows * rows, *z = x0 + nc, *scratch = z + nc;
-    nc = 0;
-    for (Py_ssize_t j = 0; j < n; j++)
-        if (moving[j] != 0.0) cols[nc++] = j;
-    double trace = 0.0;
-    for (Py_ssize_t a = 0; a < nc; a++) {
-        x0[a] = dq[cols[a]];
-        for (Py_ssize_t c = 0; c <= a; c++) {
-            double acc = 0.0;
-            for (Py_ssize_t i = 0; i < m; i++) acc += AT(Jw, i, cols[a]) * AT(Jw, i, cols[c]);
-            L[a * nc + c] = L[c * nc + a] = acc;
-        }
-        trace += L[a * nc + a];
-    }
-    double rho = dmax(trace / (double)(nc > 0 ? nc : 1), 1e-12);
-    int solves = 0;
-    if (nc > 0 && !cholesky_factor(L, nc, rho)) {
+    dual_buffers(&d, mem, moving);
+    if (!dual_metric(&d, dq, Jw)) {
         free(mem);
         return 0;  /* not reached: H + rho I is positive definite */
     }
-    /* G: A's moving columns, then -e_c for each finite lower bound, e_c for each upper;
-     * C = G L^-T row by row (forward substitution), r = h - G x0 (into h) */
-    Py_ssize_t row = 0;
-    for (Py_ssize_t i = 0; i < rows; i++) {
-        double *g = C + i * nc;
-        double hi_;
-        if (i < k) {
-            hi_ = b[i];
-            for (Py_ssize_t j = 0; j < n; j++)
-                if (moving[j] == 0.0) hi_ -= AT(A, i, j) * dq[j];
-            for (Py_ssize_t a = 0; a < nc; a++) g[a] = AT(A, i, cols[a]);
-        } else {
-            for (Py_ssize_t a = 0; a < nc; a++) g[a] = 0.0;
-            int upper_row = i >= k + lo_count;
-            /* the next column with a finite bound of this kind */
-            if (i == k || i == k + lo_count) row = 0;
-            while (!isfinite(upper_row ? upper[cols[row]] : lower[cols[row]])) row++;
-            g[row] = upper_row ? 1.0 : -1.0;
-            hi_ = upper_row ? upper[cols[row]] : -lower[cols[row]];
-            row++;
-        }
-        for (Py_ssize_t a = 0; a < nc; a++) hi_ -= g[a] * x0[a];
-        h[i] = hi_;
-        for (Py_ssize_t a = 0; a < nc; a++) {
-            double acc = g[a];
-            for (Py_ssize_t c = 0; c < a; c++) acc -= L[a * nc + c] * g[c];
-            g[a] = acc / L[a * nc + a];
-        }
-    }
-    for (Py_ssize_t i = 0; i < rows; i++)
-        for (Py_ssize_t j = 0; j <= i; j++) {
-            double acc = 0.0;
-            for (Py_ssize_t a = 0; a < nc; a++) acc += C[i * nc + a] * C[j * nc + a];
-            Q[i * rows + j] = Q[j * rows + i] = acc;
-        }
-    solves = nonnegative_qp_c(Q, h, rows, 1e-13, y, scratch);
-    /* z = -C^T y, then x - x0 = L^-T z (back substitution) */
-    for (Py_ssize_t a = 0; a < nc; a++) {
-        double acc = 0.0;
-        for (Py_ssize_t i = 0; i < rows; i++) acc -= C[i * nc + a] * y[i];
-        z[a] = acc;
-    }
-    for (Py_ssize_t a = nc - 1; a >= 0; a--) {
-        double acc = z[a];
-        for (Py_ssize_t c = a + 1; c < nc; c++) acc -= L[c * nc + a] * z[c];
-        z[a] = acc / L[a * nc + a];
-    }
-    /* the bounds are hard: rows that no velocity within them meets (the dual unbounded but
-     * for its ridge) leave the answer on them, not beyond */
-    for (Py_ssize_t a = 0; a < nc; a++) {
-        Py_ssize_t j = cols[a];
-        out[j] = dmin(dmax(x0[a] + z[a], lower[j]), upper[j]);
-    }
+    dual_problem(&d, A, b, lower, upper, moving, dq);
+    int solves = nonnegative_qp_c(d.Q, d.h, d.rows, 1e-13, d.y, d.scratch);
+    dual_primal(&d, lower, upper, out);
     free(mem);
     return solves;
 }
