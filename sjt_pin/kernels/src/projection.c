@@ -450,6 +450,42 @@ done:
     return result;
 }
 
+/* Whether the step (rad, over dt) meets every row A q_dot <= b (within BOUND_TOL (1 + |b|)) */
+static int rows_hold(Mat A, const double *b, const double *step, double dt)
+{
+    for (Py_ssize_t i = 0; i < A.m; i++) {
+        double acc = -b[i];
+        for (Py_ssize_t j = 0; j < A.n; j++) acc += AT(A, i, j) * step[j] / dt;
+        if (acc > BOUND_TOL * (1.0 + fabs(b[i]))) return 0;
+    }
+    return 1;
+}
+
+/* Whether the step (rad, over dt) lies within [lower, upper] (rad/s, within BOUND_TOL) */
+static int bounds_hold(const double *lower, const double *upper, const double *step, double dt,
+                       Py_ssize_t n)
+{
+    for (Py_ssize_t j = 0; j < n; j++) {
+        double v = step[j] / dt;
+        if (v < lower[j] - BOUND_TOL || v > upper[j] + BOUND_TOL) return 0;
+    }
+    return 1;
+}
+
+/* The metric's rows Jw = sw J mask (m x n, row-major), the step's velocity dq = step / dt and
+ * the moving joints (1 where the mask is not 0) */
+static void weighted_rows(Mat J, const double *sw, const double *mask, const double *step,
+                          double dt, double *Jw, double *dq, double *moving)
+{
+    Py_ssize_t m = J.m, n = J.n;
+    for (Py_ssize_t i = 0; i < m; i++)
+        for (Py_ssize_t j = 0; j < n; j++) Jw[i * n + j] = sw[i] * AT(J, i, j) * mask[j];
+    for (Py_ssize_t j = 0; j < n; j++) {
+        dq[j] = step[j] / dt;
+        moving[j] = mask[j] != 0.0 ? 1.0 : 0.0;
+    }
+}
+
 /* A kernel step (step, written by step_c) against a user's general rows A q_dot <= b and
  * bounds [lower, upper] (rad/s; -inf/inf where none): 0 when it meets them all (step
  * untouched), -1 when it breaks one of the bounds (the caller's whole constraint stage must
@@ -460,33 +496,21 @@ done:
 static int rows_step_c(Mat J, const double *q, Mat A, const double *b, const double *lower,
                        const double *upper, double *work, double *step)
 {
-    Py_ssize_t m = J.m, n = J.n, k = A.m;
+    Py_ssize_t m = J.m, n = J.n;
     double dt = work[P_DT];
     const double *mask = work + (Py_ssize_t)work[P_MASK];
     const double *sw = work + (Py_ssize_t)work[P_ROWS];
     const double *box_lo = work + (Py_ssize_t)work[P_CLAMPED] + n, *box_hi = box_lo + n;
-    for (Py_ssize_t j = 0; j < n; j++) {
-        double v = step[j] / dt;
-        if (v < lower[j] - BOUND_TOL || v > upper[j] + BOUND_TOL) return -1;
-    }
-    int broken = 0;
-    for (Py_ssize_t i = 0; i < k && !broken; i++) {
-        double acc = -b[i];
-        for (Py_ssize_t j = 0; j < n; j++) acc += AT(A, i, j) * step[j] / dt;
-        if (acc > BOUND_TOL * (1.0 + fabs(b[i]))) broken = 1;
-    }
-    if (!broken) return 0;
+    if (!bounds_hold(lower, upper, step, dt, n)) return -1;
+    if (rows_hold(A, b, step, dt)) return 0;
     double *mem = (double *)malloc((size_t)(m * n + 5 * n + 1) * sizeof(double));
     if (!mem) return -2;
     double *Jw = mem, *dq = Jw + m * n, *lo = dq + n, *hi = lo + n, *moving = hi + n;
     double *out = moving + n;
-    for (Py_ssize_t i = 0; i < m; i++)
-        for (Py_ssize_t j = 0; j < n; j++) Jw[i * n + j] = sw[i] * AT(J, i, j) * mask[j];
+    weighted_rows(J, sw, mask, step, dt, Jw, dq, moving);
     for (Py_ssize_t j = 0; j < n; j++) {
-        dq[j] = step[j] / dt;
         lo[j] = dmax(box_lo[j], lower[j]);
         hi[j] = dmin(box_hi[j], upper[j]);
-        moving[j] = mask[j] != 0.0 ? 1.0 : 0.0;
     }
     Mat Jm = {Jw, m, n, n, 1};
     int solves = project_c(dq, Jm, A, b, lo, hi, moving, out);
@@ -585,6 +609,104 @@ static void smoothness_box(const double *S, Py_ssize_t n, Py_ssize_t j, double v
     *hi_out = hi;
 }
 
+/* smooth_rows_c's velocities (n each): the step's dq, the box of a round [lo, hi], the moving
+ * joints, the projection's result, the hard box (the stage's within the user's bounds) and the
+ * acceleration/jerk box around the previous state */
+typedef struct {
+    double *dq, *lo, *hi, *moving, *res, *hard_lo, *hard_hi, *soft_lo, *soft_hi;
+} SmoothBoxes;
+
+/* The hard box (the stage's, within the user's bounds when given) and the smoothness box of
+ * every joint; 0 when a user's bound leaves nothing of the hard box on some joint. */
+static int smooth_boxes(SmoothBoxes *x, const double *lower, const double *upper,
+                        const double *previous, const double *work, Py_ssize_t n)
+{
+    const double *S = work + (Py_ssize_t)work[P_SMOOTH];
+    const double *hlo = S + SM_HARD_LO * n, *hhi = S + SM_HARD_HI * n;
+    int has_jerk = work[P_JERK] != 0.0;
+    for (Py_ssize_t j = 0; j < n; j++) {
+        x->hard_lo[j] = lower ? dmax(hlo[j], lower[j]) : hlo[j];
+        x->hard_hi[j] = upper ? dmin(hhi[j], upper[j]) : hhi[j];
+        if (x->hard_lo[j] > x->hard_hi[j]) return 0;
+        smoothness_box(S, n, j, previous[j], previous[n + j], work[P_DT], has_jerk,
+                       x->soft_lo + j, x->soft_hi + j);
+    }
+    return 1;
+}
+
+/* Round r's box: the smoothness box widened 2^r times around its centre within the hard box
+ * (the last round, r = SMOOTH_WIDEN_ROUNDS: the hard box alone); returns 2 when the hard box
+ * lies beyond the smoothness box on some joint (it wins there), else 1. */
+static int widened_box(SmoothBoxes *x, int round, Py_ssize_t n)
+{
+    int status = 1;
+    double widen = (double)(1 << (round < SMOOTH_WIDEN_ROUNDS ? round : 0));
+    for (Py_ssize_t j = 0; j < n; j++) {
+        double l = x->hard_lo[j], u = x->hard_hi[j];
+        if (round < SMOOTH_WIDEN_ROUNDS) {
+            double c = 0.5 * (x->soft_lo[j] + x->soft_hi[j]);
+            double r = 0.5 * (x->soft_hi[j] - x->soft_lo[j]);
+            double sl = dmax(l, c - widen * r), su = dmin(u, c + widen * r);
+            if (sl <= su) {
+                l = sl;
+                u = su;
+            } else {
+                status = 2;
+            }
+        }
+        x->lo[j] = l;
+        x->hi[j] = u;
+    }
+    return status;
+}
+
+/* Whether the velocity x meets every row (to the dual's ridge: 1e-9 (1 + |b|)) */
+static int rows_met(Mat A, const double *b, const double *x)
+{
+    for (Py_ssize_t i = 0; i < A.m; i++) {
+        double acc = -b[i];
+        for (Py_ssize_t j = 0; j < A.n; j++) acc += AT(A, i, j) * x[j];
+        if (acc > 1e-9 * (1.0 + fabs(b[i]))) return 0;
+    }
+    return 1;
+}
+
+/* The step projected (project_c, metric Jw) onto the rows within round r's box, widening it
+ * until the rows hold (smooth_rows_c): 1, or 2 when the smoothness box had to widen; -2
+ * when out of memory. */
+static int smooth_projection(SmoothBoxes *x, Mat Jw, Mat A, const double *b)
+{
+    int status = 1;
+    for (int round = 0; round <= SMOOTH_WIDEN_ROUNDS; round++) {
+        if (widened_box(x, round, Jw.n) == 2) status = 2;
+        if (project_c(x->dq, Jw, A, b, x->lo, x->hi, x->moving, x->res) < 0) return -2;
+        if (rows_met(A, b, x->res) || round == SMOOTH_WIDEN_ROUNDS) break;
+        status = 2;
+    }
+    return status;
+}
+
+/* The projected velocity becomes the step (every joint inside its range exactly onto a limit
+ * it reaches), SM_OUT and the motion state (SM_DQ, SM_DDQ); joints outside the smoothness box
+ * are marked in SM_TORN. */
+static void smooth_commit(const SmoothBoxes *x, const double *q, const double *previous,
+                          Py_ssize_t n, double *work, double *step)
+{
+    double dt = work[P_DT];
+    double *S = work + (Py_ssize_t)work[P_SMOOTH];
+    double *pdq = S + SM_DQ * n, *pddq = S + SM_DDQ * n;
+    double *out = S + SM_OUT * n, *torn = S + SM_TORN * n;
+    for (Py_ssize_t j = 0; j < n; j++) step[j] = x->res[j] * dt;
+    exact_position(q, work, step);
+    for (Py_ssize_t j = 0; j < n; j++) {
+        double v = step[j] / dt;
+        if (v < x->soft_lo[j] - BOUND_TOL || v > x->soft_hi[j] + BOUND_TOL) torn[j] = 1.0;
+        out[j] = v;
+        pddq[j] = (v - previous[j]) / dt;
+        pdq[j] = v;
+    }
+}
+
 /* A step of the compiled acceleration/jerk stage (step and the stage's part of work, written by
  * smooth_stage_c) against a user's general rows A q_dot <= b and bounds [lower, upper] (rad/s;
  * -inf/inf where none; both NULL: none at all); `previous` (2 nv) is the motion state the step started from (the
@@ -603,88 +725,29 @@ static int smooth_rows_c(Mat J, const double *q, Mat A, const double *b, const d
                          const double *upper, const double *previous, double *work,
                          double *step)
 {
-    Py_ssize_t m = J.m, n = J.n, k = A.m;
+    Py_ssize_t m = J.m, n = J.n;
     double dt = work[P_DT];
-    const double *mask = work + (Py_ssize_t)work[P_MASK];
-    const double *sw = work + (Py_ssize_t)work[P_ROWS];
-    double *S = work + (Py_ssize_t)work[P_SMOOTH];
-    double *pdq = S + SM_DQ * n, *pddq = S + SM_DDQ * n;
-    const double *hlo = S + SM_HARD_LO * n, *hhi = S + SM_HARD_HI * n;
-    double *out = S + SM_OUT * n, *torn = S + SM_TORN * n;
-    int has_jerk = work[P_JERK] != 0.0;
-    int broken = 0;
-    for (Py_ssize_t j = 0; j < n && !broken && lower; j++) {
-        double v = step[j] / dt;
-        if (v < lower[j] - BOUND_TOL || v > upper[j] + BOUND_TOL) broken = 1;
-    }
-    for (Py_ssize_t i = 0; i < k && !broken; i++) {
-        double acc = -b[i];
-        for (Py_ssize_t j = 0; j < n; j++) acc += AT(A, i, j) * step[j] / dt;
-        if (acc > BOUND_TOL * (1.0 + fabs(b[i]))) broken = 1;
-    }
-    if (!broken) return 0;
+    if ((!lower || bounds_hold(lower, upper, step, dt, n)) && rows_hold(A, b, step, dt)) return 0;
     double *mem = (double *)malloc((size_t)(m * n + 10 * n + 1) * sizeof(double));
     if (!mem) return -2;
-    double *Jw = mem, *dq = Jw + m * n, *lo = dq + n, *hi = lo + n, *moving = hi + n;
-    double *res = moving + n, *hard_lo = res + n, *hard_hi = hard_lo + n;
-    double *soft_lo = hard_hi + n, *soft_hi = soft_lo + n;
-    for (Py_ssize_t i = 0; i < m; i++)
-        for (Py_ssize_t j = 0; j < n; j++) Jw[i * n + j] = sw[i] * AT(J, i, j) * mask[j];
-    for (Py_ssize_t j = 0; j < n; j++) {
-        dq[j] = step[j] / dt;
-        moving[j] = mask[j] != 0.0 ? 1.0 : 0.0;
-        hard_lo[j] = lower ? dmax(hlo[j], lower[j]) : hlo[j];
-        hard_hi[j] = upper ? dmin(hhi[j], upper[j]) : hhi[j];
-        if (hard_lo[j] > hard_hi[j]) {  /* the user's bound against the hard box */
-            free(mem);
-            return -1;
-        }
-        smoothness_box(S, n, j, previous[j], previous[n + j], dt, has_jerk, soft_lo + j,
-                       soft_hi + j);
+    SmoothBoxes x = {mem + m * n, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL};
+    x.lo = x.dq + n;
+    x.hi = x.lo + n;
+    x.moving = x.hi + n;
+    x.res = x.moving + n;
+    x.hard_lo = x.res + n;
+    x.hard_hi = x.hard_lo + n;
+    x.soft_lo = x.hard_hi + n;
+    x.soft_hi = x.soft_lo + n;
+    weighted_rows(J, work + (Py_ssize_t)work[P_ROWS], work + (Py_ssize_t)work[P_MASK], step, dt,
+                  mem, x.dq, x.moving);
+    if (!smooth_boxes(&x, lower, upper, previous, work, n)) {
+        free(mem);
+        return -1;
     }
-    Mat Jm = {Jw, m, n, n, 1};
-    int status = 1;
-    for (int round = 0; round <= SMOOTH_WIDEN_ROUNDS; round++) {
-        /* round r: the smoothness box widened 2^r times (the last round: none), within the
-         * hard box */
-        double widen = (double)(1 << (round < SMOOTH_WIDEN_ROUNDS ? round : 0));
-        for (Py_ssize_t j = 0; j < n; j++) {
-            double l = hard_lo[j], u = hard_hi[j];
-            if (round < SMOOTH_WIDEN_ROUNDS) {
-                double c = 0.5 * (soft_lo[j] + soft_hi[j]), r = 0.5 * (soft_hi[j] - soft_lo[j]);
-                double sl = dmax(l, c - widen * r), su = dmin(u, c + widen * r);
-                if (sl <= su) {  /* else the hard box lies beyond: it wins on this joint */
-                    l = sl;
-                    u = su;
-                } else {
-                    status = 2;
-                }
-            }
-            lo[j] = l;
-            hi[j] = u;
-        }
-        if (project_c(dq, Jm, A, b, lo, hi, moving, res) < 0) {
-            free(mem);
-            return -2;
-        }
-        int kept = 1;  /* the rows met within the box (to the dual's ridge) */
-        for (Py_ssize_t i = 0; i < k && kept; i++) {
-            double acc = -b[i];
-            for (Py_ssize_t j = 0; j < n; j++) acc += AT(A, i, j) * res[j];
-            if (acc > 1e-9 * (1.0 + fabs(b[i]))) kept = 0;
-        }
-        if (kept || round == SMOOTH_WIDEN_ROUNDS) break;
-        status = 2;
-    }
-    for (Py_ssize_t j = 0; j < n; j++) step[j] = res[j] * dt;
-    exact_position(q, work, step);
-    for (Py_ssize_t j = 0; j < n; j++) {
-        double v = step[j] / dt;
-        if (v < soft_lo[j] - BOUND_TOL || v > soft_hi[j] + BOUND_TOL) torn[j] = 1.0;
-        out[j] = v;
-        pddq[j] = (v - previous[j]) / dt;
-        pdq[j] = v;
-    }
+    Mat Jm = {mem, m, n, n, 1};
+    int status = smooth_projection(&x, Jm, A, b);
+    if (status >= 0) smooth_commit(&x, q, previous, n, work, step);
     free(mem);
     return status;
 }
