@@ -620,6 +620,12 @@ class CollisionLimit(Limit):
                 return ref[2]
         near, slack = self._broad_phase(data)
         if q is not None and inside and self._pair_lever is not None:
+            # the pairs within a skin of half the band (influence - margin) of being candidates
+            # are candidates too, as in a Verlet list: the next broad phase waits until some
+            # bound reaches the skin at least (Panda's scenes: on 1-3 % of the steps instead
+            # of 8-16 %), and an extra candidate costs one exact query (its floor skips it
+            # after that; a wider skin queries more than it saves)
+            near = np.flatnonzero(slack < 0.5 * (self.influence - self.margin))
             slack[near] = np.inf  # a candidate stays one
             self._reference = (self._version, q.copy(), near, slack, near.tolist())
             self._bound = self._no_bound
