@@ -279,13 +279,11 @@ static void dual_primal(const Dual *d, const double *lower, const double *upper,
     }
 }
 
-/* out = argmin (x - dq)^T H (x - dq), H = Jw_c^T Jw_c + rho I on the moving joints c (rho the
- * mean of H's diagonal), subject to A x <= b and lower <= x <= upper, the others at dq: as
- * constraints.project (its reference), on the dual of the Cholesky-whitened problem; when no
- * x meets them all, within the bounds. Returns the passive-set solves, -1 when out of memory. */
-static int project_once_c(const double *dq, Mat Jw, Mat A, const double *b,
-                          const double *lower, const double *upper, const double *moving,
-                          double *out)
+/* project_once_c on the rows and the finite bounds of [lower, upper] given (the others
+ * -inf/inf): the dual's answer, each moving joint within those bounds. Returns the
+ * passive-set solves, -1 when out of memory. */
+static int project_dual(const double *dq, Mat Jw, Mat A, const double *b, const double *lower,
+                        const double *upper, const double *moving, double *out)
 {
     Dual d;
     d.n = Jw.n;
@@ -301,6 +299,61 @@ static int project_once_c(const double *dq, Mat Jw, Mat A, const double *b,
     int solves = nonnegative_qp_c(d.Q, d.h, d.rows, 1e-13, d.y, d.scratch);
     dual_primal(&d, lower, upper, out);
     free(mem);
+    return solves;
+}
+
+/* The bounds the answer x breaks (beyond 1e-12 (1 + |bound|)) join those in the dual (lo_in,
+ * hi_in: the bound, or -inf/inf while it is not in); returns how many joined */
+static int broken_bounds_join(const double *x, const double *lower, const double *upper,
+                              const double *moving, Py_ssize_t n, double *lo_in, double *hi_in)
+{
+    int joined = 0;
+    for (Py_ssize_t j = 0; j < n; j++) {
+        if (moving[j] == 0.0) continue;
+        if (lo_in[j] == -INFINITY && x[j] < lower[j] - 1e-12 * (1.0 + fabs(lower[j]))) {
+            lo_in[j] = lower[j];
+            joined++;
+        }
+        if (hi_in[j] == INFINITY && x[j] > upper[j] + 1e-12 * (1.0 + fabs(upper[j]))) {
+            hi_in[j] = upper[j];
+            joined++;
+        }
+    }
+    return joined;
+}
+
+/* out = argmin (x - dq)^T H (x - dq), H = Jw_c^T Jw_c + rho I on the moving joints c (rho the
+ * mean of H's diagonal), subject to A x <= b and lower <= x <= upper, the others at dq: as
+ * constraints.project (its reference), on the dual of the Cholesky-whitened problem; when no
+ * x meets them all, within the bounds. A bound enters the dual only once an answer breaks it:
+ * the optimum of a convex problem with fewer constraints that meets the others is its optimum
+ * (the speed and position bounds seldom bind where the rows do, and each bound in the dual is
+ * one row more of it). Returns the passive-set solves, -1 when out of memory. */
+static int project_once_c(const double *dq, Mat Jw, Mat A, const double *b,
+                          const double *lower, const double *upper, const double *moving,
+                          double *out)
+{
+    Py_ssize_t n = Jw.n;
+    double *in = (double *)malloc((size_t)(2 * n + 1) * sizeof(double));
+    if (!in) return -1;
+    double *lo_in = in, *hi_in = in + n;
+    for (Py_ssize_t j = 0; j < n; j++) {
+        lo_in[j] = -INFINITY;
+        hi_in[j] = INFINITY;
+    }
+    int solves = 0;
+    for (Py_ssize_t round = 0; round <= 2 * n; round++) {
+        int now = project_dual(dq, Jw, A, b, lo_in, hi_in, moving, out);
+        if (now < 0) {
+            solves = now;
+            break;
+        }
+        solves += now;
+        if (!broken_bounds_join(out, lower, upper, moving, n, lo_in, hi_in)) break;
+    }
+    for (Py_ssize_t j = 0; j < n && solves >= 0; j++)
+        if (moving[j] != 0.0) out[j] = dmin(dmax(out[j], lower[j]), upper[j]);
+    free(in);
     return solves;
 }
 
