@@ -364,19 +364,28 @@ static int query_args(PyObject *const *args, Queries *Q)
     return 0;
 }
 
-/* The row of pair k from its result res: d, its margin, its joints, coal's normal and the
- * closest points; -1 with a Python error set */
+/* The row of pair k from its result res: d, its margin, its joints, the normal and the
+ * closest points. Where the pair is apart by more than SEPARATED (m) the normal is read off the
+ * points, (p_b - p_a) / |p_b - p_a|, as coal forms it (to 1e-14 on the bench's scenes), not
+ * from coal (a result read through Python costs per vector); -1 with a Python error set */
+#define SEPARATED 1e-6
 static int query_row(const Queries *Q, PyObject *res, Py_ssize_t k, double d, double *row)
 {
-    PyObject *normal = PyObject_GetAttr(res, s_normal);
-    PyObject *p1 = normal ? PyObject_CallMethodNoArgs(res, s_p1) : NULL;
+    int apart = d > SEPARATED;
+    PyObject *normal = apart ? NULL : PyObject_GetAttr(res, s_normal);
+    PyObject *p1 = apart || normal ? PyObject_CallMethodNoArgs(res, s_p1) : NULL;
     PyObject *p2 = p1 ? PyObject_CallMethodNoArgs(res, s_p2) : NULL;
-    int bad = !p2 || read3(normal, row + 4, "normal") || read3(p1, row + 7, "nearest point 1")
-              || read3(p2, row + 10, "nearest point 2");
+    int bad = !p2 || (!apart && read3(normal, row + 4, "normal"))
+              || read3(p1, row + 7, "nearest point 1") || read3(p2, row + 10, "nearest point 2");
     Py_XDECREF(normal);
     Py_XDECREF(p1);
     Py_XDECREF(p2);
     if (bad) return -1;
+    if (apart) {
+        double u[3] = {row[10] - row[7], row[11] - row[8], row[12] - row[9]};
+        double norm = sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]);
+        for (int c = 0; c < 3; c++) row[4 + c] = u[c] / norm;
+    }
     row[0] = d;
     row[1] = Q->mv[k];
     row[2] = AT(Q->Jm, k, 0);
