@@ -461,8 +461,10 @@ def project(dq: np.ndarray, Jw: np.ndarray, A: np.ndarray, b: np.ndarray, lower:
     ridge lets them (:func:`nonnegative_qp`). Where that point differs from ``dq``, the answer
     is the same least-cost point from :func:`rest_target` instead (``dq``'s self-motion scaled
     with the share of its task motion the rows let through), so that an arm whose push the
-    rows stop comes to rest. Compiled (``kernels.project_rows``, a few microseconds);
-    :func:`project_reference` is the same in numpy."""
+    rows stop comes to rest. Compiled (``kernels.project_rows``, a few microseconds; a bound
+    enters its dual only once an answer breaks it, which gives the same point: the optimum of
+    the convex problem without a constraint that meets it anyway is the optimum with it);
+    :func:`project_reference` is the same in numpy, every finite bound in the dual."""
     out = np.empty(dq.size)
     project_rows(np.asarray(dq, dtype=float), np.asarray(Jw, dtype=float),
                  np.asarray(A, dtype=float), np.asarray(b, dtype=float),
