@@ -358,21 +358,22 @@ static int project_once_c(const double *dq, Mat Jw, Mat A, const double *b,
 }
 
 /* The step the projection starts from when it had to correct dq (constraints.rest_target):
- * dq's self-motion (dq minus its least-norm part with the same task motion Jw dq, on the
- * moving joints) scaled by the share phi = |Jw x| / |Jw dq| of the task motion the first
- * projection x kept. A method's step (SJT's per-joint scaling, a saturated step) carries
- * self-motion along with its push on the task; where the rows stop that push (a target inside
- * an obstacle) its self-motion would go on alone and the arm drift in its null space. Writes
- * into target (n) and returns 1, or 0 where it keeps dq (no task motion asked or kept whole,
- * a singular Jw, out of memory). */
+ * the least-norm velocity of the task motion Jw x the first projection x kept, plus dq's
+ * self-motion (dq minus the least-norm velocity of its own task motion Jw dq, on the moving
+ * joints) scaled by the share phi = |Jw x| / |Jw dq| of the task motion kept. A method's step
+ * (SJT's per-joint scaling, a saturated step) carries self-motion along with its push on the
+ * task; where the rows stop that push (a target inside an obstacle) its self-motion would go
+ * on alone, and the push itself, projected again, would come out as self-motion that keeps the
+ * contacts: the arm would drift in its null space. Writes into target (n) and returns 1, or 0
+ * where it keeps dq (no task motion asked or kept whole, a singular Jw, out of memory). */
 static int rest_target_c(const double *dq, Mat Jw, const double *moving, const double *x,
                          double *target)
 {
     Py_ssize_t n = Jw.n, m = Jw.m;
     if (m == 0) return 0;
-    double *S = (double *)malloc((size_t)(m * m + 3 * m) * sizeof(double));
+    double *S = (double *)malloc((size_t)(m * m + 4 * m) * sizeof(double));
     if (!S) return 0;
-    double *t0 = S + m * m, *t1 = t0 + m, *w = t1 + m;
+    double *t0 = S + m * m, *t1 = t0 + m, *w0 = t1 + m, *w1 = w0 + m;
     double asked = 0.0, kept = 0.0, trace = 0.0;
     for (Py_ssize_t i = 0; i < m; i++) {
         double a0 = 0.0, a1 = 0.0;
@@ -398,13 +399,17 @@ static int rest_target_c(const double *dq, Mat Jw, const double *moving, const d
         free(S);
         return 0;
     }
-    cholesky_substitute(S, m, t0, w);
+    cholesky_substitute(S, m, t0, w0);
+    cholesky_substitute(S, m, t1, w1);
     for (Py_ssize_t j = 0; j < n; j++) {
         target[j] = dq[j];
         if (moving[j] == 0.0) continue;
-        double task = 0.0;
-        for (Py_ssize_t i = 0; i < m; i++) task += AT(Jw, i, j) * w[i];
-        target[j] = task + phi * (dq[j] - task);
+        double asked_j = 0.0, kept_j = 0.0;
+        for (Py_ssize_t i = 0; i < m; i++) {
+            asked_j += AT(Jw, i, j) * w0[i];
+            kept_j += AT(Jw, i, j) * w1[i];
+        }
+        target[j] = kept_j + phi * (dq[j] - asked_j);
     }
     free(S);
     return 1;
