@@ -27,10 +27,11 @@ the band ``influence - margin`` or when the pair leaves ``influence``, and a pai
 than that from its margin remembers nothing (its row binds nothing).
 
 Distances and closest points come from coal (through Pinocchio's ``GeometryModel``); only the
-pairs whose bounding spheres come within ``influence`` pay for an exact distance query, and a
-pair whose last exact distance was beyond ``influence`` is not queried again until its joints
-can have closed that gap (a bound from the joint offsets and the ranges of the prismatic
-joints between, :meth:`CollisionLimit._near`).
+pairs whose bounding spheres come within ``influence`` (plus a skin of half the band
+``influence - margin`` while the broad phase's result is reused, as in a Verlet list) pay for
+an exact distance query, and a pair whose last exact distance was beyond ``influence`` is not
+queried again until its joints can have closed that gap (a bound from the joint offsets and
+the ranges of the prismatic joints between, :meth:`CollisionLimit._near`).
 """
 
 from __future__ import annotations
