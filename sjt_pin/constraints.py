@@ -461,8 +461,10 @@ def project(dq: np.ndarray, Jw: np.ndarray, A: np.ndarray, b: np.ndarray, lower:
     ridge lets them (:func:`nonnegative_qp`). Where that point differs from ``dq``, the answer
     is the same least-cost point from :func:`rest_target` instead (``dq``'s self-motion scaled
     with the share of its task motion the rows let through), so that an arm whose push the
-    rows stop comes to rest. Compiled (``kernels.project_rows``, a few microseconds);
-    :func:`project_reference` is the same in numpy."""
+    rows stop comes to rest. Compiled (``kernels.project_rows``, a few microseconds; a bound
+    enters its dual only once an answer breaks it, which gives the same point: the optimum of
+    the convex problem without a constraint that meets it anyway is the optimum with it);
+    :func:`project_reference` is the same in numpy, every finite bound in the dual."""
     out = np.empty(dq.size)
     project_rows(np.asarray(dq, dtype=float), np.asarray(Jw, dtype=float),
                  np.asarray(A, dtype=float), np.asarray(b, dtype=float),
@@ -473,16 +475,21 @@ def project(dq: np.ndarray, Jw: np.ndarray, A: np.ndarray, b: np.ndarray, lower:
 
 def rest_target(dq: np.ndarray, x: np.ndarray, Jw: np.ndarray, moving: np.ndarray
                 ) -> np.ndarray | None:
-    """Where the projection starts again once it had to correct ``dq`` (rad/s) to ``x``: ``dq``
-    with its self-motion (``dq`` minus the least-norm velocity of the same task motion
-    ``Jw dq``, on the ``moving`` joints) scaled by the share ``phi = |Jw x| / |Jw dq|`` of the
-    task motion that ``x`` kept; None where ``dq`` stays (no task motion asked, or all kept).
+    """Where the projection starts again once it had to correct ``dq`` (rad/s) to ``x``: the
+    least-norm velocity of the task motion ``Jw x`` that ``x`` kept, plus ``dq``'s self-motion
+    (``dq`` minus the least-norm velocity of its own task motion ``Jw dq``, on the ``moving``
+    joints) scaled by the share ``phi = |Jw x| / |Jw dq|`` of the task motion kept; None where
+    ``dq`` stays (no task motion asked, or all kept).
 
     A method's step carries self-motion along with its push on the task (SJT's per-joint
     scaling, a saturated step); where the rows stop that push, at a target inside an obstacle,
     the self-motion went on alone and the arm drifted in its null space at a few cm/s with
     the hand still (six of sixteen random blocked Panda scenes). Scaled with the push it
-    stops with it, and a step the rows do not correct keeps its self-motion as it is."""
+    stops with it. And the push the rows stop, projected again, came out as self-motion that
+    keeps the contacts (``J^T J + rho I`` charges it little), a slide at 6e-4 to 4e-3 rad/s with
+    the hand nearly still (Panda seeds 4, 7 and 11 of ``tests/test_collision_rest.py``): the
+    start keeps only the task motion the rows let through. A step the rows do not correct keeps
+    its self-motion."""
     cols = np.flatnonzero(moving)
     Jc = Jw[:, cols]
     if Jc.shape[0] == 0:
@@ -495,8 +502,9 @@ def rest_target(dq: np.ndarray, x: np.ndarray, Jw: np.ndarray, moving: np.ndarra
     S = Jc @ Jc.T
     S += REST_RIDGE * max(float(np.trace(S)) / S.shape[0], 1e-300) * np.eye(S.shape[0])
     task = Jc.T @ np.linalg.solve(S, t0)
+    kept = Jc.T @ np.linalg.solve(S, t1)
     out = dq.copy()
-    out[cols] = task + phi * (dq[cols] - task)
+    out[cols] = kept + phi * (dq[cols] - task)
     return out
 
 

@@ -179,6 +179,91 @@ static int fetch_pose(PyObject *oMi, Py_ssize_t j, double *out)
     return bad ? -1 : 0;
 }
 
+/* The pair indices of the sequence `found` as doubles in *out (malloc'ed, count of them); -1
+ * with a Python error set */
+static int pair_indices(PyObject *found, double **out, Py_ssize_t *count)
+{
+    PyObject *seq = PySequence_Fast(found, "found must be a sequence of pair indices");
+    if (!seq) return -1;
+    Py_ssize_t n = *count = PySequence_Fast_GET_SIZE(seq);
+    double *fv = *out = (double *)malloc((size_t)(n > 0 ? n : 1) * sizeof(double));
+    int bad = 0;
+    if (!fv) {
+        PyErr_NoMemory();
+        bad = 1;
+    }
+    for (Py_ssize_t i = 0; i < n && !bad; i++) {
+        fv[i] = PyFloat_AsDouble(PySequence_Fast_GET_ITEM(seq, i));
+        bad = fv[i] == -1.0 && PyErr_Occurred();
+    }
+    Py_DECREF(seq);
+    return bad ? -1 : 0;
+}
+
+/* Whether witness_rows' arrays fit each other, its pairs are pairs and its rows name joints
+ * of poses; sets ValueError otherwise. *W: the witnesses per pair. */
+static int witness_args_fit(const Arg *poses, const Arg *rows, const Arg *memory,
+                            const Arg *state, const Arg *owners, const double *fv,
+                            Py_ssize_t count, Py_ssize_t *W)
+{
+    Py_ssize_t N = rows->view.shape[0], npairs = state->view.shape[0];
+    const double *rv = (const double *)rows->view.buf;
+    *W = npairs > 0 ? memory->view.shape[0] / npairs : 0;
+    if (poses->view.shape[1] != 16 || rows->view.shape[1] != 13
+        || memory->view.shape[1] != 6 || state->view.shape[1] != 2 || *W < 1 || *W > 64
+        || memory->view.shape[0] != *W * npairs || N < count * (1 + *W)
+        || length(owners) < count * *W) {
+        PyErr_Format(PyExc_ValueError, "witness_rows: poses (njoints, 16), rows (>= count (1 + W), "
+                     "13), memory (npairs W, 6) with 1 <= W <= 64, state (npairs, 2) and owners "
+                     "(>= count W,) do not fit (count %zd, rows %zd, npairs %zd)", count, N,
+                     npairs);
+        return 0;
+    }
+    for (Py_ssize_t i = 0; i < count; i++) {
+        if (!(fv[i] >= 0.0 && fv[i] < (double)npairs)) {
+            PyErr_Format(PyExc_ValueError, "found[%zd] is no pair (npairs %zd)", i, npairs);
+            return 0;
+        }
+        for (int side = 0; side < 2; side++) {
+            double j = rv[13 * i + 2 + side];
+            if (!(j >= 0.0 && j < (double)poses->view.shape[0])) {
+                PyErr_Format(PyExc_ValueError, "rows[%zd] names joint %zd; poses has %zd", i,
+                             (Py_ssize_t)j, poses->view.shape[0]);
+                return 0;
+            }
+        }
+    }
+    return 1;
+}
+
+/* The world poses (P, njoints x 16; joint 0 the identity) of the joints of the rows whose
+ * pairs remember (d - margin under keep), from Pinocchio's oMi, each joint once; -1 with a
+ * Python error set */
+static int witness_poses(PyObject *oMi, double *P, Py_ssize_t nj, const double *rv,
+                         Py_ssize_t count, double keep)
+{
+    char *fetched = (char *)calloc((size_t)nj, 1);
+    if (!fetched) {
+        PyErr_NoMemory();
+        return -1;
+    }
+    for (int c = 0; c < 16; c++) P[c] = c % 5 == 0 ? 1.0 : 0.0;
+    fetched[0] = 1;
+    int bad = 0;
+    for (Py_ssize_t i = 0; i < count && !bad; i++) {
+        const double *row = rv + 13 * i;
+        if (!(row[0] - row[1] < keep)) continue;
+        for (int side = 0; side < 2 && !bad; side++) {
+            Py_ssize_t j = (Py_ssize_t)row[2 + side];
+            if (fetched[j]) continue;
+            bad = fetch_pose(oMi, j, P + 16 * j) != 0;
+            fetched[j] = 1;
+        }
+    }
+    free(fetched);
+    return bad ? -1 : 0;
+}
+
 PyObject *py_witness_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     if (!nargs_ok(nargs, 10, "witness_rows")) return NULL;
@@ -188,9 +273,9 @@ PyObject *py_witness_rows(PyObject *self, PyObject *const *args, Py_ssize_t narg
     double apart = PyFloat_AsDouble(args[7]);
     if (PyErr_Occurred()) return NULL;
     Arg poses = {0}, rows = {0}, memory = {0}, state = {0}, owners = {0};
-    PyObject *result = NULL, *found = NULL;
+    PyObject *result = NULL;
     double *fv = NULL;
-    char *fetched = NULL;
+    Py_ssize_t count = 0, W;
     if (acquire(args[0], &poses, oMi != Py_None, 2, "poses")
         || acquire(args[1], &rows, 1, 2, "rows")
         || acquire(args[3], &memory, 1, 2, "memory") || acquire(args[4], &state, 1, 2, "state")
@@ -199,72 +284,15 @@ PyObject *py_witness_rows(PyObject *self, PyObject *const *args, Py_ssize_t narg
     double *pv = out_mat(&poses, "poses"), *rv = out_mat(&rows, "rows");
     double *mv = out_mat(&memory, "memory");
     double *sv = out_mat(&state, "state"), *ov = out_vec(&owners, "owners");
-    if (!pv || !rv || !mv || !sv || !ov) goto done;
-    found = PySequence_Fast(args[2], "found must be a sequence of pair indices");
-    if (!found) goto done;
-    Py_ssize_t count = PySequence_Fast_GET_SIZE(found), N = rows.view.shape[0];
-    Py_ssize_t npairs = state.view.shape[0];
-    fv = (double *)malloc((size_t)(count > 0 ? count : 1) * sizeof(double));
-    if (!fv) {
-        PyErr_NoMemory();
+    if (!pv || !rv || !mv || !sv || !ov || pair_indices(args[2], &fv, &count)
+        || !witness_args_fit(&poses, &rows, &memory, &state, &owners, fv, count, &W))
         goto done;
-    }
-    for (Py_ssize_t i = 0; i < count; i++) {
-        fv[i] = PyFloat_AsDouble(PySequence_Fast_GET_ITEM(found, i));
-        if (fv[i] == -1.0 && PyErr_Occurred()) goto done;
-    }
-    Py_ssize_t W = npairs > 0 ? memory.view.shape[0] / npairs : 0;
-    if (poses.view.shape[1] != 16 || rows.view.shape[1] != 13
-        || memory.view.shape[1] != 6 || state.view.shape[1] != 2 || W < 1 || W > 64
-        || memory.view.shape[0] != W * npairs || N < count * (1 + W)
-        || length(&owners) < count * W) {
-        PyErr_Format(PyExc_ValueError, "witness_rows: poses (njoints, 16), rows (>= count (1 + W), "
-                     "13), memory (npairs W, 6) with 1 <= W <= 64, state (npairs, 2) and owners "
-                     "(>= count W,) do not fit (count %zd, rows %zd, npairs %zd)", count, N,
-                     npairs);
+    if (oMi != Py_None && witness_poses(oMi, pv, poses.view.shape[0], rv, count, keep))
         goto done;
-    }
-    for (Py_ssize_t i = 0; i < count; i++) {
-        if (!(fv[i] >= 0.0 && fv[i] < (double)npairs)) {
-            PyErr_Format(PyExc_ValueError, "found[%zd] is no pair (npairs %zd)", i, npairs);
-            goto done;
-        }
-        for (int side = 0; side < 2; side++) {
-            double j = rv[13 * i + 2 + side];
-            if (!(j >= 0.0 && j < (double)poses.view.shape[0])) {
-                PyErr_Format(PyExc_ValueError, "rows[%zd] names joint %zd; poses has %zd", i,
-                             (Py_ssize_t)j, poses.view.shape[0]);
-                goto done;
-            }
-        }
-    }
-    if (oMi != Py_None) {  /* the poses of the joints of the pairs that remember */
-        Py_ssize_t nj = poses.view.shape[0];
-        fetched = (char *)calloc((size_t)nj, 1);
-        if (!fetched) {
-            PyErr_NoMemory();
-            goto done;
-        }
-        double *P = (double *)poses.view.buf;
-        for (int c = 0; c < 16; c++) P[c] = c % 5 == 0 ? 1.0 : 0.0;
-        fetched[0] = 1;
-        for (Py_ssize_t i = 0; i < count; i++) {
-            const double *row = rv + 13 * i;
-            if (!(row[0] - row[1] < keep)) continue;
-            for (int side = 0; side < 2; side++) {
-                Py_ssize_t j = (Py_ssize_t)row[2 + side];
-                if (fetched[j]) continue;
-                if (fetch_pose(oMi, j, P + 16 * j)) goto done;
-                fetched[j] = 1;
-            }
-        }
-    }
     result = PyLong_FromSsize_t(witness_rows_c(pv, rv, fv, count, mv, W, sv, tick, keep, apart,
                                                ov));
 done:
-    Py_XDECREF(found);
     free(fv);
-    free(fetched);
     release(&poses); release(&rows); release(&memory); release(&state); release(&owners);
     return result;
 }
@@ -288,6 +316,110 @@ static int read3(PyObject *obj, double *out, const char *name)
     return 0;
 }
 
+/* coal's result attributes, interned once */
+static PyObject *s_distance, *s_normal, *s_p1, *s_p2;
+
+static int query_names(void)
+{
+    if (s_distance) return 0;
+    s_distance = PyUnicode_InternFromString("min_distance");
+    s_normal = PyUnicode_InternFromString("normal");
+    s_p1 = PyUnicode_InternFromString("getNearestPoint1");
+    s_p2 = PyUnicode_InternFromString("getNearestPoint2");
+    return s_distance && s_normal && s_p1 && s_p2 ? 0 : -1;
+}
+
+/* query_rows' arrays: the bound (or none), each pair's floor and margin, its two joints, and
+ * the rows written */
+typedef struct {
+    Arg bound, floor_, margins, joints, rows;
+    double *bv, *fv, *mv, *rv, influence;
+    Mat Jm;
+    Py_ssize_t npairs, N;
+} Queries;
+
+/* Acquire and check query_rows' arrays (args as query_rows'); -1 with a Python error set */
+static int query_args(PyObject *const *args, Queries *Q)
+{
+    int has_bound = args[4] != Py_None;
+    if ((has_bound && acquire(args[4], &Q->bound, 0, 1, "bound"))
+        || acquire(args[5], &Q->floor_, 1, 1, "floor")
+        || acquire(args[6], &Q->margins, 0, 1, "margins")
+        || acquire(args[7], &Q->joints, 0, 2, "joints") || acquire(args[9], &Q->rows, 1, 2, "rows"))
+        return -1;
+    Q->bv = has_bound ? vec(&Q->bound, "bound") : NULL;
+    Q->fv = out_vec(&Q->floor_, "floor");
+    Q->mv = vec(&Q->margins, "margins");
+    Q->rv = out_mat(&Q->rows, "rows");
+    if ((has_bound && !Q->bv) || !Q->fv || !Q->mv || !Q->rv) return -1;
+    Q->Jm = mat(&Q->joints);
+    Q->npairs = length(&Q->floor_);
+    Q->N = Q->rows.view.shape[0];
+    if (length(&Q->margins) != Q->npairs || Q->Jm.m != Q->npairs || Q->Jm.n != 2
+        || Q->rows.view.shape[1] != 13 || (has_bound && length(&Q->bound) != Q->npairs)) {
+        PyErr_Format(PyExc_ValueError, "query_rows: bound, floor, margins (npairs,), joints "
+                     "(npairs, 2) and rows (N, 13) do not fit (npairs %zd)", Q->npairs);
+        return -1;
+    }
+    return 0;
+}
+
+/* The row of pair k from its result res: d, its margin, its joints, the normal and the
+ * closest points. Where the pair is apart by more than SEPARATED (m) the normal is read off the
+ * points, (p_b - p_a) / |p_b - p_a|, as coal forms it (to 1e-14 on the bench's scenes), not
+ * from coal (a result read through Python costs per vector); -1 with a Python error set */
+#define SEPARATED 1e-6
+static int query_row(const Queries *Q, PyObject *res, Py_ssize_t k, double d, double *row)
+{
+    int apart = d > SEPARATED;
+    PyObject *normal = apart ? NULL : PyObject_GetAttr(res, s_normal);
+    PyObject *p1 = apart || normal ? PyObject_CallMethodNoArgs(res, s_p1) : NULL;
+    PyObject *p2 = p1 ? PyObject_CallMethodNoArgs(res, s_p2) : NULL;
+    int bad = !p2 || (!apart && read3(normal, row + 4, "normal"))
+              || read3(p1, row + 7, "nearest point 1") || read3(p2, row + 10, "nearest point 2");
+    Py_XDECREF(normal);
+    Py_XDECREF(p1);
+    Py_XDECREF(p2);
+    if (bad) return -1;
+    if (apart) {
+        double u[3] = {row[10] - row[7], row[11] - row[8], row[12] - row[9]};
+        double norm = sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]);
+        for (int c = 0; c < 3; c++) row[4 + c] = u[c] / norm;
+    }
+    row[0] = d;
+    row[1] = Q->mv[k];
+    row[2] = AT(Q->Jm, k, 0);
+    row[3] = AT(Q->Jm, k, 1);
+    return 0;
+}
+
+/* Pair `item` (index k) queried through compute(geometry, geometry_data, k): its floor, and
+ * its row at *count when it is within influence (then *count grows); -1 with a Python error
+ * set */
+static int query_pair(PyObject *const *args, const Queries *Q, PyObject *item, Py_ssize_t k,
+                      Py_ssize_t *count)
+{
+    PyObject *call[3] = {args[1], args[2], item};
+    PyObject *res = PyObject_Vectorcall(args[0], call, 3, NULL);
+    if (!res) return -1;
+    PyObject *dobj = PyObject_GetAttr(res, s_distance);
+    double d = dobj ? PyFloat_AsDouble(dobj) : -1.0;
+    Py_XDECREF(dobj);
+    int bad = !dobj || (d == -1.0 && PyErr_Occurred());
+    if (!bad && Q->bv) Q->fv[k] = d > -INFINITY ? d - Q->bv[k] : -INFINITY;  /* NaN: -inf */
+    if (!bad && d > -INFINITY && d < Q->influence) {
+        if (*count >= Q->N) {
+            PyErr_SetString(PyExc_ValueError, "query_rows: more pairs within influence than rows");
+            bad = 1;
+        } else {
+            bad = query_row(Q, res, k, d, Q->rv + 13 * *count) != 0;
+            *count += bad ? 0 : 1;
+        }
+    }
+    Py_DECREF(res);
+    return bad ? -1 : 0;
+}
+
 /* query_rows(compute, geometry, geometry_data, near, bound, floor, margins, joints, influence,
  * rows) -> list: the collision limit's exact distance queries (limits/collision.py, _rows):
  * for each pair k of the list `near`, res = compute(geometry, geometry_data, k) (Pinocchio's
@@ -297,98 +429,84 @@ static int read3(PyObject *obj, double *out, const char *name)
  * 2), res.normal, res.getNearestPoint1(), res.getNearestPoint2(). Returns those pairs. */
 PyObject *py_query_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
-    if (!nargs_ok(nargs, 10, "query_rows")) return NULL;
-    static PyObject *s_distance = NULL, *s_normal = NULL, *s_p1 = NULL, *s_p2 = NULL;
-    if (!s_distance) {
-        s_distance = PyUnicode_InternFromString("min_distance");
-        s_normal = PyUnicode_InternFromString("normal");
-        s_p1 = PyUnicode_InternFromString("getNearestPoint1");
-        s_p2 = PyUnicode_InternFromString("getNearestPoint2");
-        if (!s_distance || !s_normal || !s_p1 || !s_p2) return NULL;
-    }
-    double influence = PyFloat_AsDouble(args[8]);
-    if (influence == -1.0 && PyErr_Occurred()) return NULL;
-    int has_bound = args[4] != Py_None;
-    Arg bound = {0}, floor_ = {0}, margins = {0}, joints = {0}, rows = {0};
-    PyObject *found = NULL, *near = NULL, *result = NULL;
-    if ((has_bound && acquire(args[4], &bound, 0, 1, "bound"))
-        || acquire(args[5], &floor_, 1, 1, "floor") || acquire(args[6], &margins, 0, 1, "margins")
-        || acquire(args[7], &joints, 0, 2, "joints") || acquire(args[9], &rows, 1, 2, "rows"))
-        goto done;
-    double *bv = has_bound ? vec(&bound, "bound") : NULL, *fv = out_vec(&floor_, "floor");
-    double *mv = vec(&margins, "margins"), *rv = out_mat(&rows, "rows");
-    if ((has_bound && !bv) || !fv || !mv || !rv) goto done;
-    Mat Jm = mat(&joints);
-    Py_ssize_t npairs = length(&floor_), N = rows.view.shape[0];
-    if (length(&margins) != npairs || Jm.m != npairs || Jm.n != 2 || rows.view.shape[1] != 13
-        || (has_bound && length(&bound) != npairs)) {
-        PyErr_Format(PyExc_ValueError, "query_rows: bound, floor, margins (npairs,), joints "
-                     "(npairs, 2) and rows (N, 13) do not fit (npairs %zd)", npairs);
-        goto done;
-    }
+    if (!nargs_ok(nargs, 10, "query_rows") || query_names()) return NULL;
+    Queries Q;
+    memset(&Q, 0, sizeof Q);
+    Q.influence = PyFloat_AsDouble(args[8]);
+    if (Q.influence == -1.0 && PyErr_Occurred()) return NULL;
+    PyObject *found = NULL, *near = NULL;
+    if (query_args(args, &Q)) goto done;
     near = PySequence_Fast(args[3], "near must be a sequence of pair indices");
-    if (!near) goto done;
-    found = PyList_New(0);
-    if (!found) goto done;
+    if (!near || !(found = PyList_New(0))) goto done;
     Py_ssize_t m = PySequence_Fast_GET_SIZE(near), count = 0;
     PyObject **items = PySequence_Fast_ITEMS(near);
     for (Py_ssize_t i = 0; i < m; i++) {
-        Py_ssize_t k = PyLong_AsSsize_t(items[i]);
+        Py_ssize_t k = PyLong_AsSsize_t(items[i]), before = count;
         if (k == -1 && PyErr_Occurred()) goto fail;
-        if (k < 0 || k >= npairs) {
+        if (k < 0 || k >= Q.npairs) {
             PyErr_Format(PyExc_ValueError, "near[%zd] = %zd is no pair (npairs %zd)", i, k,
-                         npairs);
+                         Q.npairs);
             goto fail;
         }
-        PyObject *call[3] = {args[1], args[2], items[i]};
-        PyObject *res = PyObject_Vectorcall(args[0], call, 3, NULL);
-        if (!res) goto fail;
-        PyObject *dobj = PyObject_GetAttr(res, s_distance);
-        double d = dobj ? PyFloat_AsDouble(dobj) : -1.0;
-        Py_XDECREF(dobj);
-        if (!dobj || (d == -1.0 && PyErr_Occurred())) {
-            Py_DECREF(res);
+        if (query_pair(args, &Q, items[i], k, &count)
+            || (count > before && PyList_Append(found, items[i]) < 0))
             goto fail;
-        }
-        if (has_bound) fv[k] = d > -INFINITY ? d - bv[k] : -INFINITY;  /* NaN: -inf */
-        if (!(d > -INFINITY && d < influence)) {
-            Py_DECREF(res);
-            continue;
-        }
-        if (count >= N) {
-            Py_DECREF(res);
-            PyErr_SetString(PyExc_ValueError, "query_rows: more pairs within influence than rows");
-            goto fail;
-        }
-        double *row = rv + 13 * count;
-        PyObject *normal = PyObject_GetAttr(res, s_normal);
-        PyObject *p1 = normal ? PyObject_CallMethodNoArgs(res, s_p1) : NULL;
-        PyObject *p2 = p1 ? PyObject_CallMethodNoArgs(res, s_p2) : NULL;
-        int bad = !p2 || read3(normal, row + 4, "normal") || read3(p1, row + 7, "nearest point 1")
-                  || read3(p2, row + 10, "nearest point 2");
-        Py_XDECREF(normal);
-        Py_XDECREF(p1);
-        Py_XDECREF(p2);
-        Py_DECREF(res);
-        if (bad) goto fail;
-        row[0] = d;
-        row[1] = mv[k];
-        row[2] = AT(Jm, k, 0);
-        row[3] = AT(Jm, k, 1);
-        if (PyList_Append(found, items[i]) < 0) goto fail;
-        count++;
     }
-    result = found;
-    found = NULL;
     goto done;
 fail:
     Py_CLEAR(found);
 done:
     Py_XDECREF(near);
-    Py_XDECREF(found);
-    if (has_bound) release(&bound);
-    release(&floor_); release(&margins); release(&joints); release(&rows);
-    return result;
+    release(&Q.bound); release(&Q.floor_); release(&Q.margins); release(&Q.joints); release(&Q.rows);
+    return found;
+}
+
+/* bound = lever |q - reference| (npairs,); whether q lies in the box [lower, upper] the
+ * levers hold in and every pair's bound stays under its slack (else the broad phase must run
+ * again); -1 when out of memory */
+static int lever_bound(const double *q, const double *ref, const double *lo, const double *hi,
+                       Mat L, const double *slack, double *bound)
+{
+    Py_ssize_t n = L.n;
+    for (Py_ssize_t j = 0; j < n; j++)
+        if (!(q[j] >= lo[j] && q[j] <= hi[j])) return 0;
+    double *moved = (double *)malloc((size_t)(n > 0 ? n : 1) * sizeof(double));
+    if (!moved) return -1;
+    for (Py_ssize_t j = 0; j < n; j++) moved[j] = fabs(q[j] - ref[j]);
+    int within = 1;
+    for (Py_ssize_t k = 0; k < L.m; k++) {
+        double acc = 0.0;
+        for (Py_ssize_t j = 0; j < n; j++) acc += AT(L, k, j) * moved[j];
+        bound[k] = acc;
+        if (!(acc < slack[k])) within = 0;
+    }
+    free(moved);
+    return within;
+}
+
+/* The pairs of the sequence `near` whose floor - bound is not above influence (a new list) */
+static PyObject *pairs_to_query(PyObject *near_seq, const double *floor_, const double *bound,
+                                Py_ssize_t npairs, double influence)
+{
+    PyObject *near = PySequence_Fast(near_seq, "near must be a sequence of pair indices");
+    if (!near) return NULL;
+    PyObject *out = PyList_New(0);
+    Py_ssize_t m = PySequence_Fast_GET_SIZE(near);
+    PyObject **items = PySequence_Fast_ITEMS(near);
+    for (Py_ssize_t i = 0; i < m && out; i++) {
+        Py_ssize_t k = PyLong_AsSsize_t(items[i]);
+        if (k == -1 && PyErr_Occurred()) {
+            Py_CLEAR(out);
+        } else if (k < 0 || k >= npairs) {
+            PyErr_Format(PyExc_ValueError, "near[%zd] = %zd is no pair (npairs %zd)", i, k,
+                         npairs);
+            Py_CLEAR(out);
+        } else if (!(floor_[k] - bound[k] > influence) && PyList_Append(out, items[i]) < 0) {
+            Py_CLEAR(out);
+        }
+    }
+    Py_DECREF(near);
+    return out;
 }
 
 /* near_pairs(q, reference, lower, upper, lever, slack, bound, near, floor, influence) ->
@@ -396,8 +514,8 @@ done:
  * (limits/collision.py, _near and _rows) for q in its own tangent space (revolute and
  * prismatic joints): bound (npairs,) = lever (npairs, nv) |q - reference|; None when q leaves
  * the box lower <= q <= upper (n,) the levers hold in, or when some pair's bound reaches its
- * slack (npairs,) (the broad phase must run again); else the pairs of the list `near` whose floor - bound is
- * not above influence (those to query). */
+ * slack (npairs,) (the broad phase must run again); else the pairs of the list `near`
+ * whose floor - bound is not above influence (those to query). */
 PyObject *py_near_pairs(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     if (!nargs_ok(nargs, 10, "near_pairs")) return NULL;
@@ -405,8 +523,7 @@ PyObject *py_near_pairs(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     if (influence == -1.0 && PyErr_Occurred()) return NULL;
     Arg q = {0}, ref = {0}, lo = {0}, hi = {0}, lever = {0}, slack = {0}, bound = {0},
         floor_ = {0};
-    PyObject *result = NULL, *near = NULL, *out = NULL;
-    double *moved = NULL;
+    PyObject *result = NULL;
     if (acquire(args[0], &q, 0, 1, "q") || acquire(args[1], &ref, 0, 1, "reference")
         || acquire(args[2], &lo, 0, 1, "lower") || acquire(args[3], &hi, 0, 1, "upper")
         || acquire(args[4], &lever, 0, 2, "lever") || acquire(args[5], &slack, 0, 1, "slack")
@@ -425,54 +542,17 @@ PyObject *py_near_pairs(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
                      "npairs %zd)", n, npairs);
         goto done;
     }
-    for (Py_ssize_t j = 0; j < n; j++) {
-        if (!(qv[j] >= lov[j] && qv[j] <= hiv[j])) {
-            result = Py_None;
-            Py_INCREF(result);
-            goto done;
-        }
-    }
-    moved = (double *)malloc((size_t)(n > 0 ? n : 1) * sizeof(double));
-    if (!moved) {
+    int within = lever_bound(qv, rv, lov, hiv, L, sv, bv);
+    if (within < 0) {
         PyErr_NoMemory();
-        goto done;
-    }
-    for (Py_ssize_t j = 0; j < n; j++) moved[j] = fabs(qv[j] - rv[j]);
-    int within = 1;
-    for (Py_ssize_t k = 0; k < npairs; k++) {
-        double acc = 0.0;
-        for (Py_ssize_t j = 0; j < n; j++) acc += AT(L, k, j) * moved[j];
-        bv[k] = acc;
-        if (!(acc < sv[k])) within = 0;
-    }
-    if (!within) {
+    } else if (!within) {
         result = Py_None;
         Py_INCREF(result);
-        goto done;
+    } else {
+        result = pairs_to_query(args[7], fv, bv, npairs, influence);
     }
-    near = PySequence_Fast(args[7], "near must be a sequence of pair indices");
-    if (!near) goto done;
-    out = PyList_New(0);
-    if (!out) goto done;
-    Py_ssize_t m = PySequence_Fast_GET_SIZE(near);
-    PyObject **items = PySequence_Fast_ITEMS(near);
-    for (Py_ssize_t i = 0; i < m; i++) {
-        Py_ssize_t k = PyLong_AsSsize_t(items[i]);
-        if (k == -1 && PyErr_Occurred()) goto done;
-        if (k < 0 || k >= npairs) {
-            PyErr_Format(PyExc_ValueError, "near[%zd] = %zd is no pair (npairs %zd)", i, k,
-                         npairs);
-            goto done;
-        }
-        if (!(fv[k] - bv[k] > influence) && PyList_Append(out, items[i]) < 0) goto done;
-    }
-    result = out;
-    out = NULL;
 done:
-    Py_XDECREF(out);
-    Py_XDECREF(near);
-    free(moved);
-    release(&q); release(&ref); release(&lo); release(&hi); release(&lever); release(&slack); release(&bound);
-    release(&floor_);
+    release(&q); release(&ref); release(&lo); release(&hi); release(&lever); release(&slack);
+    release(&bound); release(&floor_);
     return result;
 }

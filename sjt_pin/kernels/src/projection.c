@@ -5,6 +5,103 @@
 
 /* -- the constraint stage's correction (sjt_pin/constraints.py: project, nonnegative_qp) -------- */
 
+/* The state of nonnegative_qp_c: Q (k x k) with its ridge, r, the iterate y, the flags of the
+ * passive set and of the inert rows (those no motion changes: Q_tt = 0), and its scratch. */
+typedef struct {
+    const double *Q, *r;
+    Py_ssize_t k;
+    double ridge, *y, *w, *s, *rhs, *sub, *V, *passive, *inert;
+    Py_ssize_t *idx;
+} Nnls;
+
+/* y = 0, nothing passive; the rows no motion changes are inert (they never enter: their
+ * gradient is zero and they would stall every round); returns the tolerance of the test for
+ * optimality, tol (1 + max |r|) */
+static double nnls_start(Nnls *p, double tol)
+{
+    double top = 0.0, rmax = 0.0;
+    for (Py_ssize_t i = 0; i < p->k; i++) {
+        p->y[i] = p->passive[i] = 0.0;
+        top = dmax(top, p->Q[i * p->k + i]);
+        rmax = dmax(rmax, fabs(p->r[i]));
+    }
+    p->ridge = DUAL_RIDGE * top;
+    for (Py_ssize_t i = 0; i < p->k; i++)
+        p->inert[i] = p->Q[i * p->k + i] <= 1e-14 * dmax(top, 1e-300) ? 1.0 : 0.0;
+    return tol * (1.0 + rmax);
+}
+
+/* The row that enters the passive set: the largest entry of the negative gradient
+ * -(Q y + r) among the rows neither passive nor inert, above `scale`; -1 when none (y is
+ * optimal). */
+static Py_ssize_t nnls_entering(const Nnls *p, double scale)
+{
+    Py_ssize_t t = -1, k = p->k;
+    double best = -INFINITY;
+    for (Py_ssize_t i = 0; i < k; i++) {
+        if (p->passive[i] != 0.0 || p->inert[i] != 0.0) continue;
+        double acc = -p->r[i] - p->ridge * p->y[i];
+        for (Py_ssize_t j = 0; j < k; j++) acc -= p->Q[i * k + j] * p->y[j];
+        if (acc > best) {
+            best = acc;
+            t = i;
+        }
+    }
+    return best > scale ? t : -1;
+}
+
+/* s: the passive set's unconstrained minimiser (0 elsewhere), its system by Cholesky (the
+ * ridge makes it positive definite) and the pseudo-inverse only if rounding made a pivot
+ * vanish; writes the passive indices to idx and their count to *count. Returns whether every
+ * passive entry of s is positive. */
+static int nnls_passive_solve(const Nnls *p, Py_ssize_t *count)
+{
+    Py_ssize_t k = p->k, n = 0;
+    for (Py_ssize_t i = 0; i < k; i++)
+        if (p->passive[i] != 0.0) p->idx[n++] = i;
+    for (Py_ssize_t a = 0; a < n; a++) {
+        p->rhs[a] = -p->r[p->idx[a]];
+        for (Py_ssize_t c = 0; c < n; c++) p->sub[a * n + c] = p->Q[p->idx[a] * k + p->idx[c]];
+        p->sub[a * n + a] += p->ridge;
+    }
+    double *sol = p->w;
+    memcpy(p->V, p->sub, (size_t)(n * n) * sizeof(double));
+    if (cholesky_factor(p->V, n, 0.0))
+        cholesky_substitute(p->V, n, p->rhs, sol);
+    else
+        pseudo_solve(p->sub, p->V, n, p->rhs, sol, 0.0);
+    for (Py_ssize_t i = 0; i < k; i++) p->s[i] = 0.0;
+    int positive = 1;
+    for (Py_ssize_t a = 0; a < n; a++) {
+        p->s[p->idx[a]] = sol[a];
+        if (!(sol[a] > 0.0)) positive = 0;
+    }
+    *count = n;
+    return positive;
+}
+
+/* The step from y toward s stops where the first passive entry at or below 0 in s reaches 0
+ * (one already at 0 with s = 0 too stops it at once); those at 0 leave the passive set.
+ * Returns whether any row is still passive. */
+static int nnls_step_back(const Nnls *p, Py_ssize_t count)
+{
+    double alpha = INFINITY;
+    for (Py_ssize_t a = 0; a < count; a++) {
+        Py_ssize_t i = p->idx[a];
+        if (p->s[i] > 0.0) continue;
+        double gap = p->y[i] - p->s[i];
+        alpha = dmin(alpha, gap > 0.0 ? p->y[i] / gap : 0.0);
+    }
+    int any = 0;
+    for (Py_ssize_t i = 0; i < p->k; i++) {
+        p->y[i] += alpha * (p->s[i] - p->y[i]);
+        if (p->passive[i] != 0.0 && !(p->y[i] > 1e-15)) p->passive[i] = 0.0;
+        if (p->passive[i] == 0.0) p->y[i] = 0.0;
+        any |= p->passive[i] != 0.0;
+    }
+    return any;
+}
+
 /* argmin 1/2 y^T Q y + r^T y over y >= 0 for the symmetric PSD Q (k x k, row-major) plus
  * DUAL_RIDGE max(diag Q) I: the active-set method of Lawson and Hanson's NNLS on the normal
  * equations of the passive set, step for step as constraints.nonnegative_qp (the reference;
@@ -13,79 +110,29 @@
 static int nonnegative_qp_c(const double *Q, const double *r, Py_ssize_t k, double tol,
                             double *y, double *scratch)
 {
-    double *w = scratch, *s = w + k, *rhs = s + k, *sub = rhs + k, *V = sub + k * k;
-    double *passive = V + k * k, *inert = passive + k;
-    Py_ssize_t *idx = (Py_ssize_t *)(inert + k);
-    double top = 0.0, rmax = 0.0;
-    for (Py_ssize_t i = 0; i < k; i++) {
-        y[i] = passive[i] = 0.0;
-        top = dmax(top, Q[i * k + i]);
-        rmax = dmax(rmax, fabs(r[i]));
-    }
-    double scale = tol * (1.0 + rmax), ridge = DUAL_RIDGE * top;
-    for (Py_ssize_t i = 0; i < k; i++)
-        inert[i] = Q[i * k + i] <= 1e-14 * dmax(top, 1e-300) ? 1.0 : 0.0;
+    Nnls p = {Q, r, k, 0.0, y, scratch, NULL, NULL, NULL, NULL, NULL, NULL, NULL};
+    p.s = p.w + k;
+    p.rhs = p.s + k;
+    p.sub = p.rhs + k;
+    p.V = p.sub + k * k;
+    p.passive = p.V + k * k;
+    p.inert = p.passive + k;
+    p.idx = (Py_ssize_t *)(p.inert + k);
+    double scale = nnls_start(&p, tol);
     int solves = 0;
     for (Py_ssize_t outer = 0; outer < 3 * k + 10; outer++) {
-        Py_ssize_t t = -1;
-        double best = -INFINITY;
-        for (Py_ssize_t i = 0; i < k; i++) {
-            if (passive[i] != 0.0 || inert[i] != 0.0) continue;
-            double acc = -r[i] - ridge * y[i];
-            for (Py_ssize_t j = 0; j < k; j++) acc -= Q[i * k + j] * y[j];
-            w[i] = acc;
-            if (acc > best) {
-                best = acc;
-                t = i;
-            }
-        }
-        if (t < 0 || best <= scale) break;
-        passive[t] = 1.0;
+        Py_ssize_t t = nnls_entering(&p, scale);
+        if (t < 0) break;
+        p.passive[t] = 1.0;
         for (Py_ssize_t inner = 0; inner < 3 * k + 10; inner++) {
-            Py_ssize_t p = 0;
-            for (Py_ssize_t i = 0; i < k; i++)
-                if (passive[i] != 0.0) idx[p++] = i;
-            for (Py_ssize_t a = 0; a < p; a++) {
-                rhs[a] = -r[idx[a]];
-                for (Py_ssize_t c = 0; c < p; c++) sub[a * p + c] = Q[idx[a] * k + idx[c]];
-                sub[a * p + a] += ridge;
-            }
-            double *sol = w;  /* w is recomputed before it is read again */
-            /* the ridge makes the passive set's system positive definite: Cholesky, and the
-             * pseudo-inverse only if rounding made a pivot vanish */
-            memcpy(V, sub, (size_t)(p * p) * sizeof(double));
-            if (cholesky_factor(V, p, 0.0))
-                cholesky_substitute(V, p, rhs, sol);
-            else
-                pseudo_solve(sub, V, p, rhs, sol, 0.0);
+            Py_ssize_t count;
+            int positive = nnls_passive_solve(&p, &count);
             solves++;
-            for (Py_ssize_t i = 0; i < k; i++) s[i] = 0.0;
-            int positive = 1;
-            for (Py_ssize_t a = 0; a < p; a++) {
-                s[idx[a]] = sol[a];
-                if (!(sol[a] > 0.0)) positive = 0;
-            }
             if (positive) {
-                memcpy(y, s, (size_t)k * sizeof(double));
+                memcpy(y, p.s, (size_t)k * sizeof(double));
                 break;
             }
-            /* the step toward s stops where the first of those at or below 0 reaches 0 (one
-             * already at 0 with s = 0 too stops it at once) */
-            double alpha = INFINITY;
-            for (Py_ssize_t a = 0; a < p; a++) {
-                Py_ssize_t i = idx[a];
-                if (s[i] > 0.0) continue;
-                double gap = y[i] - s[i];
-                alpha = dmin(alpha, gap > 0.0 ? y[i] / gap : 0.0);
-            }
-            int any = 0;
-            for (Py_ssize_t i = 0; i < k; i++) {
-                y[i] += alpha * (s[i] - y[i]);
-                if (passive[i] != 0.0 && !(y[i] > 1e-15)) passive[i] = 0.0;
-                if (passive[i] == 0.0) y[i] = 0.0;
-                any |= passive[i] != 0.0;
-            }
-            if (!any) break;
+            if (!nnls_step_back(&p, count)) break;
         }
     }
     return solves;
@@ -94,124 +141,239 @@ static int nonnegative_qp_c(const double *Q, const double *r, Py_ssize_t k, doub
 /* doubles of scratch nonnegative_qp_c needs for k rows (its flags and indices included) */
 static Py_ssize_t nonnegative_qp_scratch(Py_ssize_t k) { return 6 * k + 2 * k * k + 1; }
 
-/* out = argmin (x - dq)^T H (x - dq), H = Jw_c^T Jw_c + rho I on the moving joints c (rho the
- * mean of H's diagonal), subject to A x <= b and lower <= x <= upper, the others at dq: as
- * constraints.project (its reference), on the dual of the Cholesky-whitened problem; when no
- * x meets them all, within the bounds. Returns the passive-set solves, -1 when out of memory. */
-static int project_once_c(const double *dq, Mat Jw, Mat A, const double *b,
-                          const double *lower, const double *upper, const double *moving,
-                          double *out)
+/* The whitened dual of project_once_c on the moving joints cols (nc of n): L the Cholesky
+ * factor of H = Jw_c^T Jw_c + rho I, the rows G x <= h (A's moving columns, then -e_c for
+ * each finite lower bound and e_c for each finite upper one), C = G L^-T (rows x nc), the
+ * residual h - G x0 at x0 = dq_c, and the dual's Q = C C^T and solution y. */
+typedef struct {
+    Py_ssize_t n, nc, k, lo_count, hi_count, rows;
+    Py_ssize_t *cols;
+    double *L, *C, *h, *y, *Q, *x0, *z, *scratch;
+} Dual;
+
+/* the moving joints and the finite bounds among them; out = dq. Returns the doubles the
+ * dual's buffers need. */
+static size_t dual_sizes(Dual *d, const double *dq, const double *lower, const double *upper,
+                         const double *moving, Py_ssize_t k, double *out)
 {
-    Py_ssize_t n = Jw.n, m = Jw.m, k = A.m, nc = 0, rows;
-    Py_ssize_t lo_count = 0, hi_count = 0;
-    for (Py_ssize_t j = 0; j < n; j++) {
+    d->nc = d->lo_count = d->hi_count = 0;
+    d->k = k;
+    for (Py_ssize_t j = 0; j < d->n; j++) {
         out[j] = dq[j];
-        if (moving[j] != 0.0) {
-            nc++;
-            lo_count += isfinite(lower[j]) ? 1 : 0;
-            hi_count += isfinite(upper[j]) ? 1 : 0;
-        }
+        if (moving[j] == 0.0) continue;
+        d->nc++;
+        d->lo_count += isfinite(lower[j]) ? 1 : 0;
+        d->hi_count += isfinite(upper[j]) ? 1 : 0;
     }
-    rows = k + lo_count + hi_count;
-    size_t size = (size_t)(n + nc * nc + rows * nc + 2 * rows + rows * rows + 2 * nc
-                           + nonnegative_qp_scratch(rows));
-    double *mem = (double *)malloc(size * sizeof(double));
-    if (!mem) return -1;
-    Py_ssize_t *cols = (Py_ssize_t *)mem;
-    double *L = mem + n, *C = L + nc * nc, *h = C + rows * nc, *y = h + rows, *Q = y + rows;
-    double *x0 = Q + rows * rows, *z = x0 + nc, *scratch = z + nc;
-    nc = 0;
-    for (Py_ssize_t j = 0; j < n; j++)
-        if (moving[j] != 0.0) cols[nc++] = j;
+    Py_ssize_t nc = d->nc, rows = d->rows = k + d->lo_count + d->hi_count;
+    return (size_t)(d->n + nc * nc + rows * nc + 2 * rows + rows * rows + 2 * nc
+                    + nonnegative_qp_scratch(rows));
+}
+
+/* the dual's buffers in mem (dual_sizes doubles) */
+static void dual_buffers(Dual *d, double *mem, const double *moving)
+{
+    Py_ssize_t nc = d->nc, rows = d->rows;
+    d->cols = (Py_ssize_t *)mem;
+    d->L = mem + d->n;
+    d->C = d->L + nc * nc;
+    d->h = d->C + rows * nc;
+    d->y = d->h + rows;
+    d->Q = d->y + rows;
+    d->x0 = d->Q + rows * rows;
+    d->z = d->x0 + nc;
+    d->scratch = d->z + nc;
+    Py_ssize_t c = 0;
+    for (Py_ssize_t j = 0; j < d->n; j++)
+        if (moving[j] != 0.0) d->cols[c++] = j;
+}
+
+/* x0 = dq_c and L: H = Jw_c^T Jw_c + rho I factored (rho the mean of Jw_c^T Jw_c's diagonal);
+ * returns 0 only if the factorisation failed (not reached: H is positive definite) */
+static int dual_metric(Dual *d, const double *dq, Mat Jw)
+{
+    Py_ssize_t nc = d->nc;
     double trace = 0.0;
     for (Py_ssize_t a = 0; a < nc; a++) {
-        x0[a] = dq[cols[a]];
+        d->x0[a] = dq[d->cols[a]];
         for (Py_ssize_t c = 0; c <= a; c++) {
             double acc = 0.0;
-            for (Py_ssize_t i = 0; i < m; i++) acc += AT(Jw, i, cols[a]) * AT(Jw, i, cols[c]);
-            L[a * nc + c] = L[c * nc + a] = acc;
+            for (Py_ssize_t i = 0; i < Jw.m; i++)
+                acc += AT(Jw, i, d->cols[a]) * AT(Jw, i, d->cols[c]);
+            d->L[a * nc + c] = d->L[c * nc + a] = acc;
         }
-        trace += L[a * nc + a];
+        trace += d->L[a * nc + a];
     }
     double rho = dmax(trace / (double)(nc > 0 ? nc : 1), 1e-12);
-    int solves = 0;
-    if (nc > 0 && !cholesky_factor(L, nc, rho)) {
-        free(mem);
-        return 0;  /* not reached: H + rho I is positive definite */
+    return nc == 0 || cholesky_factor(d->L, nc, rho);
+}
+
+/* Row i of G into g (nc) and its h - G x0 into h[i]; *next walks the columns with a finite
+ * bound of the kind of row i */
+static void dual_row(Dual *d, Py_ssize_t i, Mat A, const double *b, const double *lower,
+                     const double *upper, const double *moving, const double *dq,
+                     Py_ssize_t *next, double *g)
+{
+    Py_ssize_t nc = d->nc, k = d->k;
+    double hi_;
+    if (i < k) {
+        hi_ = b[i];
+        for (Py_ssize_t j = 0; j < d->n; j++)
+            if (moving[j] == 0.0) hi_ -= AT(A, i, j) * dq[j];
+        for (Py_ssize_t a = 0; a < nc; a++) g[a] = AT(A, i, d->cols[a]);
+    } else {
+        for (Py_ssize_t a = 0; a < nc; a++) g[a] = 0.0;
+        int upper_row = i >= k + d->lo_count;
+        if (i == k || i == k + d->lo_count) *next = 0;
+        const double *bound = upper_row ? upper : lower;
+        while (!isfinite(bound[d->cols[*next]])) (*next)++;
+        g[*next] = upper_row ? 1.0 : -1.0;
+        hi_ = upper_row ? upper[d->cols[*next]] : -lower[d->cols[*next]];
+        (*next)++;
     }
-    /* G: A's moving columns, then -e_c for each finite lower bound, e_c for each upper;
-     * C = G L^-T row by row (forward substitution), r = h - G x0 (into h) */
-    Py_ssize_t row = 0;
+    for (Py_ssize_t a = 0; a < nc; a++) hi_ -= g[a] * d->x0[a];
+    d->h[i] = hi_;
+}
+
+/* C = G L^-T row by row (forward substitution), r = h - G x0, and Q = C C^T */
+static void dual_problem(Dual *d, Mat A, const double *b, const double *lower,
+                         const double *upper, const double *moving, const double *dq)
+{
+    Py_ssize_t nc = d->nc, rows = d->rows, next = 0;
     for (Py_ssize_t i = 0; i < rows; i++) {
-        double *g = C + i * nc;
-        double hi_;
-        if (i < k) {
-            hi_ = b[i];
-            for (Py_ssize_t j = 0; j < n; j++)
-                if (moving[j] == 0.0) hi_ -= AT(A, i, j) * dq[j];
-            for (Py_ssize_t a = 0; a < nc; a++) g[a] = AT(A, i, cols[a]);
-        } else {
-            for (Py_ssize_t a = 0; a < nc; a++) g[a] = 0.0;
-            int upper_row = i >= k + lo_count;
-            /* the next column with a finite bound of this kind */
-            if (i == k || i == k + lo_count) row = 0;
-            while (!isfinite(upper_row ? upper[cols[row]] : lower[cols[row]])) row++;
-            g[row] = upper_row ? 1.0 : -1.0;
-            hi_ = upper_row ? upper[cols[row]] : -lower[cols[row]];
-            row++;
-        }
-        for (Py_ssize_t a = 0; a < nc; a++) hi_ -= g[a] * x0[a];
-        h[i] = hi_;
+        double *g = d->C + i * nc;
+        dual_row(d, i, A, b, lower, upper, moving, dq, &next, g);
         for (Py_ssize_t a = 0; a < nc; a++) {
             double acc = g[a];
-            for (Py_ssize_t c = 0; c < a; c++) acc -= L[a * nc + c] * g[c];
-            g[a] = acc / L[a * nc + a];
+            for (Py_ssize_t c = 0; c < a; c++) acc -= d->L[a * nc + c] * g[c];
+            g[a] = acc / d->L[a * nc + a];
         }
     }
     for (Py_ssize_t i = 0; i < rows; i++)
         for (Py_ssize_t j = 0; j <= i; j++) {
             double acc = 0.0;
-            for (Py_ssize_t a = 0; a < nc; a++) acc += C[i * nc + a] * C[j * nc + a];
-            Q[i * rows + j] = Q[j * rows + i] = acc;
+            for (Py_ssize_t a = 0; a < nc; a++) acc += d->C[i * nc + a] * d->C[j * nc + a];
+            d->Q[i * rows + j] = d->Q[j * rows + i] = acc;
         }
-    solves = nonnegative_qp_c(Q, h, rows, 1e-13, y, scratch);
-    /* z = -C^T y, then x - x0 = L^-T z (back substitution) */
+}
+
+/* The primal from the dual's y: z = -C^T y, x - x0 = L^-T z (back substitution), each moving
+ * joint then within its bounds (the bounds are hard: rows that no velocity within them meets,
+ * the dual unbounded but for its ridge, leave the answer on them, not beyond) */
+static void dual_primal(const Dual *d, const double *lower, const double *upper, double *out)
+{
+    Py_ssize_t nc = d->nc, rows = d->rows;
     for (Py_ssize_t a = 0; a < nc; a++) {
         double acc = 0.0;
-        for (Py_ssize_t i = 0; i < rows; i++) acc -= C[i * nc + a] * y[i];
-        z[a] = acc;
+        for (Py_ssize_t i = 0; i < rows; i++) acc -= d->C[i * nc + a] * d->y[i];
+        d->z[a] = acc;
     }
     for (Py_ssize_t a = nc - 1; a >= 0; a--) {
-        double acc = z[a];
-        for (Py_ssize_t c = a + 1; c < nc; c++) acc -= L[c * nc + a] * z[c];
-        z[a] = acc / L[a * nc + a];
+        double acc = d->z[a];
+        for (Py_ssize_t c = a + 1; c < nc; c++) acc -= d->L[c * nc + a] * d->z[c];
+        d->z[a] = acc / d->L[a * nc + a];
     }
-    /* the bounds are hard: rows that no velocity within them meets (the dual unbounded but
-     * for its ridge) leave the answer on them, not beyond */
     for (Py_ssize_t a = 0; a < nc; a++) {
-        Py_ssize_t j = cols[a];
-        out[j] = dmin(dmax(x0[a] + z[a], lower[j]), upper[j]);
+        Py_ssize_t j = d->cols[a];
+        out[j] = dmin(dmax(d->x0[a] + d->z[a], lower[j]), upper[j]);
     }
+}
+
+/* project_once_c on the rows and the finite bounds of [lower, upper] given (the others
+ * -inf/inf): the dual's answer, each moving joint within those bounds. Returns the
+ * passive-set solves, -1 when out of memory. */
+static int project_dual(const double *dq, Mat Jw, Mat A, const double *b, const double *lower,
+                        const double *upper, const double *moving, double *out)
+{
+    Dual d;
+    d.n = Jw.n;
+    size_t size = dual_sizes(&d, dq, lower, upper, moving, A.m, out);
+    double *mem = (double *)malloc(size * sizeof(double));
+    if (!mem) return -1;
+    dual_buffers(&d, mem, moving);
+    if (!dual_metric(&d, dq, Jw)) {
+        free(mem);
+        return 0;  /* not reached: H + rho I is positive definite */
+    }
+    dual_problem(&d, A, b, lower, upper, moving, dq);
+    int solves = nonnegative_qp_c(d.Q, d.h, d.rows, 1e-13, d.y, d.scratch);
+    dual_primal(&d, lower, upper, out);
     free(mem);
     return solves;
 }
 
+/* The bounds the answer x breaks (beyond 1e-12 (1 + |bound|)) join those in the dual (lo_in,
+ * hi_in: the bound, or -inf/inf while it is not in); returns how many joined */
+static int broken_bounds_join(const double *x, const double *lower, const double *upper,
+                              const double *moving, Py_ssize_t n, double *lo_in, double *hi_in)
+{
+    int joined = 0;
+    for (Py_ssize_t j = 0; j < n; j++) {
+        if (moving[j] == 0.0) continue;
+        if (lo_in[j] == -INFINITY && x[j] < lower[j] - 1e-12 * (1.0 + fabs(lower[j]))) {
+            lo_in[j] = lower[j];
+            joined++;
+        }
+        if (hi_in[j] == INFINITY && x[j] > upper[j] + 1e-12 * (1.0 + fabs(upper[j]))) {
+            hi_in[j] = upper[j];
+            joined++;
+        }
+    }
+    return joined;
+}
+
+/* out = argmin (x - dq)^T H (x - dq), H = Jw_c^T Jw_c + rho I on the moving joints c (rho the
+ * mean of H's diagonal), subject to A x <= b and lower <= x <= upper, the others at dq: as
+ * constraints.project (its reference), on the dual of the Cholesky-whitened problem; when no
+ * x meets them all, within the bounds. A bound enters the dual only once an answer breaks it:
+ * the optimum of a convex problem with fewer constraints that meets the others is its optimum
+ * (the speed and position bounds seldom bind where the rows do, and each bound in the dual is
+ * one row more of it). Returns the passive-set solves, -1 when out of memory. */
+static int project_once_c(const double *dq, Mat Jw, Mat A, const double *b,
+                          const double *lower, const double *upper, const double *moving,
+                          double *out)
+{
+    Py_ssize_t n = Jw.n;
+    double *in = (double *)malloc((size_t)(2 * n + 1) * sizeof(double));
+    if (!in) return -1;
+    double *lo_in = in, *hi_in = in + n;
+    for (Py_ssize_t j = 0; j < n; j++) {
+        lo_in[j] = -INFINITY;
+        hi_in[j] = INFINITY;
+    }
+    int solves = 0;
+    for (Py_ssize_t round = 0; round <= 2 * n; round++) {
+        int now = project_dual(dq, Jw, A, b, lo_in, hi_in, moving, out);
+        if (now < 0) {
+            solves = now;
+            break;
+        }
+        solves += now;
+        if (!broken_bounds_join(out, lower, upper, moving, n, lo_in, hi_in)) break;
+    }
+    for (Py_ssize_t j = 0; j < n && solves >= 0; j++)
+        if (moving[j] != 0.0) out[j] = dmin(dmax(out[j], lower[j]), upper[j]);
+    free(in);
+    return solves;
+}
+
 /* The step the projection starts from when it had to correct dq (constraints.rest_target):
- * dq's self-motion (dq minus its least-norm part with the same task motion Jw dq, on the
- * moving joints) scaled by the share phi = |Jw x| / |Jw dq| of the task motion the first
- * projection x kept. A method's step (SJT's per-joint scaling, a saturated step) carries
- * self-motion along with its push on the task; where the rows stop that push (a target inside
- * an obstacle) its self-motion would go on alone and the arm drift in its null space. Writes
- * into target (n) and returns 1, or 0 where it keeps dq (no task motion asked or kept whole,
- * a singular Jw, out of memory). */
+ * the least-norm velocity of the task motion Jw x the first projection x kept, plus dq's
+ * self-motion (dq minus the least-norm velocity of its own task motion Jw dq, on the moving
+ * joints) scaled by the share phi = |Jw x| / |Jw dq| of the task motion kept. A method's step
+ * (SJT's per-joint scaling, a saturated step) carries self-motion along with its push on the
+ * task; where the rows stop that push (a target inside an obstacle) its self-motion would go
+ * on alone, and the push itself, projected again, would come out as self-motion that keeps the
+ * contacts: the arm would drift in its null space. Writes into target (n) and returns 1, or 0
+ * where it keeps dq (no task motion asked or kept whole, a singular Jw, out of memory). */
 static int rest_target_c(const double *dq, Mat Jw, const double *moving, const double *x,
                          double *target)
 {
     Py_ssize_t n = Jw.n, m = Jw.m;
     if (m == 0) return 0;
-    double *S = (double *)malloc((size_t)(m * m + 3 * m) * sizeof(double));
+    double *S = (double *)malloc((size_t)(m * m + 4 * m) * sizeof(double));
     if (!S) return 0;
-    double *t0 = S + m * m, *t1 = t0 + m, *w = t1 + m;
+    double *t0 = S + m * m, *t1 = t0 + m, *w0 = t1 + m, *w1 = w0 + m;
     double asked = 0.0, kept = 0.0, trace = 0.0;
     for (Py_ssize_t i = 0; i < m; i++) {
         double a0 = 0.0, a1 = 0.0;
@@ -237,13 +399,17 @@ static int rest_target_c(const double *dq, Mat Jw, const double *moving, const d
         free(S);
         return 0;
     }
-    cholesky_substitute(S, m, t0, w);
+    cholesky_substitute(S, m, t0, w0);
+    cholesky_substitute(S, m, t1, w1);
     for (Py_ssize_t j = 0; j < n; j++) {
         target[j] = dq[j];
         if (moving[j] == 0.0) continue;
-        double task = 0.0;
-        for (Py_ssize_t i = 0; i < m; i++) task += AT(Jw, i, j) * w[i];
-        target[j] = task + phi * (dq[j] - task);
+        double asked_j = 0.0, kept_j = 0.0;
+        for (Py_ssize_t i = 0; i < m; i++) {
+            asked_j += AT(Jw, i, j) * w0[i];
+            kept_j += AT(Jw, i, j) * w1[i];
+        }
+        target[j] = kept_j + phi * (dq[j] - asked_j);
     }
     free(S);
     return 1;
@@ -342,6 +508,42 @@ done:
     return result;
 }
 
+/* Whether the step (rad, over dt) meets every row A q_dot <= b (within BOUND_TOL (1 + |b|)) */
+static int rows_hold(Mat A, const double *b, const double *step, double dt)
+{
+    for (Py_ssize_t i = 0; i < A.m; i++) {
+        double acc = -b[i];
+        for (Py_ssize_t j = 0; j < A.n; j++) acc += AT(A, i, j) * step[j] / dt;
+        if (acc > BOUND_TOL * (1.0 + fabs(b[i]))) return 0;
+    }
+    return 1;
+}
+
+/* Whether the step (rad, over dt) lies within [lower, upper] (rad/s, within BOUND_TOL) */
+static int bounds_hold(const double *lower, const double *upper, const double *step, double dt,
+                       Py_ssize_t n)
+{
+    for (Py_ssize_t j = 0; j < n; j++) {
+        double v = step[j] / dt;
+        if (v < lower[j] - BOUND_TOL || v > upper[j] + BOUND_TOL) return 0;
+    }
+    return 1;
+}
+
+/* The metric's rows Jw = sw J mask (m x n, row-major), the step's velocity dq = step / dt and
+ * the moving joints (1 where the mask is not 0) */
+static void weighted_rows(Mat J, const double *sw, const double *mask, const double *step,
+                          double dt, double *Jw, double *dq, double *moving)
+{
+    Py_ssize_t m = J.m, n = J.n;
+    for (Py_ssize_t i = 0; i < m; i++)
+        for (Py_ssize_t j = 0; j < n; j++) Jw[i * n + j] = sw[i] * AT(J, i, j) * mask[j];
+    for (Py_ssize_t j = 0; j < n; j++) {
+        dq[j] = step[j] / dt;
+        moving[j] = mask[j] != 0.0 ? 1.0 : 0.0;
+    }
+}
+
 /* A kernel step (step, written by step_c) against a user's general rows A q_dot <= b and
  * bounds [lower, upper] (rad/s; -inf/inf where none): 0 when it meets them all (step
  * untouched), -1 when it breaks one of the bounds (the caller's whole constraint stage must
@@ -352,33 +554,21 @@ done:
 static int rows_step_c(Mat J, const double *q, Mat A, const double *b, const double *lower,
                        const double *upper, double *work, double *step)
 {
-    Py_ssize_t m = J.m, n = J.n, k = A.m;
+    Py_ssize_t m = J.m, n = J.n;
     double dt = work[P_DT];
     const double *mask = work + (Py_ssize_t)work[P_MASK];
     const double *sw = work + (Py_ssize_t)work[P_ROWS];
     const double *box_lo = work + (Py_ssize_t)work[P_CLAMPED] + n, *box_hi = box_lo + n;
-    for (Py_ssize_t j = 0; j < n; j++) {
-        double v = step[j] / dt;
-        if (v < lower[j] - BOUND_TOL || v > upper[j] + BOUND_TOL) return -1;
-    }
-    int broken = 0;
-    for (Py_ssize_t i = 0; i < k && !broken; i++) {
-        double acc = -b[i];
-        for (Py_ssize_t j = 0; j < n; j++) acc += AT(A, i, j) * step[j] / dt;
-        if (acc > BOUND_TOL * (1.0 + fabs(b[i]))) broken = 1;
-    }
-    if (!broken) return 0;
+    if (!bounds_hold(lower, upper, step, dt, n)) return -1;
+    if (rows_hold(A, b, step, dt)) return 0;
     double *mem = (double *)malloc((size_t)(m * n + 5 * n + 1) * sizeof(double));
     if (!mem) return -2;
     double *Jw = mem, *dq = Jw + m * n, *lo = dq + n, *hi = lo + n, *moving = hi + n;
     double *out = moving + n;
-    for (Py_ssize_t i = 0; i < m; i++)
-        for (Py_ssize_t j = 0; j < n; j++) Jw[i * n + j] = sw[i] * AT(J, i, j) * mask[j];
+    weighted_rows(J, sw, mask, step, dt, Jw, dq, moving);
     for (Py_ssize_t j = 0; j < n; j++) {
-        dq[j] = step[j] / dt;
         lo[j] = dmax(box_lo[j], lower[j]);
         hi[j] = dmin(box_hi[j], upper[j]);
-        moving[j] = mask[j] != 0.0 ? 1.0 : 0.0;
     }
     Mat Jm = {Jw, m, n, n, 1};
     int solves = project_c(dq, Jm, A, b, lo, hi, moving, out);
@@ -477,6 +667,104 @@ static void smoothness_box(const double *S, Py_ssize_t n, Py_ssize_t j, double v
     *hi_out = hi;
 }
 
+/* smooth_rows_c's velocities (n each): the step's dq, the box of a round [lo, hi], the moving
+ * joints, the projection's result, the hard box (the stage's within the user's bounds) and the
+ * acceleration/jerk box around the previous state */
+typedef struct {
+    double *dq, *lo, *hi, *moving, *res, *hard_lo, *hard_hi, *soft_lo, *soft_hi;
+} SmoothBoxes;
+
+/* The hard box (the stage's, within the user's bounds when given) and the smoothness box of
+ * every joint; 0 when a user's bound leaves nothing of the hard box on some joint. */
+static int smooth_boxes(SmoothBoxes *x, const double *lower, const double *upper,
+                        const double *previous, const double *work, Py_ssize_t n)
+{
+    const double *S = work + (Py_ssize_t)work[P_SMOOTH];
+    const double *hlo = S + SM_HARD_LO * n, *hhi = S + SM_HARD_HI * n;
+    int has_jerk = work[P_JERK] != 0.0;
+    for (Py_ssize_t j = 0; j < n; j++) {
+        x->hard_lo[j] = lower ? dmax(hlo[j], lower[j]) : hlo[j];
+        x->hard_hi[j] = upper ? dmin(hhi[j], upper[j]) : hhi[j];
+        if (x->hard_lo[j] > x->hard_hi[j]) return 0;
+        smoothness_box(S, n, j, previous[j], previous[n + j], work[P_DT], has_jerk,
+                       x->soft_lo + j, x->soft_hi + j);
+    }
+    return 1;
+}
+
+/* Round r's box: the smoothness box widened 2^r times around its centre within the hard box
+ * (the last round, r = SMOOTH_WIDEN_ROUNDS: the hard box alone); returns 2 when the hard box
+ * lies beyond the smoothness box on some joint (it wins there), else 1. */
+static int widened_box(SmoothBoxes *x, int round, Py_ssize_t n)
+{
+    int status = 1;
+    double widen = (double)(1 << (round < SMOOTH_WIDEN_ROUNDS ? round : 0));
+    for (Py_ssize_t j = 0; j < n; j++) {
+        double l = x->hard_lo[j], u = x->hard_hi[j];
+        if (round < SMOOTH_WIDEN_ROUNDS) {
+            double c = 0.5 * (x->soft_lo[j] + x->soft_hi[j]);
+            double r = 0.5 * (x->soft_hi[j] - x->soft_lo[j]);
+            double sl = dmax(l, c - widen * r), su = dmin(u, c + widen * r);
+            if (sl <= su) {
+                l = sl;
+                u = su;
+            } else {
+                status = 2;
+            }
+        }
+        x->lo[j] = l;
+        x->hi[j] = u;
+    }
+    return status;
+}
+
+/* Whether the velocity x meets every row (to the dual's ridge: 1e-9 (1 + |b|)) */
+static int rows_met(Mat A, const double *b, const double *x)
+{
+    for (Py_ssize_t i = 0; i < A.m; i++) {
+        double acc = -b[i];
+        for (Py_ssize_t j = 0; j < A.n; j++) acc += AT(A, i, j) * x[j];
+        if (acc > 1e-9 * (1.0 + fabs(b[i]))) return 0;
+    }
+    return 1;
+}
+
+/* The step projected (project_c, metric Jw) onto the rows within round r's box, widening it
+ * until the rows hold (smooth_rows_c): 1, or 2 when the smoothness box had to widen; -2
+ * when out of memory. */
+static int smooth_projection(SmoothBoxes *x, Mat Jw, Mat A, const double *b)
+{
+    int status = 1;
+    for (int round = 0; round <= SMOOTH_WIDEN_ROUNDS; round++) {
+        if (widened_box(x, round, Jw.n) == 2) status = 2;
+        if (project_c(x->dq, Jw, A, b, x->lo, x->hi, x->moving, x->res) < 0) return -2;
+        if (rows_met(A, b, x->res) || round == SMOOTH_WIDEN_ROUNDS) break;
+        status = 2;
+    }
+    return status;
+}
+
+/* The projected velocity becomes the step (every joint inside its range exactly onto a limit
+ * it reaches), SM_OUT and the motion state (SM_DQ, SM_DDQ); joints outside the smoothness box
+ * are marked in SM_TORN. */
+static void smooth_commit(const SmoothBoxes *x, const double *q, const double *previous,
+                          Py_ssize_t n, double *work, double *step)
+{
+    double dt = work[P_DT];
+    double *S = work + (Py_ssize_t)work[P_SMOOTH];
+    double *pdq = S + SM_DQ * n, *pddq = S + SM_DDQ * n;
+    double *out = S + SM_OUT * n, *torn = S + SM_TORN * n;
+    for (Py_ssize_t j = 0; j < n; j++) step[j] = x->res[j] * dt;
+    exact_position(q, work, step);
+    for (Py_ssize_t j = 0; j < n; j++) {
+        double v = step[j] / dt;
+        if (v < x->soft_lo[j] - BOUND_TOL || v > x->soft_hi[j] + BOUND_TOL) torn[j] = 1.0;
+        out[j] = v;
+        pddq[j] = (v - previous[j]) / dt;
+        pdq[j] = v;
+    }
+}
+
 /* A step of the compiled acceleration/jerk stage (step and the stage's part of work, written by
  * smooth_stage_c) against a user's general rows A q_dot <= b and bounds [lower, upper] (rad/s;
  * -inf/inf where none; both NULL: none at all); `previous` (2 nv) is the motion state the step started from (the
@@ -495,88 +783,29 @@ static int smooth_rows_c(Mat J, const double *q, Mat A, const double *b, const d
                          const double *upper, const double *previous, double *work,
                          double *step)
 {
-    Py_ssize_t m = J.m, n = J.n, k = A.m;
+    Py_ssize_t m = J.m, n = J.n;
     double dt = work[P_DT];
-    const double *mask = work + (Py_ssize_t)work[P_MASK];
-    const double *sw = work + (Py_ssize_t)work[P_ROWS];
-    double *S = work + (Py_ssize_t)work[P_SMOOTH];
-    double *pdq = S + SM_DQ * n, *pddq = S + SM_DDQ * n;
-    const double *hlo = S + SM_HARD_LO * n, *hhi = S + SM_HARD_HI * n;
-    double *out = S + SM_OUT * n, *torn = S + SM_TORN * n;
-    int has_jerk = work[P_JERK] != 0.0;
-    int broken = 0;
-    for (Py_ssize_t j = 0; j < n && !broken && lower; j++) {
-        double v = step[j] / dt;
-        if (v < lower[j] - BOUND_TOL || v > upper[j] + BOUND_TOL) broken = 1;
-    }
-    for (Py_ssize_t i = 0; i < k && !broken; i++) {
-        double acc = -b[i];
-        for (Py_ssize_t j = 0; j < n; j++) acc += AT(A, i, j) * step[j] / dt;
-        if (acc > BOUND_TOL * (1.0 + fabs(b[i]))) broken = 1;
-    }
-    if (!broken) return 0;
+    if ((!lower || bounds_hold(lower, upper, step, dt, n)) && rows_hold(A, b, step, dt)) return 0;
     double *mem = (double *)malloc((size_t)(m * n + 10 * n + 1) * sizeof(double));
     if (!mem) return -2;
-    double *Jw = mem, *dq = Jw + m * n, *lo = dq + n, *hi = lo + n, *moving = hi + n;
-    double *res = moving + n, *hard_lo = res + n, *hard_hi = hard_lo + n;
-    double *soft_lo = hard_hi + n, *soft_hi = soft_lo + n;
-    for (Py_ssize_t i = 0; i < m; i++)
-        for (Py_ssize_t j = 0; j < n; j++) Jw[i * n + j] = sw[i] * AT(J, i, j) * mask[j];
-    for (Py_ssize_t j = 0; j < n; j++) {
-        dq[j] = step[j] / dt;
-        moving[j] = mask[j] != 0.0 ? 1.0 : 0.0;
-        hard_lo[j] = lower ? dmax(hlo[j], lower[j]) : hlo[j];
-        hard_hi[j] = upper ? dmin(hhi[j], upper[j]) : hhi[j];
-        if (hard_lo[j] > hard_hi[j]) {  /* the user's bound against the hard box */
-            free(mem);
-            return -1;
-        }
-        smoothness_box(S, n, j, previous[j], previous[n + j], dt, has_jerk, soft_lo + j,
-                       soft_hi + j);
+    SmoothBoxes x = {mem + m * n, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL};
+    x.lo = x.dq + n;
+    x.hi = x.lo + n;
+    x.moving = x.hi + n;
+    x.res = x.moving + n;
+    x.hard_lo = x.res + n;
+    x.hard_hi = x.hard_lo + n;
+    x.soft_lo = x.hard_hi + n;
+    x.soft_hi = x.soft_lo + n;
+    weighted_rows(J, work + (Py_ssize_t)work[P_ROWS], work + (Py_ssize_t)work[P_MASK], step, dt,
+                  mem, x.dq, x.moving);
+    if (!smooth_boxes(&x, lower, upper, previous, work, n)) {
+        free(mem);
+        return -1;
     }
-    Mat Jm = {Jw, m, n, n, 1};
-    int status = 1;
-    for (int round = 0; round <= SMOOTH_WIDEN_ROUNDS; round++) {
-        /* round r: the smoothness box widened 2^r times (the last round: none), within the
-         * hard box */
-        double widen = (double)(1 << (round < SMOOTH_WIDEN_ROUNDS ? round : 0));
-        for (Py_ssize_t j = 0; j < n; j++) {
-            double l = hard_lo[j], u = hard_hi[j];
-            if (round < SMOOTH_WIDEN_ROUNDS) {
-                double c = 0.5 * (soft_lo[j] + soft_hi[j]), r = 0.5 * (soft_hi[j] - soft_lo[j]);
-                double sl = dmax(l, c - widen * r), su = dmin(u, c + widen * r);
-                if (sl <= su) {  /* else the hard box lies beyond: it wins on this joint */
-                    l = sl;
-                    u = su;
-                } else {
-                    status = 2;
-                }
-            }
-            lo[j] = l;
-            hi[j] = u;
-        }
-        if (project_c(dq, Jm, A, b, lo, hi, moving, res) < 0) {
-            free(mem);
-            return -2;
-        }
-        int kept = 1;  /* the rows met within the box (to the dual's ridge) */
-        for (Py_ssize_t i = 0; i < k && kept; i++) {
-            double acc = -b[i];
-            for (Py_ssize_t j = 0; j < n; j++) acc += AT(A, i, j) * res[j];
-            if (acc > 1e-9 * (1.0 + fabs(b[i]))) kept = 0;
-        }
-        if (kept || round == SMOOTH_WIDEN_ROUNDS) break;
-        status = 2;
-    }
-    for (Py_ssize_t j = 0; j < n; j++) step[j] = res[j] * dt;
-    exact_position(q, work, step);
-    for (Py_ssize_t j = 0; j < n; j++) {
-        double v = step[j] / dt;
-        if (v < soft_lo[j] - BOUND_TOL || v > soft_hi[j] + BOUND_TOL) torn[j] = 1.0;
-        out[j] = v;
-        pddq[j] = (v - previous[j]) / dt;
-        pdq[j] = v;
-    }
+    Mat Jm = {mem, m, n, n, 1};
+    int status = smooth_projection(&x, Jm, A, b);
+    if (status >= 0) smooth_commit(&x, q, previous, n, work, step);
     free(mem);
     return status;
 }
