@@ -90,11 +90,6 @@ typedef struct {
 
 /* the dual's ridge relative to its largest diagonal entry (constraints.DUAL_RIDGE) */
 #define DUAL_RIDGE 1e-13
-/* rest_target_c's ridge of Jw Jw^T, relative to its mean diagonal (constraints.REST_RIDGE) */
-#define REST_RIDGE 1e-12
-/* how far the smoothness box widens, around its centre, in the rounds that look for the
- * smallest breach of the acceleration and jerk limits that lets the rows hold */
-#define SMOOTH_WIDEN_ROUNDS 6
 
 /* |W J_j|^2 over the first `rows` rows: the squared norm of weighted column j (task units^2) */
 static inline double weighted_column_norm2(Mat J, const double *sw, Py_ssize_t rows,
@@ -153,6 +148,20 @@ static inline void jerk_bounds(double v, double a, double Jk, double vj, double 
     if (isfinite(bound)) *lo = dmax(*lo, bound);
 }
 
+/* what each file offers the others, in the order they build on each other */
+
+/* args.c */
+void release(Arg *a);
+int acquire(PyObject *obj, Arg *a, int writable, int ndim, const char *name);
+double *vec(Arg *a, const char *name);
+double *out_vec(Arg *a, const char *name);
+Mat mat(const Arg *a);
+double *out_mat(Arg *a, const char *name);
+int nargs_ok(Py_ssize_t got, Py_ssize_t want, const char *name);
+int check_work(const Arg *work, Py_ssize_t m, Py_ssize_t n, Py_ssize_t nq);
+int table_ok(const double *table, Py_ssize_t c, Py_ssize_t nq, Py_ssize_t n, int pairs,
+             const char *name);
+
 /* linalg.c */
 void gram(Mat J, const double *sw, const double *s, int use_rows, double *out);
 double loop_bound_c(const double *A, Py_ssize_t p, int products, double *B, double *C);
@@ -163,6 +172,9 @@ void symmetric_eigen_c(double *A, double *V, Py_ssize_t p);
 PyObject *py_cholesky_solve(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
 PyObject *py_loop_bound(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
 PyObject *py_symmetric_eigen(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
+
+/* lie.c */
+PyObject *py_jlog6_inverse(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
 
 /* methods.c */
 void damped_solve(Mat J, const double *v, const double *sw, const double *alpha,
@@ -204,21 +216,6 @@ PyObject *py_frame_velocity(PyObject *self, PyObject *const *args, Py_ssize_t na
 PyObject *py_rotation_defect(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
 PyObject *py_position_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
 PyObject *py_unit_defect(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
-
-/* args.c */
-void release(Arg *a);
-int acquire(PyObject *obj, Arg *a, int writable, int ndim, const char *name);
-double *vec(Arg *a, const char *name);
-double *out_vec(Arg *a, const char *name);
-Mat mat(const Arg *a);
-double *out_mat(Arg *a, const char *name);
-int nargs_ok(Py_ssize_t got, Py_ssize_t want, const char *name);
-int check_work(const Arg *work, Py_ssize_t m, Py_ssize_t n, Py_ssize_t nq);
-int table_ok(const double *table, Py_ssize_t c, Py_ssize_t nq, Py_ssize_t n, int pairs,
-             const char *name);
-
-/* lie.c */
-PyObject *py_jlog6_inverse(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
 
 /* projection.c */
 PyObject *py_nonnegative_qp(PyObject *self, PyObject *const *args, Py_ssize_t nargs);

@@ -3,6 +3,13 @@
 
 #include "kernels.h"
 
+/* how far the smoothness box widens, around its centre, in the rounds that look for the
+ * smallest breach of the acceleration and jerk limits that lets the rows hold */
+#define SMOOTH_WIDEN_ROUNDS 6
+
+/* rest_target_c's ridge of Jw Jw^T, relative to its mean diagonal (constraints.REST_RIDGE) */
+#define REST_RIDGE 1e-12
+
 /* -- the constraint stage's correction (sjt_pin/constraints.py: project, nonnegative_qp) -------- */
 
 /* The state of nonnegative_qp_c: Q (k x k) with its ridge, r, the iterate y, the flags of the
