@@ -389,32 +389,19 @@ def solve(solver, target, q0, *, tol: float = TOL, max_iters: int = MAX_ITERS,
     q, clipped = _seed(solver.robot, q0)
     targets = _targets(search, solver.robot, target, q)
     search.aim(targets, tol)
-    if timeout is None:
-        deadline = math.inf
-    else:
-        timeout = positive(timeout, "timeout", "s")
-        search.stack.evaluate(q, targets, None)  # anything loaded on first use: before the clock
-        search.restart_table()  # built on first use too: before the clock
-        deadline = time.perf_counter() + timeout
-    total, best, attempt, generator = 0, None, 0, None
+    deadline = _deadline(search, q, targets, timeout)
+    starts = _Starts(search, q, rng)
+    total, best, attempt = 0, None, 0
     while True:
         table = search.nearest(attempt) if attempt else None
         if table is not None and search.pose is not None and deadline == math.inf:
             assert best is not None  # the first start has run
             last = NEAREST if restarts is None else min(NEAREST, restarts)
-            success, used, attempt, lowest = search.run_nearest(table, attempt, last, max_iters,
-                                                                budget - total, best[1])
-            if lowest < best[1]:
-                best = (search.best_q.copy(), lowest)
+            success, used, attempt, best = _table_starts(search, table, attempt, last,
+                                                         max_iters, budget - total, best)
         else:
-            if attempt == 0:
-                start = q
-            elif table is not None:
-                start = table.next()
-            else:  # the generator only when a restart needs it (it costs as much as a start)
-                generator = search.generator(rng) if generator is None else generator
-                start = search.random(q, generator)
-            success, used = search.run(start, min(max_iters, budget - total), deadline,
+            success, used = search.run(starts.pick(attempt, table),
+                                       min(max_iters, budget - total), deadline,
                                        attempt <= NEAREST)
         total += used
         error = search.error()
@@ -428,6 +415,47 @@ def solve(solver, target, q0, *, tol: float = TOL, max_iters: int = MAX_ITERS,
         if out_of_starts or total >= budget or time.perf_counter() > deadline:
             return IKResult(best[0], False, total, best[1], attempt, clipped)
         attempt += 1
+
+
+def _deadline(search: Search, q: np.ndarray, targets: list, timeout) -> float:
+    """When the search must stop (``time.perf_counter()`` s; ``inf`` without a timeout): the
+    clock starts once what loads on first use has loaded (the rows, the restart table)."""
+    if timeout is None:
+        return math.inf
+    timeout = positive(timeout, "timeout", "s")
+    search.stack.evaluate(q, targets, None)
+    search.restart_table()
+    return time.perf_counter() + timeout
+
+
+class _Starts:
+    """The configuration each start runs from: ``q`` first, then the table's next nearest,
+    then random ones from ``rng`` (its generator made only when a restart needs it: it costs
+    as much as a start)."""
+
+    def __init__(self, search: Search, q: np.ndarray, rng):
+        self.search, self.q, self.rng = search, q, rng
+        self.generator: np.random.Generator | None = None
+
+    def pick(self, attempt: int, table) -> np.ndarray:
+        if attempt == 0:
+            return self.q
+        if table is not None:
+            return table.next()
+        if self.generator is None:
+            self.generator = self.search.generator(self.rng)
+        return self.search.random(self.q, self.generator)
+
+
+def _table_starts(search: Search, table, attempt: int, last: int, max_iters: int, left: int,
+                  best: tuple) -> tuple[bool, int, int, tuple]:
+    """The table's starts ``attempt`` to ``last`` in one compiled call (a single pose task,
+    no clock): (success, iterations used, the last start run, the best (q, error) so far)."""
+    success, used, attempt, lowest = search.run_nearest(table, attempt, last, max_iters, left,
+                                                        best[1])
+    if lowest < best[1]:
+        best = (search.best_q.copy(), lowest)
+    return success, used, attempt, best
 
 
 def _options(tol, max_iters, budget, restarts) -> tuple[float, int, int, int | None]:
