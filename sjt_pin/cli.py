@@ -168,8 +168,15 @@ def bench(args: argparse.Namespace) -> int:
         plain, idle = collision.idle()
         print(f"\nSJT on Panda, self-collision, nothing within influence: {idle:.1f} us/step "
               f"against {plain:.1f} without the limit ({idle / plain:.1f}x)")
+        crowd = collision.crowded()
+        print(f"SJT on Panda passing the ball among 19 more obstacles, self-collision "
+              f"({crowd.pairs} pairs): "
+              f"{crowd.median_us:.1f} us/step median (p99 {crowd.p99_us:.1f}) against "
+              f"{crowd.plain_us:.1f} without the limit ({crowd.median_us / crowd.plain_us:.1f}x), "
+              f"closest {crowd.min_distance * 1e3:.1f} mm")
         _write_json(args.json, {"machine": machine, "rows": [asdict(r) for r in rows],
-                                "idle_us": {"plain": plain, "limit": idle}})
+                                "idle_us": {"plain": plain, "limit": idle},
+                                "crowded": asdict(crowd)})
     elif args.kind == "accuracy":
         from .bench import accuracy
 

@@ -426,3 +426,18 @@ def test_rows_no_velocity_can_meet_leave_the_step_within_the_speed_limits(method
         broken += rows is not None and bool(np.any(rows[0] @ (step / 1e-3) > rows[1] + 1e-6))
         q = q_next
     assert broken  # the rows could not all hold: the bounds won
+
+
+def test_the_crowded_bench_scene_is_seeded_and_clear_of_the_robot(panda):
+    """bench collision's crowd: the asked number of obstacles, each more than its clearance
+    from the robot at the start (the limit's own distances), the same for the same seed."""
+    from sjt_pin.bench.collision import crowd
+    from sjt_pin.limits import CollisionLimit
+
+    obstacles = crowd(panda, panda.q0, count=4, clearance=0.06, seed=3)
+    assert len(obstacles) == 4
+    limit = CollisionLimit(panda, obstacles, margin=0.0)
+    assert min(d.distance for d in limit.distances(panda.q0)) > 0.06
+    again = crowd(panda, panda.q0, count=4, clearance=0.06, seed=3)
+    assert all(np.array_equal(a[1].homogeneous, b[1].homogeneous)
+               for a, b in zip(obstacles, again, strict=True))

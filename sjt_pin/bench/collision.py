@@ -301,3 +301,62 @@ def idle(steps: int = 3000) -> tuple[float, float]:
                    for _ in range(3))
         out.append(best)
     return out[0], out[1]
+
+
+@dataclass
+class Crowded:
+    """:func:`crowded`'s result: pairs checked, CPU time per step (us) without and with the
+    limit (median and 99th percentile of single steps), and the least distance (m, checked
+    independently)."""
+
+    pairs: int
+    plain_us: float
+    median_us: float
+    p99_us: float
+    min_distance: float
+
+
+def crowd(robot: Robot, q0: np.ndarray, count: int = 20, clearance: float = 0.06,
+          seed: int = 0) -> list:
+    """``count`` seeded obstacles (spheres, boxes, capsules, random turns) in a 1.6 x 1.6 x
+    1.2 m box around the robot's base, each at least ``clearance`` (m) from the robot at
+    ``q0``."""
+    rng = np.random.default_rng(seed)
+    obstacles: list = []
+    while len(obstacles) < count:
+        centre = rng.uniform([-0.8, -0.8, 0.0], [0.8, 0.8, 1.2])
+        shape = [coal.Sphere(rng.uniform(0.03, 0.08)), coal.Box(*rng.uniform(0.04, 0.15, 3)),
+                 coal.Capsule(0.04, 0.15)][int(rng.integers(3))]
+        candidate = (shape, pin.SE3(pin.exp3(rng.normal(size=3)), centre))
+        probe = CollisionLimit(robot, [candidate], margin=0.0)
+        if min(d.distance for d in probe.distances(q0)) > clearance:
+            obstacles.append(candidate)
+    return obstacles
+
+
+def crowded(steps: int = 3000) -> Crowded:
+    """SJT on the first scene (Panda's hand passes a ball on a 40 cm line) with 19 more
+    obstacles of :func:`crowd`, self-collision on: the limit's cost with many pairs, most of
+    which the broad phase leaves out."""
+    scene = scenes()[0]
+    obstacles = scene.obstacles + crowd(scene.robot, scene.q0, count=19)
+    scene = Scene("crowded", scene.robot, scene.q0, obstacles, scene.target, 2.0, steps * DT)
+    limit = CollisionLimit(scene.robot, obstacles, self_collision=True, margin=MARGIN)
+    qs = []
+    for limits in ((), (limit,)):
+        solver = make_solver("sjt", scene.robot, dt=DT, limits=limits)
+        q, each = scene.q0.copy(), []
+        for k in range(steps):
+            pose, velocity = scene.target(k * DT)
+            start = time.process_time_ns()
+            q = solver.step(q, pose, velocity)
+            each.append((time.process_time_ns() - start) / 1e3)
+            if limits:
+                qs.append(q)
+        if not limits:
+            plain = float(np.median(each))
+    checker = Checker(scene.robot, obstacles, limit.pair_names)
+    closest = min(checker.closest(q)[0] for q in qs[::10])
+    return Crowded(len(limit.pair_names), plain, float(np.median(each)),
+                   float(np.percentile(each, 99)), closest)
+
