@@ -116,6 +116,19 @@ static inline BoxEntry box_entry(const double *q, const double *work, Py_ssize_t
     return b;
 }
 
+/* The doubles of work's clamped part for m task rows and n joints: the held joints, SNS's
+ * scratch (saturation.c, 12 n + m + m^2 in all), then the method's velocity before the
+ * saturation (rad/s, n; method_velocity). */
+#define CLAMPED_SIZE(m, n) (13 * (n) + (m) + (m) * (m))
+
+/* The method's velocity of the last kernel step before its position and speed bounds (rad/s,
+ * n; written by saturate_c): what a user's rows correct (rows_step_c), continuous in q where
+ * the saturation's choice of held joints is not. */
+static inline double *method_velocity(double *work, Py_ssize_t m, Py_ssize_t n)
+{
+    return work + (Py_ssize_t)work[P_CLAMPED] + 12 * n + m + m * m;
+}
+
 /* The speed limit of velocity coordinate j (rad/s or m/s; INFINITY for none): work keeps its
  * inverse, 0 for none. */
 static inline double speed_limit(const double *work, Py_ssize_t j)

@@ -268,7 +268,9 @@ int saturate_c(int kind, Mat J, const double *e, const double *ff, int has_ff,
         }
     }
     int inside = 1;
+    double *method = method_velocity(work, J.m, n);
     for (Py_ssize_t j = 0; j < n; j++) {
+        method[j] = step[j] / dt;
         if (mask[j] == 0.0) {
             lo[j] = dmin(lo[j], 0.0);
             hi[j] = dmax(hi[j], 0.0);
@@ -281,6 +283,14 @@ int saturate_c(int kind, Mat J, const double *e, const double *ff, int has_ff,
         exact_position(q, work, step);
         return 0;
     }
+    /* the first candidate of sns_c: the method's velocity scaled down as a whole into the box
+     * (what a user's rows correct; continuous in a, unlike the choice of held joints) */
+    double *zero = held + 4 * n, first;
+    Py_ssize_t k;
+    for (Py_ssize_t j = 0; j < n; j++) zero[j] = 0.0;
+    first = dmax(task_scale_c(a, zero, lo, hi, mask, n, &k), 0.0);
+    for (Py_ssize_t j = 0; j < n; j++)
+        method[j] = mask[j] != 0.0 ? dmin(dmax(first * a[j], lo[j]), hi[j]) : 0.0;
     /* a is sns_c's first candidate, and its result */
     double scale;
     int status = sns_c(kind, J, e, ff, has_ff, mask, work, lo, hi, a, 1.0, NULL, escaping,
