@@ -218,8 +218,9 @@ class ConstraintStage:
 
         outcome = Outcome(dq)
         desired = None
-        cut = box is not None and not _inside(dq, box.lower, box.upper)
-        if cut:
+        cut = False  # whether the box cut dq
+        if box is not None and not _inside(dq, box.lower, box.upper):
+            cut = True
             outcome = saturate(dq, solve, box.lower, box.upper, self.moving,
                                lambda: weighted()[:self.task_rows])
         if box is not None and box.smooth is not None:
