@@ -97,7 +97,7 @@ def _blocked_scene(robot, rng):
 # limit and solving again, a choice that flipped with q (task scales 0.019 and 0.074), and
 # rows_step projected each of those very different steps onto the rows. The rows now correct
 # SNS's first candidate, the method's step scaled as a whole into the box, continuous in the
-# method's step (constraints.scaled_into): SJT 4.9e-6 rad/s at 6 s, DLS 8.9e-7 at 10 s. Seed 9,
+# method's step (constraints.scaled_into): SJT 4.9e-6 rad/s at 6 s, DLS 5.9e-11 at 10 s. Seed 9,
 # which slid on at 5e-3 rad/s at 12 s, now rests too (1e-13 and 0 rad/s). Before the second
 # projection started from the task motion the first kept (constraints.rest_target), seeds 4, 7
 # and 11 slid on too (SJT 3.8e-3 rad/s at 6 s, DLS 6e-4 steady to 10 s, SJT 3.8e-3 steady), the
