@@ -17,7 +17,10 @@ velocity closest to what the method wants, in the method's own terms:
 2. **General rows** (collision dampers, workspace bounds) that the result still breaks: the
    smallest correction in the metric ``J_w^T J_w + rho I`` — changes of the task motion cost
    much, self-motion little, so the other joints take over — subject to every row and bound,
-   a small convex QP solved exactly on its dual by an active-set method.
+   a small convex QP solved exactly on its dual by an active-set method. When the box cut the
+   method's velocity, the correction starts from that velocity scaled as a whole into the box
+   (SNS's first candidate, :func:`scaled_into`), not from SNS's result: which joints SNS holds
+   can flip with ``q``, and the two corrections with it (a blocked arm cycling between them).
 
 The box of each joint is the intersection of every limit's bounds. *Hard* limits (positions,
 speeds, collisions) win over *smoothness* limits (acceleration, jerk) when both cannot hold —
