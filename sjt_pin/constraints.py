@@ -17,7 +17,10 @@ velocity closest to what the method wants, in the method's own terms:
 2. **General rows** (collision dampers, workspace bounds) that the result still breaks: the
    smallest correction in the metric ``J_w^T J_w + rho I`` — changes of the task motion cost
    much, self-motion little, so the other joints take over — subject to every row and bound,
-   a small convex QP solved exactly on its dual by an active-set method.
+   a small convex QP solved exactly on its dual by an active-set method. When the box cut the
+   method's velocity, the correction starts from that velocity scaled as a whole into the box
+   (SNS's first candidate, :func:`scaled_into`), not from SNS's result: which joints SNS holds
+   can flip with ``q``, and the two corrections with it (a blocked arm cycling between them).
 
 The box of each joint is the intersection of every limit's bounds. *Hard* limits (positions,
 speeds, collisions) win over *smoothness* limits (acceleration, jerk) when both cannot hold —
@@ -218,7 +221,9 @@ class ConstraintStage:
 
         outcome = Outcome(dq)
         desired = None
+        cut = False  # whether the box cut dq
         if box is not None and not _inside(dq, box.lower, box.upper):
+            cut = True
             outcome = saturate(dq, solve, box.lower, box.upper, self.moving,
                                lambda: weighted()[:self.task_rows])
         if box is not None and box.smooth is not None:
@@ -238,7 +243,11 @@ class ConstraintStage:
             if np.any(slack > TOLERANCE * (1.0 + np.abs(b))):
                 lower = box.lower if box is not None else np.full(self.nv, -np.inf)
                 upper = box.upper if box is not None else np.full(self.nv, np.inf)
-                outcome.dq = project(outcome.dq, weighted(), A, b, lower, upper, self.moving)
+                start = outcome.dq  # without a smoothness box, when the box cut dq: the
+                # method's dq scaled into it (continuous in dq, where SNS is not: scaled_into)
+                if cut and box is not None and box.smooth is None:
+                    start = scaled_into(dq, box.lower, box.upper, self.moving)
+                outcome.dq = project(start, weighted(), A, b, lower, upper, self.moving)
                 slack = A @ outcome.dq - b
             tight = slack > -1e-9 * (1.0 + np.abs(b))
             outcome.rows = tuple(sorted({owners[i] for i in np.flatnonzero(tight)}))
@@ -364,6 +373,20 @@ REST_RIDGE = 1e-12
 #: normalised task columns is above this fraction of their root-sum-square (of the largest,
 #: within a factor sqrt(m); Flacco's rank test, the compiled kernels' test)
 RANK_TOL = kernels.RANK_TOL
+
+
+def scaled_into(dq: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+                moving: np.ndarray) -> np.ndarray:
+    """The method's ``dq`` (rad/s) scaled down as a whole into the box ``[lower, upper]``
+    (the nearest point of the box when no scale fits): :func:`saturate`'s first candidate, and
+    what the general rows correct when the box cut ``dq`` (:meth:`ConstraintStage.enforce`).
+    It is continuous in ``dq``; SNS's result is not, where two sets of held joints scale the
+    task alike and the choice between them flips with ``q``: projected onto the rows, each
+    gives a different step, and a blocked arm cycles between them with its hand still."""
+    s, _ = task_scale(dq, np.zeros(dq.size), lower, upper, moving)
+    out = np.clip(max(s, 0.0) * dq, lower, upper)
+    out[~moving] = 0.0
+    return out
 
 
 def saturate(dq: np.ndarray, solve: Solve, lower: np.ndarray, upper: np.ndarray,

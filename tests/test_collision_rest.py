@@ -59,7 +59,7 @@ def test_a_target_its_own_links_block_comes_to_rest(panda, method):
     the arm back, a 7-step cycle at 0.0146 rad/s forever (main before the witness rows)."""
     q0, target = _beside_the_base(panda)
     limit = CollisionLimit(panda, self_collision=True, margin=MARGIN)
-    qs = _run(panda, q0, target, limit, method, seconds=8.0)  # 1e-2 rad/s at 6 s, 4e-4 at 8
+    qs = _run(panda, q0, target, limit, method, seconds=8.0)  # at rest (0 rad/s) from 4 s
     assert _rest(qs) < 1e-3
     assert bench._pose_error(panda, qs[-1], target(8.0)[0]) > 0.05  # blocked, not reached
     assert _closest(panda, [], limit, qs) >= MARGIN - 1e-3
@@ -91,21 +91,23 @@ def _blocked_scene(robot, rng):
             return q0, end, bench._line(start, end, 1.0), (shape, pose)
 
 
-# seeds of _blocked_scene where both methods come to rest. Panda seed 9 does not: SJT and DLS
-# slide on at 5e-3 rad/s at 12 s (measured on this code). Panda seed 14 chatters (SJT and DLS,
-# main before these changes too): a 3-step cycle at 0.45 rad/s RMS with the hand still, because
-# the kernel's saturation alternates between scaling the blocked push (joint 4 at its speed
-# limit) and holding joint 4 and solving again (two candidates of nearly the same task scale),
-# and rows_step projects each of those very different steps onto the rows; projecting the
-# unsaturated step onto the rows within the box would be continuous, but rows_step only gets
-# the saturated one. Before the second projection started
-# from the task motion the first kept (constraints.rest_target), seeds 4, 7 and 11 slid on too
-# (SJT 3.8e-3 rad/s at 6 s, DLS 6e-4 steady to 10 s, SJT 3.8e-3 steady), the hand nearly
-# still: the push the rows stop, projected again in the metric J^T J + rho I, came out as
-# self-motion that kept the contacts. UR10 (a robot no other collision test uses): seed 2 settles
-# slowly (DLS 1.2e-2 rad/s at 6 s, 6e-5 at 12 s).
+# seeds of _blocked_scene where both methods come to rest. Panda seed 14 chattered (SJT and DLS,
+# main too): a 3-step cycle at 0.45 rad/s RMS with the hand still. The kernel's saturation (SNS)
+# chose between scaling the whole blocked push into the box and holding joint 4 at its speed
+# limit and solving again, a choice that flipped with q (task scales 0.019 and 0.074), and
+# rows_step projected each of those very different steps onto the rows. The rows now correct
+# SNS's first candidate, the method's step scaled as a whole into the box, continuous in the
+# method's step (constraints.scaled_into): SJT 4.9e-6 rad/s at 6 s, DLS 5.9e-11 at 10 s. Seed 9,
+# which slid on at 5e-3 rad/s at 12 s, now rests too (1e-13 and 0 rad/s). Before the second
+# projection started from the task motion the first kept (constraints.rest_target), seeds 4, 7
+# and 11 slid on too (SJT 3.8e-3 rad/s at 6 s, DLS 6e-4 steady to 10 s, SJT 3.8e-3 steady), the
+# hand nearly still: the push the rows stop, projected again in the metric J^T J + rho I, came
+# out as self-motion that kept the contacts. UR10 (a robot no other collision test uses): seed 2
+# settles slowly (DLS 1.2e-2 rad/s at 6 s, 6e-5 at 12 s before the scaled start; now SJT 3.2e-3
+# at 6 s, DLS 3.7e-4 at 10 s).
 RESTING = [("panda", 0), ("panda", 1), ("panda", 2), ("panda", 3), ("panda", 4), ("panda", 5),
-           ("panda", 6), ("panda", 7), ("panda", 8), ("panda", 10), ("panda", 11),
+           ("panda", 6), ("panda", 7), ("panda", 8), ("panda", 9), ("panda", 10), ("panda", 11),
+           ("panda", 14),
            ("ur5", 0), ("ur5", 1), ("ur5", 2), ("ur5", 3), ("ur5", 4), ("ur5", 5), ("ur5", 6),
            ("ur5", 7), ("ur10", 0), ("ur10", 1), ("ur10", 3)]
 
@@ -137,3 +139,25 @@ def test_without_witness_rows_sjt_chatters_under_a_ur5_obstacle(ur5):
     q0, end, target, obstacle = _blocked_scene(ur5, np.random.default_rng(4))
     limit = CollisionLimit(ur5, [obstacle], self_collision=True, margin=MARGIN, witnesses=0)
     assert _rest(_run(ur5, q0, target, limit, "sjt")) > 5e-3
+
+
+@pytest.mark.parametrize("method", ["sjt", "dls"])
+def test_the_rows_correct_a_saturated_step_as_the_whole_stage_does(panda, method):
+    """Blocked Panda scene 14, where the kernel's box cuts the step and the rows then break it:
+    rows_step's correction (the method's step scaled into the box, then projected) equals the
+    whole stage's (re-solve, saturation, constraints.scaled_into, projection), from the same
+    configuration at every step of the first 2 s."""
+    q0, end, target, obstacle = _blocked_scene(panda, np.random.default_rng(14))
+    limits = [[CollisionLimit(panda, [obstacle], self_collision=True, margin=MARGIN)]
+              for _ in range(2)]
+    fast, whole = (sjt.make_solver(method, panda, dt=DT, limits=lim) for lim in limits)
+    whole._user_stage.hard_parts = lambda kinematics, motion: None  # every step: the stage
+    q, both = q0.copy(), 0
+    for k in range(2000):
+        pose, velocity = target(k * DT)
+        q_fast, q_whole = fast.step(q, pose, velocity), whole.step(q, pose, velocity)
+        info = fast.last
+        both += info.task_scale < 1.0 and bool(info.active_rows)
+        np.testing.assert_allclose(q_fast, q_whole, rtol=0.0, atol=1e-9)
+        q = q_fast
+    assert both > 100  # saturated steps the rows corrected

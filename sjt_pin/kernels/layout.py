@@ -155,9 +155,9 @@ class Layout:
         # the held joints of the last step, then the saturation's scratch (bounds, candidates,
         # the re-solve's task velocity, the rank test's Gram matrix)
         self.clamped = self.extra + n
-        self.smooth = self.clamped + 12 * n + m + m * m if smooth else 0
+        self.smooth = self.clamped + 13 * n + m + m * m if smooth else 0
         self.scratch = (self.smooth + (SMOOTH_SIZE - 1) * n + m if smooth
-                        else self.clamped + 12 * n + m + m * m)
+                        else self.clamped + 13 * n + m + m * m)
         p = min(m, n)
         self.size = self.scratch + 4 * m + 6 * n + 3 * p * p
 

@@ -121,7 +121,7 @@ int check_work(const Arg *work, Py_ssize_t m, Py_ssize_t n, Py_ssize_t nq)
     if (!(count >= 0 && count <= n) || !region_ok(w[P_ROWS], 2 * m, size)
         || !region_ok(w[P_MASK], n, size) || !region_ok(w[P_BOX], 5 * (Py_ssize_t)count, size)
         || !region_ok(w[P_SPEED], n, size) || !region_ok(w[P_EXTRA], n, size)
-        || !region_ok(w[P_CLAMPED], 12 * n + m + m * m, size)) goto bad;
+        || !region_ok(w[P_CLAMPED], CLAMPED_SIZE(m, n), size)) goto bad;
     Py_ssize_t box = (Py_ssize_t)w[P_BOX], c = (Py_ssize_t)count;
     for (Py_ssize_t k = 0; k < c; k++)
         if (!(w[box + k] >= 0 && w[box + k] < nq && w[box + c + k] >= 0 && w[box + c + k] < n))

@@ -116,6 +116,20 @@ static inline BoxEntry box_entry(const double *q, const double *work, Py_ssize_t
     return b;
 }
 
+/* The doubles of work's clamped part for m task rows and n joints: the held joints, SNS's
+ * scratch (saturation.c, 12 n + m + m^2 in all), then the method's velocity before the
+ * saturation (rad/s, n; method_velocity). */
+#define CLAMPED_SIZE(m, n) (13 * (n) + (m) + (m) * (m))
+
+/* The method's velocity of the last kernel step before its position and speed box (rad/s, n;
+ * written by saturate_c only when the box cut the step: the task scale below 1 or joints
+ * held): scaled as a whole into the box (scaled_into_c), what a user's rows correct
+ * (rows_step_c), continuous in the method's step where SNS's choice of held joints is not. */
+static inline double *method_velocity(double *work, Py_ssize_t m, Py_ssize_t n)
+{
+    return work + (Py_ssize_t)work[P_CLAMPED] + 12 * n + m + m * m;
+}
+
 /* The speed limit of velocity coordinate j (rad/s or m/s; INFINITY for none): work keeps its
  * inverse, 0 for none. */
 static inline double speed_limit(const double *work, Py_ssize_t j)
@@ -186,6 +200,8 @@ Core core(int kind, Mat J, const double *e, const double *ff, int has_ff,
 
 /* saturation.c */
 void exact_position(const double *q, const double *work, double *step);
+void scaled_into_c(const double *a, const double *lo, const double *hi, const double *mask,
+                   Py_ssize_t n, double *zero, double *out);
 void core_scaled(int kind, Mat J, const double *e, const double *ff, int has_ff,
                  const double *mask, double *work, double *step, double factor,
                  double *save);

@@ -554,10 +554,12 @@ static void weighted_rows(Mat J, const double *sw, const double *mask, const dou
 /* A kernel step (step, written by step_c) against a user's general rows A q_dot <= b and
  * bounds [lower, upper] (rad/s; -inf/inf where none): 0 when it meets them all (step
  * untouched), -1 when it breaks one of the bounds (the caller's whole constraint stage must
- * saturate it), else 1 with step projected onto the rows within those bounds and the kernel's
- * own box of this step (project_c in the metric of the weighted task rows, the moving joints
- * of the mask; every joint inside its range exactly onto a limit it reaches); -2 when out of
- * memory. */
+ * saturate it), else 1 with the method's velocity scaled as a whole into the kernel's own box
+ * of this step (method_velocity, scaled_into_c: SNS's first candidate, not its result, which
+ * jumps with q where two sets of held joints scale the task alike) projected onto the rows within
+ * those bounds and that box (project_c in the metric of the weighted task rows, the moving
+ * joints of the mask; every joint inside its range exactly onto a limit it reaches); -2 when
+ * out of memory (constraints.ConstraintStage.enforce, constraints.scaled_into). */
 static int rows_step_c(Mat J, const double *q, Mat A, const double *b, const double *lower,
                        const double *upper, double *work, double *step)
 {
@@ -573,6 +575,12 @@ static int rows_step_c(Mat J, const double *q, Mat A, const double *b, const dou
     double *Jw = mem, *dq = Jw + m * n, *lo = dq + n, *hi = lo + n, *moving = hi + n;
     double *out = moving + n;
     weighted_rows(J, sw, mask, step, dt, Jw, dq, moving);
+    /* the box cut the kernel's step (saturate_c): the method's velocity scaled into it instead
+     * of SNS's result (out as scratch) */
+    const double *held = box_lo - n;
+    int cut = !(work[INFO + I_SCALE] >= 1.0);
+    for (Py_ssize_t j = 0; j < n && !cut; j++) cut = held[j] != 0.0;
+    if (cut) scaled_into_c(method_velocity(work, m, n), box_lo, box_hi, mask, n, out, dq);
     for (Py_ssize_t j = 0; j < n; j++) {
         lo[j] = dmax(box_lo[j], lower[j]);
         hi[j] = dmin(box_hi[j], upper[j]);

@@ -48,6 +48,19 @@ static double task_scale_c(const double *a, const double *b, const double *lo,
     return dmax(dmin(s_max, 1.0), 0.0);
 }
 
+/* out = the velocity a (rad/s) scaled down as a whole into [lo, hi] on the joints of mask (0
+ * on the others; the nearest point of the box when no scale fits): sns_c's first candidate,
+ * continuous in a (constraints.scaled_into). zero: n doubles of scratch. */
+void scaled_into_c(const double *a, const double *lo, const double *hi, const double *mask,
+                   Py_ssize_t n, double *zero, double *out)
+{
+    Py_ssize_t k;
+    for (Py_ssize_t j = 0; j < n; j++) zero[j] = 0.0;
+    double s = dmax(task_scale_c(a, zero, lo, hi, mask, n, &k), 0.0);
+    for (Py_ssize_t j = 0; j < n; j++)
+        out[j] = mask[j] != 0.0 ? dmin(dmax(s * a[j], lo[j]), hi[j]) : 0.0;
+}
+
 /* whether the free joints' weighted task columns (the first error_rows rows), each scaled to
  * unit norm, span R^rows: their Gram matrix G (rows x rows scratch) is positive
  * definite with lambda_min above RANK_TOL^2 of its trace */
@@ -281,6 +294,8 @@ int saturate_c(int kind, Mat J, const double *e, const double *ff, int has_ff,
         exact_position(q, work, step);
         return 0;
     }
+    /* the method's velocity, for a user's rows (rows_step_c: scaled_into_c) */
+    memcpy(method_velocity(work, J.m, n), a, (size_t)n * sizeof(double));
     /* a is sns_c's first candidate, and its result */
     double scale;
     int status = sns_c(kind, J, e, ff, has_ff, mask, work, lo, hi, a, 1.0, NULL, escaping,
