@@ -246,7 +246,9 @@ class ConstraintStage:
                 start = outcome.dq  # without a smoothness box, when the box cut dq: the
                 # method's dq scaled into it (continuous in dq, where SNS is not: scaled_into)
                 if cut and box is not None and box.smooth is None:
-                    start = scaled_into(dq, box.lower, box.upper, self.moving)
+                    # (what the step reports follows: that scale, no joint held)
+                    start, outcome.scale = scaled_into(dq, box.lower, box.upper, self.moving)
+                    outcome.held = None
                 outcome.dq = project(start, weighted(), A, b, lower, upper, self.moving)
                 slack = A @ outcome.dq - b
             tight = slack > -1e-9 * (1.0 + np.abs(b))
@@ -376,17 +378,19 @@ RANK_TOL = kernels.RANK_TOL
 
 
 def scaled_into(dq: np.ndarray, lower: np.ndarray, upper: np.ndarray,
-                moving: np.ndarray) -> np.ndarray:
+                moving: np.ndarray) -> tuple[np.ndarray, float]:
     """The method's ``dq`` (rad/s) scaled down as a whole into the box ``[lower, upper]``
-    (the nearest point of the box when no scale fits): :func:`saturate`'s first candidate, and
+    (the nearest point of the box when no scale fits), and that scale s in [0, 1]:
+    :func:`saturate`'s first candidate, and
     what the general rows correct when the box cut ``dq`` (:meth:`ConstraintStage.enforce`).
     It is continuous in ``dq``; SNS's result is not, where two sets of held joints scale the
     task alike and the choice between them flips with ``q``: projected onto the rows, each
     gives a different step, and a blocked arm cycles between them with its hand still."""
     s, _ = task_scale(dq, np.zeros(dq.size), lower, upper, moving)
-    out = np.clip(max(s, 0.0) * dq, lower, upper)
+    s = max(s, 0.0)
+    out = np.clip(s * dq, lower, upper)
     out[~moving] = 0.0
-    return out
+    return out, s
 
 
 def saturate(dq: np.ndarray, solve: Solve, lower: np.ndarray, upper: np.ndarray,

@@ -655,7 +655,7 @@ class Solver:
             if outcome is None and self._compiled_smooth and not status & K.NON_FINITE:
                 outcome = self._smooth_outcome()
             elif outcome is None and status & (K.CLAMPED | K.SCALED):
-                outcome = self._kernel_outcome(q, step, status)
+                outcome = self._kernel_outcome(q, step)
             if outcome is None:
                 outcome = Outcome(step / self._dt)
             if self._checked_rows[0] == self._count and self._checked_rows[1] is not None:
@@ -681,11 +681,11 @@ class Solver:
                 stalled=stalled)
         return self._last
 
-    def _kernel_outcome(self, q: np.ndarray, step: np.ndarray, status: int) -> Outcome:
+    def _kernel_outcome(self, q: np.ndarray, step: np.ndarray) -> Outcome:
         """What the kernel's saturation on the position and speed bounds did (see
         :func:`~sjt_pin.constraints.saturate`), in the stage's terms."""
         dq = step / self._dt
-        scale = float(self._info[K.I_SCALE]) if status & K.SCALED else 1.0
+        scale = float(self._info[K.I_SCALE])  # (a user's rows may have set it: rows_step)
         pairs = []
         position, velocity = self.position_limit, self.velocity_limit
         at_position = np.zeros(dq.size, dtype=bool)

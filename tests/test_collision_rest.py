@@ -159,5 +159,7 @@ def test_the_rows_correct_a_saturated_step_as_the_whole_stage_does(panda, method
         info = fast.last
         both += info.task_scale < 1.0 and bool(info.active_rows)
         np.testing.assert_allclose(q_fast, q_whole, rtol=0.0, atol=1e-9)
+        # and each reports the step it commands: the whole step's scale, no joint held
+        assert abs(info.task_scale - whole.last.task_scale) < 1e-9
         q = q_fast
     assert both > 100  # saturated steps the rows corrected

@@ -200,8 +200,8 @@ Core core(int kind, Mat J, const double *e, const double *ff, int has_ff,
 
 /* saturation.c */
 void exact_position(const double *q, const double *work, double *step);
-void scaled_into_c(const double *a, const double *lo, const double *hi, const double *mask,
-                   Py_ssize_t n, double *zero, double *out);
+double scaled_into_c(const double *a, const double *lo, const double *hi, const double *mask,
+                     Py_ssize_t n, double *zero, double *out);
 void core_scaled(int kind, Mat J, const double *e, const double *ff, int has_ff,
                  const double *mask, double *work, double *step, double factor,
                  double *save);

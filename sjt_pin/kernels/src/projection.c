@@ -577,10 +577,14 @@ static int rows_step_c(Mat J, const double *q, Mat A, const double *b, const dou
     weighted_rows(J, sw, mask, step, dt, Jw, dq, moving);
     /* the box cut the kernel's step (saturate_c): the method's velocity scaled into it instead
      * of SNS's result (out as scratch) */
-    const double *held = box_lo - n;
+    double *held = work + (Py_ssize_t)work[P_CLAMPED];
     int cut = !(work[INFO + I_SCALE] >= 1.0);
     for (Py_ssize_t j = 0; j < n && !cut; j++) cut = held[j] != 0.0;
-    if (cut) scaled_into_c(method_velocity(work, m, n), box_lo, box_hi, mask, n, out, dq);
+    if (cut) {  /* what the step reports follows: that scale, no joint held */
+        work[INFO + I_SCALE] = scaled_into_c(method_velocity(work, m, n), box_lo, box_hi, mask,
+                                             n, out, dq);
+        for (Py_ssize_t j = 0; j < n; j++) held[j] = 0.0;
+    }
     for (Py_ssize_t j = 0; j < n; j++) {
         lo[j] = dmax(box_lo[j], lower[j]);
         hi[j] = dmin(box_hi[j], upper[j]);

@@ -50,15 +50,16 @@ static double task_scale_c(const double *a, const double *b, const double *lo,
 
 /* out = the velocity a (rad/s) scaled down as a whole into [lo, hi] on the joints of mask (0
  * on the others; the nearest point of the box when no scale fits): sns_c's first candidate,
- * continuous in a (constraints.scaled_into). zero: n doubles of scratch. */
-void scaled_into_c(const double *a, const double *lo, const double *hi, const double *mask,
-                   Py_ssize_t n, double *zero, double *out)
+ * continuous in a (constraints.scaled_into). zero: n doubles of scratch. Returns the scale. */
+double scaled_into_c(const double *a, const double *lo, const double *hi, const double *mask,
+                     Py_ssize_t n, double *zero, double *out)
 {
     Py_ssize_t k;
     for (Py_ssize_t j = 0; j < n; j++) zero[j] = 0.0;
     double s = dmax(task_scale_c(a, zero, lo, hi, mask, n, &k), 0.0);
     for (Py_ssize_t j = 0; j < n; j++)
         out[j] = mask[j] != 0.0 ? dmin(dmax(s * a[j], lo[j]), hi[j]) : 0.0;
+    return s;
 }
 
 /* whether the free joints' weighted task columns (the first error_rows rows), each scaled to
