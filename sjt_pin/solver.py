@@ -361,8 +361,9 @@ class Solver:
                 step = self._slow(status, q, J, e, ff, [target] if targets is None else targets)
             # 4. integrate on the manifold; the record of the step (StepInfo) is built on demand
             self._record, self._last = (J, e, step, status, q, ff), None
-            if self._tracks_motion:
-                self._follow_motion(step)
+            if self._tracks_motion:  # the velocity and acceleration it commands, in place
+                motion = self._motion
+                K.follow_motion(step, self._dt, motion.dq, motion.ddq)
             self._returned = q_next = _integrate(self._model, q, step)
             return q_next
         finally:
@@ -373,15 +374,6 @@ class Solver:
             f"{type(self).__name__} is being stepped by another thread: a solver's buffers "
             "and pin.Data are one thread's; give each thread its own solver "
             "(copy.deepcopy(solver) makes one in the same state)")
-
-    def _follow_motion(self, step: np.ndarray) -> None:
-        """The commanded velocity and acceleration of this step (the state of the stage in
-        Python)."""
-        motion, dt = self._motion, self._dt
-        dq = step / dt
-        np.subtract(dq, motion.dq, out=motion.ddq)
-        motion.ddq /= dt
-        motion.dq[:] = dq
 
     def _slow(self, status, q, J, e, ff, targets) -> np.ndarray:
         """What the fast path skips: errors, the stability check, the escape's state (its

@@ -350,3 +350,17 @@ def test_jlog6_inverse_is_pinocchio_s(angle):
         G = np.zeros((6, 6))
         jlog6_inverse(pin.log6(N).vector, G)
         np.testing.assert_allclose(G, pin.Jlog6(N.inverse()), rtol=0, atol=1e-12)
+
+
+def test_follow_motion_is_the_numpy_formula_bitwise(rng):
+    """follow_motion(step, dt, dq, ddq): dq = step / dt and ddq = (dq_new - dq_old) / dt,
+    the numbers numpy's division gives (the motion state a user's limits read)."""
+    from sjt_pin.kernels import follow_motion
+
+    step, dq, ddq, dt = rng.normal(size=9) * 1e-3, rng.normal(size=9), np.zeros(9), 1e-3
+    expected_dq = step / dt
+    expected_ddq = (expected_dq - dq) / dt
+    follow_motion(step, dt, dq, ddq)
+    assert np.array_equal(dq, expected_dq) and np.array_equal(ddq, expected_ddq)
+    with pytest.raises(ValueError, match="one length"):
+        follow_motion(step, dt, dq[:3], ddq)

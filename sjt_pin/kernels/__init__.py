@@ -26,6 +26,8 @@ against the numpy reference formulas of :mod:`sjt_pin.mappings` and against Pino
   ``query_rows``: its exact distance queries (through Pinocchio's ``computeDistance``) and rows;
   ``near_pairs``: the pairs it must query, or whether its broad phase must run again;
 - ``frame_velocity``, ``position_rows``, ``rotation_defect``: the tasks' small transforms;
+- ``follow_motion(step, dt, dq, ddq)``: the velocity and acceleration a step commands (the
+  motion state a user's limits read);
 - ``project_rows(dq, Jw, A, b, lower, upper, moving, out)``: the constraint stage's smallest
   correction onto general rows and a box (:func:`sjt_pin.constraints.project`), on its dual by
   ``nonnegative_qp(Q, r, y)`` (Lawson and Hanson's NNLS, as
@@ -42,6 +44,7 @@ against the numpy reference formulas of :mod:`sjt_pin.mappings` and against Pino
 from ._kernels import (  # noqa: F401
     cholesky_solve,
     damper_rows,
+    follow_motion,
     frame_velocity,
     jlog6_inverse,
     least_squares_step,

@@ -222,6 +222,7 @@ int step_c(int kind, Mat J, const double *e, const double *ff, const double *q,
            double *work, double *step);
 PyObject *py_transpose_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
 PyObject *py_least_squares_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
+PyObject *py_follow_motion(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
 
 /* search.c */
 PyObject *py_search_iteration(PyObject *self, PyObject *const *args, Py_ssize_t nargs);

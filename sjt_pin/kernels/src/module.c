@@ -24,6 +24,9 @@ static PyMethodDef methods[] = {
     {"least_squares_step", (PyCFunction)(void (*)(void))py_least_squares_step, METH_FASTCALL,
      "least_squares_step(J, e, ff, q, work, step) -> status: one step of the pseudoinverse "
      "(eq. 8) or damped least-squares CLIK law, then the limits."},
+    {"follow_motion", (PyCFunction)(void (*)(void))py_follow_motion, METH_FASTCALL,
+     "follow_motion(step, dt, dq, ddq): the velocity step / dt and acceleration (its change "
+     "over dt) a step commands, into dq and ddq in place."},
     {"cholesky_solve", (PyCFunction)(void (*)(void))py_cholesky_solve, METH_FASTCALL,
      "cholesky_solve(A, shift, rhs, out) -> bool: out = (A + shift I)^-1 rhs (A overwritten)."},
     {"loop_bound", (PyCFunction)(void (*)(void))py_loop_bound, METH_FASTCALL,

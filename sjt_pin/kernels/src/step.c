@@ -101,3 +101,34 @@ PyObject *py_least_squares_step(PyObject *self, PyObject *const *args, Py_ssize_
 {
     return step_wrapper(LEAST_SQUARES, args, nargs, "least_squares_step");
 }
+
+/* follow_motion(step, dt, dq, ddq): the motion state a step commands, in place: its velocity
+ * dq = step / dt (rad/s) and acceleration ddq = (dq - the previous dq) / dt (rad/s^2), as
+ * Solver._follow_motion computes them (the state a user's limits read next step) */
+PyObject *py_follow_motion(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (!nargs_ok(nargs, 4, "follow_motion")) return NULL;
+    double dt = PyFloat_AsDouble(args[1]);
+    if (dt == -1.0 && PyErr_Occurred()) return NULL;
+    Arg step = {0}, dq = {0}, ddq = {0};
+    PyObject *result = NULL;
+    if (acquire(args[0], &step, 0, 1, "step") || acquire(args[2], &dq, 1, 1, "dq")
+        || acquire(args[3], &ddq, 1, 1, "ddq"))
+        goto done;
+    double *s = vec(&step, "step"), *v = out_vec(&dq, "dq"), *a = out_vec(&ddq, "ddq");
+    if (!s || !v || !a) goto done;
+    Py_ssize_t n = length(&step);
+    if (length(&dq) != n || length(&ddq) != n) {
+        PyErr_SetString(PyExc_ValueError, "follow_motion: step, dq and ddq must have one length");
+        goto done;
+    }
+    for (Py_ssize_t j = 0; j < n; j++) {
+        double velocity = s[j] / dt;
+        a[j] = (velocity - v[j]) / dt;
+        v[j] = velocity;
+    }
+    result = Py_NewRef(Py_None);
+done:
+    release(&step); release(&dq); release(&ddq);
+    return result;
+}
