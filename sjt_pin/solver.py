@@ -405,13 +405,13 @@ class Solver:
                 if run > 1.0:  # a window ended: the kernel counts the next one
                     work[K.P_STALL_RUN] = 0.0
                 work[K.P_STALL_WAIT] = escape.wait
-            velocity = escape.velocity(float(self._info[K.I_REGULAR]), dt,
-                                       float(self._info[K.I_EW_SQ]))
+            velocity = None if not escape.active else escape.velocity(
+                float(self._info[K.I_REGULAR]), dt, float(self._info[K.I_EW_SQ]))
             if velocity is None:
                 if work[K.P_ESCAPING]:  # an escape ended: a stall after it is a new run
                     work[K.P_STALL_RUN] = -1.0
-                work[K.P_ESCAPING] = 0.0
-                self._escape_velocity[:] = 0.0
+                    work[K.P_ESCAPING] = 0.0
+                    self._escape_velocity[:] = 0.0  # (zero while no escape runs)
             else:  # the kernel adds it, within the limits, from the next step on
                 self._work[K.P_ESCAPING] = 1.0
                 self._escape_velocity[:] = velocity
