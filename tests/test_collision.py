@@ -231,6 +231,24 @@ def test_loading_errors(panda):
         CollisionLimit(panda, margin=0.05, influence=0.02)
 
 
+def test_a_mesh_qhull_cannot_triangulate_gets_a_joggled_hull():
+    """Centauro's pelvis mesh: qhull refuses its triangulated hull ("Qt"); the limit takes the
+    hull of the joggled points instead (it was a CollisionError), which holds every vertex of
+    the mesh within 1e-9 m (on the inner side of every face plane of the hull's points)."""
+    centauro = sjt.Robot.from_example("centauro", ee_frame="arm1_6")
+    pelvis = next(g for g in centauro.collision_model.geometryObjects if g.name == "pelvis_0")
+    with pytest.raises(Exception):  # noqa: B017 - qhull's error is a plain RuntimeError
+        pelvis.geometry.clone().buildConvexHull(False, "Qt")
+    limit = CollisionLimit(centauro)
+    hull = next(g.geometry for g in limit.geometry.geometryObjects if g.name == "pelvis_0")
+    assert isinstance(hull, coal.ConvexBase)
+    from scipy.spatial import ConvexHull
+
+    faces = ConvexHull(np.array(hull.points())).equations  # outward normal n, offset c
+    vertices = np.array(pelvis.geometry.vertices())
+    assert np.max(vertices @ faces[:, :3].T + faces[:, 3]) < 1e-9
+
+
 # -- broad phase --------------------------------------------------------------------------
 @pytest.mark.parametrize("name", ["panda", "ur5"])
 def test_broad_phase_never_drops_a_pair_within_influence(name, panda, ur5):

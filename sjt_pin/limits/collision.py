@@ -159,13 +159,23 @@ def _to_hulls(geom: pin.GeometryModel) -> None:
     for g in geom.geometryObjects:
         shape = g.geometry
         if isinstance(shape, coal.BVHModelBase) and not isinstance(shape, coal.ConvexBase):
-            mesh = shape.clone()
-            try:
-                mesh.buildConvexHull(False, "Qt")
-            except Exception as exc:  # noqa: BLE001 - qhull's errors are plain exceptions
-                raise CollisionError(f"collision mesh {g.name!r}: no convex hull ({exc}); "
-                                     "pass convex=False to use the mesh itself") from exc
-            g.geometry = mesh.convex
+            g.geometry = _hull(shape, g.name)
+
+
+def _hull(mesh, name: str):
+    """The convex hull of ``mesh`` (qhull through coal): triangulated ("Qt"), or, where qhull
+    refuses that (Centauro's pelvis), of its points joggled ("QJ": qhull's default joggle, a
+    relative 1e-11 or so of the mesh's size, far below any margin)."""
+    error = None
+    for options in ("Qt", "QJ"):
+        copy = mesh.clone()
+        try:
+            copy.buildConvexHull(False, options)
+            return copy.convex
+        except Exception as exc:  # noqa: BLE001 - qhull's errors are plain exceptions
+            error = exc
+    raise CollisionError(f"collision mesh {name!r}: no convex hull ({error}); pass "
+                         "convex=False to use the mesh itself") from error
 
 
 class CollisionLimit(Limit):
