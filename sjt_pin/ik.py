@@ -36,7 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from . import kernels as K
+from . import kernels
 from .joint_ranges import outside
 from .kernels import (
     CONVERGED,
@@ -113,15 +113,15 @@ class Search:
         self.stack = stack = solver.stack.copy()
         method = solver.method
         m, n = stack.dim, robot.nv
-        self.layout = layout = K.Layout(m, n, 0)
+        self.layout = layout = kernels.Layout(m, n, 0)
         self.work = work = layout.allocate()
         layout.sqrt_weight(work)[:] = stack.sqrt_weight
-        work[K.P_IDENTITY_ROWS] = stack.identity_rows
+        work[kernels.P_IDENTITY_ROWS] = stack.identity_rows
         layout.joint_mask(work)[:] = stack.chain
-        work[K.P_MU] = MU  # the search's own damping: DLS's tracking damping would stall it
-        work[K.P_COL_TOL] = getattr(method, "column_tol", COLUMN_TOL)
-        work[K.P_LENGTH2] = getattr(method, "length", 0.0) ** 2
-        work[K.P_SCALED] = 1.0 if getattr(method, "scaled", False) else 0.0
+        work[kernels.P_MU] = MU  # the search's own damping: DLS's tracking damping would stall it
+        work[kernels.P_COL_TOL] = getattr(method, "column_tol", COLUMN_TOL)
+        work[kernels.P_LENGTH2] = getattr(method, "length", 0.0) ** 2
+        work[kernels.P_SCALED] = 1.0 if getattr(method, "scaled", False) else 0.0
         limit = solver.position_limit
         self.limits = (np.zeros((4, 0)) if limit is None else
                        np.vstack([limit.q_index, limit.v_index, limit.lower, limit.upper])

@@ -41,7 +41,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from . import kernels as K
+from . import kernels
 from .constraints import Bounds, Box, ConstraintStage, Outcome, active_limits
 from .escape import SaddleEscape
 from .exceptions import ConcurrentStepError
@@ -69,8 +69,8 @@ _STAGE = 64
 #: status bits that need Python: an error to raise, a stall for the escape to look at, a
 #: user's limit for the stage in Python (joints held at the position and speed bounds, a task
 #: scaled for them: the kernel's own work)
-_PYTHON = K.NON_FINITE | K.STALLED | _STAGE
-_I_SCALE = K.I_SCALE  # (read per step by task_scale)
+_PYTHON = kernels.NON_FINITE | kernels.STALLED | _STAGE
+_I_SCALE = kernels.I_SCALE  # (read per step by task_scale)
 _integrate = pin.integrate
 
 #: whether solvers made from now on run the acceleration/jerk stage compiled in their step
@@ -195,12 +195,12 @@ class Solver:
         # the kernel tests the position and speed box, so that a step within them costs nothing
         # more; beyond them (or with limits it cannot test) the stage takes over
         box = self.position_limit if self._kernel_bounds else None
-        self._layout = layout = K.Layout(stack.dim, n, 0 if box is None else box.q_index.size,
+        self._layout = layout = kernels.Layout(stack.dim, n, 0 if box is None else box.q_index.size,
                                          smooth=self._compiled_smooth)
         self._work = work = layout.allocate()
         self._info = layout.info(work)
         layout.sqrt_weight(work)[:] = stack.sqrt_weight
-        work[K.P_IDENTITY_ROWS] = stack.identity_rows  # a posture task's: solved linear in n
+        work[kernels.P_IDENTITY_ROWS] = stack.identity_rows  # a posture task's: solved linear in n
         self._mask = layout.joint_mask(work)
         self._mask[:] = stack.chain
         if box is not None:
@@ -222,31 +222,31 @@ class Solver:
         self._checked_rows: tuple[int, tuple | None] = (-1, None)
         self._no_rows = (np.zeros((0, n)), np.zeros(0))
         self._no_bounds = (np.full(n, -np.inf), np.full(n, np.inf))
-        work[K.P_ERROR_ROWS] = stack.target_dim
-        work[K.P_STALL_RATIO] = -1.0 if self.escape is None else SaddleEscape.STALL_RATIO
+        work[kernels.P_ERROR_ROWS] = stack.target_dim
+        work[kernels.P_STALL_RATIO] = -1.0 if self.escape is None else SaddleEscape.STALL_RATIO
         # converged, not stalled: |e_w| below ERROR_FLOOR times the tasks' length (unit-free)
-        work[K.P_STALL_ERROR] = (SaddleEscape.ERROR_FLOOR
+        work[kernels.P_STALL_ERROR] = (SaddleEscape.ERROR_FLOOR
                                   * tasks_length(robot, stack.tasks)) ** 2
 
-    def _fill_smooth(self, layout: K.Layout, work: np.ndarray) -> None:
+    def _fill_smooth(self, layout: kernels.Layout, work: np.ndarray) -> None:
         """The compiled acceleration/jerk stage's limits; the solver's motion state becomes
         views on the kernel's (it updates them on every step)."""
         accel, jerk = self.acceleration_limit, self.jerk_limit
         assert accel is not None  # the compiled stage is for acceleration limits
         n = self.robot.nv
         jerks = np.full(n, np.inf) if jerk is None else jerk.limits
-        work[K.P_JERK] = 0.0 if jerk is None else 1.0
-        for part, values in ((K.SM_ACC, accel.limits), (K.SM_JERK, jerks),
-                             (K.SM_JERK_SPEED, np.full(n, np.inf) if jerk is None
+        work[kernels.P_JERK] = 0.0 if jerk is None else 1.0
+        for part, values in ((kernels.SM_ACC, accel.limits), (kernels.SM_JERK, jerks),
+                             (kernels.SM_JERK_SPEED, np.full(n, np.inf) if jerk is None
                               else jerk.speeds),
-                             (K.SM_BRAKE_ACC, (1.0 - BRAKING_RESERVE) * accel.limits),
-                             (K.SM_BRAKE_JERK, (1.0 - BRAKING_RESERVE) * jerks)):
+                             (kernels.SM_BRAKE_ACC, (1.0 - BRAKING_RESERVE) * accel.limits),
+                             (kernels.SM_BRAKE_JERK, (1.0 - BRAKING_RESERVE) * jerks)):
             layout.smooth_part(work, part)[:] = values
-        self._motion.dq = layout.smooth_part(work, K.SM_DQ)
-        self._motion.ddq = layout.smooth_part(work, K.SM_DDQ)
+        self._motion.dq = layout.smooth_part(work, kernels.SM_DQ)
+        self._motion.ddq = layout.smooth_part(work, kernels.SM_DDQ)
         #: the state (velocity, then acceleration: adjacent parts) and its copy from before
         #: the step, which the user's limits and a correction of the step start from
-        start = layout.smooth + K.SM_DQ * n
+        start = layout.smooth + kernels.SM_DQ * n
         self._state = work[start:start + 2 * n]
         self._before = np.zeros(2 * n)
         #: the user's limits' bounds and rows of this step (before its kernel call)
@@ -287,9 +287,9 @@ class Solver:
         """Write everything that depends on the gain and dt into the kernel's parameters."""
         stack, gain, work = self.stack, self._gain, self._work
         self.method.configure(work, gain, self._dt, stack.n_chain)
-        work[K.P_FF_MODE] = self.method.feedforward_mode()
+        work[kernels.P_FF_MODE] = self.method.feedforward_mode()
         self._layout.gains(work)[:] = gain.rows(stack.target_dim, stack.posture_dim)
-        self._stability.arm(gain.mode == K.GAIN_FIXED, gain.largest * self._dt)
+        self._stability.arm(gain.mode == kernels.GAIN_FIXED, gain.largest * self._dt)
         self._motion.dt = self._dt
         self._update_slow()
 
@@ -306,8 +306,8 @@ class Solver:
         self._motion.ddq[:] = 0.0
         if self.escape is not None:
             self.escape.reset()
-        self._work[K.P_ESCAPING] = 0.0
-        self._work[K.P_STALL_RUN], self._work[K.P_STALL_WAIT] = -1.0, np.inf
+        self._work[kernels.P_ESCAPING] = 0.0
+        self._work[kernels.P_STALL_RUN], self._work[kernels.P_STALL_WAIT] = -1.0, np.inf
         self._escape_velocity[:] = 0.0
 
     # -- one control period --------------------------------------------------------------------
@@ -333,7 +333,8 @@ class Solver:
             # the array the last step returned is checked: a loop that feeds it back skips this
             if q is not self._returned and (
                     not (type(q) is np.ndarray and q.shape == self._q_shape and q.dtype == _F64)
-                    or (self._units and not K.unit_defect(q, self._unit_blocks) <= _UNIT_EXACT)):
+                    or (self._units
+                        and not kernels.unit_defect(q, self._unit_blocks) <= _UNIT_EXACT)):
                 q = self.robot.check_q(q)
             # 1. the task rows at q
             stack = self.stack
@@ -350,7 +351,7 @@ class Solver:
             # 2. gain, mapping, escape velocity and limits, in one compiled call
             if (ff is not None) != self._ff_on:  # the feed-forward starts or stops
                 self._ff_on = ff is not None
-                self._work[K.P_HAS_FF] = float(self._ff_on)
+                self._work[kernels.P_HAS_FF] = float(self._ff_on)
             if ff is None:
                 ff = self._no_ff
             step = self._step
@@ -363,7 +364,7 @@ class Solver:
             self._record, self._last = (J, e, step, status, q, ff), None
             if self._tracks_motion:  # the velocity and acceleration it commands, in place
                 motion = self._motion
-                K.follow_motion(step, self._dt, motion.dq, motion.ddq)
+                kernels.follow_motion(step, self._dt, motion.dq, motion.ddq)
             self._returned = q_next = _integrate(self._model, q, step)
             return q_next
         finally:
@@ -378,7 +379,7 @@ class Solver:
     def _slow(self, status, q, J, e, ff, targets) -> np.ndarray:
         """What the fast path skips: errors, the stability check, the escape's state (its
         velocity for the next step), limits beyond the built-in ones."""
-        if status & K.NON_FINITE:
+        if status & kernels.NON_FINITE:
             self._raise_non_finite(q, targets)
         if self._first:
             self._first = False
@@ -389,7 +390,7 @@ class Solver:
             self._warn_idle_outside(q)
         if self._stability.armed:
             self._stability.check(self.stack.sqrt_weight[:, None] * J * self.stack.chain,
-                                  float(self._info[K.I_TRACE]), self._gain.largest, self._dt)
+                                  float(self._info[kernels.I_TRACE]), self._gain.largest, self._dt)
         step, dt = self._step, self._dt
         if self._staged or status & _STAGE:  # with this step's escape velocity, as the
             # kernel's step has it
@@ -398,22 +399,22 @@ class Solver:
         self._escaped = (self._count, escape is not None and escape.active)
         if escape is not None:
             work = self._work
-            if status & K.STALLED and not escape.active:
-                run = float(work[K.P_STALL_RUN])
-                if escape.observe(run, float(self._info[K.I_EW_SQ])):
+            if status & kernels.STALLED and not escape.active:
+                run = float(work[kernels.P_STALL_RUN])
+                if escape.observe(run, float(self._info[kernels.I_EW_SQ])):
                     escape.test(q, self._weighted_rows(targets))
                 if run > 1.0:  # a window ended: the kernel counts the next one
-                    work[K.P_STALL_RUN] = 0.0
-                work[K.P_STALL_WAIT] = escape.wait
+                    work[kernels.P_STALL_RUN] = 0.0
+                work[kernels.P_STALL_WAIT] = escape.wait
             velocity = None if not escape.active else escape.velocity(
-                float(self._info[K.I_REGULAR]), dt, float(self._info[K.I_EW_SQ]))
+                float(self._info[kernels.I_REGULAR]), dt, float(self._info[kernels.I_EW_SQ]))
             if velocity is None:
-                if work[K.P_ESCAPING]:  # an escape ended: a stall after it is a new run
-                    work[K.P_STALL_RUN] = -1.0
-                    work[K.P_ESCAPING] = 0.0
+                if work[kernels.P_ESCAPING]:  # an escape ended: a stall after it is a new run
+                    work[kernels.P_STALL_RUN] = -1.0
+                    work[kernels.P_ESCAPING] = 0.0
                     self._escape_velocity[:] = 0.0  # (zero while no escape runs)
             else:  # the kernel adds it, within the limits, from the next step on
-                self._work[K.P_ESCAPING] = 1.0
+                self._work[kernels.P_ESCAPING] = 1.0
                 self._escape_velocity[:] = velocity
         self._update_slow()
         return step
@@ -447,7 +448,7 @@ class Solver:
         np.copyto(before, self._state)
         parts = self._user_parts = user.hard_parts(self.stack.kinematics, motion)
         status = self._method_step(J, e, ff, q, work, step)
-        if status & K.NON_FINITE:
+        if status & kernels.NON_FINITE:
             return status
         if parts is None:
             return status | _STAGE
@@ -458,7 +459,7 @@ class Solver:
         if lower is None:  # (lower and upper come together)
             upper = None
         try:
-            done = K.smooth_rows_step(J, q, A, b, lower, upper, before, work, step)
+            done = kernels.smooth_rows_step(J, q, A, b, lower, upper, before, work, step)
         except ValueError:  # rows or bounds that do not fit or hold NaN: name the limit
             user.check(self.stack.kinematics, motion)
             raise
@@ -502,7 +503,7 @@ class Solver:
             return True
         A, b = (rows[0], rows[1]) if rows is not None else self._no_rows
         try:
-            done = K.rows_step(J, q, A, b, self._no_bounds[0] if lower is None else lower,
+            done = kernels.rows_step(J, q, A, b, self._no_bounds[0] if lower is None else lower,
                                self._no_bounds[1] if upper is None else upper, self._work,
                                step)
         except ValueError:  # rows or bounds that do not fit or hold NaN: name the limit
@@ -518,8 +519,8 @@ class Solver:
         on the joints it frees, with a task velocity less J times the held joints' velocity."""
         raw, layout = self._raw_work, self._layout
         np.copyto(raw, self._work)
-        raw[K.P_BOX_COUNT] = 0.0
-        raw[K.P_SMOOTH] = 0.0  # the method alone
+        raw[kernels.P_BOX_COUNT] = 0.0
+        raw[kernels.P_SMOOTH] = 0.0  # the method alone
         layout.inverse_speeds(raw)[:] = 0.0
         return _MethodSolve(self, q, J, e, ff if self._ff_on else np.zeros(self.stack.dim))
 
@@ -560,8 +561,8 @@ class Solver:
         feedback = dq - dq_ff
         stack = self.stack
         k = float(np.mean(self._layout.gains(self._work)[:stack.target_dim]))
-        if self._gain.mode != K.GAIN_FIXED:
-            k *= float(self._info[K.I_GAIN])
+        if self._gain.mode != kernels.GAIN_FIXED:
+            k *= float(self._info[kernels.I_GAIN])
         if not k > 0.0:
             return dq, 1.0
         delta = feedback / k
@@ -608,7 +609,7 @@ class Solver:
     def error_norm(self) -> float:
         """|e| of the last step (task units; NaN before the first), without building
         :attr:`last`: the cheap test of a control loop."""
-        return math.sqrt(self._info[K.I_E_SQ]) if self._record is not None else math.nan
+        return math.sqrt(self._info[kernels.I_E_SQ]) if self._record is not None else math.nan
 
     @property
     def error(self) -> np.ndarray:
@@ -639,14 +640,14 @@ class Solver:
             info, stack = self._info, self.stack
             J, e, step, status, q, ff = self._record
             gain = self._gain
-            k = gain.argument if isinstance(gain, FixedGain) else float(info[K.I_GAIN])
+            k = gain.argument if isinstance(gain, FixedGain) else float(info[kernels.I_GAIN])
             Jw = stack.sqrt_weight[:, None] * J * stack.chain
             alpha = self.method.scaling_factors(Jw)
             escaped = self._escaped[1] and self._escaped[0] == self._count
             outcome = self._outcome if self._outcome_count == self._count else None
-            if outcome is None and self._compiled_smooth and not status & K.NON_FINITE:
+            if outcome is None and self._compiled_smooth and not status & kernels.NON_FINITE:
                 outcome = self._smooth_outcome()
-            elif outcome is None and status & (K.CLAMPED | K.SCALED):
+            elif outcome is None and status & (kernels.CLAMPED | kernels.SCALED):
                 outcome = self._kernel_outcome(q, step)
             if outcome is None:
                 outcome = Outcome(step / self._dt)
@@ -660,10 +661,10 @@ class Solver:
             rows, sw = stack.target_dim, stack.sqrt_weight[:stack.target_dim]
             stalled = not escaped and makes_no_progress(
                 Jw[:rows], sw * e[:rows], step / self._dt, sw * ff[:rows],
-                float(self._work[K.P_STALL_ERROR]))
+                float(self._work[kernels.P_STALL_ERROR]))
             self._last = StepInfo(
-                error=np.array(self.error, dtype=float), error_norm=math.sqrt(info[K.I_E_SQ]),
-                dq=step / self._dt, gain=k, loop_bound=float(info[K.I_LOOP]),
+                error=np.array(self.error, dtype=float), error_norm=math.sqrt(info[kernels.I_E_SQ]),
+                dq=step / self._dt, gain=k, loop_bound=float(info[kernels.I_LOOP]),
                 pose=stack.poses(), alpha=alpha, escaped=escaped,
                 clamped=clamped, clamped_joints=names, task_scale=float(outcome.scale),
                 active_limits=outcome.active, active_rows=outcome.rows,
@@ -677,7 +678,7 @@ class Solver:
         """What the kernel's saturation on the position and speed bounds did (see
         :func:`~sjt_pin.constraints.saturate`), in the stage's terms."""
         dq = step / self._dt
-        scale = float(self._info[K.I_SCALE])  # (a user's rows may have set it: rows_step)
+        scale = float(self._info[kernels.I_SCALE])  # (a user's rows may have set it: rows_step)
         pairs = []
         position, velocity = self.position_limit, self.velocity_limit
         at_position = np.zeros(dq.size, dtype=bool)
@@ -704,16 +705,16 @@ class Solver:
         def part(k):
             return layout.smooth_part(work, k)
 
-        hard = Bounds(part(K.SM_HARD_LO), part(K.SM_HARD_HI),
-                      part(K.SM_HARD_LO_BY).astype(np.int64),
-                      part(K.SM_HARD_HI_BY).astype(np.int64))
-        soft = Bounds(part(K.SM_SOFT_LO), part(K.SM_SOFT_HI),
-                      part(K.SM_SOFT_LO_BY).astype(np.int64),
-                      part(K.SM_SOFT_HI_BY).astype(np.int64))
-        dq = part(K.SM_OUT).copy()
-        active = active_limits(dq, Box(hard, soft), K.LIMIT_NAMES, self._v_names,
-                               part(K.SM_DESIRED))
-        torn = np.flatnonzero(part(K.SM_TORN))
+        hard = Bounds(part(kernels.SM_HARD_LO), part(kernels.SM_HARD_HI),
+                      part(kernels.SM_HARD_LO_BY).astype(np.int64),
+                      part(kernels.SM_HARD_HI_BY).astype(np.int64))
+        soft = Bounds(part(kernels.SM_SOFT_LO), part(kernels.SM_SOFT_HI),
+                      part(kernels.SM_SOFT_LO_BY).astype(np.int64),
+                      part(kernels.SM_SOFT_HI_BY).astype(np.int64))
+        dq = part(kernels.SM_OUT).copy()
+        active = active_limits(dq, Box(hard, soft), kernels.LIMIT_NAMES, self._v_names,
+                               part(kernels.SM_DESIRED))
+        torn = np.flatnonzero(part(kernels.SM_TORN))
         parts = self._user_parts
         if (self._checked_rows[0] == self._count and parts is not None and parts[0] is not None
                 and self._user_stage is not None):
@@ -726,13 +727,13 @@ class Solver:
                 active += tuple(pair for pair in active_limits(dq, Box(user.hard), names,
                                                                 self._v_names)
                                 if pair not in active)
-        return Outcome(dq, float(self._info[K.I_SCALE]), self._clamped != 0.0, active,
+        return Outcome(dq, float(self._info[kernels.I_SCALE]), self._clamped != 0.0, active,
                        conflict=tuple(self._v_names[j] for j in torn))
 
     # -- safeguards ----------------------------------------------------------------------------
     def _raise_non_finite(self, q: np.ndarray, targets) -> None:
         self.robot.check_q(q)  # names q if it holds NaN or inf
-        if not math.isfinite(self._info[K.I_E_SQ]):
+        if not math.isfinite(self._info[kernels.I_E_SQ]):
             raise_non_finite_targets(targets)
         raise ValueError("target_velocity contains NaN or inf (the feed-forward is not finite)")
 
@@ -766,19 +767,19 @@ class Solver:
         arguments = self.options.replace(gain=self._gain, dt=self._dt,
                                          check_stability=self._stability.enabled)
         state = {"motion": (self._motion.dq.copy(), self._motion.ddq.copy()),
-                 "escape": self.escape, "escaping": float(self._work[K.P_ESCAPING]),
+                 "escape": self.escape, "escaping": float(self._work[kernels.P_ESCAPING]),
                  "escape_velocity": self._escape_velocity.copy(), "warned": self._stability.warned,
-                 "count": self._count, "stall": (float(self._work[K.P_STALL_RUN]),
-                                                  float(self._work[K.P_STALL_WAIT]))}
+                 "count": self._count, "stall": (float(self._work[kernels.P_STALL_RUN]),
+                                                  float(self._work[kernels.P_STALL_WAIT]))}
         return (_rebuild, (type(self), self.robot, self.method, arguments), state)
 
     def __setstate__(self, state: dict) -> None:
         self._motion.dq[:], self._motion.ddq[:] = state["motion"]
         self.escape = state["escape"]
-        self._work[K.P_ESCAPING] = state["escaping"]
+        self._work[kernels.P_ESCAPING] = state["escaping"]
         self._escape_velocity[:] = state["escape_velocity"]
         self._stability.warned, self._count = state["warned"], state["count"]
-        self._work[K.P_STALL_RUN], self._work[K.P_STALL_WAIT] = state["stall"]
+        self._work[kernels.P_STALL_RUN], self._work[kernels.P_STALL_WAIT] = state["stall"]
         self._configure()
 
     def __repr__(self) -> str:
@@ -805,15 +806,15 @@ class _MethodSolve:
         scale = self.feedback if scale is None else scale
         v = self.ff_in if held is None else self.ff_in - self.J @ held
         layout.joint_mask(raw)[:] = solver.stack.chain * free
-        raw[K.P_HAS_FF] = 1.0
+        raw[kernels.P_HAS_FF] = 1.0
         if scale != 1.0:  # a fixed gain of scale times the one this step used
-            raw[K.P_GAIN_MODE] = K.GAIN_FIXED
+            raw[kernels.P_GAIN_MODE] = kernels.GAIN_FIXED
             gains = layout.gains(raw)
             gains[:] = layout.gains(work) * scale
-            if solver._gain.mode != K.GAIN_FIXED:
-                gains *= float(solver._info[K.I_GAIN])
+            if solver._gain.mode != kernels.GAIN_FIXED:
+                gains *= float(solver._info[kernels.I_GAIN])
         solver._method_step(self.J, self.e, v, self.q, raw, self.out)
-        raw[K.P_GAIN_MODE] = work[K.P_GAIN_MODE]
+        raw[kernels.P_GAIN_MODE] = work[kernels.P_GAIN_MODE]
         layout.gains(raw)[:] = layout.gains(work)
         return self.out / solver._dt
 

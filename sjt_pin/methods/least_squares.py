@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import math
 
-from .. import kernels as K
+from .. import kernels
 from ..tasks import OrientationTask, PoseTask
 from ..validation import real_number
 from .base import Method
@@ -48,7 +48,7 @@ class LeastSquaresMethod(Method):
             update (the paper's baselines).
     """
 
-    kernel = staticmethod(K.least_squares_step)
+    kernel = staticmethod(kernels.least_squares_step)
     damping = 0.0
     rcond = 0.0
 
@@ -73,9 +73,9 @@ class LeastSquaresMethod(Method):
 
     def configure(self, work, gain, dt, n_chain):
         super().configure(work, gain, dt, n_chain)
-        work[K.P_MU] = self.damping
-        work[K.P_RCOND] = self.rcond
-        work[K.P_LM] = self.lm_weight * self.length  # w L (m): the kernel multiplies |e_w|
+        work[kernels.P_MU] = self.damping
+        work[kernels.P_RCOND] = self.rcond
+        work[kernels.P_LM] = self.lm_weight * self.length  # w L (m): the kernel multiplies |e_w|
 
     def bound(self, n_chain):
         return 1.0
