@@ -477,6 +477,15 @@ done:
     return result;
 }
 
+/* A, b and (when bounded) lower, upper: a rows kernel's arguments 2 to 5, acquired in that
+ * order; nonzero with the error set when one is not a float64 array of its rank */
+static int acquire_rows(PyObject *const *args, int bounded, Arg *A, Arg *b, Arg *lo, Arg *hi)
+{
+    return acquire(args[2], A, 0, 2, "A") || acquire(args[3], b, 0, 1, "b")
+           || (bounded && (acquire(args[4], lo, 0, 1, "lower")
+                           || acquire(args[5], hi, 0, 1, "upper")));
+}
+
 /* project_rows(dq, Jw, A, b, lower, upper, moving, out) -> int */
 PyObject *py_project_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
@@ -484,9 +493,8 @@ PyObject *py_project_rows(PyObject *self, PyObject *const *args, Py_ssize_t narg
     Arg dq = {0}, Jw = {0}, A = {0}, b = {0}, lo = {0}, hi = {0}, mv = {0}, out = {0};
     PyObject *result = NULL;
     if (acquire(args[0], &dq, 0, 1, "dq") || acquire(args[1], &Jw, 0, 2, "Jw")
-        || acquire(args[2], &A, 0, 2, "A") || acquire(args[3], &b, 0, 1, "b")
-        || acquire(args[4], &lo, 0, 1, "lower") || acquire(args[5], &hi, 0, 1, "upper")
-        || acquire(args[6], &mv, 0, 1, "moving") || acquire(args[7], &out, 1, 1, "out"))
+        || acquire_rows(args, 1, &A, &b, &lo, &hi) || acquire(args[6], &mv, 0, 1, "moving")
+        || acquire(args[7], &out, 1, 1, "out"))
         goto done;
     Mat Jm = mat(&Jw), Am = mat(&A);
     Py_ssize_t n = length(&dq);
@@ -632,9 +640,8 @@ PyObject *py_rows_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     Arg J = {0}, q = {0}, A = {0}, b = {0}, lo = {0}, hi = {0}, work = {0}, step = {0};
     PyObject *result = NULL;
     if (acquire(args[0], &J, 0, 2, "J") || acquire(args[1], &q, 0, 1, "q")
-        || acquire(args[2], &A, 0, 2, "A") || acquire(args[3], &b, 0, 1, "b")
-        || acquire(args[4], &lo, 0, 1, "lower") || acquire(args[5], &hi, 0, 1, "upper")
-        || acquire(args[6], &work, 1, 1, "work") || acquire(args[7], &step, 1, 1, "step"))
+        || acquire_rows(args, 1, &A, &b, &lo, &hi) || acquire(args[6], &work, 1, 1, "work")
+        || acquire(args[7], &step, 1, 1, "step"))
         goto done;
     Mat Jm = mat(&J), Am = mat(&A);
     Py_ssize_t n = Jm.n;
@@ -839,9 +846,7 @@ PyObject *py_smooth_rows_step(PyObject *self, PyObject *const *args, Py_ssize_t 
     PyObject *result = NULL;
     int bounded = args[4] != Py_None || args[5] != Py_None;
     if (acquire(args[0], &J, 0, 2, "J") || acquire(args[1], &q, 0, 1, "q")
-        || acquire(args[2], &A, 0, 2, "A") || acquire(args[3], &b, 0, 1, "b")
-        || (bounded && (acquire(args[4], &lo, 0, 1, "lower")
-                        || acquire(args[5], &hi, 0, 1, "upper")))
+        || acquire_rows(args, bounded, &A, &b, &lo, &hi)
         || acquire(args[6], &pv, 0, 1, "previous") || acquire(args[7], &work, 1, 1, "work")
         || acquire(args[8], &step, 1, 1, "step"))
         goto done;
