@@ -182,7 +182,9 @@ class Solver:
         self._user_stage = (ConstraintStage(extra, moving, robot.velocity_names, stack.target_dim)
                             if extra else None)
         #: the commanded velocity and acceleration of the last step (the stage's state)
-        self._motion = Motion(np.zeros(robot.nq), np.zeros(n), np.zeros(n), 1.0)
+        self._motion = Motion(np.zeros(robot.nq), np.zeros(n), np.zeros(n), 1.0,
+                              None if accel is None else accel.limits,
+                              None if jerk is None else jerk.limits)
         # (the compiled stage keeps its own, corrections included)
         self._tracks_motion = not self._compiled_smooth and (
             accel is not None or any(limit.uses_motion for limit in extra))
@@ -720,7 +722,9 @@ class Solver:
                 and self._user_stage is not None):
             # the user's bounds the correction put joints on (evaluated again, as they were)
             n = dq.size
-            before = Motion(self._motion.q, self._before[:n], self._before[n:], self._dt)
+            m = self._motion
+            before = Motion(m.q, self._before[:n], self._before[n:], self._dt,
+                            m.acceleration_limits, m.jerk_limits)
             user = self._user_stage.box(self.stack.kinematics, before)
             if user is not None:
                 names = [limit.name for limit in self._user_stage.limits]

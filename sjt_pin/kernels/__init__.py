@@ -22,6 +22,7 @@ against the numpy reference formulas of :mod:`sjt_pin.mappings` and against Pino
   ``jlog6_inverse(xi, out)``: ``Jlog6(N^-1)`` from ``xi = log6(N)``, the exact derivative of a
   pose error in the rows of its Jacobian (the search's model);
 - ``damper_rows``: the collision limit's velocity-damper rows from its pairs' closest points;
+  ``stoppable_rows``: their bounds cut to closing speeds the acceleration limits can stop;
   ``witness_rows``: the rows of its pairs' remembered closest points (and their memory);
   ``query_rows``: its exact distance queries (through Pinocchio's ``computeDistance``) and rows;
   ``near_pairs``: the pairs it must query, or whether its broad phase must run again;
@@ -59,6 +60,7 @@ from ._kernels import (  # noqa: F401
     search_iteration,
     search_pose,
     smooth_rows_step,
+    stoppable_rows,
     symmetric_eigen,
     transpose_step,
     unit_defect,

@@ -29,13 +29,17 @@ from ..kinematics import Kinematics
 class Motion:
     """The state a limit may read besides the kinematics: the configuration ``q`` (nq,), the
     velocity ``dq`` (nv,, rad/s or m/s) and acceleration ``ddq`` (nv,, rad/s^2 or m/s^2) the
-    solver commanded in its previous step (zero after construction or ``reset()``), and the
-    control period ``dt`` (s)."""
+    solver commanded in its previous step (zero after construction or ``reset()``), the
+    control period ``dt`` (s), and the solver's joint acceleration and jerk limits (nv,;
+    rad/s^2 or m/s^2, rad/s^3 or m/s^3; ``None`` without them): a limit whose rows close a
+    distance bounds the closing speed by what those accelerations can still stop."""
 
     q: np.ndarray
     dq: np.ndarray
     ddq: np.ndarray
     dt: float
+    acceleration_limits: np.ndarray | None = None
+    jerk_limits: np.ndarray | None = None
 
 
 class Limit:

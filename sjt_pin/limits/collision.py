@@ -13,6 +13,17 @@ joint (zero for an obstacle). Over one period ``dt`` the distance then changes t
 by ``d_dot dt >= -gain (d - margin)``: with ``gain`` in (0, 1] it never crosses ``margin``,
 and below ``margin`` (or in penetration) the row pushes the pair apart.
 
+Acceleration limits. A damper alone lets a pair close at up to ``gain (d - margin) / dt``, far
+more than an arm with acceleration limits can stop from in the gap left, so a solver with
+acceleration limits (``Motion.acceleration_limits``) also bounds each row's closing speed by
+what half of those limits can still brake within ``d - margin`` (a braking-distance bound,
+the discrete form of ``d_dot >= -sqrt(2 a (d - margin))``; ``kernels.stoppable_rows``): the
+arm slows as it nears the margin instead of stopping at it in one period. The bound holds from
+``influence`` on: a pair that enters it closing faster than it can stop within
+``influence - margin`` still stops, and the acceleration limit yields on those steps
+(``StepInfo.limit_conflicts`` says so). Choose ``influence - margin`` at least the braking
+distance ``v^2 / (2 a)`` of the closing speeds ``v`` the arm reaches.
+
 Witnesses. Where two hulls touch along a face or an edge their closest points are not unique,
 and coal's pick jumps from one end of the contact to the other as the pair slides or turns: one
 row at a time lets the arm turn about the point it keeps, the next step's row (the other end)
@@ -49,13 +60,19 @@ except ImportError:  # pragma: no cover - the pin wheel ships coal
     coal = None
 
 from ..exceptions import SJTError
-from ..kernels import damper_rows, near_pairs, query_rows, witness_rows
+from ..kernels import damper_rows, near_pairs, query_rows, stoppable_rows, witness_rows
 from .base import Limit, Motion
 
 __all__ = ["ClosestPoints", "CollisionLimit", "CollisionError", "PairDistance"]
 
 #: the precision (m) of coal's GJK and EPA on convex shapes (its default is 1e-6)
 GJK_TOLERANCE = 1e-9
+#: the share of each joint's acceleration (and jerk) limit a damper row counts on to stop its
+#: pair's closing speed (``kernels.stoppable_rows``); the rest is the task's and the other rows'
+BRAKING_SHARE = 0.5
+#: with acceleration limits a row that turns or appears eases in at what they allow as long as
+#: its pair stays at least ``margin`` minus this (m) apart (``kernels.stoppable_rows``)
+EASING_SLACK = 5e-4
 #: two witnesses of a pair closer than this (m, either point, in its geometry's frame) are one
 WITNESS_APART = 1e-4
 
@@ -210,7 +227,8 @@ class CollisionLimit(Limit):
     """
 
     name: str = "collision"
-    uses_motion: bool = False  # its rows and bounds depend on q and dt alone
+    uses_motion: bool = False  # its rows depend on q and dt (and, with acceleration limits,
+    # on motion.dq, which the solver then keeps up to date anyway)
 
     def __init__(self, robot, obstacles: Sequence = (), self_collision: bool = False,
                  margin: float = 0.01, influence: float = 0.05, gain: float = 0.5,
@@ -749,13 +767,19 @@ class CollisionLimit(Limit):
     def rows(self, kinematics, motion: Motion) -> tuple[np.ndarray, np.ndarray] | None:
         """Rows ``A q_dot <= b`` (A: (k, nv) in m per unit of q_dot, b: (k,) in m/s) at the
         configuration of ``kinematics`` (after ``update(q)``: its joint poses and WORLD joint
-        Jacobians); None when no pair is within ``influence``. A second call at the same
-        configuration, period and obstacle poses returns the same (read-only) arrays."""
+        Jacobians); None when no pair is within ``influence``. With acceleration limits in
+        ``motion`` each bound is also cut to a closing speed they can stop within the pair's
+        excess over ``margin`` (module docstring, "Acceleration limits"). A second call at the
+        same configuration, period, obstacle poses and motion returns the same (read-only)
+        arrays."""
         dt = motion.dt
         if not dt > 0:
             raise ValueError(f"dt must be a period > 0 (s), got {dt!r}")
         model, data, q = kinematics.model, kinematics.data, kinematics.q
-        key = (dt, self._version, None if q is None else q.tobytes())
+        accelerations, jerks = motion.acceleration_limits, motion.jerk_limits
+        state = None if accelerations is None else motion.dq.tobytes() + motion.ddq.tobytes()
+        key = (dt, self._version, None if q is None else q.tobytes(), id(accelerations),
+               id(jerks), state)
         cache = self._cache
         if cache is not None and q is not None and cache[0] is data and cache[1] == key:
             self.active, self._witness_count = cache[2], cache[3]
@@ -763,6 +787,11 @@ class CollisionLimit(Limit):
         if not self._checked:
             self._check(model, data)
         out = self._rows(model, data, dt, q)
+        if out is not None:
+            if accelerations is not None:
+                stoppable_rows(out[0], out[1], motion.dq, motion.ddq, accelerations, jerks,
+                               self.gain / dt, dt, BRAKING_SHARE, EASING_SLACK)
+            out[1].setflags(write=False)
         self._cache = (data, key, self.active, self._witness_count, out)
         return out
 
@@ -813,7 +842,6 @@ class CollisionLimit(Limit):
         if self._mimic is not None:
             A = A @ self._mimic
         A.setflags(write=False)
-        b.setflags(write=False)
         return A, b
 
     def _witness_rows(self, data, found: list[int]) -> int:

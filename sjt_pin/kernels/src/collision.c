@@ -79,6 +79,90 @@ done:
     return result;
 }
 
+/* The closing speed v >= 0 a row can hold for tau and still brake to rest at a within the
+ * excess h (m): v tau + v^2 / (2 a) = |h|, signed as h (a row inside its margin separates). */
+static double stoppable_speed(double h, double a, double tau)
+{
+    double v = sqrt(a * tau * a * tau + 2.0 * a * fabs(h)) - a * tau;
+    return h >= 0.0 ? v : -v;
+}
+
+/* stoppable_rows(A, b, dq, ddq, accelerations, jerks, rate, dt, share, slack): the damper
+ * rows' bounds (in place) made ones an arm with acceleration (and jerk) limits can keep. Along
+ * row i the closing speed s_i = A_i q_dot changes at up to a_i = sum_j |A_ij| accelerations_j
+ * (m/s^2), and that rate changes at up to j_i = sum_j |A_ij| jerks_j (m/s^3; jerks None: no
+ * limit). With h = b_i / rate the row's excess over its margin (m; rate = gain / dt):
+ *   - b_i = min(b_i, v(h)), v the closing speed that, held for tau = dt + a / j and then
+ *     braked at a = share a_i (j = share j_i), covers h: v tau + v^2 / (2 a) = h (a row inside
+ *     its margin separates no faster than v(|h|)). The other part of each joint's
+ *     acceleration is the task's and the other rows';
+ *   - b_i = max(b_i, min(s_i + r dt, V(h + slack))), s_i = A_i dq and the least rate of change
+ *     r = max(-a_i, A_i ddq - j_i dt) from the previous step's velocity dq and acceleration
+ *     ddq, V as v at the whole a_i: a row whose closing speed jumps (a contact's closest
+ *     points slide onto another feature, a row appears) asks it to drop no faster than the
+ *     limits allow, while its pair, braking at a_i, stays at least margin - slack apart.
+ * A (k, N), b (k,), dq, ddq, accelerations and jerks (N,). */
+static void stoppable_rows_c(Mat A, double *b, const double *dq, const double *ddq,
+                             const double *acc, const double *jerk, double rate, double dt,
+                             double share, double slack)
+{
+    for (Py_ssize_t i = 0; i < A.m; i++) {
+        double a = 0.0, j = 0.0, s = 0.0, sd = 0.0;
+        for (Py_ssize_t c = 0; c < A.n; c++) {
+            double w = AT(A, i, c);
+            a += fabs(w) * acc[c];
+            if (jerk) j += fabs(w) * jerk[c];
+            s += w * dq[c];
+            sd += w * ddq[c];
+        }
+        if (!(a > 0.0) || !isfinite(a)) continue;  /* a row no joint moves, or no limit */
+        double ramp = jerk && j > 0.0 && isfinite(j) ? a / j : 0.0;  /* s to reach a */
+        double h = b[i] / rate, v = stoppable_speed(h, share * a, dt + ramp);
+        double r = jerk && isfinite(j) ? fmax(-a, sd - j * dt) : -a;
+        b[i] = h >= 0.0 ? fmin(b[i], v) : fmax(b[i], v);
+        b[i] = fmax(b[i], fmin(s + r * dt, stoppable_speed(h + slack, a, dt + ramp)));
+    }
+}
+
+PyObject *py_stoppable_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (!nargs_ok(nargs, 10, "stoppable_rows")) return NULL;
+    double rate = PyFloat_AsDouble(args[6]), dt = PyFloat_AsDouble(args[7]);
+    double share = PyFloat_AsDouble(args[8]), slack = PyFloat_AsDouble(args[9]);
+    if (PyErr_Occurred()) return NULL;
+    if (!(rate > 0.0 && dt > 0.0 && share > 0.0 && share <= 1.0 && slack >= 0.0)) {
+        PyErr_SetString(PyExc_ValueError, "stoppable_rows: rate and dt must be > 0, share in "
+                        "(0, 1], slack >= 0");
+        return NULL;
+    }
+    Arg A = {0}, b = {0}, dq = {0}, ddq = {0}, acc = {0}, jerk = {0};
+    PyObject *result = NULL;
+    int has_jerk = args[5] != Py_None;
+    if (acquire(args[0], &A, 0, 2, "A") || acquire(args[1], &b, 1, 1, "b")
+        || acquire(args[2], &dq, 0, 1, "dq") || acquire(args[3], &ddq, 0, 1, "ddq")
+        || acquire(args[4], &acc, 0, 1, "accelerations")
+        || (has_jerk && acquire(args[5], &jerk, 0, 1, "jerks")))
+        goto done;
+    Mat Am = mat(&A);
+    double *bv = out_vec(&b, "b");
+    const double *dv = vec(&dq, "dq"), *ddv = vec(&ddq, "ddq");
+    const double *av = vec(&acc, "accelerations");
+    const double *jv = has_jerk ? vec(&jerk, "jerks") : NULL;
+    if (!bv || !dv || !ddv || !av || (has_jerk && !jv)) goto done;
+    if (length(&b) != Am.m || length(&dq) != Am.n || length(&ddq) != Am.n
+        || length(&acc) != Am.n || (has_jerk && length(&jerk) != Am.n)) {
+        PyErr_Format(PyExc_ValueError, "stoppable_rows: A (k, N), b (k,), dq, ddq, "
+                     "accelerations and jerks (N,) do not fit: A (%zd, %zd)", Am.m, Am.n);
+        goto done;
+    }
+    stoppable_rows_c(Am, bv, dv, ddv, av, jv, rate, dt, share, slack);
+    result = Py_None;
+    Py_INCREF(result);
+done:
+    release(&A); release(&b); release(&dq); release(&ddq); release(&acc); release(&jerk);
+    return result;
+}
+
 /* witness_rows(oMi, poses, rows, found, memory, state, tick, keep, apart, owners) -> int: the
  * collision limit's witness rows (limits/collision.py, "Witnesses"). rows (N, 13) holds the
  * step's exact rows of the pairs `found` (count,) in its first count rows (as damper_rows

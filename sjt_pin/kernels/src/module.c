@@ -64,6 +64,9 @@ static PyMethodDef methods[] = {
     {"damper_rows", (PyCFunction)(void (*)(void))py_damper_rows, METH_FASTCALL,
      "damper_rows(J, support, pairs, gain_rate, A, b): the collision limit's velocity-damper "
      "rows of the pairs (d, margin, joint a, joint b, normal, p_a, p_b) into A and b."},
+    {"stoppable_rows", (PyCFunction)(void (*)(void))py_stoppable_rows, METH_FASTCALL,
+     "stoppable_rows(A, b, dq, ddq, accelerations, jerks, rate, dt, share, slack): the damper rows' "
+     "bounds made (in place) ones the joints' accelerations can keep."},
     {"smooth_rows_step", (PyCFunction)(void (*)(void))py_smooth_rows_step, METH_FASTCALL,
      "smooth_rows_step(J, q, A, b, lower, upper, previous, work, step) -> int: a step of the "
      "compiled acceleration/jerk stage against general rows and bounds: 0 kept, 1 projected "
