@@ -675,45 +675,29 @@ done:
     return result;
 }
 
-/* the acceleration and jerk limits' box of joint j around the state (v, a) a step starts from
- * (smooth_stage_c's step 3, without the approach to the wanted velocity) */
-static void smoothness_box(const double *S, Py_ssize_t n, Py_ssize_t j, double v, double a,
-                           double dt, int has_jerk, double *lo_out, double *hi_out)
-{
-    double A = S[SM_ACC * n + j], Jk = S[SM_JERK * n + j], vj = S[SM_JERK_SPEED * n + j];
-    double lo = v - A * dt, hi = v + A * dt;
-    if (has_jerk && isfinite(Jk)) {
-        double jl, jh;
-        jerk_bounds(v, a, Jk, vj, dt, &jl, &jh);
-        lo = dmax(lo, jl);
-        hi = dmin(hi, jh);
-    }
-    if (lo > hi) lo = hi = 0.5 * (lo + hi);  /* limits that contradict each other */
-    *lo_out = lo;
-    *hi_out = hi;
-}
-
 /* smooth_rows_c's velocities (n each): the step's dq, the box of a round [lo, hi], the moving
  * joints, the projection's result, the hard box (the stage's within the user's bounds) and the
- * acceleration/jerk box around the previous state */
+ * stage's smoothness box (work's SM_SOFT_LO, SM_SOFT_HI: the acceleration and jerk limits'
+ * box around the previous state, narrowed so that with jerk limits the wanted velocity is
+ * reached without overshooting it) */
 typedef struct {
-    double *dq, *lo, *hi, *moving, *res, *hard_lo, *hard_hi, *soft_lo, *soft_hi;
+    double *dq, *lo, *hi, *moving, *res, *hard_lo, *hard_hi;
+    const double *soft_lo, *soft_hi;
 } SmoothBoxes;
 
-/* The hard box (the stage's, within the user's bounds when given) and the smoothness box of
- * every joint; 0 when a user's bound leaves nothing of the hard box on some joint. */
+/* The hard box (the stage's, within the user's bounds when given) and the stage's smoothness
+ * box; 0 when a user's bound leaves nothing of the hard box on some joint. */
 static int smooth_boxes(SmoothBoxes *x, const double *lower, const double *upper,
-                        const double *previous, const double *work, Py_ssize_t n)
+                        const double *work, Py_ssize_t n)
 {
     const double *S = work + (Py_ssize_t)work[P_SMOOTH];
     const double *hlo = S + SM_HARD_LO * n, *hhi = S + SM_HARD_HI * n;
-    int has_jerk = work[P_JERK] != 0.0;
+    x->soft_lo = S + SM_SOFT_LO * n;
+    x->soft_hi = S + SM_SOFT_HI * n;
     for (Py_ssize_t j = 0; j < n; j++) {
         x->hard_lo[j] = lower ? dmax(hlo[j], lower[j]) : hlo[j];
         x->hard_hi[j] = upper ? dmin(hhi[j], upper[j]) : hhi[j];
         if (x->hard_lo[j] > x->hard_hi[j]) return 0;
-        smoothness_box(S, n, j, previous[j], previous[n + j], work[P_DT], has_jerk,
-                       x->soft_lo + j, x->soft_hi + j);
     }
     return 1;
 }
@@ -791,15 +775,37 @@ static void smooth_commit(const SmoothBoxes *x, const double *q, const double *p
     }
 }
 
+/* The velocity smooth_rows_c projects: the stage's wanted velocity before its move within the
+ * smoothness box (SM_DESIRED), or, where its hard box cut the method's (braked) velocity, that
+ * velocity scaled as a whole into the hard box (scaled_into_c: SNS's first candidate, continuous
+ * in the step, where SNS's choice of held joints jumps with q; then the step reports that scale
+ * and no joint held), as rows_step_c does: a blocked arm's correction then comes to rest. */
+static void smooth_start(SmoothBoxes *x, double *work, Py_ssize_t m, Py_ssize_t n)
+{
+    const double *S = work + (Py_ssize_t)work[P_SMOOTH];
+    double *held = work + (Py_ssize_t)work[P_CLAMPED];
+    int cut = !(work[INFO + I_SCALE] >= 1.0);
+    for (Py_ssize_t j = 0; j < n && !cut; j++) cut = held[j] != 0.0;
+    if (!cut) {
+        memcpy(x->dq, S + SM_DESIRED * n, (size_t)n * sizeof(double));
+        return;
+    }
+    work[INFO + I_SCALE] = scaled_into_c(method_velocity(work, m, n), x->hard_lo, x->hard_hi,
+                                         work + (Py_ssize_t)work[P_MASK], n, x->res, x->dq);
+    for (Py_ssize_t j = 0; j < n; j++) held[j] = 0.0;
+}
+
 /* A step of the compiled acceleration/jerk stage (step and the stage's part of work, written by
  * smooth_stage_c) against a user's general rows A q_dot <= b and bounds [lower, upper] (rad/s;
- * -inf/inf where none; both NULL: none at all); `previous` (2 nv) is the motion state the step started from (the
- * velocity, then the acceleration, commanded the step before). 0 when the step meets them all
- * (step and work untouched); -1 when a user's bound leaves nothing of the stage's hard box on
- * some joint (the caller's whole constraint stage must weigh them); else step is projected
- * (project_c in the metric of the weighted task rows, the moving joints of the mask) onto the
- * rows within the user's bounds, the stage's hard box (positions with their braking, speeds)
- * and the acceleration/jerk box around the previous state: 1 when that holds; 2 when no velocity
+ * -inf/inf where none; both NULL: none at all); `previous` (2 nv) is the motion state the step
+ * started from (the velocity, then the acceleration, commanded the step before). 0 when the
+ * step meets them all (step and work untouched); -1 when a user's bound leaves nothing of the
+ * stage's hard box on some joint (the caller's whole constraint stage must weigh them); else
+ * the stage's wanted velocity (smooth_start: not the step, which moved toward it as far as the
+ * smoothness box allows, so that a blocked arm's correction has a fixed point at rest) is
+ * projected (project_c in the metric of the weighted task rows, the moving joints of the mask)
+ * onto the rows within the user's bounds, the stage's hard box (positions with their braking,
+ * speeds) and its smoothness box: 1 when that holds; 2 when no velocity
  * in it meets the rows, and the hard limits and the rows win (the stage's rule): the
  * smoothness box is widened around its centre, 2, 4, ... 32 times, until they hold (else it is
  * dropped), and the joints that leave it are marked in SM_TORN. After a projection every joint
@@ -812,7 +818,7 @@ static int smooth_rows_c(Mat J, const double *q, Mat A, const double *b, const d
     Py_ssize_t m = J.m, n = J.n;
     double dt = work[P_DT];
     if ((!lower || bounds_hold(lower, upper, step, dt, n)) && rows_hold(A, b, step, dt)) return 0;
-    double *mem = (double *)malloc((size_t)(m * n + 10 * n + 1) * sizeof(double));
+    double *mem = (double *)malloc((size_t)(m * n + 8 * n + 1) * sizeof(double));
     if (!mem) return -2;
     SmoothBoxes x = {mem + m * n, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL};
     x.lo = x.dq + n;
@@ -821,14 +827,13 @@ static int smooth_rows_c(Mat J, const double *q, Mat A, const double *b, const d
     x.res = x.moving + n;
     x.hard_lo = x.res + n;
     x.hard_hi = x.hard_lo + n;
-    x.soft_lo = x.hard_hi + n;
-    x.soft_hi = x.soft_lo + n;
     weighted_rows(J, work + (Py_ssize_t)work[P_ROWS], work + (Py_ssize_t)work[P_MASK], step, dt,
                   mem, x.dq, x.moving);
-    if (!smooth_boxes(&x, lower, upper, previous, work, n)) {
+    if (!smooth_boxes(&x, lower, upper, work, n)) {
         free(mem);
         return -1;
     }
+    smooth_start(&x, work, m, n);
     Mat Jm = {mem, m, n, n, 1};
     int status = smooth_projection(&x, Jm, A, b);
     if (status >= 0) smooth_commit(&x, q, previous, n, work, step);

@@ -347,9 +347,11 @@ int smooth_stage_c(int kind, Mat J, const double *e, const double *ff, int has_f
     /* 4. SNS on the hard box */
     double scale = 1.0;
     int status = 0;
-    if (!inside)
+    if (!inside) {  /* (the velocity SNS starts from, for a user's rows: smooth_rows_c) */
+        memcpy(method_velocity(work, J.m, n), st.out, (size_t)n * sizeof(double));
         status = sns_c(kind, J, e, ff, has_ff, mask, work, st.hlo, st.hhi, st.out, factor,
                        st.save, escaping, &scale);
+    }
     work[INFO + I_SCALE] = scale;
     smooth_line(work, &st, n, has_jerk, step);
     /* 6. exactly onto a position limit; the motion state for the next step */
