@@ -235,6 +235,48 @@ def test_rows_that_need_more_than_the_smoothness_limits_win_and_say_so(panda, do
         assert infos[k].limit_conflicts, f"step {k} broke a smoothness limit unreported"
 
 
+class JointCap(Limit):
+    """``q_dot_j <= cap`` on one joint (rad/s), the cap set between steps (``inf``: none)."""
+
+    name = "cap"
+    uses_motion = False
+
+    def __init__(self, nv, joint):
+        self.row = np.zeros((1, nv))
+        self.row[0, joint] = 1.0
+        self.cap = np.array([np.inf])
+
+    def rows(self, kinematics, motion):
+        return (self.row, self.cap) if np.isfinite(self.cap[0]) else None
+
+
+@pytest.mark.parametrize("need", [1.5, 3.0, 12.0])
+def test_the_smoothness_limits_yield_only_as_far_as_the_rows_need(panda, need):
+    """A cap that asks joint 2 to slow by ``need`` times its acceleration limit in one period,
+    while the task drives every joint at its acceleration limit: the row holds, the step that
+    yields names the joints, and no joint accelerates by more than the cap needs (the box widened
+    around its centre, bisected between rounds: 1 % of the need, not the next power of two)."""
+    accel = np.full(panda.nv, 10.0)
+    cap = JointCap(panda.nv, 1)
+    solver = sjt.make_solver("dls", panda, dt=DT, acceleration_limits=accel, limits=[cap])
+    far = pin.SE3(panda.fk(panda.q0).rotation, np.array([0.6, -0.5, 0.2]))
+    q = panda.q0.copy()
+    for _ in range(60):  # speeding up toward the target
+        q = solver.step(q, far)
+    before = solver.displacement / DT
+    assert abs(before[1]) > 0.1 and np.sum(np.abs(before) > 0.1) >= 4
+    sign = np.sign(before[1])
+    cap.row[0, 1] = sign  # (a cap on the joint's speed in the direction it moves)
+    cap.cap[0] = abs(before[1]) - need * accel[1] * DT
+    q = solver.step(q, far)
+    after = solver.displacement / DT
+    assert sign * after[1] <= cap.cap[0] + 1e-9
+    assert solver.last.limit_conflicts
+    ratio = np.abs(after - before) / (accel * DT)
+    assert ratio[1] >= need * (1 - 1e-9)
+    assert ratio.max() <= need * 1.01 + 1e-9, ratio
+
+
 def test_a_bound_outside_the_hard_box_takes_the_python_stage_and_keeps_the_state(ur5):
     """The README's ``JointBand`` narrowed while the elbow is outside the new band: its bound
     asks for the way back in one period, beyond the speed and braking bounds — nothing of the

@@ -4,8 +4,10 @@
 #include "kernels.h"
 
 /* how far the smoothness box widens, around its centre, in the rounds that look for the
- * smallest breach of the acceleration and jerk limits that lets the rows hold */
+ * smallest breach of the acceleration and jerk limits that lets the rows hold (2^r times in
+ * round r), and the bisections of the factor between the last two rounds */
 #define SMOOTH_WIDEN_ROUNDS 6
+#define SMOOTH_BISECTIONS 6
 
 /* rest_target_c's ridge of Jw Jw^T, relative to its mean diagonal (constraints.REST_RIDGE) */
 #define REST_RIDGE 1e-12
@@ -702,16 +704,15 @@ static int smooth_boxes(SmoothBoxes *x, const double *lower, const double *upper
     return 1;
 }
 
-/* Round r's box: the smoothness box widened 2^r times around its centre within the hard box
- * (the last round, r = SMOOTH_WIDEN_ROUNDS: the hard box alone); returns 2 when the hard box
- * lies beyond the smoothness box on some joint (it wins there), else 1. */
-static int widened_box(SmoothBoxes *x, int round, Py_ssize_t n)
+/* The smoothness box widened `widen` times around its centre within the hard box (INFINITY:
+ * the hard box alone); returns 2 when the hard box lies beyond the smoothness box on some
+ * joint (it wins there), else 1. */
+static int widened_box(SmoothBoxes *x, double widen, Py_ssize_t n)
 {
     int status = 1;
-    double widen = (double)(1 << (round < SMOOTH_WIDEN_ROUNDS ? round : 0));
     for (Py_ssize_t j = 0; j < n; j++) {
         double l = x->hard_lo[j], u = x->hard_hi[j];
-        if (round < SMOOTH_WIDEN_ROUNDS) {
+        if (isfinite(widen)) {
             double c = 0.5 * (x->soft_lo[j] + x->soft_hi[j]);
             double r = 0.5 * (x->soft_hi[j] - x->soft_lo[j]);
             double sl = dmax(l, c - widen * r), su = dmin(u, c + widen * r);
@@ -739,18 +740,59 @@ static int rows_met(Mat A, const double *b, const double *x)
     return 1;
 }
 
-/* The step projected (project_c, metric Jw) onto the rows within round r's box, widening it
- * until the rows hold (smooth_rows_c): 1, or 2 when the smoothness box had to widen; -2
- * when out of memory. */
+/* The factor by which the smoothness box, widened around its centre, takes in the hard box
+ * (INFINITY where the box has no width or the hard box no bound) */
+static double covering_factor(const SmoothBoxes *x, Py_ssize_t n)
+{
+    double w = 1.0;
+    for (Py_ssize_t j = 0; j < n; j++) {
+        double c = 0.5 * (x->soft_lo[j] + x->soft_hi[j]);
+        double r = 0.5 * (x->soft_hi[j] - x->soft_lo[j]);
+        double reach = dmax(c - x->hard_lo[j], x->hard_hi[j] - c);
+        if (reach > 0.0) w = dmax(w, r > 0.0 ? reach / r : INFINITY);
+    }
+    return w;
+}
+
+/* The step projected (project_c, metric Jw) onto the rows within the smoothness box (widened
+ * w times) and the hard box: 0 when the rows then hold, 1 when not, -2 when out of memory. */
+static int projected_within(SmoothBoxes *x, Mat Jw, Mat A, const double *b, double w,
+                            int *status)
+{
+    if (widened_box(x, w, Jw.n) == 2) *status = 2;
+    if (project_c(x->dq, Jw, A, b, x->lo, x->hi, x->moving, x->res) < 0) return -2;
+    return rows_met(A, b, x->res) ? 0 : 1;
+}
+
+/* The step projected onto the rows within the smoothness box, widened until the rows hold
+ * (2, 4, ... 32 times, then the hard box alone) and then only as far as they need (the factor
+ * bisected between the last two rounds): the acceleration and jerk limits yield as little as
+ * the rows ask, not as far as the round's box lets the task pull. 1, or 2 when the smoothness
+ * box had to widen; -2 when out of memory. */
 static int smooth_projection(SmoothBoxes *x, Mat Jw, Mat A, const double *b)
 {
-    int status = 1;
-    for (int round = 0; round <= SMOOTH_WIDEN_ROUNDS; round++) {
-        if (widened_box(x, round, Jw.n) == 2) status = 2;
-        if (project_c(x->dq, Jw, A, b, x->lo, x->hi, x->moving, x->res) < 0) return -2;
-        if (rows_met(A, b, x->res) || round == SMOOTH_WIDEN_ROUNDS) break;
+    int status = 1, round = 0, missed;
+    double w = 1.0;
+    for (;; round++, w *= 2.0) {
+        if (round == SMOOTH_WIDEN_ROUNDS) w = INFINITY;
+        missed = projected_within(x, Jw, A, b, w, &status);
+        if (missed < 0) return -2;
+        if (!missed || round == SMOOTH_WIDEN_ROUNDS) break;
         status = 2;
     }
+    if (round == 0) return status;
+    /* the rows fail within lo times the box and hold within hi times (the hard box: the factor
+     * that takes it all in) */
+    double lo = round == SMOOTH_WIDEN_ROUNDS ? ldexp(1.0, SMOOTH_WIDEN_ROUNDS - 1) : 0.5 * w;
+    double hi = isfinite(w) ? w : covering_factor(x, Jw.n);
+    if (!(hi > lo)) return status;
+    for (int k = 0; k < SMOOTH_BISECTIONS; k++) {
+        double mid = sqrt(lo * hi);
+        missed = projected_within(x, Jw, A, b, mid, &status);
+        if (missed < 0) return -2;
+        if (missed) lo = mid; else hi = mid;
+    }
+    if (missed && projected_within(x, Jw, A, b, hi, &status) < 0) return -2;
     return status;
 }
 
@@ -805,10 +847,10 @@ static void smooth_start(SmoothBoxes *x, double *work, Py_ssize_t m, Py_ssize_t 
  * smoothness box allows, so that a blocked arm's correction has a fixed point at rest) is
  * projected (project_c in the metric of the weighted task rows, the moving joints of the mask)
  * onto the rows within the user's bounds, the stage's hard box (positions with their braking,
- * speeds) and its smoothness box: 1 when that holds; 2 when no velocity
- * in it meets the rows, and the hard limits and the rows win (the stage's rule): the
- * smoothness box is widened around its centre, 2, 4, ... 32 times, until they hold (else it is
- * dropped), and the joints that leave it are marked in SM_TORN. After a projection every joint
+ * speeds) and its smoothness box: 1 when that holds; 2 when no velocity in it meets the rows,
+ * and the hard limits and the rows win (the stage's rule): the smoothness box is widened around
+ * its centre only as far as the rows need (smooth_projection), and the joints that leave it
+ * are marked in SM_TORN. After a projection every joint
  * inside its range lands exactly on a limit it reaches, SM_OUT holds the new velocity and the
  * motion state (SM_DQ, SM_DDQ) the one it commands. -2 when out of memory. */
 static int smooth_rows_c(Mat J, const double *q, Mat A, const double *b, const double *lower,
