@@ -678,49 +678,56 @@ done:
 }
 
 /* smooth_rows_c's velocities (n each): the step's dq, the box of a round [lo, hi], the moving
- * joints, the projection's result, the hard box (the stage's within the user's bounds) and the
- * stage's smoothness box (work's SM_SOFT_LO, SM_SOFT_HI: the acceleration and jerk limits'
- * box around the previous state, narrowed so that with jerk limits the wanted velocity is
- * reached without overshooting it) */
+ * joints, the projection's result, the hard box (the stage's within the user's bounds), the
+ * stage's smoothness box (work's SM_SOFT_LO, SM_SOFT_HI: the acceleration and jerk limits' box
+ * around the previous state, narrowed so that with jerk limits the wanted velocity is reached
+ * without overshooting it), the acceleration limits' box around the previous velocity, and
+ * the box the widening rounds start from (the smoothness box, then the acceleration box) */
 typedef struct {
-    double *dq, *lo, *hi, *moving, *res, *hard_lo, *hard_hi;
-    const double *soft_lo, *soft_hi;
+    double *dq, *lo, *hi, *moving, *res, *hard_lo, *hard_hi, *acc_lo, *acc_hi;
+    const double *soft_lo, *soft_hi, *base_lo, *base_hi;
+    int jerk;  /* whether jerk limits narrow the smoothness box */
 } SmoothBoxes;
 
-/* The hard box (the stage's, within the user's bounds when given) and the stage's smoothness
- * box; 0 when a user's bound leaves nothing of the hard box on some joint. */
+/* The hard box (the stage's, within the user's bounds when given), the stage's smoothness box
+ * and the acceleration box around the previous velocity; 0 when a user's bound leaves nothing
+ * of the hard box on some joint. */
 static int smooth_boxes(SmoothBoxes *x, const double *lower, const double *upper,
-                        const double *work, Py_ssize_t n)
+                        const double *previous, const double *work, Py_ssize_t n)
 {
     const double *S = work + (Py_ssize_t)work[P_SMOOTH];
-    const double *hlo = S + SM_HARD_LO * n, *hhi = S + SM_HARD_HI * n;
-    x->soft_lo = S + SM_SOFT_LO * n;
-    x->soft_hi = S + SM_SOFT_HI * n;
+    const double *hlo = S + SM_HARD_LO * n, *hhi = S + SM_HARD_HI * n, *acc = S + SM_ACC * n;
+    x->base_lo = x->soft_lo = S + SM_SOFT_LO * n;
+    x->base_hi = x->soft_hi = S + SM_SOFT_HI * n;
+    x->jerk = work[P_JERK] != 0.0;
     for (Py_ssize_t j = 0; j < n; j++) {
         x->hard_lo[j] = lower ? dmax(hlo[j], lower[j]) : hlo[j];
         x->hard_hi[j] = upper ? dmin(hhi[j], upper[j]) : hhi[j];
         if (x->hard_lo[j] > x->hard_hi[j]) return 0;
+        x->acc_lo[j] = previous[j] - acc[j] * work[P_DT];
+        x->acc_hi[j] = previous[j] + acc[j] * work[P_DT];
     }
     return 1;
 }
 
-/* The smoothness box widened `widen` times around its centre within the hard box (INFINITY:
- * the hard box alone); returns 2 when the hard box lies beyond the smoothness box on some
- * joint (it wins there), else 1. */
+/* The base box widened `widen` times around its centre within the hard box (INFINITY: the hard
+ * box alone); returns 2 when the hard box lies beyond the base box on some joint (it wins
+ * there: the joint takes the hard box's bound nearest the base box), else 1. */
 static int widened_box(SmoothBoxes *x, double widen, Py_ssize_t n)
 {
     int status = 1;
     for (Py_ssize_t j = 0; j < n; j++) {
         double l = x->hard_lo[j], u = x->hard_hi[j];
         if (isfinite(widen)) {
-            double c = 0.5 * (x->soft_lo[j] + x->soft_hi[j]);
-            double r = 0.5 * (x->soft_hi[j] - x->soft_lo[j]);
+            double c = 0.5 * (x->base_lo[j] + x->base_hi[j]);
+            double r = 0.5 * (x->base_hi[j] - x->base_lo[j]);
             double sl = dmax(l, c - widen * r), su = dmin(u, c + widen * r);
             if (sl <= su) {
                 l = sl;
                 u = su;
-            } else {
+            } else {  /* the box lies wholly below the hard box (then l, l) or above it */
                 status = 2;
+                l = u = c + widen * r < l ? l : u;
             }
         }
         x->lo[j] = l;
@@ -740,22 +747,22 @@ static int rows_met(Mat A, const double *b, const double *x)
     return 1;
 }
 
-/* The factor by which the smoothness box, widened around its centre, takes in the hard box
+/* The factor by which the base box, widened around its centre, takes in the hard box
  * (INFINITY where the box has no width or the hard box no bound) */
 static double covering_factor(const SmoothBoxes *x, Py_ssize_t n)
 {
     double w = 1.0;
     for (Py_ssize_t j = 0; j < n; j++) {
-        double c = 0.5 * (x->soft_lo[j] + x->soft_hi[j]);
-        double r = 0.5 * (x->soft_hi[j] - x->soft_lo[j]);
+        double c = 0.5 * (x->base_lo[j] + x->base_hi[j]);
+        double r = 0.5 * (x->base_hi[j] - x->base_lo[j]);
         double reach = dmax(c - x->hard_lo[j], x->hard_hi[j] - c);
         if (reach > 0.0) w = dmax(w, r > 0.0 ? reach / r : INFINITY);
     }
     return w;
 }
 
-/* The step projected (project_c, metric Jw) onto the rows within the smoothness box (widened
- * w times) and the hard box: 0 when the rows then hold, 1 when not, -2 when out of memory. */
+/* The step projected (project_c, metric Jw) onto the rows within the base box widened w times
+ * and the hard box: 0 when the rows then hold, 1 when not, -2 when out of memory. */
 static int projected_within(SmoothBoxes *x, Mat Jw, Mat A, const double *b, double w,
                             int *status)
 {
@@ -764,23 +771,32 @@ static int projected_within(SmoothBoxes *x, Mat Jw, Mat A, const double *b, doub
     return rows_met(A, b, x->res) ? 0 : 1;
 }
 
-/* The step projected onto the rows within the smoothness box, widened until the rows hold
- * (2, 4, ... 32 times, then the hard box alone) and then only as far as they need (the factor
- * bisected between the last two rounds): the acceleration and jerk limits yield as little as
- * the rows ask, not as far as the round's box lets the task pull. 1, or 2 when the smoothness
- * box had to widen; -2 when out of memory. */
+/* The step projected onto the rows within the smoothness box; where they do not hold there,
+ * within the acceleration box (the jerk limits yield: most rows an arm cannot meet within its
+ * jerk limits it can meet within its acceleration limits), else within that box widened until
+ * the rows hold (2, 4, ... 32 times, then the hard box alone) and then only as far as they
+ * need (the factor bisected between the last two rounds): the limits yield as little as the
+ * rows ask, not as far as the round's box lets the task pull. 1, or 2 when the smoothness box
+ * had to give way; -2 when out of memory. */
 static int smooth_projection(SmoothBoxes *x, Mat Jw, Mat A, const double *b)
 {
-    int status = 1, round = 0, missed;
-    double w = 1.0;
+    int status = 1, missed = projected_within(x, Jw, A, b, 1.0, &status);
+    if (missed <= 0) return missed < 0 ? -2 : status;
+    status = 2;
+    if (x->jerk) {
+        x->base_lo = x->acc_lo;
+        x->base_hi = x->acc_hi;
+        missed = projected_within(x, Jw, A, b, 1.0, &status);
+        if (missed <= 0) return missed < 0 ? -2 : status;
+    }
+    int round = 1;
+    double w = 2.0;
     for (;; round++, w *= 2.0) {
         if (round == SMOOTH_WIDEN_ROUNDS) w = INFINITY;
         missed = projected_within(x, Jw, A, b, w, &status);
         if (missed < 0) return -2;
         if (!missed || round == SMOOTH_WIDEN_ROUNDS) break;
-        status = 2;
     }
-    if (round == 0) return status;
     /* the rows fail within lo times the box and hold within hi times (the hard box: the factor
      * that takes it all in) */
     double lo = round == SMOOTH_WIDEN_ROUNDS ? ldexp(1.0, SMOOTH_WIDEN_ROUNDS - 1) : 0.5 * w;
@@ -860,18 +876,21 @@ static int smooth_rows_c(Mat J, const double *q, Mat A, const double *b, const d
     Py_ssize_t m = J.m, n = J.n;
     double dt = work[P_DT];
     if ((!lower || bounds_hold(lower, upper, step, dt, n)) && rows_hold(A, b, step, dt)) return 0;
-    double *mem = (double *)malloc((size_t)(m * n + 8 * n + 1) * sizeof(double));
+    double *mem = (double *)malloc((size_t)(m * n + 10 * n + 1) * sizeof(double));
     if (!mem) return -2;
-    SmoothBoxes x = {mem + m * n, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL};
+    SmoothBoxes x = {0};
+    x.dq = mem + m * n;
     x.lo = x.dq + n;
     x.hi = x.lo + n;
     x.moving = x.hi + n;
     x.res = x.moving + n;
     x.hard_lo = x.res + n;
     x.hard_hi = x.hard_lo + n;
+    x.acc_lo = x.hard_hi + n;
+    x.acc_hi = x.acc_lo + n;
     weighted_rows(J, work + (Py_ssize_t)work[P_ROWS], work + (Py_ssize_t)work[P_MASK], step, dt,
                   mem, x.dq, x.moving);
-    if (!smooth_boxes(&x, lower, upper, work, n)) {
+    if (!smooth_boxes(&x, lower, upper, previous, work, n)) {
         free(mem);
         return -1;
     }
