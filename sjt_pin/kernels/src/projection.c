@@ -677,35 +677,56 @@ done:
     return result;
 }
 
+/* the acceleration and jerk limits' box of joint j around the state (v, a) a step starts from
+ * (smooth_stage_c's step 3, without the approach to the wanted velocity) */
+static void smoothness_box(const double *S, Py_ssize_t n, Py_ssize_t j, double v, double a,
+                           double dt, int has_jerk, double *lo_out, double *hi_out)
+{
+    double A = S[SM_ACC * n + j], Jk = S[SM_JERK * n + j], vj = S[SM_JERK_SPEED * n + j];
+    double lo = v - A * dt, hi = v + A * dt;
+    if (has_jerk && isfinite(Jk)) {
+        double jl, jh;
+        jerk_bounds(v, a, Jk, vj, dt, &jl, &jh);
+        lo = dmax(lo, jl);
+        hi = dmin(hi, jh);
+    }
+    if (lo > hi) lo = hi = 0.5 * (lo + hi);  /* limits that contradict each other */
+    *lo_out = lo;
+    *hi_out = hi;
+}
+
 /* smooth_rows_c's velocities (n each): the step's dq, the box of a round [lo, hi], the moving
  * joints, the projection's result, the hard box (the stage's within the user's bounds), the
- * stage's smoothness box (work's SM_SOFT_LO, SM_SOFT_HI: the acceleration and jerk limits' box
- * around the previous state, narrowed so that with jerk limits the wanted velocity is reached
- * without overshooting it), the acceleration limits' box around the previous velocity, and
- * the box the widening rounds start from (the smoothness box, then the acceleration box) */
+ * acceleration and jerk limits' box around the previous state, the acceleration limits' box
+ * around the previous velocity, and the box the widening rounds start from (the first, then
+ * the second) */
 typedef struct {
-    double *dq, *lo, *hi, *moving, *res, *hard_lo, *hard_hi, *acc_lo, *acc_hi;
-    const double *soft_lo, *soft_hi, *base_lo, *base_hi;
+    double *dq, *lo, *hi, *moving, *res, *hard_lo, *hard_hi, *soft_lo, *soft_hi, *acc_lo,
+        *acc_hi;
+    const double *base_lo, *base_hi;
     int jerk;  /* whether jerk limits narrow the smoothness box */
 } SmoothBoxes;
 
-/* The hard box (the stage's, within the user's bounds when given), the stage's smoothness box
- * and the acceleration box around the previous velocity; 0 when a user's bound leaves nothing
- * of the hard box on some joint. */
+/* The hard box (the stage's, within the user's bounds when given), the smoothness box and the
+ * acceleration box around the previous state; 0 when a user's bound leaves nothing of the
+ * hard box on some joint. */
 static int smooth_boxes(SmoothBoxes *x, const double *lower, const double *upper,
                         const double *previous, const double *work, Py_ssize_t n)
 {
     const double *S = work + (Py_ssize_t)work[P_SMOOTH];
     const double *hlo = S + SM_HARD_LO * n, *hhi = S + SM_HARD_HI * n, *acc = S + SM_ACC * n;
-    x->base_lo = x->soft_lo = S + SM_SOFT_LO * n;
-    x->base_hi = x->soft_hi = S + SM_SOFT_HI * n;
+    double dt = work[P_DT];
+    x->base_lo = x->soft_lo;
+    x->base_hi = x->soft_hi;
     x->jerk = work[P_JERK] != 0.0;
     for (Py_ssize_t j = 0; j < n; j++) {
         x->hard_lo[j] = lower ? dmax(hlo[j], lower[j]) : hlo[j];
         x->hard_hi[j] = upper ? dmin(hhi[j], upper[j]) : hhi[j];
         if (x->hard_lo[j] > x->hard_hi[j]) return 0;
-        x->acc_lo[j] = previous[j] - acc[j] * work[P_DT];
-        x->acc_hi[j] = previous[j] + acc[j] * work[P_DT];
+        smoothness_box(S, n, j, previous[j], previous[n + j], dt, x->jerk, x->soft_lo + j,
+                       x->soft_hi + j);
+        x->acc_lo[j] = previous[j] - acc[j] * dt;
+        x->acc_hi[j] = previous[j] + acc[j] * dt;
     }
     return 1;
 }
@@ -876,7 +897,7 @@ static int smooth_rows_c(Mat J, const double *q, Mat A, const double *b, const d
     Py_ssize_t m = J.m, n = J.n;
     double dt = work[P_DT];
     if ((!lower || bounds_hold(lower, upper, step, dt, n)) && rows_hold(A, b, step, dt)) return 0;
-    double *mem = (double *)malloc((size_t)(m * n + 10 * n + 1) * sizeof(double));
+    double *mem = (double *)malloc((size_t)(m * n + 12 * n + 1) * sizeof(double));
     if (!mem) return -2;
     SmoothBoxes x = {0};
     x.dq = mem + m * n;
@@ -886,7 +907,9 @@ static int smooth_rows_c(Mat J, const double *q, Mat A, const double *b, const d
     x.res = x.moving + n;
     x.hard_lo = x.res + n;
     x.hard_hi = x.hard_lo + n;
-    x.acc_lo = x.hard_hi + n;
+    x.soft_lo = x.hard_hi + n;
+    x.soft_hi = x.soft_lo + n;
+    x.acc_lo = x.soft_hi + n;
     x.acc_hi = x.acc_lo + n;
     weighted_rows(J, work + (Py_ssize_t)work[P_ROWS], work + (Py_ssize_t)work[P_MASK], step, dt,
                   mem, x.dq, x.moving);
