@@ -18,11 +18,15 @@ more than an arm with acceleration limits can stop from in the gap left, so a so
 acceleration limits (``Motion.acceleration_limits``) also bounds each row's closing speed by
 what half of those limits can still brake within ``d - margin`` (a braking-distance bound,
 the discrete form of ``d_dot >= -sqrt(2 a (d - margin))``; ``kernels.stoppable_rows``): the
-arm slows as it nears the margin instead of stopping at it in one period. The bound holds from
-``influence`` on: a pair that enters it closing faster than it can stop within
-``influence - margin`` still stops, and the acceleration limit yields on those steps
-(``StepInfo.limit_conflicts`` says so). Choose ``influence - margin`` at least the braking
-distance ``v^2 / (2 a)`` of the closing speeds ``v`` the arm reaches.
+arm slows as it nears the margin instead of stopping at it in one period. A row whose closing
+speed jumps (a contact's closest points slide onto another feature, a witness row appears)
+eases in: it asks that speed to drop no faster than the limits allow from the previous step's
+velocity and acceleration, as long as the pair, braking at its whole acceleration, stays
+``margin - EASING_SLACK`` apart. The bound holds from ``influence`` on: a pair that enters it
+closing faster than it can stop within ``influence - margin`` still stops, and the
+acceleration limit yields on those steps (``StepInfo.limit_conflicts`` says so). Choose
+``influence - margin`` at least the braking distance ``v^2 / (2 a)`` of the closing speeds
+``v`` the arm reaches.
 
 Witnesses. Where two hulls touch along a face or an edge their closest points are not unique,
 and coal's pick jumps from one end of the contact to the other as the pair slides or turns: one
@@ -228,7 +232,7 @@ class CollisionLimit(Limit):
 
     name: str = "collision"
     uses_motion: bool = False  # its rows depend on q and dt (and, with acceleration limits,
-    # on motion.dq, which the solver then keeps up to date anyway)
+    # on motion.dq and motion.ddq, which the solver then keeps up to date anyway)
 
     def __init__(self, robot, obstacles: Sequence = (), self_collision: bool = False,
                  margin: float = 0.01, influence: float = 0.05, gain: float = 0.5,
