@@ -108,6 +108,7 @@ def stream(methods=("sjt", "dls"), seeds=range(6), influence: float = 0.05, prog
 
 
 def stream_table(rows: list[StreamRow]) -> str:
+    """The rows as a markdown table (steps, ratios to the limits, distances in mm)."""
     lines = ["| xArm7 stream | method | steps above the acceleration limit | of them > 2x | "
              "worst | above the jerk limit | worst | first steps unreported | closest (mm) |",
              "|---|---|---:|---:|---:|---:|---:|---:|---:|"]
