@@ -27,7 +27,8 @@ def test_stoppable_rows_brake_within_the_excess_and_ease_in(jerk):
     """Random rows: each bound is the damper's, cut to a closing speed that, held for one
     period (and the jerk's ramp) and braked at BRAKING_SHARE of the row's acceleration, stops
     within the excess h = b / rate; never below what the previous velocity and acceleration can
-    reach in one period unless the pair would then come closer than margin - slack."""
+    reach in one period at that share unless the pair would then come closer than
+    margin - slack."""
     rng = np.random.default_rng(7 + jerk)
     n, k, dt = 7, 200, 1e-3
     rate = GAIN / dt
@@ -44,7 +45,8 @@ def test_stoppable_rows_brake_within_the_excess_and_ease_in(jerk):
     tau = dt + a_row / j_row
     brake = _speed(h, BRAKING_SHARE * a_row, tau)
     s = A @ dq
-    r = np.maximum(-a_row, A @ ddq - j_row * dt) if jerk else -a_row
+    share_a, share_j = BRAKING_SHARE * a_row, BRAKING_SHARE * j_row
+    r = np.maximum(-share_a, A @ ddq - share_j * dt) if jerk else -share_a
     floor = np.minimum(s + r * dt, _speed(h + EASING_SLACK, a_row, tau))
     cut = np.where(h >= 0.0, np.minimum(damper, brake), np.maximum(damper, brake))
     np.testing.assert_allclose(b, np.maximum(cut, floor), rtol=1e-12, atol=1e-15)
@@ -150,10 +152,10 @@ def _least_widening(A, b, v0, accel, dt, lower, upper):
 def test_on_a_stream_the_acceleration_limit_yields_no_more_than_the_rows_need(method,
                                                                               monkeypatch):
     """xArm7 (no other test uses it) under Franka-like conditions beside a ball and its own
-    links (``sjt_pin.bench.collision_stream``, seed 1): on every step where the rows make the
+    links (``sjt_pin.bench.collision_stream``, seeds 0-2): on every step where the rows make the
     acceleration limit yield, no joint accelerates by more than the least uniform widening of
     the acceleration box that the rows and the stage's hard box (speeds, position braking)
-    need, found by a linear program (1.2 % for the bisection). The hard box used to win on a
+    need, found by a linear program (1 % for the bisection). The hard box used to win on a
     joint with its whole width where it lay beyond the smoothness box (80x where 0.32x was
     needed), and the box widened to the next power of two."""
     import sjt_pin.solver as solver_module
@@ -183,9 +185,11 @@ def test_on_a_stream_the_acceleration_limit_yields_no_more_than_the_rows_need(me
 
     monkeypatch.setattr(solver_module.kernels, "smooth_rows_step", spy)
     monkeypatch.setattr(stream, "make_solver", keep)
-    stream._run(robot, method, True, 1)
+    for seed in range(3):
+        solvers.clear()
+        stream._run(robot, method, True, seed)
     assert len(seen) > 5  # steps where the rows made the smoothness limits yield
     for A, b, v0, v, lower, upper in seen:
         least = _least_widening(A, b, v0, accel, stream.DT, lower, upper)
         achieved = np.max(np.abs(v - v0) / (accel * stream.DT))
-        assert achieved <= 1.012 * max(1.0, least) + 1e-6, (achieved, least)
+        assert achieved <= 1.011 * max(1.0, least) + 1e-6, (achieved, least)

@@ -96,11 +96,11 @@ static double stoppable_speed(double h, double a, double tau)
  *     braked at a = share a_i (j = share j_i), covers h: v tau + v^2 / (2 a) = h (a row inside
  *     its margin separates no faster than v(|h|)). The other part of each joint's
  *     acceleration is the task's and the other rows';
- *   - b_i = max(b_i, min(s_i + r dt, V(h + slack))), s_i = A_i dq and the least rate of change
- *     r = max(-a_i, A_i ddq - j_i dt) from the previous step's velocity dq and acceleration
- *     ddq, V as v at the whole a_i: a row whose closing speed jumps (a contact's closest
- *     points slide onto another feature, a row appears) asks it to drop no faster than the
- *     limits allow, while its pair, braking at a_i, stays at least margin - slack apart.
+ *   - b_i = max(b_i, min(s_i + r dt, V(h + slack))), s_i = A_i dq and the rate of change
+ *     r = max(-a, A_i ddq - j dt) from the previous step's velocity dq and acceleration ddq,
+ *     V as v at the whole a_i: a row whose closing speed jumps (a contact's closest points
+ *     slide onto another feature, a row appears) asks it to drop no faster than its share of
+ *     the limits allows, while its pair, braking at a_i, stays at least margin - slack apart.
  * A (k, N), b (k,), dq, ddq, accelerations and jerks (N,). */
 static void stoppable_rows_c(Mat A, double *b, const double *dq, const double *ddq,
                              const double *acc, const double *jerk, double rate, double dt,
@@ -118,7 +118,7 @@ static void stoppable_rows_c(Mat A, double *b, const double *dq, const double *d
         if (!(a > 0.0) || !isfinite(a)) continue;  /* a row no joint moves, or no limit */
         double ramp = jerk && j > 0.0 && isfinite(j) ? a / j : 0.0;  /* s to reach a */
         double h = b[i] / rate, v = stoppable_speed(h, share * a, dt + ramp);
-        double r = jerk && isfinite(j) ? fmax(-a, sd - j * dt) : -a;
+        double r = jerk && isfinite(j) ? fmax(-share * a, sd - share * j * dt) : -share * a;
         b[i] = h >= 0.0 ? fmin(b[i], v) : fmax(b[i], v);
         b[i] = fmax(b[i], fmin(s + r * dt, stoppable_speed(h + slack, a, dt + ramp)));
     }

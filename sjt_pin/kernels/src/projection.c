@@ -5,9 +5,11 @@
 
 /* how far the smoothness box widens, around its centre, in the rounds that look for the
  * smallest breach of the acceleration and jerk limits that lets the rows hold (2^r times in
- * round r), and the bisections of the factor between the last two rounds */
+ * round r), and how closely the factor is then bisected (its ratio to the least that holds,
+ * in at most SMOOTH_BISECTIONS halvings) */
 #define SMOOTH_WIDEN_ROUNDS 6
-#define SMOOTH_BISECTIONS 6
+#define SMOOTH_BISECTIONS 16
+#define SMOOTH_PRECISION 1.01
 
 /* rest_target_c's ridge of Jw Jw^T, relative to its mean diagonal (constraints.REST_RIDGE) */
 #define REST_RIDGE 1e-12
@@ -822,8 +824,9 @@ static int smooth_projection(SmoothBoxes *x, Mat Jw, Mat A, const double *b)
      * that takes it all in) */
     double lo = round == SMOOTH_WIDEN_ROUNDS ? ldexp(1.0, SMOOTH_WIDEN_ROUNDS - 1) : 0.5 * w;
     double hi = isfinite(w) ? w : covering_factor(x, Jw.n);
-    if (!(hi > lo)) return status;
-    for (int k = 0; k < SMOOTH_BISECTIONS; k++) {
+    if (!(hi > lo) || !isfinite(hi)) return status;
+    missed = 0;  /* (the last projection, at w, held) */
+    for (int k = 0; k < SMOOTH_BISECTIONS && hi > SMOOTH_PRECISION * lo; k++) {
         double mid = sqrt(lo * hi);
         missed = projected_within(x, Jw, A, b, mid, &status);
         if (missed < 0) return -2;
