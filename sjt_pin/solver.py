@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -197,8 +198,8 @@ class Solver:
         # the kernel tests the position and speed box, so that a step within them costs nothing
         # more; beyond them (or with limits it cannot test) the stage takes over
         box = self.position_limit if self._kernel_bounds else None
-        self._layout = layout = kernels.Layout(stack.dim, n, 0 if box is None else box.q_index.size,
-                                         smooth=self._compiled_smooth)
+        self._layout = layout = kernels.Layout(
+            stack.dim, n, 0 if box is None else box.q_index.size, smooth=self._compiled_smooth)
         self._work = work = layout.allocate()
         self._info = layout.info(work)
         layout.sqrt_weight(work)[:] = stack.sqrt_weight
@@ -228,7 +229,7 @@ class Solver:
         work[kernels.P_STALL_RATIO] = -1.0 if self.escape is None else SaddleEscape.STALL_RATIO
         # converged, not stalled: |e_w| below ERROR_FLOOR times the tasks' length (unit-free)
         work[kernels.P_STALL_ERROR] = (SaddleEscape.ERROR_FLOOR
-                                  * tasks_length(robot, stack.tasks)) ** 2
+                                       * tasks_length(robot, stack.tasks)) ** 2
 
     def _fill_smooth(self, layout: kernels.Layout, work: np.ndarray) -> None:
         """The compiled acceleration/jerk stage's limits; the solver's motion state becomes
@@ -506,8 +507,8 @@ class Solver:
         A, b = (rows[0], rows[1]) if rows is not None else self._no_rows
         try:
             done = kernels.rows_step(J, q, A, b, self._no_bounds[0] if lower is None else lower,
-                               self._no_bounds[1] if upper is None else upper, self._work,
-                               step)
+                                     self._no_bounds[1] if upper is None else upper,
+                                     self._work, step)
         except ValueError:  # rows or bounds that do not fit or hold NaN: name the limit
             user.check(stack.kinematics, self._motion)
             raise
@@ -722,9 +723,7 @@ class Solver:
                 and self._user_stage is not None):
             # the user's bounds the correction put joints on (evaluated again, as they were)
             n = dq.size
-            m = self._motion
-            before = Motion(m.q, self._before[:n], self._before[n:], self._dt,
-                            m.acceleration_limits, m.jerk_limits)
+            before = replace(self._motion, dq=self._before[:n], ddq=self._before[n:])
             user = self._user_stage.box(self.stack.kinematics, before)
             if user is not None:
                 names = [limit.name for limit in self._user_stage.limits]
