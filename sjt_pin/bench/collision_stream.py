@@ -76,6 +76,7 @@ def stream(methods=("sjt", "dls"), seeds=range(6), influence: float = 0.05, prog
     robot = Robot.from_example("xarm7")
     rows = []
     for ball in (False, True):
+        checker = None  # (the same obstacles and pairs in every run of the setting)
         for method in methods:
             over = over_2x = unreported = steps = jerk_over = 0
             worst, jerk_worst, closest = 0.0, 0.0, np.inf
@@ -96,7 +97,8 @@ def stream(methods=("sjt", "dls"), seeds=range(6), influence: float = 0.05, prog
                 over_2x += int((ratio > 2.0).sum())
                 worst = max(worst, float(ratio.max()))
                 unreported += int((first & ~reported).sum())
-                checker = Checker(robot, obstacles, limit.pair_names)
+                if checker is None:
+                    checker = Checker(robot, obstacles, limit.pair_names)
                 closest = min(closest, min(checker.closest(q)[0] for q in qs[::5]))
             row = StreamRow("self-collision + ball" if ball else "self-collision", method,
                             steps, over, over_2x, worst, jerk_over, jerk_worst, unreported,
