@@ -825,7 +825,7 @@ static int smooth_projection(SmoothBoxes *x, Mat Jw, Mat A, const double *b)
     double lo = round == SMOOTH_WIDEN_ROUNDS ? ldexp(1.0, SMOOTH_WIDEN_ROUNDS - 1) : 0.5 * w;
     double hi = isfinite(w) ? w : covering_factor(x, Jw.n);
     if (!(hi > lo) || !isfinite(hi)) return status;
-    missed = 0;  /* (the last projection, at w, held) */
+    missed = 0;  /* (x->res: the projection within w times the box, or the hard box) */
     for (int k = 0; k < SMOOTH_BISECTIONS && hi > SMOOTH_PRECISION * lo; k++) {
         double mid = sqrt(lo * hi);
         missed = projected_within(x, Jw, A, b, mid, &status);
