@@ -176,17 +176,13 @@ def bench(args: argparse.Namespace) -> int:
               f"closest {crowd.min_distance * 1e3:.1f} mm")
         from .bench import collision_stream
 
-        streams = {}
-        for influence in (0.05, 0.25):
-            streams[influence] = collision_stream.stream(influence=influence)
-            print(f"\nxArm7 with self-collision beside 10 rad/s^2 and 5,000 rad/s^3, targets "
-                  f"jumping every 0.5 s, influence {influence * 1e3:.0f} mm:\n"
-                  + collision_stream.stream_table(streams[influence]))
+        stream = collision_stream.stream()
+        print("\nxArm7 with self-collision beside 10 rad/s^2 and 5,000 rad/s^3, targets jumping "
+              "every 0.5 s:\n" + collision_stream.stream_table(stream))
         _write_json(args.json, {"machine": machine, "rows": [asdict(r) for r in rows],
                                 "idle_us": {"plain": plain, "limit": idle},
                                 "crowded": asdict(crowd),
-                                "stream": {str(k): [asdict(r) for r in v]
-                                           for k, v in streams.items()}})
+                                "stream": [asdict(r) for r in stream]})
     elif args.kind == "accuracy":
         from .bench import accuracy
 

@@ -264,7 +264,7 @@ def test_broad_phase_never_drops_a_pair_within_influence(name, panda, ur5):
     for _ in range(20):
         q = robot.random_configuration(rng)  # seeded: Pinocchio's own generator is global
         kin.update(q)
-        candidates = set(limit._candidates(kin.data).tolist())
+        candidates = set(limit._broad_phase(kin.data, limit._influence)[0].tolist())
         reference = _independent_distances(robot, obstacles, q)
         for k, pair in enumerate(limit.pair_names):
             if reference[pair] < limit.influence:

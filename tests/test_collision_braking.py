@@ -193,3 +193,69 @@ def test_on_a_stream_the_acceleration_limit_yields_no_more_than_the_rows_need(me
         least = _least_widening(A, b, v0, accel, stream.DT, lower, upper)
         achieved = np.max(np.abs(v - v0) / (accel * stream.DT))
         assert achieved <= 1.011 * max(1.0, least) + 1e-6, (achieved, least)
+
+
+@pytest.mark.parametrize("jerk", [False, True])
+def test_braking_reach_covers_the_distance_any_row_needs_to_stop(jerk):
+    """Random pairs, levers and velocities: every row a pair can have (|A_ij| <= lever_kj) at
+    every velocity one period can reach (|q_dot_j| <= |dq_j| + a_j dt) stops its closing speed
+    within braking_reach's influence - margin, held for a period (and the jerk's ramp) and
+    braked at BRAKING_SHARE of the row's acceleration (what stoppable_rows asks)."""
+    rng = np.random.default_rng(21 + jerk)
+    npairs, n, dt, influence, margin = 40, 7, 1e-3, 0.05, 0.01
+    lever = rng.uniform(0.0, 1.2, (npairs, n)) * (rng.uniform(size=(npairs, n)) < 0.7)
+    dq = rng.normal(size=n) * 1.5
+    acc = rng.uniform(5.0, 20.0, n)
+    jerks = rng.uniform(2000.0, 8000.0, n) if jerk else None
+    out = np.zeros(npairs)
+    kernels.braking_reach(lever, dq, acc, jerks, dt, BRAKING_SHARE, influence, margin, out)
+    assert np.all(out >= influence)
+    for k in range(npairs):
+        for _ in range(200):
+            A = lever[k] * rng.uniform(-1.0, 1.0, n)
+            v = (np.abs(dq) + acc * dt) * rng.choice([-1.0, 1.0], n) * rng.uniform(0, 1, n) ** 0.2
+            a = BRAKING_SHARE * np.abs(A) @ acc
+            if a <= 0:
+                continue
+            tau = dt + (np.abs(A) @ acc / (np.abs(A) @ jerks) if jerk else 0.0)
+            s = abs(A @ v)
+            assert s * tau + s * s / (2.0 * a) <= out[k] - margin + 1e-12
+    still = np.zeros(npairs)
+    kernels.braking_reach(np.zeros((npairs, n)), dq, acc, jerks, dt, BRAKING_SHARE, influence,
+                          margin, still)
+    assert np.all(still == influence)  # a pair no joint moves keeps the limit's influence
+
+
+# Panda's hand sent at its full speed past a ball in its way, beside 10 rad/s^2 and
+# 5,000 rad/s^3 with the default influence (50 mm): a row appearing at 50 mm could not stop a
+# link closing at 1-2 m/s, and the acceleration limit yielded up to 3.4x (DLS), the pair
+# coming within the easing slack of its margin. Each pair's influence now grows to the
+# distance its joints' speeds need to brake (kernels.braking_reach).
+@pytest.mark.parametrize("method", ["sjt", "dls"])
+def test_a_fast_arm_brakes_for_an_obstacle_within_its_acceleration_limits(method):
+    import coal
+    import pinocchio as pin
+
+    panda = sjt.Robot.from_example("panda")
+    n = panda.nv
+    accel, jerk = np.full(n, 10.0), np.full(n, 5000.0)
+    q = panda.q0.copy()
+    start = panda.fk(q)
+    goal = pin.SE3(start.rotation, start.translation + np.array([0.0, 0.7, 0.0]))
+    ball = (coal.Sphere(0.05), pin.SE3(np.eye(3), start.translation + np.array([0.0, 0.25, 0.0])))
+    limit = CollisionLimit(panda, [ball], self_collision=True, margin=MARGIN)
+    solver = sjt.make_solver(method, panda, dt=DT, limits=[limit], acceleration_limits=accel,
+                             jerk_limits=jerk)
+    qs, conflicts = [q], 0
+    for _ in range(2000):
+        q = solver.step(q, goal)
+        qs.append(q)
+        conflicts += bool(solver.last.limit_conflicts)
+    qs = np.array(qs)
+    v = np.diff(qs, axis=0) / DT
+    a = np.diff(np.vstack([np.zeros((1, n)), v]), axis=0) / DT
+    assert np.abs(v).max() > 1.5  # fast: the speed a 50 mm band could not brake
+    assert np.max(np.abs(a) / accel) <= 1.001
+    assert np.max(np.abs(np.diff(a, axis=0)) / DT / jerk) <= 1.001
+    assert conflicts == 0
+    assert _closest(panda, [ball], limit, qs) >= MARGIN - 1e-4

@@ -137,10 +137,13 @@ def test_compiled_kernels_name_the_argument_that_does_not_fit():
     with pytest.raises(ValueError, match="near\\[0\\] = 5 is no pair"):
         K.near_pairs(np.zeros(2), np.zeros(2), np.full(2, -np.inf), np.full(2, np.inf),
                      np.zeros((3, 2)), np.ones(3), np.zeros(3), [5],
-                     np.zeros(3), 0.05)
+                     np.zeros(3), np.full(3, 0.05))
     with pytest.raises(ValueError, match="do not fit"):
         K.query_rows(pin.computeDistance, None, None, [], None, np.zeros(3), np.zeros(2),
-                     np.zeros((3, 2)), 0.05, np.zeros((3, 13)))
+                     np.zeros((3, 2)), np.full(3, 0.05), np.zeros((3, 13)))
+    with pytest.raises(ValueError, match="do not fit"):
+        K.braking_reach(np.zeros((3, 2)), np.zeros(2), np.ones(2), None, 1e-3, 0.5, 0.05, 0.01,
+                        np.zeros(2))
     with pytest.raises(ValueError, match="rows\\[0\\] names joint 7; poses has 2"):
         rows = np.zeros((4, 13))
         rows[0, 3] = 7
@@ -212,9 +215,9 @@ def test_the_broad_phase_it_skips_never_misses_a_pair_within_influence(name, pan
     calls = [0]
     full = limit._broad_phase
 
-    def counted(data):
+    def counted(data, influence):
         calls[0] += 1
-        return full(data)
+        return full(data, influence)
 
     limit._broad_phase = counted
     lower, upper = robot.model.lowerPositionLimit, robot.model.upperPositionLimit
@@ -223,7 +226,7 @@ def test_the_broad_phase_it_skips_never_misses_a_pair_within_influence(name, pan
         jump = 0.3 if step % 50 == 0 else 0.003  # mostly small steps, now and then a leap
         q = np.clip(q + drift + rng.uniform(-jump, jump, robot.nq), lower, upper)
         pin.computeJointJacobians(robot.model, data, q)
-        near = set(limit._near(data, q).tolist())
+        near = set(limit._near(data, q, limit._influence).tolist())
         pin.updateGeometryPlacements(robot.model, data, limit.geometry, limit.geometry_data)
         for k in range(len(limit.pairs)):
             d = pin.computeDistance(limit.geometry, limit.geometry_data, k).min_distance
@@ -266,7 +269,7 @@ def test_rows_hold_every_pair_within_influence_though_most_are_not_queried(name,
             limit.rows(kin, motion)
         finally:
             pin.computeDistance = compute
-        candidates += limit._near(kin.data, q).size
+        candidates += limit._near(kin.data, q, limit._influence).size
         pin.updateGeometryPlacements(robot.model, data, probe, probe_data, q)
         close = {k for k in range(len(limit.pairs))
                  if compute(probe, probe_data, k).min_distance < limit.influence}

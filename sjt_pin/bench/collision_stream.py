@@ -3,8 +3,8 @@
 Franka-like conditions on xArm7 (a robot no scene of :mod:`.collision` uses): 1 kHz, 10 rad/s^2
 and 5,000 rad/s^3 on every joint, a new target every 0.5 s from a seeded draw of reachable
 poses, every third one pushed 3x as far from the base (out of reach), self-collision on and,
-in the second setting, a 5 cm ball beside the start; the limit's ``influence`` is the default
-50 mm or one that covers the closing speeds' braking distance. Over 6 s for each of seeds 0-5
+in the second setting, a 5 cm ball beside the start; the limit's defaults (margin 10 mm,
+influence 50 mm). Over 6 s for each of seeds 0-5
 it counts the steps whose joint acceleration or jerk (finite differences of the returned q)
 exceeds its limit, the worst ratios, the runs of such steps that begin with a step not naming
 its joints in ``StepInfo.limit_conflicts`` (the stage's promise: 0), and the least distance of

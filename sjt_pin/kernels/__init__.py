@@ -26,6 +26,7 @@ against the numpy reference formulas of :mod:`sjt_pin.mappings` and against Pino
   ``witness_rows``: the rows of its pairs' remembered closest points (and their memory);
   ``query_rows``: its exact distance queries (through Pinocchio's ``computeDistance``) and rows;
   ``near_pairs``: the pairs it must query, or whether its broad phase must run again;
+  ``braking_reach``: each pair's influence for an arm with acceleration limits;
 - ``frame_velocity``, ``position_rows``, ``rotation_defect``: the tasks' small transforms;
 - ``follow_motion(step, dt, dq, ddq)``: the velocity and acceleration a step commands (the
   motion state a user's limits read);
@@ -43,6 +44,7 @@ against the numpy reference formulas of :mod:`sjt_pin.mappings` and against Pino
 """
 
 from ._kernels import (  # noqa: F401
+    braking_reach,
     cholesky_solve,
     damper_rows,
     follow_motion,

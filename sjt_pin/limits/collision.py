@@ -22,11 +22,16 @@ arm slows as it nears the margin instead of stopping at it in one period. A row 
 speed jumps (a contact's closest points slide onto another feature, a witness row appears)
 eases in: it asks that speed to drop no faster than the limits allow from the previous step's
 velocity and acceleration, as long as the pair, braking at its whole acceleration, stays
-``margin - EASING_SLACK`` apart. The bound holds from ``influence`` on: a pair that enters it
-closing faster than it can stop within ``influence - margin`` still stops, and the
-acceleration limit yields on those steps (``StepInfo.limit_conflicts`` says so). Choose
-``influence - margin`` at least the braking distance ``v^2 / (2 a)`` of the closing speeds
-``v`` the arm reaches.
+``margin - EASING_SLACK`` apart. A row that appears at ``influence`` could not stop a pair
+closing at arm speeds (a link at 1.5 m/s needs some 14 cm at 10 rad/s^2), so each pair's
+influence grows to the distance within which the row may have to start braking it: its
+joints' speeds after this step bound its closing speed ``s`` (the levers of the broad phase's
+skip, below), the time ``T`` the joints take to stop at their limits bounds ``s`` over the
+row's acceleration, and ``s (dt + ramp + T / (2 share))`` covers what the row needs
+(``kernels.braking_reach``; a robot whose joints give no such bound, Euler angles or a
+translation without a range, keeps ``influence``). The acceleration limit still yields where
+the rows ask more than its share at once (several contacts, a row that jumps);
+``StepInfo.limit_conflicts`` says so on those steps.
 
 Witnesses. Where two hulls touch along a face or an edge their closest points are not unique,
 and coal's pick jumps from one end of the contact to the other as the pair slides or turns: one
@@ -64,7 +69,14 @@ except ImportError:  # pragma: no cover - the pin wheel ships coal
     coal = None
 
 from ..exceptions import SJTError
-from ..kernels import damper_rows, near_pairs, query_rows, stoppable_rows, witness_rows
+from ..kernels import (
+    braking_reach,
+    damper_rows,
+    near_pairs,
+    query_rows,
+    stoppable_rows,
+    witness_rows,
+)
 from .base import Limit, Motion
 
 __all__ = ["ClosestPoints", "CollisionLimit", "CollisionError", "PairDistance"]
@@ -212,7 +224,8 @@ class CollisionLimit(Limit):
         self_collision: also check the robot's link pairs, except adjacent links (geometries on
             the same joint or on a joint and its parent) and the pairs the SRDF disables.
         margin: distance to keep, m.
-        influence: pairs farther than this (m) contribute no row.
+        influence: pairs farther than this (m) contribute no row; beside acceleration limits,
+            farther as the arm's speed needs (module docstring, "Acceleration limits").
         gain: the damper's gain in (0, 1]: per period the excess ``d - margin`` may shrink by
             at most this fraction.
         pairs: extra ``(link_a, link_b)`` (or geometry names) to check although the rules above
@@ -410,7 +423,7 @@ class CollisionLimit(Limit):
         ja, jb = self._joint[self._pa], self._joint[self._pb]
         self._joint_table = np.column_stack([ja, jb]).astype(float).reshape(-1, 2)
         self._pair_rows = np.zeros((max(len(self.pairs), 1) * (1 + self.witnesses), 13))
-        self._reach = self._radius[self._pa] + self._radius[self._pb] + self.influence
+        self._span = self._radius[self._pa] + self._radius[self._pb]
 
     def _witness_memory(self) -> None:
         """Per pair: its recent closest points, each in its joint's frame (``witnesses`` rows
@@ -480,6 +493,8 @@ class CollisionLimit(Limit):
         self._pair_lever, self._flat = self._pair_levers()
         self._reference: tuple[int, np.ndarray, np.ndarray, np.ndarray, list] | None = None
         self._floor = np.full(len(self.pairs), -np.inf)
+        self._influence = np.full(len(self.pairs), self.influence)  # each pair's, m
+        self._braking_influence = np.zeros(len(self.pairs))  # kernels.braking_reach's output
         self._no_bound = np.zeros(len(self.pairs))
         self._bound_now = np.zeros(len(self.pairs))  # kernels.near_pairs' output
         self._bound: np.ndarray | None = None
@@ -606,39 +621,36 @@ class CollisionLimit(Limit):
         return [(geoms[g].geometry, pin.SE3(geoms[g].placement)) for g in self._obstacle_ids]
 
     # -- queries -----------------------------------------------------------------------------
-    def _candidates(self, data) -> np.ndarray:
-        """The pairs whose bounding volumes come within ``influence`` (indices into pairs).
+    def _broad_phase(self, data, influence: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The pairs whose bounding volumes come within their ``influence`` (npairs,; indices
+        into pairs), and for each pair the gap (m) between its bounding volumes.
 
         Each geometry has a box in its own frame (coal's local AABB) and the sphere around it.
         First the spheres of both (for every pair), then, where exact distances are dear
         (meshes), for the few pairs left, the sphere of either one against the other's box:
-        volumes contain their geometry, so neither test drops a pair within ``influence``."""
-        return self._broad_phase(data)[0]
-
-    def _broad_phase(self, data) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`_candidates`, and for each pair the gap (m) by which its bounding volumes
-        miss ``influence`` (negative for the candidates)."""
+        volumes contain their geometry, so neither test drops a pair within its influence."""
         oMi = data.oMi.tolist()
         H = np.concatenate([oMi[j].homogeneous for j in self._joints] + [self._world])
         center = (H @ self._centers_in).take(self._pick)
         diff = self._difference @ center
-        slack = np.sqrt(np.einsum("ij,ij->i", diff, diff)) - self._reach
-        near = np.flatnonzero(slack < 0)
+        gap = np.sqrt(np.einsum("ij,ij->i", diff, diff)) - self._span
+        near = np.flatnonzero(gap < influence)
         if near.size == 0 or not self._refine:
-            return near, slack
+            return near, gap
         # both directions at once: the sphere of a against b's box, and of b against a's box
         one = np.concatenate((self._pa[near], self._pb[near]))
         other = np.concatenate((self._pb[near], self._pa[near]))
         poses = H.reshape(-1, 4, 4)[self._slot[other]] @ self._placement[other]
-        gap = (self._sphere_box(center[one], poses, other) - self._radius[one]).reshape(2, -1)
-        slack[near] = np.maximum(gap[0], gap[1]) - self.influence
-        return np.flatnonzero(slack < 0), slack
+        box_gap = (self._sphere_box(center[one], poses, other) - self._radius[one]).reshape(2, -1)
+        gap[near] = np.maximum(box_gap[0], box_gap[1])
+        return np.flatnonzero(gap < influence), gap
 
-    def _near(self, data, q: np.ndarray | None) -> np.ndarray:
-        """:meth:`_candidates` at ``q``, from the last broad phase while ``q`` is close to
-        where it ran: a displacement ``dq`` from there changes the distance of a pair's
+    def _near(self, data, q: np.ndarray | None, influence: np.ndarray) -> np.ndarray:
+        """:meth:`_broad_phase`'s pairs at ``q``, from the last broad phase while ``q`` is close
+        to where it ran: a displacement ``dq`` from there changes the distance of a pair's
         bounding spheres by at most ``sum_j lever_j |dq_j|`` (:meth:`_pair_levers`), so a
-        pair it left out stays out until that reaches the gap it left the pair at.
+        pair it left out stays out until that plus its influence reaches the gap it left the
+        pair at.
 
         Sets :attr:`_bound`: that bound for every pair at ``q`` (m; None without a
         reference), which :meth:`_rows` also holds the candidates' exact distances to."""
@@ -648,19 +660,19 @@ class CollisionLimit(Limit):
         if inside and ref is not None and ref[0] == self._version:
             moved = np.abs(q - ref[1] if self._flat else pin.difference(self.model, ref[1], q))
             bound = self._pair_lever @ moved
-            if (bound < ref[3]).all():
+            if (bound + influence < ref[3]).all():
                 self._bound = bound
                 return ref[2]
-        near, slack = self._broad_phase(data)
+        near, gap = self._broad_phase(data, influence)
         if q is not None and inside and self._pair_lever is not None:
             # the pairs within a skin of half the band (influence - margin) of being candidates
             # are candidates too, as in a Verlet list: the next broad phase waits until some
             # bound reaches the skin at least (Panda's scenes: on 1-3 % of the steps instead
             # of 8-16 %), and an extra candidate costs one exact query (its floor skips it
             # after that; a wider skin queries more than it saves)
-            near = np.flatnonzero(slack < 0.5 * (self.influence - self.margin))
-            slack[near] = np.inf  # a candidate stays one
-            self._reference = (self._version, q.copy(), near, slack, near.tolist())
+            near = np.flatnonzero(gap < influence + 0.5 * (self.influence - self.margin))
+            gap[near] = np.inf  # a candidate stays one
+            self._reference = (self._version, q.copy(), near, gap, near.tolist())
             self._bound = self._no_bound
             # the exact distances' floors move to the new reference (here, where its bound is
             # 0); after a move() of an obstacle they are gone
@@ -790,7 +802,12 @@ class CollisionLimit(Limit):
             return cache[4]
         if not self._checked:
             self._check(model, data)
-        out = self._rows(model, data, dt, q)
+        influence = self._influence
+        if accelerations is not None and self._pair_lever is not None:
+            influence = self._braking_influence
+            braking_reach(self._pair_lever, motion.dq, accelerations, jerks, dt, BRAKING_SHARE,
+                          self.influence, self.margin, influence)
+        out = self._rows(model, data, dt, q, influence)
         if out is not None:
             if accelerations is not None:
                 stoppable_rows(out[0], out[1], motion.dq, motion.ddq, accelerations, jerks,
@@ -805,11 +822,11 @@ class CollisionLimit(Limit):
         :meth:`rows`, which follow the rows of :attr:`active` (one each)."""
         return self._owners[:self._witness_count].astype(int).tolist()
 
-    def _rows(self, model, data, dt: float, q: np.ndarray | None = None
+    def _rows(self, model, data, dt: float, q: np.ndarray | None, influence: np.ndarray
               ) -> tuple[np.ndarray, np.ndarray] | None:
         self.active = []  # indices into self.pairs / self.pair_names of the rows returned
         self._witness_count = 0
-        influence, floor, ref = self.influence, self._floor, self._reference
+        floor, ref = self._floor, self._reference
         # a pair's distance changes by at most its bound's change (_near): one that was beyond
         # influence by more than that at its last query still is; both tests compiled where q
         # is its own tangent space, else _near and numpy
@@ -821,10 +838,10 @@ class CollisionLimit(Limit):
         if listed is not None:
             bound = self._bound = self._bound_now
         else:
-            near = self._near(data, q)
+            near = self._near(data, q, influence)
             bound = self._bound
             if bound is not None and near.size:
-                near = near[floor[near] - bound[near] <= influence]
+                near = near[floor[near] - bound[near] <= influence[near]]
             listed = near.tolist()
         if not listed:
             return None

@@ -413,11 +413,11 @@ static int query_names(void)
     return s_distance && s_normal && s_p1 && s_p2 ? 0 : -1;
 }
 
-/* query_rows' arrays: the bound (or none), each pair's floor and margin, its two joints, and
- * the rows written */
+/* query_rows' arrays: the bound (or none), each pair's floor, margin and influence, its two
+ * joints, and the rows written */
 typedef struct {
-    Arg bound, floor_, margins, joints, rows;
-    double *bv, *fv, *mv, *rv, influence;
+    Arg bound, floor_, margins, influence, joints, rows;
+    double *bv, *fv, *mv, *iv, *rv;
     Mat Jm;
     Py_ssize_t npairs, N;
 } Queries;
@@ -429,20 +429,24 @@ static int query_args(PyObject *const *args, Queries *Q)
     if ((has_bound && acquire(args[4], &Q->bound, 0, 1, "bound"))
         || acquire(args[5], &Q->floor_, 1, 1, "floor")
         || acquire(args[6], &Q->margins, 0, 1, "margins")
-        || acquire(args[7], &Q->joints, 0, 2, "joints") || acquire(args[9], &Q->rows, 1, 2, "rows"))
+        || acquire(args[7], &Q->joints, 0, 2, "joints")
+        || acquire(args[8], &Q->influence, 0, 1, "influence")
+        || acquire(args[9], &Q->rows, 1, 2, "rows"))
         return -1;
     Q->bv = has_bound ? vec(&Q->bound, "bound") : NULL;
     Q->fv = out_vec(&Q->floor_, "floor");
     Q->mv = vec(&Q->margins, "margins");
+    Q->iv = vec(&Q->influence, "influence");
     Q->rv = out_mat(&Q->rows, "rows");
-    if ((has_bound && !Q->bv) || !Q->fv || !Q->mv || !Q->rv) return -1;
+    if ((has_bound && !Q->bv) || !Q->fv || !Q->mv || !Q->iv || !Q->rv) return -1;
     Q->Jm = mat(&Q->joints);
     Q->npairs = length(&Q->floor_);
     Q->N = Q->rows.view.shape[0];
-    if (length(&Q->margins) != Q->npairs || Q->Jm.m != Q->npairs || Q->Jm.n != 2
-        || Q->rows.view.shape[1] != 13 || (has_bound && length(&Q->bound) != Q->npairs)) {
-        PyErr_Format(PyExc_ValueError, "query_rows: bound, floor, margins (npairs,), joints "
-                     "(npairs, 2) and rows (N, 13) do not fit (npairs %zd)", Q->npairs);
+    if (length(&Q->margins) != Q->npairs || length(&Q->influence) != Q->npairs
+        || Q->Jm.m != Q->npairs || Q->Jm.n != 2 || Q->rows.view.shape[1] != 13
+        || (has_bound && length(&Q->bound) != Q->npairs)) {
+        PyErr_Format(PyExc_ValueError, "query_rows: bound, floor, margins, influence (npairs,), "
+                     "joints (npairs, 2) and rows (N, 13) do not fit (npairs %zd)", Q->npairs);
         return -1;
     }
     return 0;
@@ -491,7 +495,7 @@ static int query_pair(PyObject *const *args, const Queries *Q, PyObject *item, P
     Py_XDECREF(dobj);
     int bad = !dobj || (d == -1.0 && PyErr_Occurred());
     if (!bad && Q->bv) Q->fv[k] = d > -INFINITY ? d - Q->bv[k] : -INFINITY;  /* NaN: -inf */
-    if (!bad && d > -INFINITY && d < Q->influence) {
+    if (!bad && d > -INFINITY && d < Q->iv[k]) {
         if (*count >= Q->N) {
             PyErr_SetString(PyExc_ValueError, "query_rows: more pairs within influence than rows");
             bad = 1;
@@ -508,16 +512,14 @@ static int query_pair(PyObject *const *args, const Queries *Q, PyObject *item, P
  * rows) -> list: the collision limit's exact distance queries (limits/collision.py, _rows):
  * for each pair k of the list `near`, res = compute(geometry, geometry_data, k) (Pinocchio's
  * computeDistance), d = res.min_distance; with a bound (npairs,) (else None) floor[k] =
- * d - bound[k] (-inf for a failed query: d -inf or NaN); a pair with -inf < d < influence
- * gets the next row of rows (N, 13) as damper_rows reads it: d, margins[k], joints[k] (npairs,
+ * d - bound[k] (-inf for a failed query: d -inf or NaN); a pair with -inf < d < influence[k]
+ * (npairs,) gets the next row of rows (N, 13) as damper_rows reads it: d, margins[k], joints[k] (npairs,
  * 2), res.normal, res.getNearestPoint1(), res.getNearestPoint2(). Returns those pairs. */
 PyObject *py_query_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     if (!nargs_ok(nargs, 10, "query_rows") || query_names()) return NULL;
     Queries Q;
     memset(&Q, 0, sizeof Q);
-    Q.influence = PyFloat_AsDouble(args[8]);
-    if (Q.influence == -1.0 && PyErr_Occurred()) return NULL;
     PyObject *found = NULL, *near = NULL;
     if (query_args(args, &Q)) goto done;
     near = PySequence_Fast(args[3], "near must be a sequence of pair indices");
@@ -541,15 +543,16 @@ fail:
     Py_CLEAR(found);
 done:
     Py_XDECREF(near);
-    release(&Q.bound); release(&Q.floor_); release(&Q.margins); release(&Q.joints); release(&Q.rows);
+    release(&Q.bound); release(&Q.floor_); release(&Q.margins); release(&Q.influence);
+    release(&Q.joints); release(&Q.rows);
     return found;
 }
 
 /* bound = lever |q - reference| (npairs,); whether q lies in the box [lower, upper] the
- * levers hold in and every pair's bound stays under its slack (else the broad phase must run
- * again); -1 when out of memory */
+ * levers hold in and every pair's bound plus its influence stays under its gap (else the
+ * broad phase must run again); -1 when out of memory */
 static int lever_bound(const double *q, const double *ref, const double *lo, const double *hi,
-                       Mat L, const double *slack, double *bound)
+                       Mat L, const double *gap, const double *influence, double *bound)
 {
     Py_ssize_t n = L.n;
     for (Py_ssize_t j = 0; j < n; j++)
@@ -562,15 +565,16 @@ static int lever_bound(const double *q, const double *ref, const double *lo, con
         double acc = 0.0;
         for (Py_ssize_t j = 0; j < n; j++) acc += AT(L, k, j) * moved[j];
         bound[k] = acc;
-        if (!(acc < slack[k])) within = 0;
+        if (!(acc + influence[k] < gap[k])) within = 0;
     }
     free(moved);
     return within;
 }
 
-/* The pairs of the sequence `near` whose floor - bound is not above influence (a new list) */
+/* The pairs of the sequence `near` whose floor - bound is not above their influence (a new
+ * list) */
 static PyObject *pairs_to_query(PyObject *near_seq, const double *floor_, const double *bound,
-                                Py_ssize_t npairs, double influence)
+                                Py_ssize_t npairs, const double *influence)
 {
     PyObject *near = PySequence_Fast(near_seq, "near must be a sequence of pair indices");
     if (!near) return NULL;
@@ -585,7 +589,7 @@ static PyObject *pairs_to_query(PyObject *near_seq, const double *floor_, const 
             PyErr_Format(PyExc_ValueError, "near[%zd] = %zd is no pair (npairs %zd)", i, k,
                          npairs);
             Py_CLEAR(out);
-        } else if (!(floor_[k] - bound[k] > influence) && PyList_Append(out, items[i]) < 0) {
+        } else if (!(floor_[k] - bound[k] > influence[k]) && PyList_Append(out, items[i]) < 0) {
             Py_CLEAR(out);
         }
     }
@@ -593,50 +597,114 @@ static PyObject *pairs_to_query(PyObject *near_seq, const double *floor_, const 
     return out;
 }
 
-/* near_pairs(q, reference, lower, upper, lever, slack, bound, near, floor, influence) ->
+/* near_pairs(q, reference, lower, upper, lever, gap, bound, near, floor, influence) ->
  * list | None: the collision limit's skip of its broad phase and of its queries
  * (limits/collision.py, _near and _rows) for q in its own tangent space (revolute and
  * prismatic joints): bound (npairs,) = lever (npairs, nv) |q - reference|; None when q leaves
- * the box lower <= q <= upper (n,) the levers hold in, or when some pair's bound reaches its
- * slack (npairs,) (the broad phase must run again); else the pairs of the list `near`
- * whose floor - bound is not above influence (those to query). */
+ * the box lower <= q <= upper (n,) the levers hold in, or when some pair's bound plus its
+ * influence (npairs,) reaches the gap (npairs,) its bounding volumes had at the reference (the
+ * broad phase must run again); else the pairs of the list `near` whose floor - bound is not
+ * above their influence (those to query). */
 PyObject *py_near_pairs(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     if (!nargs_ok(nargs, 10, "near_pairs")) return NULL;
-    double influence = PyFloat_AsDouble(args[9]);
-    if (influence == -1.0 && PyErr_Occurred()) return NULL;
-    Arg q = {0}, ref = {0}, lo = {0}, hi = {0}, lever = {0}, slack = {0}, bound = {0},
-        floor_ = {0};
+    Arg q = {0}, ref = {0}, lo = {0}, hi = {0}, lever = {0}, gap = {0}, bound = {0},
+        floor_ = {0}, infl = {0};
     PyObject *result = NULL;
     if (acquire(args[0], &q, 0, 1, "q") || acquire(args[1], &ref, 0, 1, "reference")
         || acquire(args[2], &lo, 0, 1, "lower") || acquire(args[3], &hi, 0, 1, "upper")
-        || acquire(args[4], &lever, 0, 2, "lever") || acquire(args[5], &slack, 0, 1, "slack")
-        || acquire(args[6], &bound, 1, 1, "bound") || acquire(args[8], &floor_, 0, 1, "floor"))
+        || acquire(args[4], &lever, 0, 2, "lever") || acquire(args[5], &gap, 0, 1, "gap")
+        || acquire(args[6], &bound, 1, 1, "bound") || acquire(args[8], &floor_, 0, 1, "floor")
+        || acquire(args[9], &infl, 0, 1, "influence"))
         goto done;
-    double *qv = vec(&q, "q"), *rv = vec(&ref, "reference"), *sv = vec(&slack, "slack");
+    double *qv = vec(&q, "q"), *rv = vec(&ref, "reference"), *gv = vec(&gap, "gap");
     double *lov = vec(&lo, "lower"), *hiv = vec(&hi, "upper");
     double *bv = out_vec(&bound, "bound"), *fv = vec(&floor_, "floor");
-    if (!qv || !rv || !lov || !hiv || !sv || !bv || !fv) goto done;
+    double *iv = vec(&infl, "influence");
+    if (!qv || !rv || !lov || !hiv || !gv || !bv || !fv || !iv) goto done;
     Mat L = mat(&lever);
     Py_ssize_t n = length(&q), npairs = L.m;
     if (length(&ref) != n || length(&lo) != n || length(&hi) != n || L.n != n
-        || length(&slack) != npairs || length(&bound) != npairs || length(&floor_) != npairs) {
+        || length(&gap) != npairs || length(&bound) != npairs || length(&floor_) != npairs
+        || length(&infl) != npairs) {
         PyErr_Format(PyExc_ValueError, "near_pairs: q, reference, lower, upper (n,), lever "
-                     "(npairs, n), slack, bound and floor (npairs,) do not fit (n %zd, "
+                     "(npairs, n), gap, bound, floor and influence (npairs,) do not fit (n %zd, "
                      "npairs %zd)", n, npairs);
         goto done;
     }
-    int within = lever_bound(qv, rv, lov, hiv, L, sv, bv);
+    int within = lever_bound(qv, rv, lov, hiv, L, gv, iv, bv);
     if (within < 0) {
         PyErr_NoMemory();
     } else if (!within) {
         result = Py_None;
         Py_INCREF(result);
     } else {
-        result = pairs_to_query(args[7], fv, bv, npairs, influence);
+        result = pairs_to_query(args[7], fv, bv, npairs, iv);
     }
 done:
-    release(&q); release(&ref); release(&lo); release(&hi); release(&lever); release(&slack);
-    release(&bound); release(&floor_);
+    release(&q); release(&ref); release(&lo); release(&hi); release(&lever); release(&gap);
+    release(&bound); release(&floor_); release(&infl);
+    return result;
+}
+
+/* braking_reach(lever, dq, accelerations, jerks, dt, share, influence, margin, out): each
+ * pair's influence (m) for a step of an arm with acceleration (and jerk) limits: out_k =
+ * max(influence, margin + s_k (tau + T_k / (2 share))), the distance within which a damper
+ * row may have to start braking the pair. With w_j = |dq_j| + accelerations_j dt (a joint's
+ * speed after this step at most), s_k = sum_j lever_kj w_j bounds the pair's closing speed
+ * (lever (npairs, N): m per unit of q_dot_j, as near_pairs'), T_k = max_j w_j /
+ * accelerations_j over the joints that move it, tau = dt + max_j accelerations_j / jerks_j
+ * (jerks None: dt). A row's closing speed s = A_i q_dot and acceleration a = sum_j |A_ij|
+ * accelerations_j give s / a <= T_k, so the distance s tau + s^2 / (2 share a) a row needs
+ * to stop it (stoppable_rows) is at most s_k (tau + T_k / (2 share)). */
+PyObject *py_braking_reach(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (!nargs_ok(nargs, 9, "braking_reach")) return NULL;
+    double dt = PyFloat_AsDouble(args[4]), share = PyFloat_AsDouble(args[5]);
+    double influence = PyFloat_AsDouble(args[6]), margin = PyFloat_AsDouble(args[7]);
+    if (PyErr_Occurred()) return NULL;
+    if (!(dt > 0.0 && share > 0.0 && share <= 1.0 && isfinite(influence) && isfinite(margin))) {
+        PyErr_SetString(PyExc_ValueError, "braking_reach: dt must be > 0, share in (0, 1], "
+                        "influence and margin finite");
+        return NULL;
+    }
+    Arg lever = {0}, dq = {0}, acc = {0}, jerk = {0}, out = {0};
+    PyObject *result = NULL;
+    int has_jerk = args[3] != Py_None;
+    if (acquire(args[0], &lever, 0, 2, "lever") || acquire(args[1], &dq, 0, 1, "dq")
+        || acquire(args[2], &acc, 0, 1, "accelerations")
+        || (has_jerk && acquire(args[3], &jerk, 0, 1, "jerks"))
+        || acquire(args[8], &out, 1, 1, "out"))
+        goto done;
+    Mat L = mat(&lever);
+    const double *dv = vec(&dq, "dq"), *av = vec(&acc, "accelerations");
+    const double *jv = has_jerk ? vec(&jerk, "jerks") : NULL;
+    double *ov = out_vec(&out, "out");
+    if (!dv || !av || (has_jerk && !jv) || !ov) goto done;
+    if (length(&dq) != L.n || length(&acc) != L.n || (has_jerk && length(&jerk) != L.n)
+        || length(&out) != L.m) {
+        PyErr_Format(PyExc_ValueError, "braking_reach: lever (npairs, N), dq, accelerations, "
+                     "jerks (N,) and out (npairs,) do not fit: lever (%zd, %zd)", L.m, L.n);
+        goto done;
+    }
+    double tau = dt;
+    for (Py_ssize_t j = 0; j < L.n; j++)
+        if (jv && jv[j] > 0.0 && isfinite(jv[j]) && isfinite(av[j]))
+            tau = fmax(tau, dt + av[j] / jv[j]);
+    for (Py_ssize_t k = 0; k < L.m; k++) {
+        double s = 0.0, T = 0.0;
+        for (Py_ssize_t j = 0; j < L.n; j++) {
+            double l = AT(L, k, j);
+            if (!(l > 0.0) || !(av[j] > 0.0) || !isfinite(av[j])) continue;
+            double w = fabs(dv[j]) + av[j] * dt;
+            s += l * w;
+            T = fmax(T, w / av[j]);
+        }
+        ov[k] = fmax(influence, margin + s * (tau + T / (2.0 * share)));
+    }
+    result = Py_None;
+    Py_INCREF(result);
+done:
+    release(&lever); release(&dq); release(&acc); release(&jerk); release(&out);
     return result;
 }

@@ -244,6 +244,7 @@ PyObject *py_smooth_rows_step(PyObject *self, PyObject *const *args, Py_ssize_t 
 PyObject *py_damper_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
 PyObject *py_stoppable_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
 PyObject *py_witness_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
+PyObject *py_braking_reach(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
 PyObject *py_query_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
 PyObject *py_near_pairs(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
 

@@ -78,9 +78,12 @@ static PyMethodDef methods[] = {
      "query_rows(compute, geometry, geometry_data, near, bound, floor, margins, joints, "
      "influence, rows) -> list: the collision limit's distance queries and its pairs' rows."},
     {"near_pairs", (PyCFunction)(void (*)(void))py_near_pairs, METH_FASTCALL,
-     "near_pairs(q, reference, lower, upper, lever, slack, bound, near, floor, influence) -> "
+     "near_pairs(q, reference, lower, upper, lever, gap, bound, near, floor, influence) -> "
      "list | None: "
      "the collision limit's pairs to query, or None when its broad phase must run again."},
+    {"braking_reach", (PyCFunction)(void (*)(void))py_braking_reach, METH_FASTCALL,
+     "braking_reach(lever, dq, accelerations, jerks, dt, share, influence, margin, out): each "
+     "collision pair's influence for an arm with acceleration limits (m)."},
     {NULL, NULL, 0, NULL},
 };
 
