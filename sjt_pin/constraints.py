@@ -76,6 +76,8 @@ class Box:
 
     hard: Bounds
     smooth: Bounds | None = None
+    #: bool (nv,): joints whose smoothness limits contradicted each other (one yielded)
+    contradicted: np.ndarray | None = None
 
     @property
     def lower(self) -> np.ndarray:
@@ -146,10 +148,17 @@ class ConstraintStage:
         box = Box(Bounds(lower, upper, lower_by, upper_by))
         if False in parts:
             smooth_box = box.smooth = Bounds(*parts[False])
-            # smoothness limits that contradict each other: the middle of their bounds
+            # smoothness limits that contradict each other: the bound of the one that does not
+            # yield first (Limit.yields_first), else the middle of their bounds
             torn = smooth_box.lower > smooth_box.upper
-            middle = 0.5 * (smooth_box.lower + smooth_box.upper)
-            smooth_box.lower[torn] = smooth_box.upper[torn] = middle[torn]
+            if torn.any():
+                firm = np.array([not limit.yields_first for limit in self.limits] + [False])
+                lo_firm, hi_firm = firm[smooth_box.lower_by], firm[smooth_box.upper_by]
+                middle = 0.5 * (smooth_box.lower + smooth_box.upper)
+                point = np.where(lo_firm & ~hi_firm, smooth_box.lower,
+                                 np.where(hi_firm & ~lo_firm, smooth_box.upper, middle))
+                smooth_box.lower[torn] = smooth_box.upper[torn] = point[torn]
+                box.contradicted = torn
         return box
 
     def general_rows(self, kinematics, motion: Motion, check: bool = True):
@@ -236,6 +245,8 @@ class ConstraintStage:
                     np.minimum(soft.upper, np.maximum(hi, soft.lower), out=soft.upper)
             desired = outcome.dq
             outcome.dq, torn = smooth(outcome.dq, box.hard, soft)
+            if box.contradicted is not None:
+                torn = torn | box.contradicted
             outcome.conflict = tuple(self.names[j] for j in np.flatnonzero(torn))
         if rows is not None:
             A, b, owners = rows

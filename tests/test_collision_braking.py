@@ -259,3 +259,47 @@ def test_a_fast_arm_brakes_for_an_obstacle_within_its_acceleration_limits(method
     assert np.max(np.abs(np.diff(a, axis=0)) / DT / jerk) <= 1.001
     assert conflicts == 0
     assert _closest(panda, [ball], limit, qs) >= MARGIN - 1e-4
+
+
+def test_smoothness_limits_that_contradict_each_other_keep_the_acceleration_limit():
+    """After a step the rows made break the acceleration limit, the jerk limit cannot bring the
+    acceleration back within one step: the acceleration limit's bound nearest the jerk's wins
+    (it used to be the middle of the two, which broke both for several steps, unreported), and
+    the joint is a conflict."""
+    from sjt_pin.constraints import ConstraintStage
+    from sjt_pin.limits import AccelerationLimit, JerkLimit
+    from sjt_pin.limits.base import Motion
+
+    n, dt = 3, 1e-3
+    accel, jerk = np.full(n, 10.0), np.full(n, 5000.0)
+    stage = ConstraintStage([AccelerationLimit(accel, n), JerkLimit(jerk, n)],
+                            np.ones(n, dtype=bool), ["a", "b", "c"], 6)
+    dq, ddq = np.array([1.0, -1.0, 0.5]), np.array([-320.0, 320.0, 2.0])
+    box = stage.box(None, Motion(np.zeros(n), dq, ddq, dt))
+    np.testing.assert_allclose(box.smooth.lower[:2], dq[:2] + dt * np.array([-10.0, 10.0]))
+    assert np.all(box.smooth.lower[:2] == box.smooth.upper[:2])
+    assert box.smooth.lower[2] < box.smooth.upper[2]  # within both: a box, not a point
+    assert box.contradicted.tolist() == [True, True, False]
+
+
+@pytest.mark.parametrize("method", ["sjt", "dls"])
+def test_every_step_above_a_limit_says_so(method):
+    """xArm7's stream beside a ball (``sjt_pin.bench.collision_stream``, seeds 0-2): every step
+    whose acceleration or jerk exceeds its limit names joints in ``limit_conflicts`` (a few did
+    not: after a step the rows made break the acceleration limit, the stage took the middle of
+    its contradicting acceleration and jerk bounds for several steps, breaking both)."""
+    from sjt_pin.bench import collision_stream as stream
+
+    robot = sjt.Robot.from_example("xarm7")
+    n = robot.nv
+    above_seen = 0
+    for seed in range(3):
+        qs, reported, _, _ = stream._run(robot, method, True, seed)
+        v = np.diff(qs, axis=0) / stream.DT  # (xArm7's coordinates are its tangent space)
+        a = np.diff(np.vstack([np.zeros((1, n)), v]), axis=0) / stream.DT
+        j = np.diff(np.vstack([np.zeros((1, n)), a]), axis=0) / stream.DT
+        above = ((np.max(np.abs(a), axis=1) > 1.001 * stream.ACCELERATION)
+                 | (np.max(np.abs(j), axis=1) > 1.001 * stream.JERK))
+        above_seen += int(above.sum())
+        assert not np.any(above & ~reported), np.flatnonzero(above & ~reported)
+    assert above_seen > 10  # the rows did make the limits yield

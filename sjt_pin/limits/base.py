@@ -54,11 +54,17 @@ class Limit:
         uses_motion: whether :meth:`bounds` or :meth:`rows` read ``motion.dq`` or
             ``motion.ddq``; the solver keeps them up to date (a few microseconds a step) only
             when one of its limits does.
+        yields_first: for a smoothness limit, whether it gives way to the other smoothness
+            limits where they contradict each other (jerk: an acceleration beyond its limit,
+            which collision rows may ask for, cannot return within one step of the jerk
+            limit, so the acceleration limit's bound wins); where none or both yield, the
+            middle of the two bounds.
     """
 
     name: str = "limit"
     hard: bool = True
     uses_motion: bool = True
+    yields_first: bool = False
 
     def bounds(self, kinematics: Kinematics, motion: Motion
                ) -> tuple[np.ndarray, np.ndarray] | None:

@@ -19,6 +19,7 @@ class JerkLimit(Limit):
 
     name = "jerk"
     hard = False
+    yields_first = True  # to the acceleration limit, where the two contradict each other
 
     def __init__(self, limits, nv: int, speeds: np.ndarray | None = None):
         self.limits = positive_limits(limits, nv, "jerk_limits", "rad/s^3 or m/s^3")

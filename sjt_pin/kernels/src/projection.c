@@ -680,7 +680,8 @@ done:
 }
 
 /* the acceleration and jerk limits' box of joint j around the state (v, a) a step starts from
- * (smooth_stage_c's step 3, without the approach to the wanted velocity) */
+ * (smooth_stage_c's step 3, without the approach to the wanted velocity; where the two
+ * contradict each other the acceleration limit wins) */
 static void smoothness_box(const double *S, Py_ssize_t n, Py_ssize_t j, double v, double a,
                            double dt, int has_jerk, double *lo_out, double *hi_out)
 {
@@ -689,10 +690,13 @@ static void smoothness_box(const double *S, Py_ssize_t n, Py_ssize_t j, double v
     if (has_jerk && isfinite(Jk)) {
         double jl, jh;
         jerk_bounds(v, a, Jk, vj, dt, &jl, &jh);
-        lo = dmax(lo, jl);
-        hi = dmin(hi, jh);
+        if (jh < lo) hi = lo;  /* the jerk yields: the acceleration bound nearest its box */
+        else if (jl > hi) lo = hi;
+        else {
+            lo = dmax(lo, jl);
+            hi = dmin(hi, jh);
+        }
     }
-    if (lo > hi) lo = hi = 0.5 * (lo + hi);  /* limits that contradict each other */
     *lo_out = lo;
     *hi_out = hi;
 }

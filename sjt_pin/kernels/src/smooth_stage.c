@@ -247,7 +247,9 @@ static int hard_box(const double *q, const double *mask, const double *work, con
 /* Step 3, the smoothness box (rad/s, AccelerationLimit and JerkLimit): the previous velocity
  * pdq changed by at most A dt, and with jerk limits the previous acceleration pddq changed by at
  * most Jk dt, the velocity approaching the jerk's speed vj no faster than a ramp of the
- * acceleration can end there (ramp_speed); limits that contradict each other give the middle.
+ * acceleration can end there (ramp_speed). Where they contradict each other (an acceleration
+ * beyond its limit, which the rows of a collision may ask, cannot come back within one step of
+ * the jerk limit) the acceleration limit wins: the jerk yields and the joint is marked in torn.
  * Codes L_ACCELERATION, L_JERK. */
 static void smoothness_bounds(const double *work, const Stage *st, Py_ssize_t n, int has_jerk)
 {
@@ -264,8 +266,16 @@ static void smoothness_bounds(const double *work, const Stage *st, Py_ssize_t n,
             jerk_bounds(pdq, st->pddq[j], Jk, st->vj[j], dt, &lo, &hi);
             tighten(st->slo + j, st->shi + j, st->slb + j, st->shb + j, lo, hi, L_JERK);
         }
-        if (st->slo[j] > st->shi[j])  /* limits that contradict each other: the middle */
-            st->slo[j] = st->shi[j] = 0.5 * (st->slo[j] + st->shi[j]);
+        st->torn[j] = 0.0;
+        if (st->slo[j] > st->shi[j]) {  /* limits that contradict each other */
+            st->torn[j] = 1.0;
+            if (st->slb[j] == L_ACCELERATION && st->shb[j] != L_ACCELERATION)
+                st->shi[j] = st->slo[j];
+            else if (st->shb[j] == L_ACCELERATION && st->slb[j] != L_ACCELERATION)
+                st->slo[j] = st->shi[j];
+            else
+                st->slo[j] = st->shi[j] = 0.5 * (st->slo[j] + st->shi[j]);
+        }
     }
 }
 
@@ -273,7 +283,8 @@ static void smoothness_bounds(const double *work, const Stage *st, Py_ssize_t n,
  * the hard box where both meet) toward out along a line, as far tau in [0, 1] as the smoothness
  * box allows, its bounds first narrowed so that with jerk limits out is reached without
  * overshooting it (ramp_speed of the gap); the hard box wins where it clips the result (marked
- * in torn). Writes desired (out before), dqff (the line's base), out and step (rad). */
+ * in torn, as are the joints whose smoothness limits contradicted each other). Writes desired
+ * (out before), dqff (the line's base), out and step (rad). */
 static void smooth_line(const double *work, const Stage *st, Py_ssize_t n, int has_jerk,
                         double *step)
 {
@@ -304,7 +315,7 @@ static void smooth_line(const double *work, const Stage *st, Py_ssize_t n, int h
     tau = dmin(dmax(tau, 0.0), 1.0);
     for (Py_ssize_t j = 0; j < n; j++) {
         double v = base[j] + tau * (out[j] - base[j]);
-        st->torn[j] = v < st->hlo[j] || v > st->hhi[j] ? 1.0 : 0.0;
+        st->torn[j] = v < st->hlo[j] || v > st->hhi[j] || st->torn[j] != 0.0 ? 1.0 : 0.0;
         out[j] = dmin(dmax(v, st->hlo[j]), st->hhi[j]);
         step[j] = out[j] * dt;
     }
