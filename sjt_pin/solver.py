@@ -185,7 +185,8 @@ class Solver:
         #: the commanded velocity and acceleration of the last step (the stage's state)
         self._motion = Motion(np.zeros(robot.nq), np.zeros(n), np.zeros(n), 1.0,
                               None if accel is None else accel.limits,
-                              None if jerk is None else jerk.limits)
+                              None if jerk is None else jerk.limits,
+                              np.where(moving, speeds, 0.0))
         # (the compiled stage keeps its own, corrections included)
         self._tracks_motion = not self._compiled_smooth and (
             accel is not None or any(limit.uses_motion for limit in extra))

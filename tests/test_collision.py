@@ -273,6 +273,27 @@ def test_broad_phase_never_drops_a_pair_within_influence(name, panda, ur5):
     assert checked > 20
 
 
+# UR5 at 20 Hz sent through a 1 cm plate 12 cm below its hand: at its URDF speeds (3.15 rad/s)
+# one step turned a joint by 0.16 rad, carrying the wrist from beyond influence through the
+# plate before any row saw it (-34 mm, DLS). The limit's speed bounds now hold on every step
+# where the solver's speed limits let a step cross the band (influence - margin) / 2.
+@pytest.mark.parametrize("method", ["sjt", "dls"])
+def test_a_long_period_does_not_carry_a_link_through_a_thin_obstacle(method, ur5):
+    q = ur5.q0.copy()
+    start = ur5.fk(q)
+    goal = pin.SE3(start.rotation, start.translation + np.array([0.0, 0.0, -0.4]))
+    plate = (coal.Box(0.6, 0.6, 0.01), pin.SE3(np.eye(3), start.translation + [0.0, 0.0, -0.12]))
+    limit = CollisionLimit(ur5, [plate])
+    solver = sjt.make_solver(method, ur5, dt=0.05, limits=[limit])
+    closest = np.inf
+    for _ in range(40):
+        q = solver.step(q, goal)
+        distances = _independent_distances(ur5, [plate], q)
+        closest = min(closest, min(d for (a, b), d in distances.items() if b == "obstacle_0"))
+    assert closest >= limit.margin - 1e-3
+    assert closest < limit.margin + 5e-3  # it did press against the plate
+
+
 # -- closed loop --------------------------------------------------------------------------
 
 

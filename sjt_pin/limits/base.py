@@ -32,7 +32,9 @@ class Motion:
     solver commanded in its previous step (zero after construction or ``reset()``), the
     control period ``dt`` (s), and the solver's joint acceleration and jerk limits (nv,;
     rad/s^2 or m/s^2, rad/s^3 or m/s^3; ``None`` without them): a limit whose rows close a
-    distance bounds the closing speed by what those accelerations can still stop."""
+    distance bounds the closing speed by what those accelerations can still stop. And the
+    solver's speed limits (nv,; rad/s or m/s, ``inf`` where none, 0 for a joint it does not
+    move; ``None`` outside a solver's step, as in ``solve()``'s iterations)."""
 
     q: np.ndarray
     dq: np.ndarray
@@ -40,6 +42,7 @@ class Motion:
     dt: float
     acceleration_limits: np.ndarray | None = None
     jerk_limits: np.ndarray | None = None
+    velocity_limits: np.ndarray | None = None
 
 
 class Limit:

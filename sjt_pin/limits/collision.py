@@ -489,7 +489,9 @@ class CollisionLimit(Limit):
         self._kinds, self._extent, self._lower, self._upper = _extents(
             self.model, getattr(self, "_mimics", ()))
         self._lever = self._levers()
-        self._bounds: tuple[float, tuple[np.ndarray, np.ndarray]] | None = None
+        # the speed bounds: (dt, the speed limits, whether they let a step cross the band,
+        # (lower, upper))
+        self._bounds: tuple[float, np.ndarray | None, bool, tuple] | None = None
         self._pair_lever, self._flat = self._pair_levers()
         self._reference: tuple[int, np.ndarray, np.ndarray, np.ndarray, list] | None = None
         self._floor = np.full(len(self.pairs), -np.inf)
@@ -582,21 +584,26 @@ class CollisionLimit(Limit):
         joint moves a point of the geometry it carries by more than ``(influence - margin) /
         2`` in one period, so that the first-order rows hold (a correction of the stage that
         turns a joint by a radian in one step would carry a link through an obstacle before
-        any row could see it). Far above a robot's own speeds at usual periods: 20 rad/s for a
-        1 m lever at 1 kHz with the defaults. Only while a pair is within ``influence`` (the
-        step's rows, computed here once for both)."""
-        if self.rows(kinematics, motion) is None:
-            return None  # nothing near: no row, and the robot's own speed limits suffice
+        any row could see it) and no link crosses the band from beyond ``influence`` into
+        ``margin`` between two steps. Far above a robot's own speeds at usual periods: 20 rad/s
+        for a 1 m lever at 1 kHz with the defaults. While a pair is within ``influence`` (the
+        step's rows, computed here once for both), and on every step where the solver's speed
+        limits (``motion.velocity_limits``) do not keep within them already (a free-flying
+        base without a speed limit, a long period)."""
         dt = motion.dt
-        if self._bounds is None or self._bounds[0] != dt:
+        speeds = motion.velocity_limits
+        if self._bounds is None or self._bounds[0] != dt or self._bounds[1] is not speeds:
             with np.errstate(divide="ignore"):
                 cap = np.where(self._lever > 0, (self.influence - self.margin)
                                / (2.0 * dt * self._lever), np.inf)
             cap.setflags(write=False)
             lower = -cap
             lower.setflags(write=False)
-            self._bounds = (dt, (lower, cap))
-        return self._bounds[1]
+            loose = speeds is not None and not bool(np.all(speeds <= cap))
+            self._bounds = (dt, speeds, loose, (lower, cap))
+        if self.rows(kinematics, motion) is None and not self._bounds[2]:
+            return None  # nothing near: no row, and the solver's speed limits suffice
+        return self._bounds[3]
 
     # -- obstacles ---------------------------------------------------------------------------
     def move(self, i: int, pose: pin.SE3) -> None:
