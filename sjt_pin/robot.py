@@ -227,8 +227,10 @@ class Robot:
         locked = [j for j in DEFAULT_LOCKED_JOINTS.get(name, ()) if model.existJointName(j)] \
             if locked_joints is None else list(_names_arg(locked_joints, "locked_joints"))
         # the full model's frame named by ee_frame, found again (by name) in the reduced one
+        collision = _capsules_as_long_as_their_cylinders(wrapper.collision_model,
+                                                         wrapper.model, urdf)
         full = cls(model, ee_frame, q0=q0, name=name, frame_type=frame_type,
-                   visual_model=wrapper.visual_model, collision_model=wrapper.collision_model,
+                   visual_model=wrapper.visual_model, collision_model=collision,
                    urdf=urdf, package_dirs=_example_dirs(urdf), mimic_joints=mimics)
         full._unmimicked = wrapper.model if mimics else None
         return full.reduced(locked) if locked else full
@@ -632,6 +634,39 @@ def _names_arg(value, name: str) -> tuple[str, ...]:
     if not all(isinstance(n, str) for n in names):
         raise TypeError(f"{name} must be joint names (a sequence of str), got {value!r}")
     return names
+
+
+def _capsules_as_long_as_their_cylinders(geometry: pin.GeometryModel | None, model: pin.Model,
+                                         urdf: str | None) -> pin.GeometryModel | None:
+    """An example-robot-data collision model whose loader turned the URDF's cylinders (with a
+    sphere of their radius at each end) into capsules (``panda_collision``), each capsule as
+    long as its cylinder: the loader passes the cylinder's half length where
+    ``coal.Capsule(radius, lz)`` takes the whole, so its capsules were half as long and a
+    limit on them let the URDF's geometry come 4 mm inside its margin. A capsule matches the
+    URDF cylinder on the same joint, at the same placement, of the same radius; the model is
+    returned as it is where none is found (or once the loader passes the whole length)."""
+    if geometry is None or urdf is None:
+        return geometry
+    import coal
+
+    capsules = [g for g in geometry.geometryObjects if isinstance(g.geometry, coal.Capsule)]
+    if not capsules:
+        return geometry
+    source = pin.buildGeomFromUrdf(model, urdf, pin.COLLISION, package_dirs=_example_dirs(urdf))
+    cylinders = [g for g in source.geometryObjects if isinstance(g.geometry, coal.Cylinder)]
+    fixed = geometry.copy()
+    for capsule in fixed.geometryObjects:
+        shape = capsule.geometry
+        if not isinstance(shape, coal.Capsule):
+            continue
+        for cylinder in cylinders:
+            if (cylinder.parentJoint == capsule.parentJoint
+                    and cylinder.placement.isApprox(capsule.placement, 1e-12)
+                    and cylinder.geometry.radius == shape.radius
+                    and cylinder.geometry.halfLength != shape.halfLength):
+                capsule.geometry = coal.Capsule(shape.radius, 2.0 * cylinder.geometry.halfLength)
+                break
+    return fixed
 
 
 def _example_dirs(urdf: str | None) -> list[str]:

@@ -208,6 +208,24 @@ def test_srdf_disabled_and_adjacent_pairs_are_skipped(panda):
         CollisionLimit(panda, self_collision=True, ignore=[("panda_link1", "no_such_link")])
 
 
+def test_panda_collision_capsules_are_as_long_as_the_urdf_cylinders():
+    """example-robot-data's panda_collision loader turns each URDF cylinder (a sphere of its
+    radius at each end) into a capsule but passes coal.Capsule the cylinder's half length for
+    its whole length: capsules half as long, and the URDF's own geometry came 6.2 mm from an
+    obstacle the limit kept at 10 mm. Robot.from_example gives each capsule its cylinder's
+    length: the capsule is then exactly the cylinder with its two spheres."""
+    robot = sjt.Robot.from_example("panda_collision")
+    urdf = pin.buildGeomFromUrdf(robot.model, robot.urdf, pin.COLLISION,
+                                 package_dirs=[str(d) for d in robot.package_dirs])
+    cylinders = {(g.parentJoint, round(g.geometry.radius, 9)): g.geometry.halfLength
+                 for g in urdf.geometryObjects if isinstance(g.geometry, coal.Cylinder)}
+    capsules = [g for g in robot.collision_model.geometryObjects
+                if isinstance(g.geometry, coal.Capsule)]
+    assert len(capsules) == len(cylinders) >= 7
+    for g in capsules:
+        assert g.geometry.halfLength == cylinders[(g.parentJoint, round(g.geometry.radius, 9))]
+
+
 # -- errors -------------------------------------------------------------------------------
 def test_loading_errors(panda):
     with pytest.raises(CollisionError, match="no <collision>"):
