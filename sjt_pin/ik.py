@@ -84,6 +84,10 @@ HELD_ITERS, HELD_PROGRESS = 4, 0.5
 #: restarts taken from the table of configurations nearest the target (single pose task) before
 #: random ones
 NEAREST = 8
+#: how far (each bound and row over a period of 1: rad, m; 0.2 mm of a collision damper's
+#: distance at its default gain) a failed start's end may lie outside the user's limits and
+#: still be returned before one that ends within them
+ENDS_TOL = 1e-4
 #: the initial nu of the damping lambda = mu^2 + nu |e_w|^2, and its floor mu^2
 NU_START, MU = 1.0, 1e-6
 
@@ -192,10 +196,11 @@ class Search:
         nv = self.robot.nv
         return Motion(q, np.zeros(nv), np.zeros(nv), 1.0)
 
-    def admissible(self, q: np.ndarray) -> bool:
-        """Whether ``q`` is within the user's limits (standing still there is admissible)."""
+    def admissible(self, q: np.ndarray, tol: float = 1e-9) -> bool:
+        """Whether ``q`` is within the user's limits (standing still there is admissible), to
+        ``tol`` (each bound and row over a period of 1: rad, m)."""
         motion = self._motion(q)
-        return self.user_limits.admits_rest(self.kinematics, motion)
+        return self.user_limits.admits_rest(self.kinematics, motion, tol)
 
     def limit(self, step: np.ndarray, J: np.ndarray) -> None:
         """Keep the next displacement from the current configuration within the user's limits
@@ -380,7 +385,10 @@ def solve(solver, target, q0, *, tol: float = TOL, max_iters: int = MAX_ITERS,
         rng: a ``numpy.random.Generator`` or a seed for the random starts (``None``: seed 0,
             so a call repeats; the table's starts do not depend on it).
 
-    Returns the first start that succeeds, or the best one (lowest error) when none did.
+    Returns the first start that succeeds, or the best one (lowest error) when none did; with
+    limits of the user's (``limits=[...]``: a collision limit), the best of the starts that end
+    within them, if any did (a target inside an obstacle: the closest the arm gets to it from
+    outside, not the start that ended deepest in it).
     """
     search = solver.search()
     tol, max_iters, budget, restarts = _options(tol, max_iters, budget, restarts)
@@ -407,13 +415,18 @@ def solve(solver, target, q0, *, tol: float = TOL, max_iters: int = MAX_ITERS,
         error = search.error()
         if not math.isfinite(error):  # a NaN target, or one so far that |e|^2 overflows
             raise_non_finite_targets(targets)  # as step() says it
-        if best is None or error < best[1]:
-            best = (search.q.copy(), error)
+        if search.user_limits is not None and not success:
+            # a start that ends outside the user's limits (a random start inside an obstacle,
+            # or pressed into it on its way) is never preferred to one that ends within them
+            error = error if search.admissible(search.q, ENDS_TOL) else math.inf
+        if best is None or error < best[1] or (best[1] == math.inf and error == math.inf
+                                               and search.error() < best[2]):
+            best = (search.q.copy(), error, search.error())
         if success:
             return IKResult(best[0], True, total, error, attempt, clipped)
         out_of_starts = restarts is not None and attempt >= restarts
         if out_of_starts or total >= budget or time.perf_counter() > deadline:
-            return IKResult(best[0], False, total, best[1], attempt, clipped)
+            return IKResult(best[0], False, total, best[2], attempt, clipped)
         attempt += 1
 
 
@@ -450,11 +463,12 @@ class _Starts:
 def _table_starts(search: Search, table, attempt: int, last: int, max_iters: int, left: int,
                   best: tuple) -> tuple[bool, int, int, tuple]:
     """The table's starts ``attempt`` to ``last`` in one compiled call (a single pose task,
-    no clock): (success, iterations used, the last start run, the best (q, error) so far)."""
+    no clock): (success, iterations used, the last start run, the best (q, error, error) so
+    far)."""
     success, used, attempt, lowest = search.run_nearest(table, attempt, last, max_iters, left,
                                                         best[1])
     if lowest < best[1]:
-        best = (search.best_q.copy(), lowest)
+        best = (search.best_q.copy(), lowest, lowest)
     return success, used, attempt, best
 
 

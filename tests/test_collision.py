@@ -388,6 +388,30 @@ def test_solve_returns_a_collision_free_configuration_or_says_it_found_none(pand
     assert not none.success and none.error > 0.04
 
 
+# Random targets inside random obstacles (UR5 and Panda, 12 each, SJT and DLS): solve() found
+# none, and returned the start that ended nearest the target, which its random restarts had
+# reached from inside the obstacle (-22 to -109 mm in 32 of 44 runs). It now returns the best
+# of the starts that end outside.
+@pytest.mark.parametrize("name", ["ur5", "panda"])
+def test_a_failed_solve_returns_a_configuration_within_the_limits(name, ur5, panda):
+    robot = {"ur5": ur5, "panda": panda}[name]
+    rng = np.random.default_rng(0)
+    checked = 0
+    for trial in range(8):
+        goal = robot.fk(robot.random_configuration(rng))
+        shape = [coal.Sphere(0.06), coal.Box(0.12, 0.12, 0.12), coal.Capsule(0.04, 0.15)][trial % 3]
+        obstacle = (shape, pin.SE3(np.eye(3), goal.translation + rng.normal(size=3) * 0.01))
+        limit = CollisionLimit(robot, [obstacle], self_collision=True)
+        if independent_distance(robot, robot.q0, *obstacle) < limit.influence:
+            continue  # (the start itself within reach of the obstacle)
+        for method in ("sjt", "dls"):
+            result = sjt.make_solver(method, robot, limits=[limit]).solve(goal, robot.q0)
+            assert not result.success
+            assert independent_distance(robot, result.q, *obstacle) >= limit.margin - 1e-3
+            checked += 1
+    assert checked >= 8
+
+
 # -- random scenes ------------------------------------------------------------------------
 def _random_scene(robot, rng):
     """A start within the joint limits (away from them), a reachable end (a joint-space step
