@@ -590,6 +590,7 @@ class CollisionLimit(Limit):
         step's rows, computed here once for both), and on every step where the solver's speed
         limits (``motion.velocity_limits``) do not keep within them already (a free-flying
         base without a speed limit, a long period)."""
+        near = self.rows(kinematics, motion) is not None  # (first: it may start the limit)
         dt = motion.dt
         speeds = motion.velocity_limits
         if self._bounds is None or self._bounds[0] != dt or self._bounds[1] is not speeds:
@@ -601,7 +602,7 @@ class CollisionLimit(Limit):
             lower.setflags(write=False)
             loose = speeds is not None and not bool(np.all(speeds <= cap))
             self._bounds = (dt, speeds, loose, (lower, cap))
-        if self.rows(kinematics, motion) is None and not self._bounds[2]:
+        if not near and not self._bounds[2]:
             return None  # nothing near: no row, and the solver's speed limits suffice
         return self._bounds[3]
 
