@@ -312,6 +312,28 @@ def test_a_long_period_does_not_carry_a_link_through_a_thin_obstacle(method, ur5
     assert closest < limit.margin + 5e-3  # it did press against the plate
 
 
+# A table given as coal.Halfspace was accepted and ignored: its bounding box (+-DBL_MAX) gave
+# the broad phase a NaN, so it was never a candidate, and UR5's hand went 25 cm through it.
+@pytest.mark.parametrize("kind", ["Halfspace", "Plane"])
+def test_an_unbounded_table_holds(kind, ur5):
+    q = ur5.q0.copy()
+    start = ur5.fk(q)
+    normal = np.array([0.0, 0.0, 1.0])
+    table = (getattr(coal, kind)(normal, 0.0),
+             pin.SE3(np.eye(3), np.array([0.0, 0.0, start.translation[2] - 0.15])))
+    limit = CollisionLimit(ur5, [table])
+    solver = sjt.SJTSolver(ur5, limits=[limit])
+    goal = pin.SE3(start.rotation, start.translation - [0.0, 0.0, 0.35])
+    closest = np.inf
+    for k in range(2000):
+        q = solver.step(q, goal)
+        if k % 10 == 0:
+            distances = _independent_distances(ur5, [table], q)
+            closest = min(closest, min(d for (a, b), d in distances.items() if b == "obstacle_0"))
+    assert closest >= limit.margin - 1e-3  # (the meshes: at least the hulls' distance)
+    assert limit.distances(q)[0].distance < limit.margin + 1e-4  # pressed against the table
+
+
 # -- closed loop --------------------------------------------------------------------------
 
 

@@ -91,6 +91,8 @@ BRAKING_SHARE = 0.5
 EASING_SLACK = 5e-4
 #: two witnesses of a pair closer than this (m, either point, in its geometry's frame) are one
 WITNESS_APART = 1e-4
+#: a local bounding box reaching this far (m) bounds nothing (coal's Halfspace and Plane)
+UNBOUNDED = 1e300
 
 
 
@@ -219,8 +221,8 @@ class CollisionLimit(Limit):
         robot: a :class:`sjt_pin.Robot` (its ``collision_model``, else the ``<collision>``
             geometry of ``robot.urdf`` with ``robot.package_dirs``).
         obstacles: ``(coal shape, pin.SE3)`` pairs fixed in the world: ``coal.Sphere``, ``Box``,
-            ``Capsule``, ``Cylinder``, ``Convex`` or a mesh (``BVHModel``). Move them with
-            :meth:`move`.
+            ``Capsule``, ``Cylinder``, ``Halfspace``, ``Plane``, ``Convex`` or a mesh
+            (``BVHModel``). Move them with :meth:`move`.
         self_collision: also check the robot's link pairs, except adjacent links (geometries on
             the same joint or on a joint and its parent) and the pairs the SRDF disables.
         margin: distance to keep, m.
@@ -411,8 +413,11 @@ class CollisionLimit(Limit):
             g.geometry.computeLocalAABB()
             box = g.geometry.aabb_local
             lo, hi = np.array(box.min_), np.array(box.max_)
-            self._box_center[i], self._box_half[i] = (lo + hi) / 2, (hi - lo) / 2
-            self._radius[i] = float(np.linalg.norm(hi - lo) / 2)
+            if np.all(np.abs(lo) < UNBOUNDED) and np.all(np.abs(hi) < UNBOUNDED):
+                self._box_center[i], self._box_half[i] = (lo + hi) / 2, (hi - lo) / 2
+                self._radius[i] = float(np.linalg.norm(hi - lo) / 2)
+            else:  # a Halfspace or a Plane (coal's box: +-DBL_MAX): always a candidate
+                self._box_half[i] = self._radius[i] = np.inf
             self._placement[i] = g.placement.homogeneous
 
     def _pair_tables(self) -> None:
