@@ -776,3 +776,44 @@ def test_a_link_swung_on_an_extended_slide_keeps_its_margin(revolute_prismatic):
         least = min(least, min(r.min_distance for r in gdata.distanceResults))
     assert least >= limit.margin - 1e-3, least
     assert q[0] > 1.0  # the arm did swing up to the ball
+
+
+class _NoClosestPoints:
+    """What coal answers deep in a penetration (GJK/EPA without closest points)."""
+
+    min_distance = -1.7976931348623157e308
+    normal = np.full(3, np.nan)
+
+    def getNearestPoint1(self):  # noqa: N802 (coal's name)
+        return np.full(3, 1e307)
+
+    def getNearestPoint2(self):  # noqa: N802
+        return np.full(3, -1e307)
+
+
+# Restarts of solve() that pass deep through the robot's own body or an obstacle met coal's
+# answer without closest points (-DBL_MAX, points near 1e307), which became a row of 1e307s:
+# solve() raised "rows() returned NaN or inf" (Baxter, ANYmal with a Kinova arm, G1, Talos).
+def test_a_query_without_closest_points_separates_the_pair(panda):
+    q0 = _start(panda)
+    limit = CollisionLimit(panda, _near_obstacles(panda, q0), self_collision=True)
+    kin = Kinematics(panda.model)
+    motion = Motion(q0, np.zeros(panda.nv), np.zeros(panda.nv), 1e-3)
+    kin.update(q0)
+    assert limit.rows(kin, motion) is not None
+    victim = limit.active[0]
+    compute = pin.computeDistance
+
+    def failing(geometry, data, k):
+        return _NoClosestPoints() if k == victim else compute(geometry, data, k)
+
+    pin.computeDistance = failing
+    try:
+        kin.update(q0 + 1e-9)  # (a new configuration: no cached rows)
+        A, b = limit.rows(kin, motion)
+    finally:
+        pin.computeDistance = compute
+    assert np.isfinite(A).all() and np.isfinite(b).all()
+    row = limit.active.index(victim)
+    assert b[row] < 0  # the pair must separate: standing still is not within the limit
+    assert np.linalg.norm(A[row]) > 0

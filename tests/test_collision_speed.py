@@ -140,7 +140,8 @@ def test_compiled_kernels_name_the_argument_that_does_not_fit():
                      np.zeros(3), np.full(3, 0.05))
     with pytest.raises(ValueError, match="do not fit"):
         K.query_rows(pin.computeDistance, None, None, [], None, np.zeros(3), np.zeros(2),
-                     np.zeros((3, 2)), np.full(3, 0.05), np.zeros((3, 13)))
+                     np.zeros((3, 2)), np.full(3, 0.05), np.zeros((3, 13)),
+                     np.zeros(1))
     with pytest.raises(ValueError, match="do not fit"):
         K.braking_reach(np.zeros((3, 2)), np.zeros(2), np.ones(2), None, 1e-3, 0.5, 0.05, 0.01,
                         np.zeros(2))

@@ -503,6 +503,7 @@ class CollisionLimit(Limit):
         self._influence = np.full(len(self.pairs), self.influence)  # each pair's, m
         self._braking_influence = np.zeros(len(self.pairs))  # kernels.braking_reach's output
         self._no_bound = np.zeros(len(self.pairs))
+        self._failures = np.zeros(1)  # kernels.query_rows': the queries without closest points
         self._bound_now = np.zeros(len(self.pairs))  # kernels.near_pairs' output
         self._bound: np.ndarray | None = None
 
@@ -863,9 +864,11 @@ class CollisionLimit(Limit):
         # Python around each query cost more than the query)
         found = query_rows(pin.computeDistance, self.geometry, self.geometry_data, listed,
                            bound, floor, self.margins, self._joint_table, influence,
-                           self._pair_rows)
+                           self._pair_rows, self._failures)
         if not found:
             return None
+        if self._failures[0]:
+            self._centre_rows(data, found)
         self.active = found
         count = len(found)
         if self.witnesses:
@@ -877,6 +880,28 @@ class CollisionLimit(Limit):
             A = A @ self._mimic
         A.setflags(write=False)
         return A, b
+
+    def _centre_rows(self, data, found: list[int]) -> None:
+        """The rows of the pairs coal found no closest points for (deep in a penetration, as a
+        restart of ``solve()`` may start: ``kernels.query_rows`` marks them ``d = -inf``): along
+        the line between the centres of the two geometries' bounding spheres, at the depth by
+        which the spheres overlap (at least 1 mm), so that they separate, and the configuration
+        is not taken for one within the limit."""
+        rows = self._pair_rows
+        for i, k in enumerate(found):
+            if rows[i, 0] != -np.inf:
+                continue
+            centres = []
+            for g in self.pairs[k]:
+                pose = data.oMi[int(self._joint[g])]
+                centres.append(pose.rotation @ self._center_local[g, :3] + pose.translation)
+            u = centres[1] - centres[0]
+            apart = float(np.linalg.norm(u))
+            normal = u / apart if apart > 0 else np.array([0.0, 0.0, 1.0])
+            overlap = self._radius[self.pairs[k]].sum() - apart
+            rows[i, 0] = -max(overlap, 1e-3) if np.isfinite(overlap) else -1e-3
+            rows[i, 4:7], rows[i, 7:10], rows[i, 10:13] = normal, centres[0], centres[1]
+        self._failures[0] = 0.0
 
     def _witness_rows(self, data, found: list[int]) -> int:
         """Append to the step's rows (``_pair_rows[:len(found)]``) one per remembered witness

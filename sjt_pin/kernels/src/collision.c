@@ -416,8 +416,8 @@ static int query_names(void)
 /* query_rows' arrays: the bound (or none), each pair's floor, margin and influence, its two
  * joints, and the rows written */
 typedef struct {
-    Arg bound, floor_, margins, influence, joints, rows;
-    double *bv, *fv, *mv, *iv, *rv;
+    Arg bound, floor_, margins, influence, joints, rows, failures;
+    double *bv, *fv, *mv, *iv, *rv, *failed;
     Mat Jm;
     Py_ssize_t npairs, N;
 } Queries;
@@ -431,14 +431,21 @@ static int query_args(PyObject *const *args, Queries *Q)
         || acquire(args[6], &Q->margins, 0, 1, "margins")
         || acquire(args[7], &Q->joints, 0, 2, "joints")
         || acquire(args[8], &Q->influence, 0, 1, "influence")
-        || acquire(args[9], &Q->rows, 1, 2, "rows"))
+        || acquire(args[9], &Q->rows, 1, 2, "rows")
+        || acquire(args[10], &Q->failures, 1, 1, "failures"))
         return -1;
     Q->bv = has_bound ? vec(&Q->bound, "bound") : NULL;
     Q->fv = out_vec(&Q->floor_, "floor");
     Q->mv = vec(&Q->margins, "margins");
     Q->iv = vec(&Q->influence, "influence");
     Q->rv = out_mat(&Q->rows, "rows");
-    if ((has_bound && !Q->bv) || !Q->fv || !Q->mv || !Q->iv || !Q->rv) return -1;
+    Q->failed = out_vec(&Q->failures, "failures");
+    if ((has_bound && !Q->bv) || !Q->fv || !Q->mv || !Q->iv || !Q->rv || !Q->failed) return -1;
+    if (length(&Q->failures) != 1) {
+        PyErr_SetString(PyExc_ValueError, "query_rows: failures must hold one number");
+        return -1;
+    }
+    Q->failed[0] = 0.0;
     Q->Jm = mat(&Q->joints);
     Q->npairs = length(&Q->floor_);
     Q->N = Q->rows.view.shape[0];
@@ -457,6 +464,16 @@ static int query_args(PyObject *const *args, Queries *Q)
  * points, (p_b - p_a) / |p_b - p_a|, as coal forms it (to 1e-14 on the bench's scenes), not
  * from coal (a result read through Python costs per vector); -1 with a Python error set */
 #define SEPARATED 1e-6
+/* coal's answer where it found no closest points (GJK/EPA deep in a penetration): a distance
+ * of -DBL_MAX and points near DBL_MAX */
+#define UNUSABLE 1e300
+static int usable(const double *row)
+{
+    for (int c = 4; c < 13; c++)
+        if (!(fabs(row[c]) < UNUSABLE)) return 0;
+    return 1;
+}
+
 static int query_row(const Queries *Q, PyObject *res, Py_ssize_t k, double d, double *row)
 {
     int apart = d > SEPARATED;
@@ -475,6 +492,11 @@ static int query_row(const Queries *Q, PyObject *res, Py_ssize_t k, double d, do
         for (int c = 0; c < 3; c++) row[4 + c] = u[c] / norm;
     }
     row[0] = d;
+    if (!(d > -UNUSABLE) || !usable(row)) {  /* no closest points: the caller forms the row */
+        row[0] = -INFINITY;
+        for (int c = 4; c < 13; c++) row[c] = 0.0;
+        Q->failed[0] += 1.0;
+    }
     row[1] = Q->mv[k];
     row[2] = AT(Q->Jm, k, 0);
     row[3] = AT(Q->Jm, k, 1);
@@ -494,7 +516,8 @@ static int query_pair(PyObject *const *args, const Queries *Q, PyObject *item, P
     double d = dobj ? PyFloat_AsDouble(dobj) : -1.0;
     Py_XDECREF(dobj);
     int bad = !dobj || (d == -1.0 && PyErr_Occurred());
-    if (!bad && Q->bv) Q->fv[k] = d > -INFINITY ? d - Q->bv[k] : -INFINITY;  /* NaN: -inf */
+    if (!bad && Q->bv)  /* NaN, or no closest points: -inf (queried again) */
+        Q->fv[k] = d > -UNUSABLE ? d - Q->bv[k] : -INFINITY;
     if (!bad && d > -INFINITY && d < Q->iv[k]) {
         if (*count >= Q->N) {
             PyErr_SetString(PyExc_ValueError, "query_rows: more pairs within influence than rows");
@@ -509,15 +532,18 @@ static int query_pair(PyObject *const *args, const Queries *Q, PyObject *item, P
 }
 
 /* query_rows(compute, geometry, geometry_data, near, bound, floor, margins, joints, influence,
- * rows) -> list: the collision limit's exact distance queries (limits/collision.py, _rows):
- * for each pair k of the list `near`, res = compute(geometry, geometry_data, k) (Pinocchio's
- * computeDistance), d = res.min_distance; with a bound (npairs,) (else None) floor[k] =
- * d - bound[k] (-inf for a failed query: d -inf or NaN); a pair with -inf < d < influence[k]
- * (npairs,) gets the next row of rows (N, 13) as damper_rows reads it: d, margins[k], joints[k] (npairs,
- * 2), res.normal, res.getNearestPoint1(), res.getNearestPoint2(). Returns those pairs. */
+ * rows, failures) -> list: the collision limit's exact distance queries (limits/collision.py,
+ * _rows): for each pair k of the list `near`, res = compute(geometry, geometry_data, k)
+ * (Pinocchio's computeDistance), d = res.min_distance; with a bound (npairs,) (else None)
+ * floor[k] = d - bound[k] (-inf for a failed query: d NaN or no closest points); a pair with
+ * d < influence[k] (npairs,) gets the next row of rows (N, 13) as damper_rows reads it: d,
+ * margins[k], joints[k] (npairs, 2), res.normal, res.getNearestPoint1(),
+ * res.getNearestPoint2(); where coal found no closest points (deep in a penetration: d
+ * -DBL_MAX) the row holds d = -inf and zeros for its caller to form, and failures (1,) counts
+ * them. Returns those pairs. */
 PyObject *py_query_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
-    if (!nargs_ok(nargs, 10, "query_rows") || query_names()) return NULL;
+    if (!nargs_ok(nargs, 11, "query_rows") || query_names()) return NULL;
     Queries Q;
     memset(&Q, 0, sizeof Q);
     PyObject *found = NULL, *near = NULL;
@@ -544,7 +570,7 @@ fail:
 done:
     Py_XDECREF(near);
     release(&Q.bound); release(&Q.floor_); release(&Q.margins); release(&Q.influence);
-    release(&Q.joints); release(&Q.rows);
+    release(&Q.joints); release(&Q.rows); release(&Q.failures);
     return found;
 }
 

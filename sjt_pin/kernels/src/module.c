@@ -76,7 +76,8 @@ static PyMethodDef methods[] = {
      "collision limit's rows of its pairs' remembered closest points after their own rows."},
     {"query_rows", (PyCFunction)(void (*)(void))py_query_rows, METH_FASTCALL,
      "query_rows(compute, geometry, geometry_data, near, bound, floor, margins, joints, "
-     "influence, rows) -> list: the collision limit's distance queries and its pairs' rows."},
+     "influence, rows, failures) -> list: the collision limit's distance queries and its "
+     "pairs' rows."},
     {"near_pairs", (PyCFunction)(void (*)(void))py_near_pairs, METH_FASTCALL,
      "near_pairs(q, reference, lower, upper, lever, gap, bound, near, floor, influence) -> "
      "list | None: "
