@@ -791,10 +791,26 @@ class _NoClosestPoints:
         return np.full(3, -1e307)
 
 
+class _NoNormal(_NoClosestPoints):
+    """What coal answers for a sphere whose centre lies on a cylinder's: the two closest points
+    coincide, and the normal is zero."""
+
+    min_distance = -0.12
+    normal = np.zeros(3)
+
+    def getNearestPoint1(self):  # noqa: N802
+        return np.array([0.3, 0.5, 0.4])
+
+    getNearestPoint2 = getNearestPoint1  # noqa: N815
+
+
 # Restarts of solve() that pass deep through the robot's own body or an obstacle met coal's
 # answer without closest points (-DBL_MAX, points near 1e307), which became a row of 1e307s:
 # solve() raised "rows() returned NaN or inf" (Baxter, ANYmal with a Kinova arm, G1, Talos).
-def test_a_query_without_closest_points_separates_the_pair(panda):
+# A sphere moved onto the centre of Baxter's elbow cylinder got a zero normal, a row of zeros
+# that held the arm 120 mm deep in it.
+@pytest.mark.parametrize("answer", [_NoClosestPoints, _NoNormal])
+def test_a_query_without_closest_points_separates_the_pair(answer, panda):
     q0 = _start(panda)
     limit = CollisionLimit(panda, _near_obstacles(panda, q0), self_collision=True)
     kin = Kinematics(panda.model)
@@ -805,7 +821,7 @@ def test_a_query_without_closest_points_separates_the_pair(panda):
     compute = pin.computeDistance
 
     def failing(geometry, data, k):
-        return _NoClosestPoints() if k == victim else compute(geometry, data, k)
+        return answer() if k == victim else compute(geometry, data, k)
 
     pin.computeDistance = failing
     try:

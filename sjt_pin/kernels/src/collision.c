@@ -465,13 +465,15 @@ static int query_args(PyObject *const *args, Queries *Q)
  * from coal (a result read through Python costs per vector); -1 with a Python error set */
 #define SEPARATED 1e-6
 /* coal's answer where it found no closest points (GJK/EPA deep in a penetration): a distance
- * of -DBL_MAX and points near DBL_MAX */
+ * of -DBL_MAX and points near DBL_MAX, or no normal (two closest points that coincide, a sphere
+ * at the centre of a cylinder) */
 #define UNUSABLE 1e300
 static int usable(const double *row)
 {
     for (int c = 4; c < 13; c++)
         if (!(fabs(row[c]) < UNUSABLE)) return 0;
-    return 1;
+    double n2 = row[4] * row[4] + row[5] * row[5] + row[6] * row[6];
+    return n2 > 0.25;  /* a unit normal (not coal's zero one where the points coincide) */
 }
 
 static int query_row(const Queries *Q, PyObject *res, Py_ssize_t k, double d, double *row)
