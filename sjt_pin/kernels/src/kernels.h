@@ -162,6 +162,49 @@ static inline void jerk_bounds(double v, double a, double Jk, double vj, double 
     if (isfinite(bound)) *lo = dmax(*lo, bound);
 }
 
+/* The acceleration and jerk limits' box [*lo, *hi] (rad/s) of one joint around the state
+ * (v, a) the step starts from (AccelerationLimit, JerkLimit): v +- A dt, narrowed by jerk_bounds
+ * where has_jerk and Jk is finite; *lo_by, *hi_by: the limit that set each bound (L_* codes,
+ * -1 none). Where they contradict each other the acceleration limit's bound wins (an
+ * acceleration beyond its limit, which a collision's rows may ask, cannot come back within one
+ * step of the jerk limit: the jerk yields), else the middle of the two; returns 1 then. */
+static inline int smoothness_limits(double v, double a, double A, double Jk, double vj,
+                                    double dt, int has_jerk, double *lo, double *hi,
+                                    double *lo_by, double *hi_by)
+{
+    *lo = -INFINITY;
+    *hi = INFINITY;
+    *lo_by = *hi_by = -1.0;
+    if (v - A * dt > *lo) {
+        *lo = v - A * dt;
+        *lo_by = L_ACCELERATION;
+    }
+    if (v + A * dt < *hi) {
+        *hi = v + A * dt;
+        *hi_by = L_ACCELERATION;
+    }
+    if (has_jerk && isfinite(Jk)) {
+        double jl, jh;
+        jerk_bounds(v, a, Jk, vj, dt, &jl, &jh);
+        if (jl > *lo) {
+            *lo = jl;
+            *lo_by = L_JERK;
+        }
+        if (jh < *hi) {
+            *hi = jh;
+            *hi_by = L_JERK;
+        }
+    }
+    if (!(*lo > *hi)) return 0;
+    if (*lo_by == L_ACCELERATION && *hi_by != L_ACCELERATION)
+        *hi = *lo;
+    else if (*hi_by == L_ACCELERATION && *lo_by != L_ACCELERATION)
+        *lo = *hi;
+    else
+        *lo = *hi = 0.5 * (*lo + *hi);
+    return 1;
+}
+
 /* what each file offers the others, in the order they build on each other */
 
 /* args.c */

@@ -679,28 +679,6 @@ done:
     return result;
 }
 
-/* the acceleration and jerk limits' box of joint j around the state (v, a) a step starts from
- * (smooth_stage_c's step 3, without the approach to the wanted velocity; where the two
- * contradict each other the acceleration limit wins) */
-static void smoothness_box(const double *S, Py_ssize_t n, Py_ssize_t j, double v, double a,
-                           double dt, int has_jerk, double *lo_out, double *hi_out)
-{
-    double A = S[SM_ACC * n + j], Jk = S[SM_JERK * n + j], vj = S[SM_JERK_SPEED * n + j];
-    double lo = v - A * dt, hi = v + A * dt;
-    if (has_jerk && isfinite(Jk)) {
-        double jl, jh;
-        jerk_bounds(v, a, Jk, vj, dt, &jl, &jh);
-        if (jh < lo) hi = lo;  /* the jerk yields: the acceleration bound nearest its box */
-        else if (jl > hi) lo = hi;
-        else {
-            lo = dmax(lo, jl);
-            hi = dmin(hi, jh);
-        }
-    }
-    *lo_out = lo;
-    *hi_out = hi;
-}
-
 /* smooth_rows_c's velocities (n each): the step's dq, the box of a round [lo, hi], the moving
  * joints, the projection's result, the hard box (the stage's within the user's bounds), the
  * acceleration and jerk limits' box around the previous state, the acceleration limits' box
@@ -729,8 +707,10 @@ static int smooth_boxes(SmoothBoxes *x, const double *lower, const double *upper
         x->hard_lo[j] = lower ? dmax(hlo[j], lower[j]) : hlo[j];
         x->hard_hi[j] = upper ? dmin(hhi[j], upper[j]) : hhi[j];
         if (x->hard_lo[j] > x->hard_hi[j]) return 0;
-        smoothness_box(S, n, j, previous[j], previous[n + j], dt, x->jerk, x->soft_lo + j,
-                       x->soft_hi + j);
+        double by[2];  /* (which limit set each bound: not needed here) */
+        smoothness_limits(previous[j], previous[n + j], acc[j], S[SM_JERK * n + j],
+                          S[SM_JERK_SPEED * n + j], dt, x->jerk, x->soft_lo + j, x->soft_hi + j,
+                          by, by + 1);
         x->acc_lo[j] = previous[j] - acc[j] * dt;
         x->acc_hi[j] = previous[j] + acc[j] * dt;
     }

@@ -244,39 +244,16 @@ static int hard_box(const double *q, const double *mask, const double *work, con
     return inside;
 }
 
-/* Step 3, the smoothness box (rad/s, AccelerationLimit and JerkLimit): the previous velocity
- * pdq changed by at most A dt, and with jerk limits the previous acceleration pddq changed by at
- * most Jk dt, the velocity approaching the jerk's speed vj no faster than a ramp of the
- * acceleration can end there (ramp_speed). Where they contradict each other (an acceleration
- * beyond its limit, which the rows of a collision may ask, cannot come back within one step of
- * the jerk limit) the acceleration limit wins: the jerk yields and the joint is marked in torn.
- * Codes L_ACCELERATION, L_JERK. */
+/* Step 3, the smoothness box (rad/s, smoothness_limits around the previous velocity and
+ * acceleration), each bound's limit, and the joints whose limits contradicted each other
+ * marked in torn. */
 static void smoothness_bounds(const double *work, const Stage *st, Py_ssize_t n, int has_jerk)
 {
     double dt = work[P_DT];
-    for (Py_ssize_t j = 0; j < n; j++) {
-        double pdq = st->pdq[j], change = st->A[j] * dt, Jk = st->Jk[j];
-        st->slo[j] = -INFINITY;
-        st->shi[j] = INFINITY;
-        st->slb[j] = st->shb[j] = -1.0;
-        tighten(st->slo + j, st->shi + j, st->slb + j, st->shb + j, pdq - change, pdq + change,
-                L_ACCELERATION);
-        if (has_jerk && isfinite(Jk)) {
-            double lo, hi;
-            jerk_bounds(pdq, st->pddq[j], Jk, st->vj[j], dt, &lo, &hi);
-            tighten(st->slo + j, st->shi + j, st->slb + j, st->shb + j, lo, hi, L_JERK);
-        }
-        st->torn[j] = 0.0;
-        if (st->slo[j] > st->shi[j]) {  /* limits that contradict each other */
-            st->torn[j] = 1.0;
-            if (st->slb[j] == L_ACCELERATION && st->shb[j] != L_ACCELERATION)
-                st->shi[j] = st->slo[j];
-            else if (st->shb[j] == L_ACCELERATION && st->slb[j] != L_ACCELERATION)
-                st->slo[j] = st->shi[j];
-            else
-                st->slo[j] = st->shi[j] = 0.5 * (st->slo[j] + st->shi[j]);
-        }
-    }
+    for (Py_ssize_t j = 0; j < n; j++)
+        st->torn[j] = smoothness_limits(st->pdq[j], st->pddq[j], st->A[j], st->Jk[j], st->vj[j],
+                                        dt, has_jerk, st->slo + j, st->shi + j, st->slb + j,
+                                        st->shb + j);
 }
 
 /* Step 5 (ConstraintStage.smooth): the velocity moves from the smoothness box's centre (within
