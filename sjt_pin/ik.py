@@ -415,13 +415,12 @@ def solve(solver, target, q0, *, tol: float = TOL, max_iters: int = MAX_ITERS,
         error = search.error()
         if not math.isfinite(error):  # a NaN target, or one so far that |e|^2 overflows
             raise_non_finite_targets(targets)  # as step() says it
-        if search.user_limits is not None and not success:
-            # a start that ends outside the user's limits (a random start inside an obstacle,
-            # or pressed into it on its way) is never preferred to one that ends within them
-            error = error if search.admissible(search.q, ENDS_TOL) else math.inf
-        if best is None or error < best[1] or (best[1] == math.inf and error == math.inf
-                                               and search.error() < best[2]):
-            best = (search.q.copy(), error, search.error())
+        # a start that ends outside the user's limits (a random start inside an obstacle, or
+        # pressed into it on its way) comes after every one that ends within them
+        outside = (search.user_limits is not None and not success
+                   and not search.admissible(search.q, ENDS_TOL))
+        if best is None or (outside, error) < (best[1], best[2]):
+            best = (search.q.copy(), outside, error)
         if success:
             return IKResult(best[0], True, total, error, attempt, clipped)
         out_of_starts = restarts is not None and attempt >= restarts
@@ -463,12 +462,12 @@ class _Starts:
 def _table_starts(search: Search, table, attempt: int, last: int, max_iters: int, left: int,
                   best: tuple) -> tuple[bool, int, int, tuple]:
     """The table's starts ``attempt`` to ``last`` in one compiled call (a single pose task,
-    no clock): (success, iterations used, the last start run, the best (q, error, error) so
-    far)."""
+    no clock): (success, iterations used, the last start run, the best (q, outside the user's
+    limits: never here, error) so far)."""
     success, used, attempt, lowest = search.run_nearest(table, attempt, last, max_iters, left,
-                                                        best[1])
-    if lowest < best[1]:
-        best = (search.best_q.copy(), lowest, lowest)
+                                                        best[2])
+    if lowest < best[2]:
+        best = (search.best_q.copy(), False, lowest)
     return success, used, attempt, best
 
 

@@ -649,8 +649,7 @@ def _capsules_as_long_as_their_cylinders(geometry: pin.GeometryModel | None, mod
         return geometry
     import coal
 
-    capsules = [g for g in geometry.geometryObjects if isinstance(g.geometry, coal.Capsule)]
-    if not capsules:
+    if not any(isinstance(g.geometry, coal.Capsule) for g in geometry.geometryObjects):
         return geometry
     source = pin.buildGeomFromUrdf(model, urdf, pin.COLLISION, package_dirs=_example_dirs(urdf))
     cylinders = [g for g in source.geometryObjects if isinstance(g.geometry, coal.Cylinder)]
