@@ -66,3 +66,13 @@ REVOLUTE_PRISMATIC_URDF = """<robot name="revolute_prismatic">
 @pytest.fixture(scope="session")
 def revolute_prismatic() -> sjt.Robot:
     return sjt.Robot.from_urdf(REVOLUTE_PRISMATIC_URDF, ee_frame="l3")
+
+
+@pytest.fixture(scope="session")
+def continuous_wrist() -> sjt.Robot:
+    """The revolute-prismatic arm with its last joint continuous: q (cos, sin) is not its own
+    tangent space."""
+    urdf = REVOLUTE_PRISMATIC_URDF.replace('<joint name="j3" type="revolute">',
+                                           '<joint name="j3" type="continuous">')
+    return sjt.Robot.from_urdf(urdf.replace('name="revolute_prismatic"',
+                                            'name="continuous_wrist"'), ee_frame="l3")

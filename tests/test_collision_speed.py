@@ -136,10 +136,10 @@ def test_compiled_kernels_name_the_argument_that_does_not_fit():
                       np.zeros(1))
     with pytest.raises(ValueError, match="near\\[0\\] = 5 is no pair"):
         K.near_pairs(np.zeros(2), np.zeros(2), np.full(2, -np.inf), np.full(2, np.inf),
-                     np.zeros((3, 2)), np.ones(3), np.zeros(3), [5],
-                     np.zeros(3), np.full(3, 0.05))
+                     np.zeros((3, 2)), np.ones(3), [5], np.zeros(3), np.zeros(2),
+                     np.full(3, 0.05))
     with pytest.raises(ValueError, match="do not fit"):
-        K.query_rows(pin.computeDistance, None, None, [], None, np.zeros(3), np.zeros(2),
+        K.query_rows(pin.computeDistance, None, None, [], np.zeros(3), np.zeros(2),
                      np.zeros((3, 2)), np.full(3, 0.05), np.zeros((3, 13)),
                      np.zeros(1))
     with pytest.raises(ValueError, match="do not fit"):
@@ -187,10 +187,12 @@ def test_the_compiled_damper_rows_are_the_numpy_ones(panda):
 
 def _walk_scene(robot, rng):
     """A walk's start, a ball and a drift per step: on Panda and UR5 a random start and a ball
-    10 cm beside the hand, no drift; on the revolute-prismatic arm the slide at 1.4 m and the
-    first joint swinging 3 mrad a step from 0.9 rad (plus the walk's noise) through a ball."""
-    if robot.name == "revolute_prismatic":
-        q = np.array([0.9, 1.4, 0.0])
+    10 cm beside the hand, no drift; on the revolute-prismatic arm (and its variant with a
+    continuous wrist) the slide at 1.4 m and the first joint swinging 3 mrad a step from 0.9
+    rad (plus the walk's noise) through a ball."""
+    if robot.name in ("revolute_prismatic", "continuous_wrist"):
+        q = pin.neutral(robot.model)
+        q[:2] = 0.9, 1.4
         ball = (coal.Sphere(0.1), pin.SE3(np.eye(3), np.array([0.0, 1.4, 0.0])))
         return q, ball, np.array([0.003, 0.0, 0.0])
     q = robot.random_configuration(rng)
@@ -198,17 +200,30 @@ def _walk_scene(robot, rng):
     pin.framesForwardKinematics(robot.model, data, q)
     hand = pin.updateFramePlacement(robot.model, data, robot.model.getFrameId(robot.ee_frame))
     ball = (coal.Sphere(0.05), pin.SE3(np.eye(3), hand.translation + [0.1, 0.0, 0.0]))
-    return q, ball, np.zeros(robot.nq)
+    return q, ball, np.zeros(robot.nv)
 
 
-@pytest.mark.parametrize("name", ["panda", "ur5", "revolute_prismatic"])
-def test_the_broad_phase_it_skips_never_misses_a_pair_within_influence(name, panda, ur5,
-                                                                       revolute_prismatic):
+def _walk_step(robot, q, drift, jump, rng):
+    """The walk's next configuration: ``q`` moved by ``drift`` plus noise of up to ``jump`` on
+    each velocity coordinate, its bounded coordinates clipped into their range."""
+    model = robot.model
+    q = pin.integrate(model, q, drift + rng.uniform(-jump, jump, robot.nv))
+    bounded = np.zeros(robot.nq, dtype=bool)
+    for joint in model.joints[1:]:
+        if joint.nq == joint.nv:
+            bounded[joint.idx_q:joint.idx_q + joint.nq] = True
+    return np.where(bounded, np.clip(q, model.lowerPositionLimit, model.upperPositionLimit), q)
+
+
+@pytest.mark.parametrize("name", ["panda", "ur5", "revolute_prismatic", "continuous_wrist"])
+def test_the_broad_phase_it_skips_never_misses_a_pair_within_influence(
+        name, panda, ur5, revolute_prismatic, continuous_wrist):
     """Along random joint-space walks (steps of up to 3 mrad, every 50th up to 0.3 rad), the
     pairs the limit measures at each configuration hold every pair whose exact distance is
     below influence (brute force over every pair), although most steps reuse the last broad
     phase."""
-    robot = {"panda": panda, "ur5": ur5, "revolute_prismatic": revolute_prismatic}[name]
+    robot = {"panda": panda, "ur5": ur5, "revolute_prismatic": revolute_prismatic,
+             "continuous_wrist": continuous_wrist}[name]
     rng = np.random.default_rng(15)
     q, ball, drift = _walk_scene(robot, rng)
     data = robot.model.createData()
@@ -221,11 +236,10 @@ def test_the_broad_phase_it_skips_never_misses_a_pair_within_influence(name, pan
         return full(data, influence)
 
     limit._broad_phase = counted
-    lower, upper = robot.model.lowerPositionLimit, robot.model.upperPositionLimit
     steps = 300
     for step in range(steps):
         jump = 0.3 if step % 50 == 0 else 0.003  # mostly small steps, now and then a leap
-        q = np.clip(q + drift + rng.uniform(-jump, jump, robot.nq), lower, upper)
+        q = _walk_step(robot, q, drift, jump, rng)
         pin.computeJointJacobians(robot.model, data, q)
         near = set(limit._near(data, q, limit._influence).tolist())
         pin.updateGeometryPlacements(robot.model, data, limit.geometry, limit.geometry_data)
@@ -236,14 +250,15 @@ def test_the_broad_phase_it_skips_never_misses_a_pair_within_influence(name, pan
     assert calls[0] < steps / 2  # the skip did skip
 
 
-@pytest.mark.parametrize("name", ["panda", "ur5", "revolute_prismatic"])
-def test_rows_hold_every_pair_within_influence_though_most_are_not_queried(name, panda, ur5,
-                                                                           revolute_prismatic):
+@pytest.mark.parametrize("name", ["panda", "ur5", "revolute_prismatic", "continuous_wrist"])
+def test_rows_hold_every_pair_within_influence_though_most_are_not_queried(
+        name, panda, ur5, revolute_prismatic, continuous_wrist):
     """Along random joint-space walks (steps of up to 3 mrad, every 50th up to 0.3 rad), the
     rows are those of exactly the pairs whose exact distance is below influence (brute force
     over every pair), although a pair last measured far enough beyond influence is not
     queried again until its bound reaches that gap."""
-    robot = {"panda": panda, "ur5": ur5, "revolute_prismatic": revolute_prismatic}[name]
+    robot = {"panda": panda, "ur5": ur5, "revolute_prismatic": revolute_prismatic,
+             "continuous_wrist": continuous_wrist}[name]
     rng = np.random.default_rng(16)
     q, ball, drift = _walk_scene(robot, rng)
     data = robot.model.createData()
@@ -260,10 +275,9 @@ def test_rows_hold_every_pair_within_influence_though_most_are_not_queried(name,
     motion = Motion(q, np.zeros(robot.nv), np.zeros(robot.nv), 1e-3)
     probe = limit.geometry.copy()
     probe_data = limit.geometry_data.copy()
-    lower, upper = robot.model.lowerPositionLimit, robot.model.upperPositionLimit
     for step in range(300):
         jump = 0.3 if step % 50 == 0 else 0.003
-        q = np.clip(q + drift + rng.uniform(-jump, jump, robot.nq), lower, upper)
+        q = _walk_step(robot, q, drift, jump, rng)
         kin.update(q)
         pin.computeDistance = counted
         try:
@@ -276,8 +290,8 @@ def test_rows_hold_every_pair_within_influence_though_most_are_not_queried(name,
                  if compute(probe, probe_data, k).min_distance < limit.influence}
         assert set(limit.active) == close, step
         within += len(close)
-    if robot.name == "revolute_prismatic":  # its one pair near the ball: every candidate is
-        assert within > 20  # within influence (and queried)
+    if name in ("revolute_prismatic", "continuous_wrist"):  # its one pair near the ball:
+        assert within > 20  # every candidate is within influence (and queried)
     else:
         assert within > 100  # pairs were within influence
         assert queries[0] < 0.6 * candidates  # and most candidates were not queried

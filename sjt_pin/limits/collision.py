@@ -50,8 +50,9 @@ Distances and closest points come from coal (through Pinocchio's ``GeometryModel
 pairs whose bounding spheres come within ``influence`` (plus a skin of half the band
 ``influence - margin`` while the broad phase's result is reused, as in a Verlet list) pay for
 an exact distance query, and a pair whose last exact distance was beyond ``influence`` is not
-queried again until its joints can have closed that gap (a bound from the joint offsets and
-the ranges of the prismatic joints between, :meth:`CollisionLimit._near`).
+queried again until the joints' moves since that query can have closed the gap (a bound from
+the joint offsets and the ranges of the prismatic joints between, summed step by step:
+:meth:`CollisionLimit._near`, :meth:`CollisionLimit._aged`).
 """
 
 from __future__ import annotations
@@ -487,8 +488,9 @@ class CollisionLimit(Limit):
         """The levers that bound how far the joints move a pair (:meth:`_pair_levers`), and
         the state of the skip of the broad phase and of the queries: the last broad phase
         (obstacles' version, q, its pairs, each pair's gap, its pairs as a list) and each
-        pair's floor (its exact distance at its last query minus the bound of :meth:`_near`
-        there, m: while that minus the bound now exceeds influence, it is not queried)."""
+        pair's floor, a lower bound of its exact distance at ``_floor_q`` (m): its distance at
+        its last query, less the levers' bound of every move since (:meth:`_aged`); while it
+        exceeds influence, the pair is not queried."""
         self._version = 0  # bumped by move(): a new scene
         self._cache: tuple | None = None
         self._kinds, self._extent, self._lower, self._upper = _extents(
@@ -500,12 +502,10 @@ class CollisionLimit(Limit):
         self._pair_lever, self._flat = self._pair_levers()
         self._reference: tuple[int, np.ndarray, np.ndarray, np.ndarray, list] | None = None
         self._floor = np.full(len(self.pairs), -np.inf)
+        self._floor_q: np.ndarray | None = None  # where the floors hold (None: nowhere)
         self._influence = np.full(len(self.pairs), self.influence)  # each pair's, m
         self._braking_influence = np.zeros(len(self.pairs))  # kernels.braking_reach's output
-        self._no_bound = np.zeros(len(self.pairs))
         self._failures = np.zeros(1)  # kernels.query_rows': the queries without closest points
-        self._bound_now = np.zeros(len(self.pairs))  # kernels.near_pairs' output
-        self._bound: np.ndarray | None = None
 
     def _chains(self, unbounded: float) -> tuple[np.ndarray, np.ndarray]:
         """For each geometry g and joint coordinate (nvExtended) of a joint k that moves it:
@@ -664,18 +664,14 @@ class CollisionLimit(Limit):
         to where it ran: a displacement ``dq`` from there changes the distance of a pair's
         bounding spheres by at most ``sum_j lever_j |dq_j|`` (:meth:`_pair_levers`), so a
         pair it left out stays out until that plus its influence reaches the gap it left the
-        pair at.
-
-        Sets :attr:`_bound`: that bound for every pair at ``q`` (m; None without a
-        reference), which :meth:`_rows` also holds the candidates' exact distances to."""
-        ref = self._reference
-        bound = None
+        pair at. A new broad phase keeps the floors of the pairs it had before (the others
+        have none)."""
         inside = q is not None and self._inside(q)
-        if inside and ref is not None and ref[0] == self._version:
+        ref = self._reference if inside and self._reference is not None \
+            and self._reference[0] == self._version else None  # (None: floors gone too)
+        if ref is not None:
             moved = np.abs(q - ref[1] if self._flat else pin.difference(self.model, ref[1], q))
-            bound = self._pair_lever @ moved
-            if (bound + influence < ref[3]).all():
-                self._bound = bound
+            if (self._pair_lever @ moved + influence < ref[3]).all():
                 return ref[2]
         near, gap = self._broad_phase(data, influence)
         if q is not None and inside and self._pair_lever is not None:
@@ -686,19 +682,33 @@ class CollisionLimit(Limit):
             # after that; a wider skin queries more than it saves)
             near = np.flatnonzero(gap < influence + 0.5 * (self.influence - self.margin))
             gap[near] = np.inf  # a candidate stays one
+            kept = np.full(len(self.pairs), -np.inf)
+            if ref is not None:  # (after a move() of an obstacle the floors are gone)
+                kept[ref[2]] = self._floor[ref[2]]
+            self._floor[:] = kept
             self._reference = (self._version, q.copy(), near, gap, near.tolist())
-            self._bound = self._no_bound
-            # the exact distances' floors move to the new reference (here, where its bound is
-            # 0); after a move() of an obstacle they are gone
-            if bound is None:
-                self._floor.fill(-np.inf)
-            else:
-                self._floor -= bound
         else:
             self._reference = None  # no reference outside the box the levers hold in
             self._floor.fill(-np.inf)
-            self._bound = None
+            self._floor_q = None
         return near
+
+    def _aged(self, q: np.ndarray | None, near: np.ndarray, influence: np.ndarray) -> np.ndarray:
+        """The pairs of ``near`` (the last broad phase's, :meth:`_near`) to query at ``q``:
+        those whose floor, aged from ``_floor_q`` to ``q`` by the levers' bound, is within
+        their influence (every pair where the floors hold nowhere)."""
+        lever = self._pair_lever
+        if q is None or self._reference is None or lever is None:
+            return near
+        if self._floor_q is None:
+            self._floor[near] = -np.inf
+            self._floor_q = q.copy()
+            return near
+        moved = np.abs(q - self._floor_q if self._flat
+                       else pin.difference(self.model, self._floor_q, q))
+        self._floor[near] -= lever[near] @ moved
+        self._floor_q[:] = q
+        return near[self._floor[near] <= influence[near]]
 
     def _inside(self, q: np.ndarray) -> bool:
         """Whether ``q`` lies in the box of position limits :meth:`_pair_levers` holds in."""
@@ -840,30 +850,24 @@ class CollisionLimit(Limit):
               ) -> tuple[np.ndarray, np.ndarray] | None:
         self.active = []  # indices into self.pairs / self.pair_names of the rows returned
         self._witness_count = 0
-        floor, ref = self._floor, self._reference
-        # a pair's distance changes by at most its bound's change (_near): one that was beyond
+        ref = self._reference
+        # a pair's distance changes by at most its levers' bound (_near): one that was beyond
         # influence by more than that at its last query still is; both tests compiled where q
-        # is its own tangent space, else _near and numpy
+        # is its own tangent space, else _near, _aged and numpy
         listed = None
-        bound: np.ndarray | None
-        if self._flat and q is not None and ref is not None and ref[0] == self._version:
+        if (self._flat and q is not None and ref is not None and ref[0] == self._version
+                and self._floor_q is not None):
             listed = near_pairs(q, ref[1], self._lower, self._upper, self._pair_lever, ref[3],
-                                self._bound_now, ref[4], floor, influence)
-        if listed is not None:
-            bound = self._bound = self._bound_now
-        else:
-            near = self._near(data, q, influence)
-            bound = self._bound
-            if bound is not None and near.size:
-                near = near[floor[near] - bound[near] <= influence[near]]
-            listed = near.tolist()
+                                ref[4], self._floor, self._floor_q, influence)
+        if listed is None:
+            listed = self._aged(q, self._near(data, q, influence), influence).tolist()
         if not listed:
             return None
         pin.updateGeometryPlacements(model, data, self.geometry, self.geometry_data)
         # coal's distance of each pair listed; those within influence get a row (compiled: the
         # Python around each query cost more than the query)
         found = query_rows(pin.computeDistance, self.geometry, self.geometry_data, listed,
-                           bound, floor, self.margins, self._joint_table, influence,
+                           self._floor, self.margins, self._joint_table, influence,
                            self._pair_rows, self._failures)
         if not found:
             return None

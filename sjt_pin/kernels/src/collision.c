@@ -413,11 +413,11 @@ static int query_names(void)
     return s_distance && s_normal && s_p1 && s_p2 ? 0 : -1;
 }
 
-/* query_rows' arrays: the bound (or none), each pair's floor, margin and influence, its two
- * joints, and the rows written */
+/* query_rows' arrays: each pair's floor, margin and influence, its two joints, and the rows
+ * written */
 typedef struct {
-    Arg bound, floor_, margins, influence, joints, rows, failures;
-    double *bv, *fv, *mv, *iv, *rv, *failed;
+    Arg floor_, margins, influence, joints, rows, failures;
+    double *fv, *mv, *iv, *rv, *failed;
     Mat Jm;
     Py_ssize_t npairs, N;
 } Queries;
@@ -425,22 +425,19 @@ typedef struct {
 /* Acquire and check query_rows' arrays (args as query_rows'); -1 with a Python error set */
 static int query_args(PyObject *const *args, Queries *Q)
 {
-    int has_bound = args[4] != Py_None;
-    if ((has_bound && acquire(args[4], &Q->bound, 0, 1, "bound"))
-        || acquire(args[5], &Q->floor_, 1, 1, "floor")
-        || acquire(args[6], &Q->margins, 0, 1, "margins")
-        || acquire(args[7], &Q->joints, 0, 2, "joints")
-        || acquire(args[8], &Q->influence, 0, 1, "influence")
-        || acquire(args[9], &Q->rows, 1, 2, "rows")
-        || acquire(args[10], &Q->failures, 1, 1, "failures"))
+    if (acquire(args[4], &Q->floor_, 1, 1, "floor")
+        || acquire(args[5], &Q->margins, 0, 1, "margins")
+        || acquire(args[6], &Q->joints, 0, 2, "joints")
+        || acquire(args[7], &Q->influence, 0, 1, "influence")
+        || acquire(args[8], &Q->rows, 1, 2, "rows")
+        || acquire(args[9], &Q->failures, 1, 1, "failures"))
         return -1;
-    Q->bv = has_bound ? vec(&Q->bound, "bound") : NULL;
     Q->fv = out_vec(&Q->floor_, "floor");
     Q->mv = vec(&Q->margins, "margins");
     Q->iv = vec(&Q->influence, "influence");
     Q->rv = out_mat(&Q->rows, "rows");
     Q->failed = out_vec(&Q->failures, "failures");
-    if ((has_bound && !Q->bv) || !Q->fv || !Q->mv || !Q->iv || !Q->rv || !Q->failed) return -1;
+    if (!Q->fv || !Q->mv || !Q->iv || !Q->rv || !Q->failed) return -1;
     if (length(&Q->failures) != 1) {
         PyErr_SetString(PyExc_ValueError, "query_rows: failures must hold one number");
         return -1;
@@ -450,9 +447,8 @@ static int query_args(PyObject *const *args, Queries *Q)
     Q->npairs = length(&Q->floor_);
     Q->N = Q->rows.view.shape[0];
     if (length(&Q->margins) != Q->npairs || length(&Q->influence) != Q->npairs
-        || Q->Jm.m != Q->npairs || Q->Jm.n != 2 || Q->rows.view.shape[1] != 13
-        || (has_bound && length(&Q->bound) != Q->npairs)) {
-        PyErr_Format(PyExc_ValueError, "query_rows: bound, floor, margins, influence (npairs,), "
+        || Q->Jm.m != Q->npairs || Q->Jm.n != 2 || Q->rows.view.shape[1] != 13) {
+        PyErr_Format(PyExc_ValueError, "query_rows: floor, margins, influence (npairs,), "
                      "joints (npairs, 2) and rows (N, 13) do not fit (npairs %zd)", Q->npairs);
         return -1;
     }
@@ -518,8 +514,8 @@ static int query_pair(PyObject *const *args, const Queries *Q, PyObject *item, P
     double d = dobj ? PyFloat_AsDouble(dobj) : -1.0;
     Py_XDECREF(dobj);
     int bad = !dobj || (d == -1.0 && PyErr_Occurred());
-    if (!bad && Q->bv)  /* NaN, or no closest points: -inf (queried again) */
-        Q->fv[k] = d > -UNUSABLE ? d - Q->bv[k] : -INFINITY;
+    if (!bad)  /* NaN, or no closest points: -inf (queried again) */
+        Q->fv[k] = d > -UNUSABLE ? d : -INFINITY;
     if (!bad && d > -INFINITY && d < Q->iv[k]) {
         if (*count >= Q->N) {
             PyErr_SetString(PyExc_ValueError, "query_rows: more pairs within influence than rows");
@@ -533,11 +529,11 @@ static int query_pair(PyObject *const *args, const Queries *Q, PyObject *item, P
     return bad ? -1 : 0;
 }
 
-/* query_rows(compute, geometry, geometry_data, near, bound, floor, margins, joints, influence,
- * rows, failures) -> list: the collision limit's exact distance queries (limits/collision.py,
+/* query_rows(compute, geometry, geometry_data, near, floor, margins, joints, influence, rows,
+ * failures) -> list: the collision limit's exact distance queries (limits/collision.py,
  * _rows): for each pair k of the list `near`, res = compute(geometry, geometry_data, k)
- * (Pinocchio's computeDistance), d = res.min_distance; with a bound (npairs,) (else None)
- * floor[k] = d - bound[k] (-inf for a failed query: d NaN or no closest points); a pair with
+ * (Pinocchio's computeDistance), d = res.min_distance, floor[k] = d (-inf for a failed query:
+ * d NaN or no closest points); a pair with
  * d < influence[k] (npairs,) gets the next row of rows (N, 13) as damper_rows reads it: d,
  * margins[k], joints[k] (npairs, 2), res.normal, res.getNearestPoint1(),
  * res.getNearestPoint2(); where coal found no closest points (deep in a penetration: d
@@ -545,7 +541,7 @@ static int query_pair(PyObject *const *args, const Queries *Q, PyObject *item, P
  * them. Returns those pairs. */
 PyObject *py_query_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
-    if (!nargs_ok(nargs, 11, "query_rows") || query_names()) return NULL;
+    if (!nargs_ok(nargs, 10, "query_rows") || query_names()) return NULL;
     Queries Q;
     memset(&Q, 0, sizeof Q);
     PyObject *found = NULL, *near = NULL;
@@ -571,38 +567,31 @@ fail:
     Py_CLEAR(found);
 done:
     Py_XDECREF(near);
-    release(&Q.bound); release(&Q.floor_); release(&Q.margins); release(&Q.influence);
+    release(&Q.floor_); release(&Q.margins); release(&Q.influence);
     release(&Q.joints); release(&Q.rows); release(&Q.failures);
     return found;
 }
 
-/* bound = lever |q - reference| (npairs,); whether q lies in the box [lower, upper] the
- * levers hold in and every pair's bound plus its influence stays under its gap (else the
- * broad phase must run again); -1 when out of memory */
-static int lever_bound(const double *q, const double *ref, const double *lo, const double *hi,
-                       Mat L, const double *gap, const double *influence, double *bound)
+/* Whether q lies in the box [lower, upper] the levers hold in and every pair's bound
+ * lever |q - reference| plus its influence stays under its gap (else the broad phase must run
+ * again) */
+static int lever_within(const double *q, const double *ref, const double *lo, const double *hi,
+                        Mat L, const double *gap, const double *influence)
 {
-    Py_ssize_t n = L.n;
-    for (Py_ssize_t j = 0; j < n; j++)
+    for (Py_ssize_t j = 0; j < L.n; j++)
         if (!(q[j] >= lo[j] && q[j] <= hi[j])) return 0;
-    double *moved = (double *)malloc((size_t)(n > 0 ? n : 1) * sizeof(double));
-    if (!moved) return -1;
-    for (Py_ssize_t j = 0; j < n; j++) moved[j] = fabs(q[j] - ref[j]);
-    int within = 1;
     for (Py_ssize_t k = 0; k < L.m; k++) {
         double acc = 0.0;
-        for (Py_ssize_t j = 0; j < n; j++) acc += AT(L, k, j) * moved[j];
-        bound[k] = acc;
-        if (!(acc + influence[k] < gap[k])) within = 0;
+        for (Py_ssize_t j = 0; j < L.n; j++) acc += AT(L, k, j) * fabs(q[j] - ref[j]);
+        if (!(acc + influence[k] < gap[k])) return 0;
     }
-    free(moved);
-    return within;
+    return 1;
 }
 
-/* The pairs of the sequence `near` whose floor - bound is not above their influence (a new
- * list) */
-static PyObject *pairs_to_query(PyObject *near_seq, const double *floor_, const double *bound,
-                                Py_ssize_t npairs, const double *influence)
+/* The pairs of the sequence `near` whose floor, aged from floor_q to q (floor_k -= lever_k
+ * |q - floor_q|), is not above their influence (a new list); floor_q becomes q */
+static PyObject *pairs_to_query(PyObject *near_seq, double *floor_, double *floor_q,
+                                const double *q, Mat L, const double *influence)
 {
     PyObject *near = PySequence_Fast(near_seq, "near must be a sequence of pair indices");
     if (!near) return NULL;
@@ -613,65 +602,67 @@ static PyObject *pairs_to_query(PyObject *near_seq, const double *floor_, const 
         Py_ssize_t k = PyLong_AsSsize_t(items[i]);
         if (k == -1 && PyErr_Occurred()) {
             Py_CLEAR(out);
-        } else if (k < 0 || k >= npairs) {
-            PyErr_Format(PyExc_ValueError, "near[%zd] = %zd is no pair (npairs %zd)", i, k,
-                         npairs);
+        } else if (k < 0 || k >= L.m) {
+            PyErr_Format(PyExc_ValueError, "near[%zd] = %zd is no pair (npairs %zd)", i, k, L.m);
             Py_CLEAR(out);
-        } else if (!(floor_[k] - bound[k] > influence[k]) && PyList_Append(out, items[i]) < 0) {
-            Py_CLEAR(out);
+        } else {
+            double moved = 0.0;
+            for (Py_ssize_t j = 0; j < L.n; j++) moved += AT(L, k, j) * fabs(q[j] - floor_q[j]);
+            floor_[k] -= moved;
+            if (!(floor_[k] > influence[k]) && PyList_Append(out, items[i]) < 0) Py_CLEAR(out);
         }
     }
     Py_DECREF(near);
+    if (out)
+        for (Py_ssize_t j = 0; j < L.n; j++) floor_q[j] = q[j];
     return out;
 }
 
-/* near_pairs(q, reference, lower, upper, lever, gap, bound, near, floor, influence) ->
+/* near_pairs(q, reference, lower, upper, lever, gap, near, floor, floor_q, influence) ->
  * list | None: the collision limit's skip of its broad phase and of its queries
  * (limits/collision.py, _near and _rows) for q in its own tangent space (revolute and
- * prismatic joints): bound (npairs,) = lever (npairs, nv) |q - reference|; None when q leaves
- * the box lower <= q <= upper (n,) the levers hold in, or when some pair's bound plus its
- * influence (npairs,) reaches the gap (npairs,) its bounding volumes had at the reference (the
- * broad phase must run again); else the pairs of the list `near` whose floor - bound is not
- * above their influence (those to query). */
+ * prismatic joints), with lever (npairs, n) bounding how far |dq| moves each pair: None when
+ * q leaves the box lower <= q <= upper (n,) the levers hold in, or when some pair's bound
+ * lever |q - reference| plus its influence (npairs,) reaches the gap (npairs,) its bounding
+ * volumes had at the reference (the broad phase must run again); else the pairs of the list
+ * `near` whose floor (npairs,; a lower bound of their distance at floor_q (n,), m), aged to q,
+ * is not above their influence (those to query), floor_q then q. */
 PyObject *py_near_pairs(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     if (!nargs_ok(nargs, 10, "near_pairs")) return NULL;
-    Arg q = {0}, ref = {0}, lo = {0}, hi = {0}, lever = {0}, gap = {0}, bound = {0},
-        floor_ = {0}, infl = {0};
+    Arg q = {0}, ref = {0}, lo = {0}, hi = {0}, lever = {0}, gap = {0}, floor_ = {0},
+        floor_q = {0}, infl = {0};
     PyObject *result = NULL;
     if (acquire(args[0], &q, 0, 1, "q") || acquire(args[1], &ref, 0, 1, "reference")
         || acquire(args[2], &lo, 0, 1, "lower") || acquire(args[3], &hi, 0, 1, "upper")
         || acquire(args[4], &lever, 0, 2, "lever") || acquire(args[5], &gap, 0, 1, "gap")
-        || acquire(args[6], &bound, 1, 1, "bound") || acquire(args[8], &floor_, 0, 1, "floor")
+        || acquire(args[7], &floor_, 1, 1, "floor") || acquire(args[8], &floor_q, 1, 1, "floor_q")
         || acquire(args[9], &infl, 0, 1, "influence"))
         goto done;
     double *qv = vec(&q, "q"), *rv = vec(&ref, "reference"), *gv = vec(&gap, "gap");
     double *lov = vec(&lo, "lower"), *hiv = vec(&hi, "upper");
-    double *bv = out_vec(&bound, "bound"), *fv = vec(&floor_, "floor");
+    double *fv = out_vec(&floor_, "floor"), *fqv = out_vec(&floor_q, "floor_q");
     double *iv = vec(&infl, "influence");
-    if (!qv || !rv || !lov || !hiv || !gv || !bv || !fv || !iv) goto done;
+    if (!qv || !rv || !lov || !hiv || !gv || !fv || !fqv || !iv) goto done;
     Mat L = mat(&lever);
     Py_ssize_t n = length(&q), npairs = L.m;
     if (length(&ref) != n || length(&lo) != n || length(&hi) != n || L.n != n
-        || length(&gap) != npairs || length(&bound) != npairs || length(&floor_) != npairs
+        || length(&floor_q) != n || length(&gap) != npairs || length(&floor_) != npairs
         || length(&infl) != npairs) {
-        PyErr_Format(PyExc_ValueError, "near_pairs: q, reference, lower, upper (n,), lever "
-                     "(npairs, n), gap, bound, floor and influence (npairs,) do not fit (n %zd, "
+        PyErr_Format(PyExc_ValueError, "near_pairs: q, reference, lower, upper, floor_q (n,), "
+                     "lever (npairs, n), gap, floor and influence (npairs,) do not fit (n %zd, "
                      "npairs %zd)", n, npairs);
         goto done;
     }
-    int within = lever_bound(qv, rv, lov, hiv, L, gv, iv, bv);
-    if (within < 0) {
-        PyErr_NoMemory();
-    } else if (!within) {
+    if (!lever_within(qv, rv, lov, hiv, L, gv, iv)) {
         result = Py_None;
         Py_INCREF(result);
     } else {
-        result = pairs_to_query(args[7], fv, bv, npairs, iv);
+        result = pairs_to_query(args[6], fv, fqv, qv, L, iv);
     }
 done:
     release(&q); release(&ref); release(&lo); release(&hi); release(&lever); release(&gap);
-    release(&bound); release(&floor_); release(&infl);
+    release(&floor_); release(&floor_q); release(&infl);
     return result;
 }
 

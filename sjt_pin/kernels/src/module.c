@@ -75,11 +75,11 @@ static PyMethodDef methods[] = {
      "witness_rows(oMi, poses, rows, found, memory, state, tick, keep, apart, owners) -> int: the "
      "collision limit's rows of its pairs' remembered closest points after their own rows."},
     {"query_rows", (PyCFunction)(void (*)(void))py_query_rows, METH_FASTCALL,
-     "query_rows(compute, geometry, geometry_data, near, bound, floor, margins, joints, "
-     "influence, rows, failures) -> list: the collision limit's distance queries and its "
+     "query_rows(compute, geometry, geometry_data, near, floor, margins, joints, influence, "
+     "rows, failures) -> list: the collision limit's distance queries and its "
      "pairs' rows."},
     {"near_pairs", (PyCFunction)(void (*)(void))py_near_pairs, METH_FASTCALL,
-     "near_pairs(q, reference, lower, upper, lever, gap, bound, near, floor, influence) -> "
+     "near_pairs(q, reference, lower, upper, lever, gap, near, floor, floor_q, influence) -> "
      "list | None: "
      "the collision limit's pairs to query, or None when its broad phase must run again."},
     {"braking_reach", (PyCFunction)(void (*)(void))py_braking_reach, METH_FASTCALL,
