@@ -190,6 +190,7 @@ class Solver:
         # (the compiled stage keeps its own, corrections included)
         self._tracks_motion = not self._compiled_smooth and (
             accel is not None or any(limit.uses_motion for limit in extra))
+        self._speeds = speeds  # (the user's limits' speed caps join them: _hold_speeds)
         return speeds
 
     def _build_work(self, speeds: np.ndarray) -> None:
@@ -213,8 +214,6 @@ class Solver:
                 layout.box_part(work, part)[:] = values
         self._escape_velocity = layout.extra_velocity(work)
         self._clamped = layout.clamped_joints(work)
-        if self._kernel_bounds:
-            layout.inverse_speeds(work)[:] = np.where(np.isfinite(speeds), 1.0 / speeds, 0.0)
         if self._compiled_smooth:
             self._fill_smooth(layout, work)
             if self._user_stage is not None:
@@ -295,7 +294,36 @@ class Solver:
         self._layout.gains(work)[:] = gain.rows(stack.target_dim, stack.posture_dim)
         self._stability.arm(gain.mode == kernels.GAIN_FIXED, gain.largest * self._dt)
         self._motion.dt = self._dt
+        self._hold_speeds()
         self._update_slow()
+
+    def _hold_speeds(self) -> None:
+        """Write the speeds the kernel holds: the solver's own limits and, where the kernel
+        holds them (``_kernel_bounds``), the user's limits' speed caps at this period
+        (:meth:`~sjt_pin.limits.Limit.speed_caps`; a free-flying base without a speed limit
+        under a collision limit's caps), so that a step they cut is saturated in the kernel;
+        the limits read them in ``Motion.velocity_limits``."""
+        speeds, moving = self._speeds, self.stack.chain > 0
+        by = np.full(speeds.size, "velocity", dtype=object)
+        limits = self._user_stage.limits if self._kernel_bounds and self._user_stage else ()
+        for limit in limits:
+            caps = limit.speed_caps(self._dt)
+            if caps is None:
+                continue
+            caps = np.asarray(caps, dtype=float)
+            if caps.shape != speeds.shape or np.isnan(caps).any() or (caps <= 0).any():
+                raise ValueError(f"{limit!r}.speed_caps() must return ({speeds.size},) speeds "
+                                 f"> 0 (rad/s or m/s; inf for none), got {caps!r}")
+            tighter = moving & (caps < speeds)
+            speeds = np.where(tighter, caps, speeds)
+            by[tighter] = limit.name
+        #: the speeds the kernel holds (rad/s, m/s; inf for none) and the limit each is
+        #: (StepInfo.active_limits)
+        self._held_speeds, self._speed_by = speeds, by
+        if self._kernel_bounds:
+            self._layout.inverse_speeds(self._work)[:] = np.where(np.isfinite(speeds),
+                                                                  1.0 / speeds, 0.0)
+        self._motion.velocity_limits = np.where(moving, speeds, 0.0)
 
     def _update_slow(self) -> None:
         """Whether every step must take the slow path (an escape in progress, a pending
@@ -684,7 +712,7 @@ class Solver:
         dq = step / self._dt
         scale = float(self._info[kernels.I_SCALE])  # (a user's rows may have set it: rows_step)
         pairs = []
-        position, velocity = self.position_limit, self.velocity_limit
+        position = self.position_limit
         at_position = np.zeros(dq.size, dtype=bool)
         if position is not None:
             x = q[position.q_index] + step[position.v_index]
@@ -693,11 +721,12 @@ class Solver:
             x0 = q[position.q_index]
             outside = (x0 < position.lower) | (x0 > position.upper)
             at_position[position.v_index[edge | outside]] = True
+        held = self._held_speeds
         for j in range(dq.size):
             if at_position[j]:
                 pairs.append(("position", self._v_names[j]))
-            elif velocity is not None and abs(dq[j]) >= velocity.limits[j] * (1 - 1e-12):
-                pairs.append(("velocity", self._v_names[j]))
+            elif abs(dq[j]) >= held[j] * (1 - 1e-12):
+                pairs.append((self._speed_by[j], self._v_names[j]))
         return Outcome(dq, scale, self._clamped != 0.0, tuple(pairs))
 
     def _smooth_outcome(self) -> Outcome:
@@ -718,6 +747,10 @@ class Solver:
         dq = part(kernels.SM_OUT).copy()
         active = active_limits(dq, Box(hard, soft), kernels.LIMIT_NAMES, self._v_names,
                                part(kernels.SM_DESIRED))
+        if (self._speed_by != "velocity").any():  # the speed bounds that are a limit's caps
+            index = {name: j for j, name in enumerate(self._v_names)}
+            active = tuple((self._speed_by[index[joint]] if name == "velocity" else name, joint)
+                           for name, joint in active)
         torn = np.flatnonzero(part(kernels.SM_TORN))
         parts = self._user_parts
         if (self._checked_rows[0] == self._count and parts is not None and parts[0] is not None

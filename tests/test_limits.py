@@ -229,3 +229,87 @@ def test_a_row_held_at_its_bound_is_reported_on_every_step(ur5, acceleration):
     for _ in range(200):
         q = solver.step(q, target)
         assert solver.last.active_rows == ("hold",)
+
+
+class _Caps(sjt.limits.Limit):
+    """Speed bounds ``|q_dot| <= caps`` on every step, declared as ``speed_caps`` or not."""
+
+    name = "caps"
+    uses_motion = False
+
+    def __init__(self, caps, declared):
+        self.caps, self.declared = np.asarray(caps, dtype=float), declared
+
+    def bounds(self, kinematics, motion):
+        return -self.caps, self.caps
+
+    def speed_caps(self, dt):
+        return self.caps if self.declared else None
+
+
+_CAPS = np.array([0.5, 0.4, 0.8, 1.0, 1.0, 1.0])
+
+
+def _cap_run(ur5, declared, method="sjt", steps=600, **options):
+    """UR5 without its own speed limits sent 27 cm away under ``_CAPS``: the configurations
+    and each step's (active limits, task scale)."""
+    solver = sjt.make_solver(method, ur5, dt=1e-3, velocity_limits=False,
+                             limits=[_Caps(_CAPS, declared)], **options)
+    q = np.array([0.3, -1.2, 1.4, -0.5, 0.8, 0.1])
+    target = ur5.fk(q) * pin.SE3(np.eye(3), np.array([0.2, -0.1, 0.15]))
+    qs, infos = [q], []
+    for _ in range(steps):
+        q = solver.step(q, target)
+        qs.append(q)
+        infos.append((solver.last.active_limits, solver.last.task_scale))
+    return np.array(qs), infos
+
+
+@pytest.mark.parametrize("method", ["sjt", "jt", "jp", "dls"])
+def test_speed_caps_are_held_in_the_kernel_as_the_stage_holds_the_bounds(ur5, method,
+                                                                         monkeypatch):
+    """A limit that declares its bounds as speed caps gets, from the kernel's saturation,
+    exactly the steps and StepInfo the whole stage in Python gives the same bounds (the task
+    carried by the joints below their caps), and the stage does not run."""
+    from sjt_pin.constraints import ConstraintStage
+
+    calls = [0]
+    enforce = ConstraintStage.enforce
+
+    def counted(*args, **kwargs):
+        calls[0] += 1
+        return enforce(*args, **kwargs)
+
+    monkeypatch.setattr(ConstraintStage, "enforce", counted)
+    staged, staged_info = _cap_run(ur5, False, method)
+    assert calls[0] > 0
+    calls[0] = 0
+    held, held_info = _cap_run(ur5, True, method)
+    assert calls[0] == 0
+    np.testing.assert_array_equal(held, staged)
+    assert held_info == staged_info
+    speeds = np.abs(np.diff(held, axis=0)) / 1e-3
+    assert (speeds <= _CAPS * (1 + 1e-12)).all()
+    assert speeds[:, 0].max() == pytest.approx(0.5)  # the caps acted, named
+    assert ("caps", ur5.velocity_names[0]) in held_info[10][0]
+
+
+@pytest.mark.parametrize("method", ["sjt", "dls"])
+def test_speed_caps_beside_acceleration_and_jerk_limits_keep_all_three(ur5, method):
+    """Under acceleration and jerk limits, caps held with the speed limits are approached
+    within both (the stage brakes to them as to its own speed limits)."""
+    qs, _ = _cap_run(ur5, True, method, steps=1500, acceleration_limits=10.0,
+                     jerk_limits=5000.0)
+    v = np.diff(qs, axis=0) / 1e-3
+    a = np.diff(v, axis=0) / 1e-3
+    jerk = np.diff(a, axis=0) / 1e-3
+    assert (np.abs(v) <= _CAPS * (1 + 1e-9)).all()
+    assert np.abs(v[:, 0]).max() > 0.49  # the first joint's cap bound it
+    assert np.abs(a).max() <= 10.0 * (1 + 1e-9)
+    assert np.abs(jerk).max() <= 5000.0 * (1 + 1e-6)
+
+
+def test_speed_caps_that_are_no_speeds_are_refused_naming_the_limit(ur5):
+    for caps in (np.ones(5), np.full(6, np.nan), np.zeros(6)):
+        with pytest.raises(ValueError, match=r"_Caps.*speed_caps\(\)"):
+            sjt.SJTSolver(ur5, limits=[_Caps(caps, True)])

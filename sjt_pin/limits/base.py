@@ -81,5 +81,14 @@ class Limit:
         or ``None`` when no row applies (e.g. nothing within a collision's influence)."""
         return None
 
+    def speed_caps(self, dt: float) -> np.ndarray | None:
+        """Speeds (nv,; rad/s or m/s, ``inf`` where none) this limit's :meth:`bounds` never go
+        below at period ``dt`` (s) and that may bound every step without changing what it
+        admits; ``None`` (the default) for none. A solver whose kernel holds its speed limits
+        holds these with them, so that a step they cut is saturated there (joints held at
+        their caps, the others taking over the task) instead of by the whole stage in Python;
+        :class:`~sjt_pin.StepInfo` names this limit where they bind."""
+        return None
+
     def __repr__(self) -> str:
         return f"{type(self).__name__}()"

@@ -600,10 +600,7 @@ class CollisionLimit(Limit):
         dt = motion.dt
         speeds = motion.velocity_limits
         if self._bounds is None or self._bounds[0] != dt or self._bounds[1] is not speeds:
-            with np.errstate(divide="ignore"):
-                cap = np.where(self._lever > 0, (self.influence - self.margin)
-                               / (2.0 * dt * self._lever), np.inf)
-            cap.setflags(write=False)
+            cap = self.speed_caps(dt)
             lower = -cap
             lower.setflags(write=False)
             loose = speeds is not None and not bool(np.all(speeds <= cap))
@@ -611,6 +608,19 @@ class CollisionLimit(Limit):
         if not near and not self._bounds[2]:
             return None  # nothing near: no row, and the solver's speed limits suffice
         return self._bounds[3]
+
+    def speed_caps(self, dt: float) -> np.ndarray:
+        """The speed bounds of :meth:`bounds` at period ``dt`` (s): ``(influence - margin) /
+        (2 dt lever)`` (rad/s or m/s) for each joint with a lever (inf for the others;
+        read-only). They bind only where the solver's own speed limits are loose, and there on
+        every step, so a solver may hold them with its own."""
+        if not dt > 0:
+            raise ValueError(f"dt must be a period > 0 (s), got {dt!r}")
+        with np.errstate(divide="ignore"):
+            cap = np.where(self._lever > 0, (self.influence - self.margin)
+                           / (2.0 * dt * self._lever), np.inf)
+        cap.setflags(write=False)
+        return cap
 
     # -- obstacles ---------------------------------------------------------------------------
     def move(self, i: int, pose: pin.SE3) -> None:
