@@ -12,6 +12,7 @@ import pinocchio as pin
 import pytest
 from scipy.optimize import minimize
 
+import sjt_pin as sjt
 from sjt_pin import kernels as K
 from sjt_pin.constraints import nonnegative_qp, project, project_reference, rest_target
 from sjt_pin.kinematics import Kinematics
@@ -185,6 +186,11 @@ def test_the_compiled_damper_rows_are_the_numpy_ones(panda):
         np.testing.assert_allclose(b, b_ref, atol=1e-9)
 
 
+@pytest.fixture(scope="module")
+def solo12() -> sjt.Robot:
+    return sjt.Robot.from_example("solo12", ee_frame="FR_FOOT")
+
+
 def _walk_scene(robot, rng):
     """A walk's start, a ball and a drift per step: on Panda and UR5 a random start and a ball
     10 cm beside the hand, no drift; on the revolute-prismatic arm (and its variant with a
@@ -196,6 +202,8 @@ def _walk_scene(robot, rng):
         ball = (coal.Sphere(0.1), pin.SE3(np.eye(3), np.array([0.0, 1.4, 0.0])))
         return q, ball, np.array([0.003, 0.0, 0.0])
     q = robot.random_configuration(rng)
+    if robot.name == "solo12":  # its free-flying base 1.5 m above the box of its position
+        q[2] += 1.5  # limits (+-1 m), which the levers do not depend on
     data = robot.model.createData()
     pin.framesForwardKinematics(robot.model, data, q)
     hand = pin.updateFramePlacement(robot.model, data, robot.model.getFrameId(robot.ee_frame))
@@ -215,15 +223,16 @@ def _walk_step(robot, q, drift, jump, rng):
     return np.where(bounded, np.clip(q, model.lowerPositionLimit, model.upperPositionLimit), q)
 
 
-@pytest.mark.parametrize("name", ["panda", "ur5", "revolute_prismatic", "continuous_wrist"])
+@pytest.mark.parametrize("name", ["panda", "ur5", "revolute_prismatic", "continuous_wrist",
+                                  "solo12"])
 def test_the_broad_phase_it_skips_never_misses_a_pair_within_influence(
-        name, panda, ur5, revolute_prismatic, continuous_wrist):
+        name, panda, ur5, revolute_prismatic, continuous_wrist, solo12):
     """Along random joint-space walks (steps of up to 3 mrad, every 50th up to 0.3 rad), the
     pairs the limit measures at each configuration hold every pair whose exact distance is
     below influence (brute force over every pair), although most steps reuse the last broad
     phase."""
     robot = {"panda": panda, "ur5": ur5, "revolute_prismatic": revolute_prismatic,
-             "continuous_wrist": continuous_wrist}[name]
+             "continuous_wrist": continuous_wrist, "solo12": solo12}[name]
     rng = np.random.default_rng(15)
     q, ball, drift = _walk_scene(robot, rng)
     data = robot.model.createData()
@@ -250,15 +259,16 @@ def test_the_broad_phase_it_skips_never_misses_a_pair_within_influence(
     assert calls[0] < steps / 2  # the skip did skip
 
 
-@pytest.mark.parametrize("name", ["panda", "ur5", "revolute_prismatic", "continuous_wrist"])
+@pytest.mark.parametrize("name", ["panda", "ur5", "revolute_prismatic", "continuous_wrist",
+                                  "solo12"])
 def test_rows_hold_every_pair_within_influence_though_most_are_not_queried(
-        name, panda, ur5, revolute_prismatic, continuous_wrist):
+        name, panda, ur5, revolute_prismatic, continuous_wrist, solo12):
     """Along random joint-space walks (steps of up to 3 mrad, every 50th up to 0.3 rad), the
     rows are those of exactly the pairs whose exact distance is below influence (brute force
     over every pair), although a pair last measured far enough beyond influence is not
     queried again until its bound reaches that gap."""
     robot = {"panda": panda, "ur5": ur5, "revolute_prismatic": revolute_prismatic,
-             "continuous_wrist": continuous_wrist}[name]
+             "continuous_wrist": continuous_wrist, "solo12": solo12}[name]
     rng = np.random.default_rng(16)
     q, ball, drift = _walk_scene(robot, rng)
     data = robot.model.createData()

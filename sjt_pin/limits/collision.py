@@ -963,7 +963,8 @@ def _extents(model: pin.Model, mimics: Sequence = ()
     range: 0 for joints that only turn, the largest translation in the box of the URDF limits
     for prismatic, translation, planar and free-flyer joints (``inf`` where a limit is not
     finite, and for any other kind); and the box ``lower <= q <= upper`` (nq,) those extents
-    hold in (``-inf``/``inf`` for coordinates they do not depend on)."""
+    hold in (``-inf``/``inf`` for coordinates they do not depend on, a root joint's among them:
+    the levers add a joint's extent only to the joints above it)."""
     lower = np.full(model.nq, -np.inf)
     upper = np.full(model.nq, np.inf)
     kinds = [model.joints[j].shortname() for j in range(model.njoints)]
@@ -991,7 +992,8 @@ def _extents(model: pin.Model, mimics: Sequence = ()
             far = np.maximum(np.abs(lo), np.abs(hi))
         finite = bool(np.all(np.isfinite(far)) and np.all(far < 1e10))
         extent[j] = float(np.linalg.norm(far)) if finite else np.inf
-        if finite:
+        if finite and model.parents[j] > 0:  # (a root joint's extent moves no joint's origin:
+            # a free-flying base outside its position box keeps the bounds)
             lower[start:start + count], upper[start:start + count] = lo, hi
     return kinds, extent, lower, upper
 
