@@ -305,7 +305,8 @@ class Solver:
         the limits read them in ``Motion.velocity_limits``."""
         speeds, moving = self._speeds, self.stack.chain > 0
         by = np.full(speeds.size, "velocity", dtype=object)
-        limits = self._user_stage.limits if self._kernel_bounds and self._user_stage else ()
+        user = self._user_stage
+        limits = user.limits if self._kernel_bounds and user is not None else ()
         for limit in limits:
             caps = limit.speed_caps(self._dt)
             if caps is None:

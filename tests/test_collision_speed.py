@@ -313,6 +313,8 @@ def _witness_reference(poses, rows, found, memory, state, tick, keep, apart):
     out, owners = [r.copy() for r in rows[:len(found)]], []
     for i, k in enumerate(found):
         row, k = rows[i], int(k)
+        if state[k, 0] < 0:  # a pair that never remembers (unique closest points)
+            continue
         H = [poses[int(row[2])].reshape(4, 4), poses[int(row[3])].reshape(4, 4)]
         now = np.concatenate([H[s][:3, :3].T @ (row[7 + 3 * s:10 + 3 * s] - H[s][:3, 3])
                               for s in (0, 1)])
@@ -338,13 +340,14 @@ def _witness_reference(poses, rows, found, memory, state, tick, keep, apart):
 
 def test_the_compiled_witness_rows_are_the_numpy_ones():
     """Random poses, rows and memories, some stale (a pair the previous call missed), some
-    witnesses too close to this step's points or too far from contact: the same rows, owners,
-    memory and state, over several calls."""
+    witnesses too close to this step's points or too far from contact, one pair that never
+    remembers: the same rows, owners, memory and state, over several calls."""
     rng = np.random.default_rng(3)
     njoints, npairs, W = 5, 6, 3
     memory = rng.normal(size=(npairs * W, 6)) * 0.05
     state = np.column_stack([rng.integers(0, W + 1, npairs), np.full(npairs, 4.0)])
     state[1, 1] = 2.0  # stale
+    state[4, 0] = -1.0  # never remembers
     ref_memory, ref_state = memory.copy(), state.copy()
     extra = 0
     for tick in (5.0, 6.0, 7.0):
@@ -379,6 +382,7 @@ def test_the_compiled_witness_rows_are_the_numpy_ones():
             np.testing.assert_allclose(memory[W * k:W * k + count],
                                        ref_memory[W * k:W * k + count], atol=1e-12)
     assert extra > 0  # some remembered points became rows
+    assert state[4, 0] == -1.0  # (found on some call)
 
 
 def test_the_solvers_one_call_correction_is_the_whole_stage(panda):

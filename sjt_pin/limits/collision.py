@@ -44,7 +44,8 @@ the closest points separates the hulls, so ``s = n^T (b' - a') >= d``; a row
 order, but together they hold the whole contact (the several points of a contact manifold),
 and the arm comes to rest there. A witness is forgotten when its ``s`` exceeds ``d`` by half
 the band ``influence - margin`` or when the pair leaves ``influence``, and a pair farther
-than that from its margin remembers nothing (its row binds nothing).
+than that from its margin remembers nothing (its row binds nothing); nor does a pair with a
+sphere (or an ellipsoid), whose closest points are unique and move continuously.
 
 Distances and closest points come from coal (through Pinocchio's ``GeometryModel``); only the
 pairs whose bounding spheres come within ``influence`` (plus a skin of half the band
@@ -433,13 +434,21 @@ class CollisionLimit(Limit):
 
     def _witness_memory(self) -> None:
         """Per pair: its recent closest points, each in its joint's frame (``witnesses`` rows
-        of 6), how many and the tick of the last rows() that had it within influence (module
-        docstring, "Witnesses"; ``kernels.witness_rows``), and that kernel's scratch: the
-        world poses of the joints the step's pairs name, the owners of its rows."""
+        of 6), how many (-1: none ever) and the tick of the last rows() that had it within
+        influence (module docstring, "Witnesses"; ``kernels.witness_rows``), and that kernel's
+        scratch: the world poses of the joints the step's pairs name, the owners of its
+        rows."""
         slots = max(len(self.pairs), 1)
         self._memory = np.zeros((slots * max(self.witnesses, 1), 6))
         self._memory_state = np.zeros((slots, 2))
         self._memory_state[:, 1] = -np.inf
+        # a pair with a sphere (or an ellipsoid) has unique closest points, which move
+        # continuously with the joints: its own row holds the contact, it remembers nothing
+        geoms = self.geometry.geometryObjects
+        for k, pair in enumerate(self.pairs):
+            if any(isinstance(geoms[int(g)].geometry, (coal.Sphere, coal.Ellipsoid))
+                   for g in pair):
+                self._memory_state[k, 0] = -1.0
         self._tick = 0.0
         self._owners = np.zeros(slots * max(self.witnesses, 1))
         njoints = self.model.njoints

@@ -169,9 +169,9 @@ done:
  * reads them); poses (njoints, 16): the 4x4 world pose of each joint the rows name (row-major),
  * taken here from Pinocchio's data.oMi (joint 0: the identity) unless oMi is None. A pair
  * whose d - margin is not under keep remembers nothing. memory (npairs * W, 6): per pair up to W remembered closest points, each
- * in its joint's frame (p_a, p_b); state (npairs, 2): how many are remembered and the tick of
- * the call that last saw the pair within influence (a pair missed by the previous call,
- * tick - 1, forgets them). Each remembered pair of points that lies farther than `apart`
+ * in its joint's frame (p_a, p_b); state (npairs, 2): how many are remembered (-1: a pair that
+ * never remembers, its closest points being unique) and the tick of the call that last saw the
+ * pair within influence (a pair missed by the previous call, tick - 1, forgets them). Each remembered pair of points that lies farther than `apart`
  * (either point, its frame) from this step's and whose separation s = n^T (p_b - p_a) along
  * this step's normal is under d + keep becomes a row after the exact ones (d = s, the points
  * in the world, the rest as its pair's row), its pair written to owners; the pair then
@@ -184,6 +184,7 @@ static Py_ssize_t witness_rows_c(const double *poses, double *rows, const double
     for (Py_ssize_t i = 0; i < count; i++) {
         Py_ssize_t k = (Py_ssize_t)found[i];
         double *row = rows + 13 * i, *st = state + 2 * k, *mem = memory + 6 * W * k;
+        if (st[0] < 0.0) continue;  /* a pair whose closest points are unique */
         const double *H[2] = {poses + 16 * (Py_ssize_t)row[2], poses + 16 * (Py_ssize_t)row[3]};
         Py_ssize_t filled = st[1] == tick - 1.0 ? (Py_ssize_t)st[0] : 0;
         st[1] = tick;
@@ -321,10 +322,11 @@ static int witness_args_fit(const Arg *poses, const Arg *rows, const Arg *memory
 }
 
 /* The world poses (P, njoints x 16; joint 0 the identity) of the joints of the rows whose
- * pairs remember (d - margin under keep), from Pinocchio's oMi, each joint once; -1 with a
- * Python error set */
+ * pairs remember (d - margin under keep, state not -1: found, state as witness_rows_c's),
+ * from Pinocchio's oMi, each joint once; -1 with a Python error set */
 static int witness_poses(PyObject *oMi, double *P, Py_ssize_t nj, const double *rv,
-                         Py_ssize_t count, double keep)
+                         const double *found, const double *state, Py_ssize_t count,
+                         double keep)
 {
     char *fetched = (char *)calloc((size_t)nj, 1);
     if (!fetched) {
@@ -336,7 +338,7 @@ static int witness_poses(PyObject *oMi, double *P, Py_ssize_t nj, const double *
     int bad = 0;
     for (Py_ssize_t i = 0; i < count && !bad; i++) {
         const double *row = rv + 13 * i;
-        if (!(row[0] - row[1] < keep)) continue;
+        if (!(row[0] - row[1] < keep) || state[2 * (Py_ssize_t)found[i]] < 0.0) continue;
         for (int side = 0; side < 2 && !bad; side++) {
             Py_ssize_t j = (Py_ssize_t)row[2 + side];
             if (fetched[j]) continue;
@@ -371,7 +373,8 @@ PyObject *py_witness_rows(PyObject *self, PyObject *const *args, Py_ssize_t narg
     if (!pv || !rv || !mv || !sv || !ov || pair_indices(args[2], &fv, &count)
         || !witness_args_fit(&poses, &rows, &memory, &state, &owners, fv, count, &W))
         goto done;
-    if (oMi != Py_None && witness_poses(oMi, pv, poses.view.shape[0], rv, count, keep))
+    if (oMi != Py_None
+        && witness_poses(oMi, pv, poses.view.shape[0], rv, fv, sv, count, keep))
         goto done;
     result = PyLong_FromSsize_t(witness_rows_c(pv, rv, fv, count, mv, W, sv, tick, keep, apart,
                                                ov));
