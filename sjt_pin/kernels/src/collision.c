@@ -168,10 +168,11 @@ done:
  * step's exact rows of the pairs `found` (count,) in its first count rows (as damper_rows
  * reads them); poses (njoints, 16): the 4x4 world pose of each joint the rows name (row-major),
  * taken here from Pinocchio's data.oMi (joint 0: the identity) unless oMi is None. A pair
- * whose d - margin is not under keep remembers nothing. memory (npairs * W, 6): per pair up to W remembered closest points, each
- * in its joint's frame (p_a, p_b); state (npairs, 2): how many are remembered (-1: a pair that
- * never remembers, its closest points being unique) and the tick of the call that last saw the
- * pair within influence (a pair missed by the previous call, tick - 1, forgets them). Each remembered pair of points that lies farther than `apart`
+ * whose d - margin is not under keep remembers nothing. memory (npairs * W, 6): per pair up to
+ * W remembered closest points, each in its joint's frame (p_a, p_b); state (npairs, 2): how
+ * many are remembered (-1: a pair that never remembers, its closest points being unique) and
+ * the tick of the call that last saw the pair within influence (a pair missed by the previous
+ * call, tick - 1, forgets them). Each remembered pair of points that lies farther than `apart`
  * (either point, its frame) from this step's and whose separation s = n^T (p_b - p_a) along
  * this step's normal is under d + keep becomes a row after the exact ones (d = s, the points
  * in the world, the rest as its pair's row), its pair written to owners; the pair then
