@@ -113,11 +113,11 @@ class Solver:
         #: the method's own step (the stage's re-solves call it)
         self._method_step = method.kernel if method.kernel is not None else method.python_step
         self._kernel = self._method_step
-        speeds = self._build_stage(opts)
+        self._build_stage(opts)
         self.escape = (SaddleEscape(robot.model, stack.chain, robot.velocity_limits,
                                     self.position_limit) if opts.escape and method.stalls
                        else None)
-        self._build_work(speeds)
+        self._build_work()
         self._step, self._no_ff, self._ff_on = np.zeros(robot.nv), np.zeros(stack.dim), False
         self._escaped = (-1, False)  # (step count, whether that step added the escape)
         self._v_names = robot.velocity_names
@@ -133,10 +133,10 @@ class Solver:
         #: the last step's rows, error, displacement and status (None before the first)
         self._record: tuple | None = None
 
-    def _build_stage(self, opts: SolverOptions) -> np.ndarray:
+    def _build_stage(self, opts: SolverOptions) -> None:
         """The constraint stage: the URDF's position and speed limits, acceleration and jerk
-        limits when given, and the user's limits; returns the speed limits it enforces (rad/s,
-        m/s; inf for none)."""
+        limits when given, and the user's limits; keeps the speed limits it enforces (rad/s,
+        m/s; inf for none), which :meth:`_hold_speeds` writes with the user's limits' caps."""
         robot, method, stack = self.robot, self.method, self.stack
         n = robot.nv
         urdf_speeds = robot.velocity_limits
@@ -185,15 +185,13 @@ class Solver:
         #: the commanded velocity and acceleration of the last step (the stage's state)
         self._motion = Motion(np.zeros(robot.nq), np.zeros(n), np.zeros(n), 1.0,
                               None if accel is None else accel.limits,
-                              None if jerk is None else jerk.limits,
-                              np.where(moving, speeds, 0.0))
+                              None if jerk is None else jerk.limits)  # (and _hold_speeds)
         # (the compiled stage keeps its own, corrections included)
         self._tracks_motion = not self._compiled_smooth and (
             accel is not None or any(limit.uses_motion for limit in extra))
         self._speeds = speeds  # (the user's limits' speed caps join them: _hold_speeds)
-        return speeds
 
-    def _build_work(self, speeds: np.ndarray) -> None:
+    def _build_work(self) -> None:
         """The kernel's work vector: parameters, weights, gains, mask, box, speeds, scratch."""
         robot, stack = self.robot, self.stack
         n = robot.nv

@@ -688,9 +688,8 @@ class CollisionLimit(Limit):
         inside = q is not None and self._inside(q)
         ref = self._reference if inside and self._reference is not None \
             and self._reference[0] == self._version else None  # (None: floors gone too)
-        if ref is not None:
-            moved = np.abs(q - ref[1] if self._flat else pin.difference(self.model, ref[1], q))
-            if (self._pair_lever @ moved + influence < ref[3]).all():
+        if ref is not None and q is not None:  # (ref: q inside the box)
+            if (self._pair_lever @ self._moved(ref[1], q) + influence < ref[3]).all():
                 return ref[2]
         near, gap = self._broad_phase(data, influence)
         if q is not None and inside and self._pair_lever is not None:
@@ -719,15 +718,17 @@ class CollisionLimit(Limit):
         lever = self._pair_lever
         if q is None or self._reference is None or lever is None:
             return near
-        if self._floor_q is None:
-            self._floor[near] = -np.inf
+        if self._floor_q is None:  # (every floor is -inf: _near)
             self._floor_q = q.copy()
             return near
-        moved = np.abs(q - self._floor_q if self._flat
-                       else pin.difference(self.model, self._floor_q, q))
-        self._floor[near] -= lever[near] @ moved
+        self._floor[near] -= lever[near] @ self._moved(self._floor_q, q)
         self._floor_q[:] = q
         return near[self._floor[near] <= influence[near]]
+
+    def _moved(self, start: np.ndarray, q: np.ndarray) -> np.ndarray:
+        """|q - start| per velocity coordinate (rad, m; on the manifold where q is not its own
+        tangent space), what :meth:`_pair_levers` multiply."""
+        return np.abs(q - start if self._flat else pin.difference(self.model, start, q))
 
     def _inside(self, q: np.ndarray) -> bool:
         """Whether ``q`` lies in the box of position limits :meth:`_pair_levers` holds in."""
