@@ -327,8 +327,13 @@ class Solver:
     def _update_slow(self) -> None:
         """Whether every step must take the slow path (an escape in progress, a pending
         stability check, limits outside the kernel's box)."""
-        self._always = (self._first or self._stability.armed or self._staged
-                        or (self.escape is not None and self.escape.active))
+        busy = (self._first or self._stability.armed
+                or (self.escape is not None and self.escape.active))
+        self._always = busy or self._staged
+        #: a user's limits the kernel's step is checked against first (_user_rows_hold): a
+        #: step that keeps them skips the rest of the slow path when nothing else needs it
+        self._lean = (not busy and self._user_stage is not None and self._kernel_bounds
+                      and not self._compiled_smooth)
 
     def reset(self) -> None:
         """Forget the commanded velocity and acceleration (the next step starts from rest)
@@ -390,7 +395,11 @@ class Solver:
             self._count += 1
             # 3. only when needed: errors, the stability check, the escape's state, other limits
             if status & _PYTHON or self._always:
-                step = self._slow(status, q, J, e, ff, [target] if targets is None else targets)
+                # (a user's limits the kernel's step keeps need nothing else: _lean)
+                checked = self._lean and not status & _PYTHON
+                if not (checked and self._user_rows_hold(q, J, step)):
+                    step = self._slow(status, q, J, e, ff,
+                                      [target] if targets is None else targets, checked)
             # 4. integrate on the manifold; the record of the step (StepInfo) is built on demand
             self._record, self._last = (J, e, step, status, q, ff), None
             if self._tracks_motion:  # the velocity and acceleration it commands, in place
@@ -407,9 +416,10 @@ class Solver:
             "and pin.Data are one thread's; give each thread its own solver "
             "(copy.deepcopy(solver) makes one in the same state)")
 
-    def _slow(self, status, q, J, e, ff, targets) -> np.ndarray:
+    def _slow(self, status, q, J, e, ff, targets, checked: bool = False) -> np.ndarray:
         """What the fast path skips: errors, the stability check, the escape's state (its
-        velocity for the next step), limits beyond the built-in ones."""
+        velocity for the next step), limits beyond the built-in ones (``checked``: the user's
+        rows were tested against the kernel's step already and broken)."""
         if status & kernels.NON_FINITE:
             self._raise_non_finite(q, targets)
         if self._first:
@@ -425,7 +435,7 @@ class Solver:
         step, dt = self._step, self._dt
         if self._staged or status & _STAGE:  # with this step's escape velocity, as the
             # kernel's step has it
-            step = self._constrain(q, J, e, ff, status, step)
+            step = self._constrain(q, J, e, ff, status, step, checked)
         escape = self.escape
         self._escaped = (self._count, escape is not None and escape.active)
         if escape is not None:
@@ -499,14 +509,15 @@ class Solver:
         self._checked_rows = (self._count + 1, rows)  # (the step counts after its kernel)
         return status
 
-    def _constrain(self, q, J, e, ff, status, step) -> np.ndarray:
-        """Run the constraint stage on the method's step (see :mod:`sjt_pin.constraints`)."""
+    def _constrain(self, q, J, e, ff, status, step, checked: bool = False) -> np.ndarray:
+        """Run the constraint stage on the method's step (see :mod:`sjt_pin.constraints`);
+        ``checked``: :meth:`_user_rows_hold` refused the kernel's step already."""
         motion = self._motion
         motion.q = q
         if self._compiled_smooth:  # the stage starts from the state before this step
             self._state[:] = self._before
-        elif self._user_stage is not None and self._kernel_bounds and self._user_rows_hold(
-                q, J, step):
+        elif (self._user_stage is not None and self._kernel_bounds and not checked
+              and self._user_rows_hold(q, J, step)):
             return step
         solve = self._method_solves(q, J, e, ff)
         everything = np.ones(self.stack.chain.size, dtype=bool)
@@ -524,9 +535,10 @@ class Solver:
         row, projected onto the rows within every bound, in one compiled call (the kernel's
         saturation stands: the same as the whole stage's while the user's bounds do not cut
         the step). False: the whole stage must run."""
-        stack, user = self.stack, self._user_stage
+        stack, user, motion = self.stack, self._user_stage, self._motion
         assert user is not None  # (for a user's limits)
-        parts = user.hard_parts(stack.kinematics, self._motion)
+        motion.q = q
+        parts = user.hard_parts(stack.kinematics, motion)
         if parts is None:
             return False
         lower, upper, rows = parts
@@ -538,7 +550,7 @@ class Solver:
                                      self._no_bounds[1] if upper is None else upper,
                                      self._work, step)
         except ValueError:  # rows or bounds that do not fit or hold NaN: name the limit
-            user.check(stack.kinematics, self._motion)
+            user.check(stack.kinematics, motion)
             raise
         if done < 0:
             return False
