@@ -76,7 +76,9 @@ def test_stoppable_rows_refuses_what_does_not_fit():
 
 def test_a_solver_with_acceleration_limits_slows_the_rows():
     """The rows a limit returns to a solver with acceleration limits are the damper's cut to
-    stoppable closing speeds (the same limit, the same configuration)."""
+    stoppable closing speeds (the same limit, the same configuration); without them, the
+    rows of the pairs whose damper bound no step within the speed limits can break are left
+    out."""
     panda = sjt.Robot.from_example("panda")
     q0, end, target, obstacle = _blocked_scene(panda, np.random.default_rng(0))
     limit = CollisionLimit(panda, [obstacle], self_collision=True, margin=MARGIN)
@@ -96,10 +98,17 @@ def test_a_solver_with_acceleration_limits_slows_the_rows():
         motion = solver._motion  # noqa: SLF001 (the state the solver hands its limits)
         motion.q = q
         A, b = limit.rows(solver.stack.kinematics, motion)
-        rows.append((A.copy(), b.copy()))
-    np.testing.assert_allclose(rows[0][0], rows[1][0], rtol=0.0, atol=1e-12)  # (coal's GJK
-    # starts from its last answer: the same points to rounding)
-    assert np.all(rows[1][1] <= rows[0][1] + 1e-12) and np.any(rows[1][1] < 0.5 * rows[0][1])
+        count = len(limit.active)  # (the witness rows follow)
+        rows.append((dict(zip(limit.active, A[:count], strict=True)),
+                     dict(zip(limit.active, b[:count], strict=True))))
+        within = limit.within
+    assert set(rows[1][0]) == set(within)  # with acceleration limits, every pair within
+    assert set(rows[0][0]) <= set(within)  # influence has a row; without, those that can bind
+    for k in rows[0][0]:
+        np.testing.assert_allclose(rows[0][0][k], rows[1][0][k], rtol=0.0, atol=1e-12)  # (coal's
+        # GJK starts from its last answer: the same points to rounding)
+        assert rows[1][1][k] <= rows[0][1][k] + 1e-12
+    assert any(rows[1][1][k] < 0.5 * rows[0][1][k] for k in rows[0][0])
 
 
 # Panda's blocked scenes with 15 rad/s^2 and 7,500 rad/s^3: the rows corrected the stage's

@@ -136,13 +136,15 @@ def test_compiled_kernels_name_the_argument_that_does_not_fit():
         K.damper_rows(np.zeros((6, 3)), np.zeros((4, 3)), pairs, 1.0, np.zeros((1, 3)),
                       np.zeros(1))
     with pytest.raises(ValueError, match="near\\[0\\] = 5 is no pair"):
-        K.near_pairs(np.zeros(2), np.zeros(2), np.full(2, -np.inf), np.full(2, np.inf),
-                     np.zeros((3, 2)), np.ones(3), [5], np.zeros(3), np.zeros(2),
+        K.near_pairs(np.zeros(2), (np.zeros(2), np.full(2, -np.inf), np.full(2, np.inf),
+                                   np.zeros((3, 2)), np.ones(3), [5], np.zeros(3), np.zeros(2)),
                      np.full(3, 0.05))
     with pytest.raises(ValueError, match="do not fit"):
-        K.query_rows(pin.computeDistance, None, None, [], np.zeros(3), np.zeros(2),
-                     np.zeros((3, 2)), np.full(3, 0.05), np.zeros((3, 13)),
-                     np.zeros(1))
+        K.collision_rows((None, None, np.zeros(3), np.zeros(2), np.zeros((3, 2)),
+                          np.zeros((3, 13)), np.zeros(1), np.zeros((2, 16)), np.zeros((3, 6)),
+                          np.zeros((3, 2)), 0.02, 1e-4, np.zeros(3), np.zeros((2, 2)),
+                          pin.updateGeometryPlacements, None, True), [0], None, 1.0,
+                         np.full(3, 0.05), 1.0, None, pin.computeDistance)
     with pytest.raises(ValueError, match="do not fit"):
         K.braking_reach(np.zeros((3, 2)), np.zeros(2), np.ones(2), None, 1e-3, 0.5, 0.05, 0.01,
                         np.zeros(2))
@@ -336,6 +338,46 @@ def _witness_reference(poses, rows, found, memory, state, tick, keep, apart):
         memory[W * k:W * k + len(kept)] = kept
         state[k] = len(kept), tick
     return np.array(out), owners
+
+
+@pytest.mark.parametrize("name", ["panda", "ur5", "revolute_prismatic", "continuous_wrist"])
+def test_a_row_left_out_could_not_bind_at_the_speed_limits(
+        name, panda, ur5, revolute_prismatic, continuous_wrist):
+    """Along random walks near a ball (with self-collision), a pair within influence whose row
+    is left out for a solver with speed limits v has a row (the one the limit gives without
+    speed limits, at the same configuration) that no velocity within them breaks:
+    sum_j |A_kj| v_j <= b_k; the pairs within influence are the same with and without."""
+    robot = {"panda": panda, "ur5": ur5, "revolute_prismatic": revolute_prismatic,
+             "continuous_wrist": continuous_wrist}[name]
+    rng = np.random.default_rng(17)
+    q, ball, drift = _walk_scene(robot, rng)
+    limit = CollisionLimit(robot, [ball], self_collision=True, influence=0.08)
+    limit._checked = True  # every pair stays, the ball wherever the walk takes the arm
+    speeds = np.where(np.isfinite(robot.velocity_limits), robot.velocity_limits, 2.0)
+    kin = Kinematics(robot.model)
+    bounded = Motion(q, np.zeros(robot.nv), np.zeros(robot.nv), 1e-3, velocity_limits=speeds)
+    free = Motion(q, np.zeros(robot.nv), np.zeros(robot.nv), 1e-3)
+    left_out = kept = 0
+    for step in range(300):
+        q = _walk_step(robot, q, drift, 0.3 if step % 50 == 0 else 0.003, rng)
+        kin.update(q)
+        limit.rows(kin, bounded)
+        active, within = list(limit.active), list(limit.within)
+        rows = limit.rows(kin, free)
+        assert limit.within == within and set(active) <= set(within)
+        if rows is None:
+            continue
+        A, b = rows
+        assert limit.active == within  # (without speed limits every pair has its row)
+        for i, k in enumerate(within):
+            if k in active:
+                kept += 1
+            else:
+                left_out += 1
+                assert np.abs(A[i]) @ speeds <= b[i] * (1 + 1e-12), limit.pair_names[k]
+    assert left_out > 0  # rows were left out
+    if name in ("panda", "ur5"):
+        assert kept > 0  # and others kept
 
 
 def test_the_compiled_witness_rows_are_the_numpy_ones():

@@ -188,7 +188,7 @@ def _floor(scene: Scene, limit: CollisionLimit, qs: np.ndarray, plain_us: float
         start = clock()
         limit.rows(kinematics, motion)
         rows_time += clock() - start
-        active.append(list(limit.active))
+        active.append(list(limit.within))
     geometry, data = limit.geometry, limit.geometry_data
     model, pin_data = scene.robot.model, kinematics.data
     start = clock()

@@ -24,8 +24,9 @@ against the numpy reference formulas of :mod:`sjt_pin.mappings` and against Pino
 - ``damper_rows``: the collision limit's velocity-damper rows from its pairs' closest points;
   ``stoppable_rows``: their bounds cut to closing speeds the acceleration limits can stop;
   ``witness_rows``: the rows of its pairs' remembered closest points (and their memory);
-  ``query_rows``: its exact distance queries (through Pinocchio's ``computeDistance``) and rows;
   ``near_pairs``: the pairs it must query, or whether its broad phase must run again;
+  ``collision_rows``: a step's exact distance queries (through Pinocchio's ``computeDistance``),
+  witness and damper rows in one call;
   ``braking_reach``: each pair's influence for an arm with acceleration limits;
 - ``frame_velocity``, ``position_rows``, ``rotation_defect``: the tasks' small transforms;
 - ``follow_motion(step, dt, dq, ddq)``: the velocity and acceleration a step commands (the
@@ -46,6 +47,7 @@ against the numpy reference formulas of :mod:`sjt_pin.mappings` and against Pino
 from ._kernels import (  # noqa: F401
     braking_reach,
     cholesky_solve,
+    collision_rows,
     damper_rows,
     follow_motion,
     frame_velocity,
@@ -56,7 +58,6 @@ from ._kernels import (  # noqa: F401
     nonnegative_qp,
     position_rows,
     project_rows,
-    query_rows,
     rotation_defect,
     rows_step,
     search_iteration,

@@ -73,9 +73,9 @@ except ImportError:  # pragma: no cover - the pin wheel ships coal
 from ..exceptions import SJTError
 from ..kernels import (
     braking_reach,
+    collision_rows,
     damper_rows,
     near_pairs,
-    query_rows,
     stoppable_rows,
     witness_rows,
 )
@@ -293,6 +293,9 @@ class CollisionLimit(Limit):
         #: the pairs (indices into pairs / pair_names) of the first rows of the last rows()
         #: (one each, from its exact distance), and of the witness rows that follow them
         self.active: list[int] = []
+        #: the pairs within influence at the last rows(): those of :attr:`active` and those
+        #: whose row could not bind at the solver's speed limits (left out)
+        self.within: list[int] = []
         self._witness_count = 0  # the witness rows of the last rows() (_owners holds their pairs)
         self._prepare_broad_phase()
 
@@ -514,7 +517,17 @@ class CollisionLimit(Limit):
         self._floor_q: np.ndarray | None = None  # where the floors hold (None: nowhere)
         self._influence = np.full(len(self.pairs), self.influence)  # each pair's, m
         self._braking_influence = np.zeros(len(self.pairs))  # kernels.braking_reach's output
-        self._failures = np.zeros(1)  # kernels.query_rows': the queries without closest points
+        self._failures = np.zeros(1)  # kernels.collision_rows': queries without closest points
+        #: what kernels.collision_rows reads and writes besides the step's (arrays changed in
+        #: place only)
+        self._fixed = (self.geometry, self.geometry_data, self._floor, self.margins,
+                       self._joint_table, self._pair_rows, self._failures, self._flat_poses,
+                       self._memory, self._memory_state, 0.5 * (self.influence - self.margin),
+                       WITNESS_APART, self._owners, self._support, pin.updateGeometryPlacements,
+                       self.model, self.witnesses > 0)
+        self._skip: tuple | None = None  # near_pairs' (from _reference and _floor_q)
+        # each pair's reach at the solver's speed limits (_reach): (those limits, the reach)
+        self._reaches: tuple[np.ndarray | None, np.ndarray | None] = (None, None)
 
     def _chains(self, unbounded: float) -> tuple[np.ndarray, np.ndarray]:
         """For each geometry g and joint coordinate (nvExtended) of a joint k that moves it:
@@ -601,11 +614,10 @@ class CollisionLimit(Limit):
         turns a joint by a radian in one step would carry a link through an obstacle before
         any row could see it) and no link crosses the band from beyond ``influence`` into
         ``margin`` between two steps. Far above a robot's own speeds at usual periods: 20 rad/s
-        for a 1 m lever at 1 kHz with the defaults. While a pair is within ``influence`` (the
-        step's rows, computed here once for both), and on every step where the solver's speed
+        for a 1 m lever at 1 kHz with the defaults. On every step where the solver's speed
         limits (``motion.velocity_limits``) do not keep within them already (a free-flying
-        base without a speed limit, a long period)."""
-        near = self.rows(kinematics, motion) is not None  # (first: it may start the limit)
+        base without a speed limit, a long period), never where they do; without speed limits
+        (``solve()``'s iterations), while a pair is within ``influence``."""
         dt = motion.dt
         speeds = motion.velocity_limits
         if self._bounds is None or self._bounds[0] != dt or self._bounds[1] is not speeds:
@@ -614,9 +626,10 @@ class CollisionLimit(Limit):
             lower.setflags(write=False)
             loose = speeds is not None and not bool(np.all(speeds <= cap))
             self._bounds = (dt, speeds, loose, (lower, cap))
-        if not near and not self._bounds[2]:
-            return None  # nothing near: no row, and the solver's speed limits suffice
-        return self._bounds[3]
+        if speeds is not None:
+            return self._bounds[3] if self._bounds[2] else None
+        # no speed limits (solve()'s iterations): while a pair is within influence
+        return self._bounds[3] if self.rows(kinematics, motion) is not None else None
 
     def speed_caps(self, dt: float) -> np.ndarray:
         """The speed bounds of :meth:`bounds` at period ``dt`` (s): ``(influence - margin) /
@@ -709,6 +722,7 @@ class CollisionLimit(Limit):
             self._reference = None  # no reference outside the box the levers hold in
             self._floor.fill(-np.inf)
             self._floor_q = None
+        self._skip = None
         return near
 
     def _aged(self, q: np.ndarray | None, near: np.ndarray, influence: np.ndarray) -> np.ndarray:
@@ -720,6 +734,7 @@ class CollisionLimit(Limit):
             return near
         if self._floor_q is None:  # (every floor is -inf: _near)
             self._floor_q = q.copy()
+            self._skip = None
             return near
         self._floor[near] -= lever[near] @ self._moved(self._floor_q, q)
         self._floor_q[:] = q
@@ -839,11 +854,11 @@ class CollisionLimit(Limit):
         accelerations, jerks = motion.acceleration_limits, motion.jerk_limits
         state = None if accelerations is None else motion.dq.tobytes() + motion.ddq.tobytes()
         key = (dt, self._version, None if q is None else q.tobytes(), id(accelerations),
-               id(jerks), state)
+               id(jerks), state, id(motion.velocity_limits))
         cache = self._cache
         if cache is not None and q is not None and cache[0] is data and cache[1] == key:
-            self.active, self._witness_count = cache[2], cache[3]
-            return cache[4]
+            self.active, self.within, self._witness_count = cache[2]
+            return cache[3]
         if not self._checked:
             self._check(model, data)
         influence = self._influence
@@ -851,14 +866,32 @@ class CollisionLimit(Limit):
             influence = self._braking_influence
             braking_reach(self._pair_lever, motion.dq, accelerations, jerks, dt, BRAKING_SHARE,
                           self.influence, self.margin, influence)
-        out = self._rows(model, data, dt, q, influence)
-        if out is not None:
-            if accelerations is not None:
-                stoppable_rows(out[0], out[1], motion.dq, motion.ddq, accelerations, jerks,
-                               self.gain / dt, dt, BRAKING_SHARE, EASING_SLACK)
-            out[1].setflags(write=False)
-        self._cache = (data, key, self.active, self._witness_count, out)
+        out = self._rows(model, data, dt, q, influence,
+                         None if accelerations is not None else self._reach(motion))
+        if out is not None and accelerations is not None:
+            b = out[1]
+            b.setflags(write=True)  # (its own data: the rows' bounds, cut in place)
+            stoppable_rows(out[0], b, motion.dq, motion.ddq, accelerations, jerks,
+                           self.gain / dt, dt, BRAKING_SHARE, EASING_SLACK)
+            b.setflags(write=False)
+        self._cache = (data, key, (self.active, self.within, self._witness_count), out)
         return out
+
+    def _reach(self, motion: Motion) -> np.ndarray | None:
+        """Each pair's reach (npairs,; m/s): the fastest its distance can shrink at the
+        solver's speed limits (``motion.velocity_limits``, which every step it commands keeps),
+        ``sum_j lever_kj v_j`` (:meth:`_pair_levers`). A pair whose damper bound
+        ``gain (d - margin) / dt`` is not below it needs no row: no step can break it. None
+        without speed limits (``solve()``'s iterations) or levers."""
+        speeds = motion.velocity_limits
+        if speeds is None or self._pair_lever is None:
+            return None
+        if self._reaches[0] is not speeds:
+            finite = np.isfinite(speeds)
+            reach = self._pair_lever @ np.where(finite, speeds, 0.0)
+            reach[(self._pair_lever[:, ~finite] > 0).any(axis=1)] = np.inf
+            self._reaches = (speeds, reach)
+        return self._reaches[1]
 
     @property
     def witness_pairs(self) -> list[int]:
@@ -866,9 +899,10 @@ class CollisionLimit(Limit):
         :meth:`rows`, which follow the rows of :attr:`active` (one each)."""
         return self._owners[:self._witness_count].astype(int).tolist()
 
-    def _rows(self, model, data, dt: float, q: np.ndarray | None, influence: np.ndarray
-              ) -> tuple[np.ndarray, np.ndarray] | None:
+    def _rows(self, model, data, dt: float, q: np.ndarray | None, influence: np.ndarray,
+              reach: np.ndarray | None) -> tuple[np.ndarray, np.ndarray] | None:
         self.active = []  # indices into self.pairs / self.pair_names of the rows returned
+        self.within = []
         self._witness_count = 0
         ref = self._reference
         # a pair's distance changes by at most its levers' bound (_near): one that was beyond
@@ -877,40 +911,56 @@ class CollisionLimit(Limit):
         listed = None
         if (self._flat and q is not None and ref is not None and ref[0] == self._version
                 and self._floor_q is not None):
-            listed = near_pairs(q, ref[1], self._lower, self._upper, self._pair_lever, ref[3],
-                                ref[4], self._floor, self._floor_q, influence)
+            skip = self._skip
+            if skip is None:  # (what near_pairs reads, since the last broad phase)
+                skip = self._skip = (ref[1], self._lower, self._upper, self._pair_lever, ref[3],
+                                     ref[4], self._floor, self._floor_q)
+            listed = near_pairs(q, skip, influence)
         if listed is None:
             listed = self._aged(q, self._near(data, q, influence), influence).tolist()
         if not listed:
             return None
-        pin.updateGeometryPlacements(model, data, self.geometry, self.geometry_data)
-        # coal's distance of each pair listed; those within influence get a row (compiled: the
-        # Python around each query cost more than the query)
-        found = query_rows(pin.computeDistance, self.geometry, self.geometry_data, listed,
-                           self._floor, self.margins, self._joint_table, influence,
-                           self._pair_rows, self._failures)
+        # the geometries' placements, coal's distance of each pair listed (those within
+        # influence get a row, unless it cannot bind at the speed limits: _reach), their
+        # witnesses' rows and the damper rows of them all, in one compiled call (the Python
+        # around each query and between the parts cost more than the queries)
+        rate = self.gain / dt
+        out = collision_rows(self._fixed, listed, data, rate, influence, self._tick + 1.0,
+                             reach, pin.computeDistance)
+        if out is None:
+            return None
+        self.within, found, A, b, self._witness_count = out
         if not found:
             return None
-        if self._failures[0]:
-            self._centre_rows(data, found)
         self.active = found
-        count = len(found)
-        if self.witnesses:
-            count = self._witness_rows(data, found)
-        A = np.empty((count, self._support.shape[1]))
-        b = np.empty(count)
-        damper_rows(data.J, self._support, self._pair_rows[:count], self.gain / dt, A, b)
+        if A is None:  # a query found no closest points: its row first, then the rest
+            A, b = self._formed_rows(data, found, rate)
+        elif self.witnesses:
+            self._tick += 1.0
         if self._mimic is not None:
             A = A @ self._mimic
+            A.setflags(write=False)
+        return A, b
+
+    def _formed_rows(self, data, found: list[int], rate: float) -> tuple[np.ndarray, np.ndarray]:
+        """The rows of a step where some query found no closest points (:meth:`_centre_rows`
+        forms theirs), its witnesses' and the damper rows of them all, as
+        ``kernels.collision_rows`` makes them otherwise."""
+        self._centre_rows(data, found)
+        count = self._witness_rows(data, found) if self.witnesses else len(found)
+        A = np.empty((count, self._support.shape[1]))
+        b = np.empty(count)
+        damper_rows(data.J, self._support, self._pair_rows[:count], rate, A, b)
         A.setflags(write=False)
+        b.setflags(write=False)
         return A, b
 
     def _centre_rows(self, data, found: list[int]) -> None:
         """The rows of the pairs coal found no closest points for (deep in a penetration, as a
-        restart of ``solve()`` may start: ``kernels.query_rows`` marks them ``d = -inf``): along
-        the line between the centres of the two geometries' bounding spheres, at the depth by
-        which the spheres overlap (at least 1 mm), so that they separate, and the configuration
-        is not taken for one within the limit."""
+        restart of ``solve()`` may start: ``kernels.collision_rows`` marks them ``d = -inf``):
+        along the line between the centres of the two geometries' bounding spheres, at the
+        depth by which the spheres overlap (at least 1 mm), so that they separate, and the
+        configuration is not taken for one within the limit."""
         rows = self._pair_rows
         for i, k in enumerate(found):
             if rows[i, 0] != -np.inf:

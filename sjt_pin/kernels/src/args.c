@@ -1,7 +1,19 @@
-/* The Python side's buffers: float64 arrays through the buffer protocol, and the checks of
- * a solver's work vector and index tables. */
+/* The Python side's buffers: float64 arrays (numpy's read directly, any other object through
+ * the buffer protocol), and the checks of a solver's work vector and index tables. */
 
 #include "kernels.h"
+
+/* numpy's C API, in this file only (the others read an Arg): built against numpy 2, for every
+ * numpy the package supports (pyproject.toml: numpy>=1.24) */
+#define NPY_NO_DEPRECATED_API NPY_1_24_API_VERSION
+#define NPY_TARGET_VERSION NPY_1_24_API_VERSION
+#include <numpy/arrayobject.h>
+
+int args_init(void)
+{
+    import_array1(-1);
+    return 0;
+}
 
 /* -- the Python side: buffers ------------------------------------------------------------------- */
 
@@ -21,11 +33,53 @@ void release(Arg *a)
     a->copy = NULL;
 }
 
+/* a numpy array's float64 data read in place: what the buffer protocol gives, without its
+ * cost (about 50 ns an argument, most of a small kernel's call); 1 when obj is no such array
+ * of at most 2 dimensions (the caller then asks the buffer protocol, which also makes the
+ * errors). As numpy's buffers do, a C-contiguous array has C strides (numpy may give a
+ * dimension of length 0 or 1 any stride). */
+static int acquire_array(PyObject *obj, Arg *a, int writable, int ndim)
+{
+    if (!PyArray_Check(obj)) return 1;
+    PyArrayObject *arr = (PyArrayObject *)obj;
+    int nd = PyArray_NDIM(arr);
+    if (PyArray_TYPE(arr) != NPY_DOUBLE || !PyArray_ISNOTSWAPPED(arr) || nd > 2
+        || (writable && !PyArray_ISWRITEABLE(arr)) || (ndim >= 0 && nd != ndim))
+        return 1;
+    a->view.buf = PyArray_DATA(arr);
+    a->view.ndim = nd;
+    a->view.shape = PyArray_DIMS(arr);  /* (npy_intp is Py_ssize_t) */
+    a->view.strides = PyArray_STRIDES(arr);
+    if (nd > 0 && PyArray_IS_C_CONTIGUOUS(arr)) {
+        a->strides[nd - 1] = 8;
+        if (nd == 2) a->strides[0] = 8 * a->view.shape[1];
+        a->view.strides = a->strides;
+    }
+    return 0;
+}
+
+/* a new C-contiguous float64 array of `nd` (1 or 2) dimensions, its data in *data; NULL with
+ * a Python error set */
+PyObject *new_array(int nd, const Py_ssize_t *dims, double **data)
+{
+    npy_intp shape[2] = {dims[0], nd > 1 ? dims[1] : 0};
+    PyObject *out = PyArray_SimpleNew(nd, shape, NPY_DOUBLE);
+    if (out) *data = (double *)PyArray_DATA((PyArrayObject *)out);
+    return out;
+}
+
+/* an array new_array made, read-only from now on */
+void freeze_array(PyObject *array)
+{
+    PyArray_CLEARFLAGS((PyArrayObject *)array, NPY_ARRAY_WRITEABLE);
+}
+
 /* a float64 buffer of `ndim` dimensions (-1: any) */
 int acquire(PyObject *obj, Arg *a, int writable, int ndim, const char *name)
 {
     a->held = 0;
     a->copy = NULL;
+    if (!acquire_array(obj, a, writable, ndim)) return 0;
     int flags = PyBUF_STRIDES | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
     if (PyObject_GetBuffer(obj, &a->view, flags) < 0) {
         PyErr_Clear();

@@ -417,16 +417,21 @@ static int query_names(void)
     return s_distance && s_normal && s_p1 && s_p2 ? 0 : -1;
 }
 
-/* query_rows' arrays: each pair's floor, margin and influence, its two joints, and the rows
- * written */
+/* the queries' arrays: each pair's floor, margin and influence, its two joints, and the rows
+ * written; and, when a pair's row may be left out where it cannot bind, its reach (the
+ * closing speed, m/s, the joints' speed limits can give it at most) and the damper's rate
+ * (1/s) */
 typedef struct {
-    Arg floor_, margins, influence, joints, rows, failures;
+    Arg floor_, margins, influence, joints, rows, failures, reach;
     double *fv, *mv, *iv, *rv, *failed;
+    const double *reach_v;
+    double rate;
     Mat Jm;
     Py_ssize_t npairs, N;
 } Queries;
 
-/* Acquire and check query_rows' arrays (args as query_rows'); -1 with a Python error set */
+/* Acquire and check the queries' arrays (args[4..9]: floor, margins, joints, influence,
+ * rows, failures); -1 with a Python error set */
 static int query_args(PyObject *const *args, Queries *Q)
 {
     if (acquire(args[4], &Q->floor_, 1, 1, "floor")
@@ -443,7 +448,7 @@ static int query_args(PyObject *const *args, Queries *Q)
     Q->failed = out_vec(&Q->failures, "failures");
     if (!Q->fv || !Q->mv || !Q->iv || !Q->rv || !Q->failed) return -1;
     if (length(&Q->failures) != 1) {
-        PyErr_SetString(PyExc_ValueError, "query_rows: failures must hold one number");
+        PyErr_SetString(PyExc_ValueError, "collision_rows: failures must hold one number");
         return -1;
     }
     Q->failed[0] = 0.0;
@@ -452,7 +457,7 @@ static int query_args(PyObject *const *args, Queries *Q)
     Q->N = Q->rows.view.shape[0];
     if (length(&Q->margins) != Q->npairs || length(&Q->influence) != Q->npairs
         || Q->Jm.m != Q->npairs || Q->Jm.n != 2 || Q->rows.view.shape[1] != 13) {
-        PyErr_Format(PyExc_ValueError, "query_rows: floor, margins, influence (npairs,), "
+        PyErr_Format(PyExc_ValueError, "collision_rows: floor, margins, influence (npairs,), "
                      "joints (npairs, 2) and rows (N, 13) do not fit (npairs %zd)", Q->npairs);
         return -1;
     }
@@ -506,10 +511,11 @@ static int query_row(const Queries *Q, PyObject *res, Py_ssize_t k, double d, do
 }
 
 /* Pair `item` (index k) queried through compute(geometry, geometry_data, k): its floor, and
- * its row at *count when it is within influence (then *count grows); -1 with a Python error
- * set */
+ * when it is within influence (*within then 1) its row at *count (which grows) unless its
+ * damper's bound rate (d - margin) is not below its reach (no joint speed within the limits
+ * closes it that fast: the row could never bind); -1 with a Python error set */
 static int query_pair(PyObject *const *args, const Queries *Q, PyObject *item, Py_ssize_t k,
-                      Py_ssize_t *count)
+                      Py_ssize_t *count, int *within)
 {
     PyObject *call[3] = {args[1], args[2], item};
     PyObject *res = PyObject_Vectorcall(args[0], call, 3, NULL);
@@ -520,9 +526,10 @@ static int query_pair(PyObject *const *args, const Queries *Q, PyObject *item, P
     int bad = !dobj || (d == -1.0 && PyErr_Occurred());
     if (!bad)  /* NaN, or no closest points: -inf (queried again) */
         Q->fv[k] = d > -UNUSABLE ? d : -INFINITY;
-    if (!bad && d > -INFINITY && d < Q->iv[k]) {
+    *within = !bad && d > -INFINITY && d < Q->iv[k];
+    if (*within && !(Q->reach_v && Q->rate * (d - Q->mv[k]) >= Q->reach_v[k])) {
         if (*count >= Q->N) {
-            PyErr_SetString(PyExc_ValueError, "query_rows: more pairs within influence than rows");
+            PyErr_SetString(PyExc_ValueError, "collision_rows: more pairs within influence than rows");
             bad = 1;
         } else {
             bad = query_row(Q, res, k, d, Q->rv + 13 * *count) != 0;
@@ -533,47 +540,195 @@ static int query_pair(PyObject *const *args, const Queries *Q, PyObject *item, P
     return bad ? -1 : 0;
 }
 
-/* query_rows(compute, geometry, geometry_data, near, floor, margins, joints, influence, rows,
- * failures) -> list: the collision limit's exact distance queries (limits/collision.py,
- * _rows): for each pair k of the list `near`, res = compute(geometry, geometry_data, k)
- * (Pinocchio's computeDistance), d = res.min_distance, floor[k] = d (-inf for a failed query:
- * d NaN or no closest points); a pair with
- * d < influence[k] (npairs,) gets the next row of rows (N, 13) as damper_rows reads it: d,
- * margins[k], joints[k] (npairs, 2), res.normal, res.getNearestPoint1(),
- * res.getNearestPoint2(); where coal found no closest points (deep in a penetration: d
- * -DBL_MAX) the row holds d = -inf and zeros for its caller to form, and failures (1,) counts
- * them. Returns those pairs. */
-PyObject *py_query_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+/* the queries' loop: each pair of the sequence args[3] queried (query_pair); the list of those
+ * with a row, their rows the first *count of Q->rows, and in *within the list of those within
+ * influence (a new reference); NULL with a Python error set */
+static PyObject *run_queries(PyObject *const *args, Queries *Q, Py_ssize_t *count,
+                             PyObject **within)
 {
-    if (!nargs_ok(nargs, 10, "query_rows") || query_names()) return NULL;
-    Queries Q;
-    memset(&Q, 0, sizeof Q);
-    PyObject *found = NULL, *near = NULL;
-    if (query_args(args, &Q)) goto done;
-    near = PySequence_Fast(args[3], "near must be a sequence of pair indices");
-    if (!near || !(found = PyList_New(0))) goto done;
-    Py_ssize_t m = PySequence_Fast_GET_SIZE(near), count = 0;
+    PyObject *near = PySequence_Fast(args[3], "near must be a sequence of pair indices");
+    PyObject *found = near ? PyList_New(0) : NULL;
+    *within = found ? PyList_New(0) : NULL;
+    *count = 0;
+    if (!*within) goto fail;
+    Py_ssize_t m = PySequence_Fast_GET_SIZE(near);
     PyObject **items = PySequence_Fast_ITEMS(near);
     for (Py_ssize_t i = 0; i < m; i++) {
-        Py_ssize_t k = PyLong_AsSsize_t(items[i]), before = count;
+        Py_ssize_t k = PyLong_AsSsize_t(items[i]), before = *count;
         if (k == -1 && PyErr_Occurred()) goto fail;
-        if (k < 0 || k >= Q.npairs) {
+        if (k < 0 || k >= Q->npairs) {
             PyErr_Format(PyExc_ValueError, "near[%zd] = %zd is no pair (npairs %zd)", i, k,
-                         Q.npairs);
+                         Q->npairs);
             goto fail;
         }
-        if (query_pair(args, &Q, items[i], k, &count)
-            || (count > before && PyList_Append(found, items[i]) < 0))
+        int close;
+        if (query_pair(args, Q, items[i], k, count, &close)
+            || (close && PyList_Append(*within, items[i]) < 0)
+            || (*count > before && PyList_Append(found, items[i]) < 0))
             goto fail;
     }
     goto done;
 fail:
     Py_CLEAR(found);
+    Py_CLEAR(*within);
 done:
     Py_XDECREF(near);
-    release(&Q.floor_); release(&Q.margins); release(&Q.influence);
-    release(&Q.joints); release(&Q.rows); release(&Q.failures);
     return found;
+}
+
+static void release_queries(Queries *Q)
+{
+    release(&Q->floor_); release(&Q->margins); release(&Q->influence);
+    release(&Q->joints); release(&Q->rows); release(&Q->failures); release(&Q->reach);
+}
+
+/* collision_rows' witness rows after the `count` rows of Q's pairs `found` (witness_rows with
+ * the arrays of fixed); the number of rows, -1 with a Python error set */
+static Py_ssize_t witnesses_of(PyObject *const *F, PyObject *data, const Queries *Q,
+                               PyObject *found, Py_ssize_t count, double tick)
+{
+    double keep = PyFloat_AsDouble(F[10]), apart = PyFloat_AsDouble(F[11]);
+    if (PyErr_Occurred()) return -1;
+    Arg poses = {0}, memory = {0}, state = {0}, owners = {0};
+    Py_ssize_t total = -1, W;
+    double *fv = NULL;
+    PyObject *oMi = NULL;
+    if (acquire(F[7], &poses, 1, 2, "poses") || acquire(F[8], &memory, 1, 2, "memory")
+        || acquire(F[9], &state, 1, 2, "state") || acquire(F[12], &owners, 1, 1, "owners"))
+        goto done;
+    double *pv = out_mat(&poses, "poses"), *mv = out_mat(&memory, "memory");
+    double *sv = out_mat(&state, "state"), *ov = out_vec(&owners, "owners");
+    Py_ssize_t n;
+    if (!pv || !mv || !sv || !ov || pair_indices(found, &fv, &n)
+        || !witness_args_fit(&poses, &Q->rows, &memory, &state, &owners, fv, count, &W))
+        goto done;
+    int remembers = 0;  /* (Pinocchio's oMi only when some pair's witnesses need poses) */
+    for (Py_ssize_t i = 0; i < count; i++)
+        remembers |= Q->rv[13 * i] - Q->rv[13 * i + 1] < keep && sv[2 * (Py_ssize_t)fv[i]] >= 0.0;
+    if (remembers && (!(oMi = PyObject_GetAttrString(data, "oMi"))
+                      || witness_poses(oMi, pv, poses.view.shape[0], Q->rv, fv, sv, count, keep)))
+        goto done;
+    total = witness_rows_c(pv, Q->rv, fv, count, mv, W, sv, tick, keep, apart, ov);
+done:
+    Py_XDECREF(oMi);
+    free(fv);
+    release(&poses); release(&memory); release(&state); release(&owners);
+    return total;
+}
+
+/* collision_rows' A (total, N) and b (total,) from the first `total` rows of Q (damper_rows at
+ * `rate`, 1/s), into out[0] (A, read-only) and out[1] (b); -1 with a Python error set */
+static int dampers_of(PyObject *const *F, PyObject *data, const Queries *Q, Py_ssize_t total,
+                      double rate, PyObject **out)
+{
+    Arg J = {0}, sup = {0};
+    int bad = 1;
+    PyObject *J_obj = PyObject_GetAttrString(data, "J");
+    if (!J_obj || acquire(J_obj, &J, 0, 2, "J") || acquire(F[13], &sup, 0, 2, "support"))
+        goto done;
+    Mat Jm = mat(&J), Sm = mat(&sup), Pm = {Q->rv, total, 13, 13, 1};
+    if (Jm.m != 6 || Sm.n != Jm.n) {
+        PyErr_Format(PyExc_ValueError, "collision_rows: J (6, N) and support (njoints, N) do not "
+                     "fit: J (%zd, %zd), support (%zd, %zd)", Jm.m, Jm.n, Sm.m, Sm.n);
+        goto done;
+    }
+    for (Py_ssize_t i = 0; i < total; i++)
+        for (int side = 0; side < 2; side++) {
+            double j = AT(Pm, i, 2 + side);
+            if (!(j >= 0.0 && j < (double)Sm.m)) {
+                PyErr_Format(PyExc_ValueError, "rows[%zd] names joint %zd; support has %zd", i,
+                             (Py_ssize_t)j, Sm.m);
+                goto done;
+            }
+        }
+    Py_ssize_t dims[2] = {total, Jm.n};
+    double *Av, *bv;
+    if (!(out[0] = new_array(2, dims, &Av)) || !(out[1] = new_array(1, dims, &bv))) goto done;
+    damper_rows_c(Jm, Sm, Pm, rate, Av, bv);
+    freeze_array(out[0]);
+    freeze_array(out[1]);
+    bad = 0;
+done:
+    release(&J); release(&sup);
+    Py_XDECREF(J_obj);
+    return bad ? -1 : 0;
+}
+
+/* collision_rows(fixed, near, data, rate, influence, tick, reach, compute) -> (within, found,
+ * A, b, witnesses) | None: a step's rows of the collision limit in one call
+ * (limits/collision.py, _rows), at the joint poses and WORLD joint Jacobians of Pinocchio's
+ * `data`. fixed: the limit's (geometry, geometry_data, floor, margins, joints, rows, failures,
+ * poses, memory, state, keep, apart, owners, support, update, model, witnesses).
+ * 1. The geometries' placements: update(model, data, geometry, geometry_data) (Pinocchio's
+ *    updateGeometryPlacements).
+ * 2. The exact distance queries: for each pair k of the list `near`, res = compute(geometry,
+ *    geometry_data, k) (Pinocchio's computeDistance), d = res.min_distance, floor[k] = d (-inf
+ *    for a failed query: d NaN or no closest points). A pair with d < influence[k] (npairs,)
+ *    is within influence; it gets the next row of rows (N, 13) as damper_rows reads it (d,
+ *    margins[k], joints[k] (npairs, 2), the normal, res.getNearestPoint1(),
+ *    res.getNearestPoint2()) unless reach (npairs,; None: every pair within influence) says
+ *    the row cannot bind: rate (d - margin) >= reach[k], the largest closing speed (m/s) the
+ *    joints' speed limits can give the pair. Where coal found no closest points (deep in a
+ *    penetration: d -DBL_MAX) the row holds d = -inf and zeros and failures (1,) counts it.
+ * 3. Unless a query failed (then A and b are None: the caller forms those rows first, then
+ *    the rest with witness_rows and damper_rows), when `witnesses` is true, witness_rows' rows
+ *    after them (at `tick`; data.oMi read only for pairs that remember), `witnesses` of them,
+ *    and damper_rows' A (k, N) and b (k,), both read-only, of all the rows at `rate` (1/s) from
+ *    data.J (6, N).
+ * within: the pairs within influence, found those with a row (A and b None when there is
+ * none); None when no pair is within influence. */
+PyObject *py_collision_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (!nargs_ok(nargs, 8, "collision_rows") || query_names()) return NULL;
+    if (!PyTuple_Check(args[0]) || PyTuple_GET_SIZE(args[0]) != 17) {
+        PyErr_SetString(PyExc_TypeError, "collision_rows: fixed must be a tuple of 17");
+        return NULL;
+    }
+    PyObject *const *F = &PyTuple_GET_ITEM(args[0], 0), *data = args[2];
+    double rate = PyFloat_AsDouble(args[3]), tick = PyFloat_AsDouble(args[5]);
+    int witnesses = PyObject_IsTrue(F[16]);
+    if (PyErr_Occurred() || witnesses < 0) return NULL;
+    PyObject *qa[10] = {args[7], F[0], F[1], args[1], F[2], F[3], F[4], args[4], F[5], F[6]};
+    PyObject *update[4] = {F[15], data, F[0], F[1]};
+    Queries Q;
+    memset(&Q, 0, sizeof Q);
+    Py_ssize_t count = 0, total;
+    PyObject *found = NULL, *within = NULL, *result = NULL, *placed = NULL;
+    PyObject *AB[2] = {NULL, NULL};
+    if (query_args(qa, &Q)) goto done;
+    Q.rate = rate;
+    if (args[6] != Py_None) {
+        if (acquire(args[6], &Q.reach, 0, 1, "reach") || !(Q.reach_v = vec(&Q.reach, "reach")))
+            goto done;
+        if (length(&Q.reach) != Q.npairs) {
+            PyErr_Format(PyExc_ValueError, "collision_rows: reach must hold one speed per pair "
+                         "(%zd), got %zd", Q.npairs, length(&Q.reach));
+            goto done;
+        }
+    }
+    if (!(placed = PyObject_Vectorcall(F[14], update, 4, NULL))
+        || !(found = run_queries(qa, &Q, &count, &within)))
+        goto done;
+    if (PyList_GET_SIZE(within) == 0) {
+        result = Py_None;
+        Py_INCREF(result);
+        goto done;
+    }
+    if (count == 0 || Q.failed[0] > 0.0) {
+        result = Py_BuildValue("(OOOOn)", within, found, Py_None, Py_None, (Py_ssize_t)0);
+        goto done;
+    }
+    total = witnesses ? witnesses_of(F, data, &Q, found, count, tick) : count;
+    if (total < 0 || dampers_of(F, data, &Q, total, rate, AB)) goto done;
+    result = Py_BuildValue("(OOOOn)", within, found, AB[0], AB[1], total - count);
+done:
+    Py_XDECREF(placed);
+    Py_XDECREF(found);
+    Py_XDECREF(within);
+    Py_XDECREF(AB[0]);
+    Py_XDECREF(AB[1]);
+    release_queries(&Q);
+    return result;
 }
 
 /* Whether q lies in the box [lower, upper] the levers hold in and every pair's bound
@@ -622,26 +777,31 @@ static PyObject *pairs_to_query(PyObject *near_seq, double *floor_, double *floo
     return out;
 }
 
-/* near_pairs(q, reference, lower, upper, lever, gap, near, floor, floor_q, influence) ->
- * list | None: the collision limit's skip of its broad phase and of its queries
- * (limits/collision.py, _near and _rows) for q in its own tangent space (revolute and
- * prismatic joints), with lever (npairs, n) bounding how far |dq| moves each pair: None when
- * q leaves the box lower <= q <= upper (n,) the levers hold in, or when some pair's bound
+/* near_pairs(q, skip, influence) -> list | None: the collision limit's skip of its broad phase
+ * and of its queries (limits/collision.py, _near and _rows) for q in its own tangent space
+ * (revolute and prismatic joints); skip: the limit's (reference, lower, upper, lever, gap,
+ * near, floor, floor_q), with lever (npairs, n) bounding how far |dq| moves each pair. None
+ * when q leaves the box lower <= q <= upper (n,) the levers hold in, or when some pair's bound
  * lever |q - reference| plus its influence (npairs,) reaches the gap (npairs,) its bounding
  * volumes had at the reference (the broad phase must run again); else the pairs of the list
  * `near` whose floor (npairs,; a lower bound of their distance at floor_q (n,), m), aged to q,
  * is not above their influence (those to query), floor_q then q. */
 PyObject *py_near_pairs(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
-    if (!nargs_ok(nargs, 10, "near_pairs")) return NULL;
+    if (!nargs_ok(nargs, 3, "near_pairs")) return NULL;
+    if (!PyTuple_Check(args[1]) || PyTuple_GET_SIZE(args[1]) != 8) {
+        PyErr_SetString(PyExc_TypeError, "near_pairs: skip must be a tuple of 8");
+        return NULL;
+    }
+    PyObject *const *S = &PyTuple_GET_ITEM(args[1], 0);
     Arg q = {0}, ref = {0}, lo = {0}, hi = {0}, lever = {0}, gap = {0}, floor_ = {0},
         floor_q = {0}, infl = {0};
     PyObject *result = NULL;
-    if (acquire(args[0], &q, 0, 1, "q") || acquire(args[1], &ref, 0, 1, "reference")
-        || acquire(args[2], &lo, 0, 1, "lower") || acquire(args[3], &hi, 0, 1, "upper")
-        || acquire(args[4], &lever, 0, 2, "lever") || acquire(args[5], &gap, 0, 1, "gap")
-        || acquire(args[7], &floor_, 1, 1, "floor") || acquire(args[8], &floor_q, 1, 1, "floor_q")
-        || acquire(args[9], &infl, 0, 1, "influence"))
+    if (acquire(args[0], &q, 0, 1, "q") || acquire(S[0], &ref, 0, 1, "reference")
+        || acquire(S[1], &lo, 0, 1, "lower") || acquire(S[2], &hi, 0, 1, "upper")
+        || acquire(S[3], &lever, 0, 2, "lever") || acquire(S[4], &gap, 0, 1, "gap")
+        || acquire(S[6], &floor_, 1, 1, "floor") || acquire(S[7], &floor_q, 1, 1, "floor_q")
+        || acquire(args[2], &infl, 0, 1, "influence"))
         goto done;
     double *qv = vec(&q, "q"), *rv = vec(&ref, "reference"), *gv = vec(&gap, "gap");
     double *lov = vec(&lo, "lower"), *hiv = vec(&hi, "upper");
@@ -662,7 +822,7 @@ PyObject *py_near_pairs(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         result = Py_None;
         Py_INCREF(result);
     } else {
-        result = pairs_to_query(args[6], fv, fqv, qv, L, iv);
+        result = pairs_to_query(S[5], fv, fqv, qv, L, iv);
     }
 done:
     release(&q); release(&ref); release(&lo); release(&hi); release(&lever); release(&gap);

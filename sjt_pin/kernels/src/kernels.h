@@ -86,6 +86,7 @@ typedef struct {
     Py_buffer view;
     int held;
     double *copy; /* a contiguous copy of a strided 1-D input */
+    Py_ssize_t strides[2]; /* a C-contiguous array's canonical strides (view.strides) */
 } Arg;
 
 /* the dual's ridge relative to its largest diagonal entry (constraints.DUAL_RIDGE) */
@@ -208,6 +209,9 @@ static inline int smoothness_limits(double v, double a, double A, double Jk, dou
 /* what each file offers the others, in the order they build on each other */
 
 /* args.c */
+int args_init(void);
+PyObject *new_array(int nd, const Py_ssize_t *dims, double **data);
+void freeze_array(PyObject *array);
 void release(Arg *a);
 int acquire(PyObject *obj, Arg *a, int writable, int ndim, const char *name);
 double *vec(Arg *a, const char *name);
@@ -288,7 +292,7 @@ PyObject *py_damper_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs
 PyObject *py_stoppable_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
 PyObject *py_witness_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
 PyObject *py_braking_reach(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
-PyObject *py_query_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
 PyObject *py_near_pairs(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
+PyObject *py_collision_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
 
 #endif

@@ -74,13 +74,12 @@ static PyMethodDef methods[] = {
     {"witness_rows", (PyCFunction)(void (*)(void))py_witness_rows, METH_FASTCALL,
      "witness_rows(oMi, poses, rows, found, memory, state, tick, keep, apart, owners) -> int: the "
      "collision limit's rows of its pairs' remembered closest points after their own rows."},
-    {"query_rows", (PyCFunction)(void (*)(void))py_query_rows, METH_FASTCALL,
-     "query_rows(compute, geometry, geometry_data, near, floor, margins, joints, influence, "
-     "rows, failures) -> list: the collision limit's distance queries and its "
-     "pairs' rows."},
+    {"collision_rows", (PyCFunction)(void (*)(void))py_collision_rows, METH_FASTCALL,
+     "collision_rows(fixed, near, data, rate, influence, tick, reach, compute) -> (within, "
+     "found, A, b, witnesses) | None: the collision limit's queries, witness and damper rows "
+     "of a step in one call."},
     {"near_pairs", (PyCFunction)(void (*)(void))py_near_pairs, METH_FASTCALL,
-     "near_pairs(q, reference, lower, upper, lever, gap, near, floor, floor_q, influence) -> "
-     "list | None: "
+     "near_pairs(q, skip, influence) -> list | None: "
      "the collision limit's pairs to query, or None when its broad phase must run again."},
     {"braking_reach", (PyCFunction)(void (*)(void))py_braking_reach, METH_FASTCALL,
      "braking_reach(lever, dq, accelerations, jerks, dt, share, influence, margin, out): each "
@@ -95,6 +94,7 @@ static struct PyModuleDef module = {
 
 PyMODINIT_FUNC PyInit__kernels(void)
 {
+    if (args_init() < 0) return NULL;
     PyObject *m = PyModule_Create(&module);
     if (!m) return NULL;
     /* every slot by its name: kernels/layout.py takes them from here (no Python module holds
