@@ -143,7 +143,7 @@ def test_compiled_kernels_name_the_argument_that_does_not_fit():
         K.collision_rows((None, None, np.zeros(3), np.zeros(2), np.zeros((3, 2)),
                           np.zeros((3, 13)), np.zeros(1), np.zeros((2, 16)), np.zeros((3, 6)),
                           np.zeros((3, 2)), 0.02, 1e-4, np.zeros(3), np.zeros((2, 2)),
-                          pin.updateGeometryPlacements, None, True), [0], None, 1.0,
+                          pin.updateGeometryPlacements, None, True, None), [0], None, 1.0,
                          np.full(3, 0.05), 1.0, None, pin.computeDistance)
     with pytest.raises(ValueError, match="do not fit"):
         K.braking_reach(np.zeros((3, 2)), np.zeros(2), np.ones(2), None, 1e-3, 0.5, 0.05, 0.01,

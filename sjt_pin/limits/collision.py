@@ -524,10 +524,10 @@ class CollisionLimit(Limit):
                        self._joint_table, self._pair_rows, self._failures, self._flat_poses,
                        self._memory, self._memory_state, 0.5 * (self.influence - self.margin),
                        WITNESS_APART, self._owners, self._support, pin.updateGeometryPlacements,
-                       self.model, self.witnesses > 0)
+                       self.model, self.witnesses > 0, self._mimic)
         self._skip: tuple | None = None  # near_pairs' (from _reference and _floor_q)
         # each pair's reach at the solver's speed limits (_reach): (those limits, the reach)
-        self._reaches: tuple[np.ndarray | None, np.ndarray | None] = (None, None)
+        self._reaches: tuple[np.ndarray | None, np.ndarray | None] = (self, None)  # (none)
 
     def _chains(self, unbounded: float) -> tuple[np.ndarray, np.ndarray]:
         """For each geometry g and joint coordinate (nvExtended) of a joint k that moves it:
@@ -847,18 +847,19 @@ class CollisionLimit(Limit):
         excess over ``margin`` (module docstring, "Acceleration limits"). A second call at the
         same configuration, period, obstacle poses and motion returns the same (read-only)
         arrays."""
-        dt = motion.dt
-        if not dt > 0:
-            raise ValueError(f"dt must be a period > 0 (s), got {dt!r}")
-        model, data, q = kinematics.model, kinematics.data, kinematics.q
+        data, q, dt = kinematics.data, kinematics.q, motion.dt
         accelerations, jerks = motion.acceleration_limits, motion.jerk_limits
-        state = None if accelerations is None else motion.dq.tobytes() + motion.ddq.tobytes()
-        key = (dt, self._version, None if q is None else q.tobytes(), id(accelerations),
-               id(jerks), state, id(motion.velocity_limits))
+        where = None if q is None else q.tobytes()
+        key = (where, dt, self._version, id(motion.velocity_limits)) if accelerations is None \
+            else (where, dt, self._version, id(accelerations), id(jerks),
+                  motion.dq.tobytes() + motion.ddq.tobytes())
         cache = self._cache
         if cache is not None and q is not None and cache[0] is data and cache[1] == key:
             self.active, self.within, self._witness_count = cache[2]
             return cache[3]
+        if not dt > 0:
+            raise ValueError(f"dt must be a period > 0 (s), got {dt!r}")
+        model = kinematics.model
         if not self._checked:
             self._check(model, data)
         influence = self._influence
@@ -866,8 +867,12 @@ class CollisionLimit(Limit):
             influence = self._braking_influence
             braking_reach(self._pair_lever, motion.dq, accelerations, jerks, dt, BRAKING_SHARE,
                           self.influence, self.margin, influence)
-        out = self._rows(model, data, dt, q, influence,
-                         None if accelerations is not None else self._reach(motion))
+        if accelerations is None:
+            speeds, reaches = motion.velocity_limits, self._reaches
+            reach = reaches[1] if reaches[0] is speeds else self._reach(speeds)
+        else:
+            reach = None  # (the stoppable rows below are tighter than the damper's)
+        out = self._rows(model, data, dt, q, influence, reach)
         if out is not None and accelerations is not None:
             b = out[1]
             b.setflags(write=True)  # (its own data: the rows' bounds, cut in place)
@@ -877,21 +882,19 @@ class CollisionLimit(Limit):
         self._cache = (data, key, (self.active, self.within, self._witness_count), out)
         return out
 
-    def _reach(self, motion: Motion) -> np.ndarray | None:
-        """Each pair's reach (npairs,; m/s): the fastest its distance can shrink at the
-        solver's speed limits (``motion.velocity_limits``, which every step it commands keeps),
-        ``sum_j lever_kj v_j`` (:meth:`_pair_levers`). A pair whose damper bound
-        ``gain (d - margin) / dt`` is not below it needs no row: no step can break it. None
-        without speed limits (``solve()``'s iterations) or levers."""
-        speeds = motion.velocity_limits
-        if speeds is None or self._pair_lever is None:
-            return None
-        if self._reaches[0] is not speeds:
+    def _reach(self, speeds: np.ndarray | None) -> np.ndarray | None:
+        """Each pair's reach (npairs,; m/s; kept for these ``speeds``): the fastest its
+        distance can shrink at the solver's speed limits (``motion.velocity_limits``, which
+        every step it commands keeps), ``sum_j lever_kj v_j`` (:meth:`_pair_levers`). A pair
+        whose damper bound ``gain (d - margin) / dt`` is not below it needs no row: no step can
+        break it. None without speed limits (``solve()``'s iterations) or levers."""
+        reach = None
+        if speeds is not None and self._pair_lever is not None:
             finite = np.isfinite(speeds)
             reach = self._pair_lever @ np.where(finite, speeds, 0.0)
             reach[(self._pair_lever[:, ~finite] > 0).any(axis=1)] = np.inf
-            self._reaches = (speeds, reach)
-        return self._reaches[1]
+        self._reaches = (speeds, reach)
+        return reach
 
     @property
     def witness_pairs(self) -> list[int]:
@@ -934,12 +937,9 @@ class CollisionLimit(Limit):
             return None
         self.active = found
         if A is None:  # a query found no closest points: its row first, then the rest
-            A, b = self._formed_rows(data, found, rate)
-        elif self.witnesses:
+            return self._formed_rows(data, found, rate)
+        if self.witnesses:
             self._tick += 1.0
-        if self._mimic is not None:
-            A = A @ self._mimic
-            A.setflags(write=False)
         return A, b
 
     def _formed_rows(self, data, found: list[int], rate: float) -> tuple[np.ndarray, np.ndarray]:
@@ -951,6 +951,8 @@ class CollisionLimit(Limit):
         A = np.empty((count, self._support.shape[1]))
         b = np.empty(count)
         damper_rows(data.J, self._support, self._pair_rows[:count], rate, A, b)
+        if self._mimic is not None:
+            A = A @ self._mimic
         A.setflags(write=False)
         b.setflags(write=False)
         return A, b

@@ -616,20 +616,38 @@ done:
     return total;
 }
 
-/* collision_rows' A (total, N) and b (total,) from the first `total` rows of Q (damper_rows at
- * `rate`, 1/s), into out[0] (A, read-only) and out[1] (b); -1 with a Python error set */
+/* A (k, n) = X (k, N) G (N, n): the damper rows folded onto the velocity coordinates by the
+ * map G from every joint coordinate's velocity, mimic joints' included (a mimic joint's column
+ * adds, times its multiplier, to the one it follows) */
+static void fold_columns(const double *X, Py_ssize_t k, Py_ssize_t N, Mat G, double *A)
+{
+    for (Py_ssize_t i = 0; i < k; i++)
+        for (Py_ssize_t v = 0; v < G.n; v++) {
+            double acc = 0.0;
+            for (Py_ssize_t c = 0; c < N; c++) acc += X[i * N + c] * AT(G, c, v);
+            A[i * G.n + v] = acc;
+        }
+}
+
+/* collision_rows' A and b from the first `total` rows of Q (damper_rows at `rate`, 1/s), A
+ * folded by the mimic map (fixed's last; None: none) onto the velocity coordinates, into
+ * out[0] (A, read-only) and out[1] (b, read-only); -1 with a Python error set */
 static int dampers_of(PyObject *const *F, PyObject *data, const Queries *Q, Py_ssize_t total,
                       double rate, PyObject **out)
 {
-    Arg J = {0}, sup = {0};
-    int bad = 1;
+    Arg J = {0}, sup = {0}, map = {0};
+    int bad = 1, folds = F[17] != Py_None;
+    double *X = NULL;
     PyObject *J_obj = PyObject_GetAttrString(data, "J");
-    if (!J_obj || acquire(J_obj, &J, 0, 2, "J") || acquire(F[13], &sup, 0, 2, "support"))
+    if (!J_obj || acquire(J_obj, &J, 0, 2, "J") || acquire(F[13], &sup, 0, 2, "support")
+        || (folds && acquire(F[17], &map, 0, 2, "mimic")))
         goto done;
-    Mat Jm = mat(&J), Sm = mat(&sup), Pm = {Q->rv, total, 13, 13, 1};
-    if (Jm.m != 6 || Sm.n != Jm.n) {
-        PyErr_Format(PyExc_ValueError, "collision_rows: J (6, N) and support (njoints, N) do not "
-                     "fit: J (%zd, %zd), support (%zd, %zd)", Jm.m, Jm.n, Sm.m, Sm.n);
+    Mat Jm = mat(&J), Sm = mat(&sup), Pm = {Q->rv, total, 13, 13, 1}, G = {NULL, 0, 0, 0, 0};
+    if (folds) G = mat(&map);
+    if (Jm.m != 6 || Sm.n != Jm.n || (folds && G.m != Jm.n)) {
+        PyErr_Format(PyExc_ValueError, "collision_rows: J (6, N), support (njoints, N) and the "
+                     "mimic map (N, n) do not fit: J (%zd, %zd), support (%zd, %zd)", Jm.m, Jm.n,
+                     Sm.m, Sm.n);
         goto done;
     }
     for (Py_ssize_t i = 0; i < total; i++)
@@ -641,15 +659,21 @@ static int dampers_of(PyObject *const *F, PyObject *data, const Queries *Q, Py_s
                 goto done;
             }
         }
-    Py_ssize_t dims[2] = {total, Jm.n};
+    Py_ssize_t dims[2] = {total, folds ? G.n : Jm.n};
     double *Av, *bv;
     if (!(out[0] = new_array(2, dims, &Av)) || !(out[1] = new_array(1, dims, &bv))) goto done;
-    damper_rows_c(Jm, Sm, Pm, rate, Av, bv);
+    if (folds && !(X = (double *)malloc((size_t)(total * Jm.n + 1) * sizeof(double)))) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    damper_rows_c(Jm, Sm, Pm, rate, folds ? X : Av, bv);
+    if (folds) fold_columns(X, total, Jm.n, G, Av);
     freeze_array(out[0]);
     freeze_array(out[1]);
     bad = 0;
 done:
-    release(&J); release(&sup);
+    free(X);
+    release(&J); release(&sup); release(&map);
     Py_XDECREF(J_obj);
     return bad ? -1 : 0;
 }
@@ -658,7 +682,7 @@ done:
  * A, b, witnesses) | None: a step's rows of the collision limit in one call
  * (limits/collision.py, _rows), at the joint poses and WORLD joint Jacobians of Pinocchio's
  * `data`. fixed: the limit's (geometry, geometry_data, floor, margins, joints, rows, failures,
- * poses, memory, state, keep, apart, owners, support, update, model, witnesses).
+ * poses, memory, state, keep, apart, owners, support, update, model, witnesses, mimic).
  * 1. The geometries' placements: update(model, data, geometry, geometry_data) (Pinocchio's
  *    updateGeometryPlacements).
  * 2. The exact distance queries: for each pair k of the list `near`, res = compute(geometry,
@@ -674,14 +698,14 @@ done:
  *    the rest with witness_rows and damper_rows), when `witnesses` is true, witness_rows' rows
  *    after them (at `tick`; data.oMi read only for pairs that remember), `witnesses` of them,
  *    and damper_rows' A (k, N) and b (k,), both read-only, of all the rows at `rate` (1/s) from
- *    data.J (6, N).
+ *    data.J (6, N); A (k, n) = A G with a mimic map G (N, n) (mimic None: N = n).
  * within: the pairs within influence, found those with a row (A and b None when there is
  * none); None when no pair is within influence. */
 PyObject *py_collision_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     if (!nargs_ok(nargs, 8, "collision_rows") || query_names()) return NULL;
-    if (!PyTuple_Check(args[0]) || PyTuple_GET_SIZE(args[0]) != 17) {
-        PyErr_SetString(PyExc_TypeError, "collision_rows: fixed must be a tuple of 17");
+    if (!PyTuple_Check(args[0]) || PyTuple_GET_SIZE(args[0]) != 18) {
+        PyErr_SetString(PyExc_TypeError, "collision_rows: fixed must be a tuple of 18");
         return NULL;
     }
     PyObject *const *F = &PyTuple_GET_ITEM(args[0], 0), *data = args[2];
