@@ -244,6 +244,32 @@ def test_strided_inputs_give_the_contiguous_results():
     np.testing.assert_array_equal(strided, contiguous)
 
 
+def test_numpy_arrays_are_read_as_the_buffer_protocol_reads_them():
+    """The kernels read numpy's arrays in place (numpy's C API): a one-row output sliced out
+    of a bigger array (numpy calls it C-contiguous whatever the row stride) is written as a
+    contiguous one, a byte-swapped or non-float64 array is refused as through the buffer
+    protocol, and any other buffer (a memoryview) still works."""
+    rng = np.random.default_rng(3)
+    J, support = rng.standard_normal((6, 3)), np.ones((2, 3))
+    pairs = np.zeros((1, 13))
+    pairs[0, :4] = 0.03, 0.01, 1.0, 0.0
+    pairs[0, 4:7] = 0.0, 0.0, 1.0
+    pairs[0, 7:] = rng.standard_normal(6)
+    A, b = np.zeros((1, 3)), np.zeros(1)
+    K.damper_rows(J, support, pairs, 2.0, A, b)
+    sliced = np.zeros((2, 3))[::2]  # shape (1, 3), row stride 48 bytes
+    assert sliced.flags.c_contiguous and sliced.strides[0] != 24
+    K.damper_rows(J, support, pairs, 2.0, sliced, np.zeros(1))
+    np.testing.assert_array_equal(sliced, A)
+    viewed = np.zeros((1, 3))
+    K.damper_rows(memoryview(J), memoryview(support), pairs, 2.0, memoryview(viewed), b)
+    np.testing.assert_array_equal(viewed, A)
+    with pytest.raises(TypeError, match="float64"):
+        K.damper_rows(J.astype(">f8"), support, pairs, 2.0, A, b)
+    with pytest.raises(TypeError, match="float64"):
+        K.damper_rows(J, support.astype(np.int64), pairs, 2.0, A, b)
+
+
 @pytest.mark.parametrize("joints", [7, 30, 100])
 @pytest.mark.parametrize("method, options", [("sjt", {}), ("sjt", {"feedback": "transpose"}),
                                              ("dls", {}), ("jp", {})])

@@ -527,7 +527,7 @@ class CollisionLimit(Limit):
                        self.model, self.witnesses > 0, self._mimic)
         self._skip: tuple | None = None  # near_pairs' (from _reference and _floor_q)
         # each pair's reach at the solver's speed limits (_reach): (those limits, the reach)
-        self._reaches: tuple[np.ndarray | None, np.ndarray | None] = (self, None)  # (none)
+        self._reaches: tuple[object, np.ndarray | None] = (self, None)  # (none yet)
 
     def _chains(self, unbounded: float) -> tuple[np.ndarray, np.ndarray]:
         """For each geometry g and joint coordinate (nvExtended) of a joint k that moves it:
