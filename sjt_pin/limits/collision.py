@@ -11,7 +11,10 @@ with ``p_a``, ``p_b`` the closest points, ``n`` the unit normal from ``b`` to ``
 ``J_x(p)`` the world-aligned linear Jacobian of the point ``p`` fixed to geometry ``x``'s parent
 joint (zero for an obstacle). Over one period ``dt`` the distance then changes to first order
 by ``d_dot dt >= -gain (d - margin)``: with ``gain`` in (0, 1] it never crosses ``margin``,
-and below ``margin`` (or in penetration) the row pushes the pair apart.
+and below ``margin`` (or in penetration) the row pushes the pair apart. Where the solver's
+speed limits ``v`` keep ``|d_dot|`` below ``gain (d - margin) / dt`` already (``|d_dot| <=
+sum_j lever_j v_j``, the levers of the broad phase's skip, below), the row is implied by them
+and is left out of the step's rows.
 
 Acceleration limits. A damper alone lets a pair close at up to ``gain (d - margin) / dt``, far
 more than an arm with acceleration limits can stop from in the gap left, so a solver with
@@ -842,11 +845,14 @@ class CollisionLimit(Limit):
     def rows(self, kinematics, motion: Motion) -> tuple[np.ndarray, np.ndarray] | None:
         """Rows ``A q_dot <= b`` (A: (k, nv) in m per unit of q_dot, b: (k,) in m/s) at the
         configuration of ``kinematics`` (after ``update(q)``: its joint poses and WORLD joint
-        Jacobians); None when no pair is within ``influence``. With acceleration limits in
-        ``motion`` each bound is also cut to a closing speed they can stop within the pair's
-        excess over ``margin`` (module docstring, "Acceleration limits"). A second call at the
-        same configuration, period, obstacle poses and motion returns the same (read-only)
-        arrays."""
+        Jacobians), one for each pair within ``influence`` (:attr:`active`, then the witness
+        rows) but those that no step within the solver's speed limits
+        (``motion.velocity_limits``) can break (:meth:`_reach`; :attr:`within` lists them
+        all); None when there is none. With acceleration limits in ``motion`` each bound is
+        also cut to a closing speed they can stop within the pair's excess over ``margin``
+        (module docstring, "Acceleration limits"), and every pair within influence has its
+        row. A second call at the same configuration, period, obstacle poses and motion
+        returns the same (read-only) arrays."""
         data, q, dt = kinematics.data, kinematics.q, motion.dt
         accelerations, jerks = motion.acceleration_limits, motion.jerk_limits
         where = None if q is None else q.tobytes()

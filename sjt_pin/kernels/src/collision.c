@@ -529,7 +529,8 @@ static int query_pair(PyObject *const *args, const Queries *Q, PyObject *item, P
     *within = !bad && d > -INFINITY && d < Q->iv[k];
     if (*within && !(Q->reach_v && Q->rate * (d - Q->mv[k]) >= Q->reach_v[k])) {
         if (*count >= Q->N) {
-            PyErr_SetString(PyExc_ValueError, "collision_rows: more pairs within influence than rows");
+            PyErr_SetString(PyExc_ValueError,
+                            "collision_rows: more pairs within influence than rows");
             bad = 1;
         } else {
             bad = query_row(Q, res, k, d, Q->rv + 13 * *count) != 0;
