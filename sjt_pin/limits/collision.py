@@ -865,9 +865,8 @@ class CollisionLimit(Limit):
             return cache[3]
         if not dt > 0:
             raise ValueError(f"dt must be a period > 0 (s), got {dt!r}")
-        model = kinematics.model
         if not self._checked:
-            self._check(model, data)
+            self._check(kinematics.model, data)
         influence = self._influence
         if accelerations is not None and self._pair_lever is not None:
             influence = self._braking_influence
@@ -878,7 +877,7 @@ class CollisionLimit(Limit):
             reach = reaches[1] if reaches[0] is speeds else self._reach(speeds)
         else:
             reach = None  # (the stoppable rows below are tighter than the damper's)
-        out = self._rows(model, data, dt, q, influence, reach)
+        out = self._rows(data, dt, q, influence, reach)
         if out is not None and accelerations is not None:
             b = out[1]
             b.setflags(write=True)  # (its own data: the rows' bounds, cut in place)
@@ -908,7 +907,7 @@ class CollisionLimit(Limit):
         :meth:`rows`, which follow the rows of :attr:`active` (one each)."""
         return self._owners[:self._witness_count].astype(int).tolist()
 
-    def _rows(self, model, data, dt: float, q: np.ndarray | None, influence: np.ndarray,
+    def _rows(self, data, dt: float, q: np.ndarray | None, influence: np.ndarray,
               reach: np.ndarray | None) -> tuple[np.ndarray, np.ndarray] | None:
         self.active = []  # indices into self.pairs / self.pair_names of the rows returned
         self.within = []

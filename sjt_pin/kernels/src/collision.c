@@ -41,6 +41,22 @@ static void damper_rows_c(Mat J, Mat support, Mat pairs, double rate, double *A,
     }
 }
 
+/* Whether every row of P (k, 13) names two joints (columns 2 and 3) below njoints; sets
+ * ValueError naming the row otherwise (`what`: the rows' name) */
+static int rows_name_joints(Mat P, Py_ssize_t njoints, const char *what)
+{
+    for (Py_ssize_t i = 0; i < P.m; i++)
+        for (int side = 0; side < 2; side++) {
+            double j = AT(P, i, 2 + side);
+            if (!(j >= 0.0 && j < (double)njoints)) {
+                PyErr_Format(PyExc_ValueError, "%s[%zd] names joint %zd; support has %zd", what,
+                             i, (Py_ssize_t)j, njoints);
+                return 0;
+            }
+        }
+    return 1;
+}
+
 PyObject *py_damper_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     if (!nargs_ok(nargs, 6, "damper_rows")) return NULL;
@@ -62,15 +78,7 @@ PyObject *py_damper_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs
                      Jm.m, Jm.n, Sm.m, Sm.n, Pm.m, Pm.n);
         goto done;
     }
-    for (Py_ssize_t i = 0; i < Pm.m; i++)
-        for (int side = 0; side < 2; side++) {
-            double j = AT(Pm, i, 2 + side);
-            if (!(j >= 0.0 && j < (double)Sm.m)) {
-                PyErr_Format(PyExc_ValueError, "pairs[%zd] names joint %zd; support has %zd",
-                             i, (Py_ssize_t)j, Sm.m);
-                goto done;
-            }
-        }
+    if (!rows_name_joints(Pm, Sm.m, "pairs")) goto done;
     damper_rows_c(Jm, Sm, Pm, rate, Av, bv);
     result = Py_None;
     Py_INCREF(result);
@@ -324,10 +332,11 @@ static int witness_args_fit(const Arg *poses, const Arg *rows, const Arg *memory
 
 /* The world poses (P, njoints x 16; joint 0 the identity) of the joints of the rows whose
  * pairs remember (d - margin under keep, state not -1: found, state as witness_rows_c's),
- * from Pinocchio's oMi, each joint once; -1 with a Python error set */
-static int witness_poses(PyObject *oMi, double *P, Py_ssize_t nj, const double *rv,
-                         const double *found, const double *state, Py_ssize_t count,
-                         double keep)
+ * from Pinocchio's oMi, each joint once; `source` is oMi, or (of_data) Pinocchio's data, whose
+ * oMi is read only when some row needs a pose; -1 with a Python error set */
+static int witness_poses(PyObject *source, int of_data, double *P, Py_ssize_t nj,
+                         const double *rv, const double *found, const double *state,
+                         Py_ssize_t count, double keep)
 {
     char *fetched = (char *)calloc((size_t)nj, 1);
     if (!fetched) {
@@ -337,16 +346,22 @@ static int witness_poses(PyObject *oMi, double *P, Py_ssize_t nj, const double *
     for (int c = 0; c < 16; c++) P[c] = c % 5 == 0 ? 1.0 : 0.0;
     fetched[0] = 1;
     int bad = 0;
+    PyObject *oMi = of_data ? NULL : source;
     for (Py_ssize_t i = 0; i < count && !bad; i++) {
         const double *row = rv + 13 * i;
         if (!(row[0] - row[1] < keep) || state[2 * (Py_ssize_t)found[i]] < 0.0) continue;
         for (int side = 0; side < 2 && !bad; side++) {
             Py_ssize_t j = (Py_ssize_t)row[2 + side];
             if (fetched[j]) continue;
+            if (!oMi && !(oMi = PyObject_GetAttrString(source, "oMi"))) {
+                bad = 1;
+                break;
+            }
             bad = fetch_pose(oMi, j, P + 16 * j) != 0;
             fetched[j] = 1;
         }
     }
+    if (of_data) Py_XDECREF(oMi);
     free(fetched);
     return bad ? -1 : 0;
 }
@@ -375,7 +390,7 @@ PyObject *py_witness_rows(PyObject *self, PyObject *const *args, Py_ssize_t narg
         || !witness_args_fit(&poses, &rows, &memory, &state, &owners, fv, count, &W))
         goto done;
     if (oMi != Py_None
-        && witness_poses(oMi, pv, poses.view.shape[0], rv, fv, sv, count, keep))
+        && witness_poses(oMi, 0, pv, poses.view.shape[0], rv, fv, sv, count, keep))
         goto done;
     result = PyLong_FromSsize_t(witness_rows_c(pv, rv, fv, count, mv, W, sv, tick, keep, apart,
                                                ov));
@@ -417,11 +432,12 @@ static int query_names(void)
     return s_distance && s_normal && s_p1 && s_p2 ? 0 : -1;
 }
 
-/* the queries' arrays: each pair's floor, margin and influence, its two joints, and the rows
- * written; and, when a pair's row may be left out where it cannot bind, its reach (the
- * closing speed, m/s, the joints' speed limits can give it at most) and the damper's rate
- * (1/s) */
+/* the queries: compute(geometry, geometry_data, k) (Pinocchio's computeDistance), each pair's
+ * floor, margin and influence, its two joints, and the rows written; and, when a pair's row
+ * may be left out where it cannot bind, its reach (the closing speed, m/s, the joints' speed
+ * limits can give it at most) and the damper's rate (1/s) */
 typedef struct {
+    PyObject *compute, *geometry, *geometry_data;
     Arg floor_, margins, influence, joints, rows, failures, reach;
     double *fv, *mv, *iv, *rv, *failed;
     const double *reach_v;
@@ -430,17 +446,19 @@ typedef struct {
     Py_ssize_t npairs, N;
 } Queries;
 
-/* Acquire and check the queries' arrays (args[4..9]: floor, margins, joints, influence,
- * rows, failures); -1 with a Python error set */
-static int query_args(PyObject *const *args, Queries *Q)
+/* Acquire and check the queries' arrays from collision_rows' fixed (F) and influence; -1 with
+ * a Python error set */
+static int query_args(PyObject *const *F, PyObject *influence, Queries *Q)
 {
-    if (acquire(args[4], &Q->floor_, 1, 1, "floor")
-        || acquire(args[5], &Q->margins, 0, 1, "margins")
-        || acquire(args[6], &Q->joints, 0, 2, "joints")
-        || acquire(args[7], &Q->influence, 0, 1, "influence")
-        || acquire(args[8], &Q->rows, 1, 2, "rows")
-        || acquire(args[9], &Q->failures, 1, 1, "failures"))
+    if (acquire(F[2], &Q->floor_, 1, 1, "floor")
+        || acquire(F[3], &Q->margins, 0, 1, "margins")
+        || acquire(F[4], &Q->joints, 0, 2, "joints")
+        || acquire(influence, &Q->influence, 0, 1, "influence")
+        || acquire(F[5], &Q->rows, 1, 2, "rows")
+        || acquire(F[6], &Q->failures, 1, 1, "failures"))
         return -1;
+    Q->geometry = F[0];
+    Q->geometry_data = F[1];
     Q->fv = out_vec(&Q->floor_, "floor");
     Q->mv = vec(&Q->margins, "margins");
     Q->iv = vec(&Q->influence, "influence");
@@ -510,15 +528,15 @@ static int query_row(const Queries *Q, PyObject *res, Py_ssize_t k, double d, do
     return 0;
 }
 
-/* Pair `item` (index k) queried through compute(geometry, geometry_data, k): its floor, and
+/* Pair `item` (index k) queried through Q's compute: its floor, and
  * when it is within influence (*within then 1) its row at *count (which grows) unless its
  * damper's bound rate (d - margin) is not below its reach (no joint speed within the limits
  * closes it that fast: the row could never bind); -1 with a Python error set */
-static int query_pair(PyObject *const *args, const Queries *Q, PyObject *item, Py_ssize_t k,
-                      Py_ssize_t *count, int *within)
+static int query_pair(const Queries *Q, PyObject *item, Py_ssize_t k, Py_ssize_t *count,
+                      int *within)
 {
-    PyObject *call[3] = {args[1], args[2], item};
-    PyObject *res = PyObject_Vectorcall(args[0], call, 3, NULL);
+    PyObject *call[3] = {Q->geometry, Q->geometry_data, item};
+    PyObject *res = PyObject_Vectorcall(Q->compute, call, 3, NULL);
     if (!res) return -1;
     PyObject *dobj = PyObject_GetAttr(res, s_distance);
     double d = dobj ? PyFloat_AsDouble(dobj) : -1.0;
@@ -541,13 +559,12 @@ static int query_pair(PyObject *const *args, const Queries *Q, PyObject *item, P
     return bad ? -1 : 0;
 }
 
-/* the queries' loop: each pair of the sequence args[3] queried (query_pair); the list of those
- * with a row, their rows the first *count of Q->rows, and in *within the list of those within
- * influence (a new reference); NULL with a Python error set */
-static PyObject *run_queries(PyObject *const *args, Queries *Q, Py_ssize_t *count,
-                             PyObject **within)
+/* the queries' loop: each pair of the sequence `listed` queried (query_pair); the list of
+ * those with a row, their rows the first *count of Q->rows, and in *within the list of those
+ * within influence (a new reference); NULL with a Python error set */
+static PyObject *run_queries(PyObject *listed, Queries *Q, Py_ssize_t *count, PyObject **within)
 {
-    PyObject *near = PySequence_Fast(args[3], "near must be a sequence of pair indices");
+    PyObject *near = PySequence_Fast(listed, "near must be a sequence of pair indices");
     PyObject *found = near ? PyList_New(0) : NULL;
     *within = found ? PyList_New(0) : NULL;
     *count = 0;
@@ -563,7 +580,7 @@ static PyObject *run_queries(PyObject *const *args, Queries *Q, Py_ssize_t *coun
             goto fail;
         }
         int close;
-        if (query_pair(args, Q, items[i], k, count, &close)
+        if (query_pair(Q, items[i], k, count, &close)
             || (close && PyList_Append(*within, items[i]) < 0)
             || (*count > before && PyList_Append(found, items[i]) < 0))
             goto fail;
@@ -593,7 +610,6 @@ static Py_ssize_t witnesses_of(PyObject *const *F, PyObject *data, const Queries
     Arg poses = {0}, memory = {0}, state = {0}, owners = {0};
     Py_ssize_t total = -1, W;
     double *fv = NULL;
-    PyObject *oMi = NULL;
     if (acquire(F[7], &poses, 1, 2, "poses") || acquire(F[8], &memory, 1, 2, "memory")
         || acquire(F[9], &state, 1, 2, "state") || acquire(F[12], &owners, 1, 1, "owners"))
         goto done;
@@ -601,17 +617,11 @@ static Py_ssize_t witnesses_of(PyObject *const *F, PyObject *data, const Queries
     double *sv = out_mat(&state, "state"), *ov = out_vec(&owners, "owners");
     Py_ssize_t n;
     if (!pv || !mv || !sv || !ov || pair_indices(found, &fv, &n)
-        || !witness_args_fit(&poses, &Q->rows, &memory, &state, &owners, fv, count, &W))
-        goto done;
-    int remembers = 0;  /* (Pinocchio's oMi only when some pair's witnesses need poses) */
-    for (Py_ssize_t i = 0; i < count; i++)
-        remembers |= Q->rv[13 * i] - Q->rv[13 * i + 1] < keep && sv[2 * (Py_ssize_t)fv[i]] >= 0.0;
-    if (remembers && (!(oMi = PyObject_GetAttrString(data, "oMi"))
-                      || witness_poses(oMi, pv, poses.view.shape[0], Q->rv, fv, sv, count, keep)))
+        || !witness_args_fit(&poses, &Q->rows, &memory, &state, &owners, fv, count, &W)
+        || witness_poses(data, 1, pv, poses.view.shape[0], Q->rv, fv, sv, count, keep))
         goto done;
     total = witness_rows_c(pv, Q->rv, fv, count, mv, W, sv, tick, keep, apart, ov);
 done:
-    Py_XDECREF(oMi);
     free(fv);
     release(&poses); release(&memory); release(&state); release(&owners);
     return total;
@@ -651,15 +661,7 @@ static int dampers_of(PyObject *const *F, PyObject *data, const Queries *Q, Py_s
                      Sm.m, Sm.n);
         goto done;
     }
-    for (Py_ssize_t i = 0; i < total; i++)
-        for (int side = 0; side < 2; side++) {
-            double j = AT(Pm, i, 2 + side);
-            if (!(j >= 0.0 && j < (double)Sm.m)) {
-                PyErr_Format(PyExc_ValueError, "rows[%zd] names joint %zd; support has %zd", i,
-                             (Py_ssize_t)j, Sm.m);
-                goto done;
-            }
-        }
+    if (!rows_name_joints(Pm, Sm.m, "rows")) goto done;
     Py_ssize_t dims[2] = {total, folds ? G.n : Jm.n};
     double *Av, *bv;
     if (!(out[0] = new_array(2, dims, &Av)) || !(out[1] = new_array(1, dims, &bv))) goto done;
@@ -713,14 +715,14 @@ PyObject *py_collision_rows(PyObject *self, PyObject *const *args, Py_ssize_t na
     double rate = PyFloat_AsDouble(args[3]), tick = PyFloat_AsDouble(args[5]);
     int witnesses = PyObject_IsTrue(F[16]);
     if (PyErr_Occurred() || witnesses < 0) return NULL;
-    PyObject *qa[10] = {args[7], F[0], F[1], args[1], F[2], F[3], F[4], args[4], F[5], F[6]};
     PyObject *update[4] = {F[15], data, F[0], F[1]};
     Queries Q;
     memset(&Q, 0, sizeof Q);
     Py_ssize_t count = 0, total;
     PyObject *found = NULL, *within = NULL, *result = NULL, *placed = NULL;
     PyObject *AB[2] = {NULL, NULL};
-    if (query_args(qa, &Q)) goto done;
+    if (query_args(F, args[4], &Q)) goto done;
+    Q.compute = args[7];
     Q.rate = rate;
     if (args[6] != Py_None) {
         if (acquire(args[6], &Q.reach, 0, 1, "reach") || !(Q.reach_v = vec(&Q.reach, "reach")))
@@ -732,7 +734,7 @@ PyObject *py_collision_rows(PyObject *self, PyObject *const *args, Py_ssize_t na
         }
     }
     if (!(placed = PyObject_Vectorcall(F[14], update, 4, NULL))
-        || !(found = run_queries(qa, &Q, &count, &within)))
+        || !(found = run_queries(args[1], &Q, &count, &within)))
         goto done;
     if (PyList_GET_SIZE(within) == 0) {
         result = Py_None;
