@@ -25,8 +25,13 @@ against the numpy reference formulas of :mod:`sjt_pin.mappings` and against Pino
   ``stoppable_rows``: their bounds cut to closing speeds the acceleration limits can stop;
   ``witness_rows``: the rows of its pairs' remembered closest points (and their memory);
   ``near_pairs``: the pairs it must query, or whether its broad phase must run again;
-  ``collision_rows``: a step's exact distance queries (through Pinocchio's ``computeDistance``),
-  witness and damper rows in one call;
+  ``collision_rows``: a step's exact distance queries (through Pinocchio's ``computeDistance``,
+  or :data:`distance_queries`' compiled ones), witness and damper rows in one call;
+  ``distance_queries(shapes, pairs, requests, rotations, translations, keep)``: coal's
+  distance queries of a limit's pairs in C++ (``src/distances.cpp``, on coal's shapes and the
+  placements in Pinocchio's ``GeometryData``) for ``collision_rows`` to call without Python;
+  None where that module is not built or was built against another coal
+  (:data:`distance_queries_missing` says why);
   ``braking_reach``: each pair's influence for an arm with acceleration limits;
 - ``frame_velocity``, ``position_rows``, ``rotation_defect``: the tasks' small transforms;
 - ``follow_motion(step, dt, dq, ddq)``: the velocity and acceleration a step commands (the
@@ -70,3 +75,13 @@ from ._kernels import (  # noqa: F401
     witness_rows,
 )
 from .layout import *  # noqa: F403 (the slot names are the kernels' vocabulary)
+
+distance_queries = None
+#: why :data:`distance_queries` is None (None when it is not)
+distance_queries_missing: str | None = None
+try:  # (libcoal and Boost.Python are loaded by coal's import first: the module links them)
+    import coal as _coal  # noqa: F401
+
+    from ._distances import queries as distance_queries  # type: ignore[no-redef]  # noqa: F401
+except ImportError as exc:
+    distance_queries_missing = str(exc)

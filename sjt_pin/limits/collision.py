@@ -78,6 +78,7 @@ from ..kernels import (
     braking_reach,
     collision_rows,
     damper_rows,
+    distance_queries,
     near_pairs,
     stoppable_rows,
     witness_rows,
@@ -391,9 +392,26 @@ class CollisionLimit(Limit):
         for req in self.geometry_data.distanceRequests:
             req.enable_signed_distance = True
             req.gjk_tolerance = req.epa_tolerance = GJK_TOLERANCE
+        self._compute = self._compiled_queries() or pin.computeDistance
         #: the distance each pair keeps (m): ``margin``, or less for a pair of the robot's own
         #: links that was closer than ``margin`` where the limit started
         self.margins = np.full(len(chosen), self.margin)
+
+    def _compiled_queries(self):
+        """``kernels.distance_queries`` of the pairs (coal's queries at the placements in
+        ``geometry_data``, which ``kernels.collision_rows`` then runs without a Python call), or
+        None where that module is missing or Pinocchio's placements are not numpy views of
+        its own memory."""
+        if distance_queries is None:
+            return None
+        data = self.geometry_data
+        rotations = [data.oMg[g].rotation for g in range(self.geometry.ngeoms)]
+        translations = [data.oMg[g].translation for g in range(self.geometry.ngeoms)]
+        if any(part.flags.owndata or part.base is not None for part in rotations + translations):
+            return None  # (copies: the compiled queries would read placements that never move)
+        return distance_queries([g.geometry for g in self.geometry.geometryObjects],
+                                self.pairs.tolist(), list(data.distanceRequests), rotations,
+                                translations, data)
 
     def _prepare_broad_phase(self) -> None:
         """Everything a step reads, as arrays: each geometry's bounding volumes, the pairs as
@@ -529,6 +547,7 @@ class CollisionLimit(Limit):
                        WITNESS_APART, self._owners, self._support, pin.updateGeometryPlacements,
                        self.model, self.witnesses > 0, self._mimic)
         self._skip: tuple | None = None  # near_pairs' (from _reference and _floor_q)
+        self._views: tuple = (None, None)  # (a data, collision_rows' views onto it)
         # each pair's reach at the solver's speed limits (_reach): (those limits, the reach)
         self._reaches: tuple[object, np.ndarray | None] = (self, None)  # (none yet)
 
@@ -933,8 +952,9 @@ class CollisionLimit(Limit):
         # witnesses' rows and the damper rows of them all, in one compiled call (the Python
         # around each query and between the parts cost more than the queries)
         rate = self.gain / dt
-        out = collision_rows(self._fixed, listed, data, rate, influence, self._tick + 1.0,
-                             reach, pin.computeDistance)
+        views = self._views[1] if self._views[0] is data else self._data_views(data)
+        out = collision_rows(self._fixed, listed, views, rate, influence, self._tick + 1.0,
+                             reach, self._compute)
         if out is None:
             return None
         self.within, found, A, b, self._witness_count = out
@@ -946,6 +966,19 @@ class CollisionLimit(Limit):
         if self.witnesses:
             self._tick += 1.0
         return A, b
+
+    def _data_views(self, data) -> tuple:
+        """``kernels.collision_rows``' views onto ``data`` (Pinocchio's data of the solver's
+        kinematics): ``(data, data.J, [oMi[j].rotation], [oMi[j].translation])``, numpy
+        arrays on its own memory that the kernel reads without a Python call (kept while the
+        same data comes back); ``data`` itself where Pinocchio's bindings give copies."""
+        parts = [data.J] + [getattr(data.oMi[j], name) for name in ("rotation", "translation")
+                            for j in range(self.model.njoints)]
+        n = self.model.njoints
+        views = data if any(part.flags.owndata or part.base is not None for part in parts) \
+            else (data, parts[0], parts[1:1 + n], parts[1 + n:])
+        self._views = (data, views)
+        return views
 
     def _formed_rows(self, data, found: list[int], rate: float) -> tuple[np.ndarray, np.ndarray]:
         """The rows of a step where some query found no closest points (:meth:`_centre_rows`

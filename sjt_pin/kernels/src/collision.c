@@ -2,6 +2,7 @@
  * distance queries, the broad phase's skip. */
 
 #include "kernels.h"
+#include "distances.h"
 
 /* -- collision dampers (sjt_pin/limits/collision.py) ------------------------------------------ */
 
@@ -273,6 +274,37 @@ static int fetch_pose(PyObject *oMi, Py_ssize_t j, double *out)
     return bad ? -1 : 0;
 }
 
+/* the 4x4 world pose of joint j into out (row-major) from data views (collision_rows): its
+ * rotation (3, 3) and translation (3,) arrays, numpy views onto Pinocchio's data.oMi[j] */
+static int view_pose(PyObject *views, Py_ssize_t j, double *out)
+{
+    if (j >= PyList_GET_SIZE(PyTuple_GET_ITEM(views, 2))) {
+        PyErr_Format(PyExc_ValueError, "collision_rows: no view of joint %zd's pose", j);
+        return -1;
+    }
+    PyObject *R = PyList_GET_ITEM(PyTuple_GET_ITEM(views, 2), j);
+    PyObject *t = PyList_GET_ITEM(PyTuple_GET_ITEM(views, 3), j);
+    Arg a = {0}, b = {0};
+    int bad = acquire(R, &a, 0, 2, "a rotation") || acquire(t, &b, 0, 1, "a translation");
+    if (!bad && (a.view.shape[0] != 3 || a.view.shape[1] != 3 || length(&b) != 3)) {
+        PyErr_SetString(PyExc_ValueError, "a joint's rotation must be (3, 3), its translation "
+                        "(3,)");
+        bad = 1;
+    }
+    if (!bad) {
+        Mat Rm = mat(&a), tm = mat(&b);
+        for (int r = 0; r < 3; r++) {
+            for (int c = 0; c < 3; c++) out[4 * r + c] = AT(Rm, r, c);
+            out[4 * r + 3] = tm.p[r * tm.s0];
+            out[12 + r] = 0.0;
+        }
+        out[15] = 1.0;
+    }
+    release(&a);
+    release(&b);
+    return bad ? -1 : 0;
+}
+
 /* The pair indices of the sequence `found` as doubles in *out (malloc'ed, count of them); -1
  * with a Python error set */
 static int pair_indices(PyObject *found, double **out, Py_ssize_t *count)
@@ -332,8 +364,9 @@ static int witness_args_fit(const Arg *poses, const Arg *rows, const Arg *memory
 
 /* The world poses (P, njoints x 16; joint 0 the identity) of the joints of the rows whose
  * pairs remember (d - margin under keep, state not -1: found, state as witness_rows_c's),
- * from Pinocchio's oMi, each joint once; `source` is oMi, or (of_data) Pinocchio's data, whose
- * oMi is read only when some row needs a pose; -1 with a Python error set */
+ * from Pinocchio's oMi, each joint once; `source` is oMi, or (of_data 1) Pinocchio's data,
+ * whose oMi is read only when some row needs a pose, or (of_data 2) collision_rows' data views;
+ * -1 with a Python error set */
 static int witness_poses(PyObject *source, int of_data, double *P, Py_ssize_t nj,
                          const double *rv, const double *found, const double *state,
                          Py_ssize_t count, double keep)
@@ -353,6 +386,11 @@ static int witness_poses(PyObject *source, int of_data, double *P, Py_ssize_t nj
         for (int side = 0; side < 2 && !bad; side++) {
             Py_ssize_t j = (Py_ssize_t)row[2 + side];
             if (fetched[j]) continue;
+            if (of_data == 2) {
+                bad = view_pose(source, j, P + 16 * j) != 0;
+                fetched[j] = 1;
+                continue;
+            }
             if (!oMi && !(oMi = PyObject_GetAttrString(source, "oMi"))) {
                 bad = 1;
                 break;
@@ -361,7 +399,7 @@ static int witness_poses(PyObject *source, int of_data, double *P, Py_ssize_t nj
             fetched[j] = 1;
         }
     }
-    if (of_data) Py_XDECREF(oMi);
+    if (of_data == 1) Py_XDECREF(oMi);
     free(fetched);
     return bad ? -1 : 0;
 }
@@ -438,6 +476,7 @@ static int query_names(void)
  * limits can give it at most) and the damper's rate (1/s) */
 typedef struct {
     PyObject *compute, *geometry, *geometry_data;
+    Distances *direct;  /* the compiled queries (compute a capsule of them), or NULL */
     Arg floor_, margins, influence, joints, rows, failures, reach;
     double *fv, *mv, *iv, *rv, *failed;
     const double *reach_v;
@@ -499,18 +538,27 @@ static int usable(const double *row)
     return n2 > 0.25;  /* a unit normal (not coal's zero one where the points coincide) */
 }
 
-static int query_row(const Queries *Q, PyObject *res, Py_ssize_t k, double d, double *row)
+/* coal's normal (unless apart) and closest points of a result read through Python into
+ * out[1:10] (as Distances.distance gives them); -1 with a Python error set */
+static int python_points(PyObject *res, int apart, double *out)
 {
-    int apart = d > SEPARATED;
     PyObject *normal = apart ? NULL : PyObject_GetAttr(res, s_normal);
     PyObject *p1 = apart || normal ? PyObject_CallMethodNoArgs(res, s_p1) : NULL;
     PyObject *p2 = p1 ? PyObject_CallMethodNoArgs(res, s_p2) : NULL;
-    int bad = !p2 || (!apart && read3(normal, row + 4, "normal"))
-              || read3(p1, row + 7, "nearest point 1") || read3(p2, row + 10, "nearest point 2");
+    int bad = !p2 || (!apart && read3(normal, out + 1, "normal"))
+              || read3(p1, out + 4, "nearest point 1") || read3(p2, out + 7, "nearest point 2");
     Py_XDECREF(normal);
     Py_XDECREF(p1);
     Py_XDECREF(p2);
-    if (bad) return -1;
+    return bad ? -1 : 0;
+}
+
+/* The row of pair k from its query's out (d, normal, p_a, p_b; the normal unread where
+ * apart): d, its margin, its joints, the normal and the closest points */
+static void query_row(const Queries *Q, Py_ssize_t k, const double *out, int apart, double *row)
+{
+    double d = out[0];
+    for (int c = 0; c < 9; c++) row[4 + c] = out[1 + c];
     if (apart) {
         double u[3] = {row[10] - row[7], row[11] - row[8], row[12] - row[9]};
         double norm = sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]);
@@ -525,37 +573,47 @@ static int query_row(const Queries *Q, PyObject *res, Py_ssize_t k, double d, do
     row[1] = Q->mv[k];
     row[2] = AT(Q->Jm, k, 0);
     row[3] = AT(Q->Jm, k, 1);
-    return 0;
 }
 
-/* Pair `item` (index k) queried through Q's compute: its floor, and
+/* Pair `item` (index k) queried (compiled, Q->direct, or through Q's compute): its floor, and
  * when it is within influence (*within then 1) its row at *count (which grows) unless its
  * damper's bound rate (d - margin) is not below its reach (no joint speed within the limits
  * closes it that fast: the row could never bind); -1 with a Python error set */
 static int query_pair(const Queries *Q, PyObject *item, Py_ssize_t k, Py_ssize_t *count,
                       int *within)
 {
-    PyObject *call[3] = {Q->geometry, Q->geometry_data, item};
-    PyObject *res = PyObject_Vectorcall(Q->compute, call, 3, NULL);
-    if (!res) return -1;
-    PyObject *dobj = PyObject_GetAttr(res, s_distance);
-    double d = dobj ? PyFloat_AsDouble(dobj) : -1.0;
-    Py_XDECREF(dobj);
-    int bad = !dobj || (d == -1.0 && PyErr_Occurred());
-    if (!bad)  /* NaN, or no closest points: -inf (queried again) */
-        Q->fv[k] = d > -UNUSABLE ? d : -INFINITY;
-    *within = !bad && d > -INFINITY && d < Q->iv[k];
+    double out[10];
+    PyObject *res = NULL;
+    if (Q->direct) {
+        if (Q->direct->distance(Q->direct, k, out)) return -1;
+    } else {
+        PyObject *call[3] = {Q->geometry, Q->geometry_data, item};
+        if (!(res = PyObject_Vectorcall(Q->compute, call, 3, NULL))) return -1;
+        PyObject *dobj = PyObject_GetAttr(res, s_distance);
+        out[0] = dobj ? PyFloat_AsDouble(dobj) : -1.0;
+        Py_XDECREF(dobj);
+        if (!dobj || (out[0] == -1.0 && PyErr_Occurred())) {
+            Py_DECREF(res);
+            return -1;
+        }
+    }
+    double d = out[0];
+    int bad = 0;
+    /* NaN, or no closest points: -inf (queried again) */
+    Q->fv[k] = d > -UNUSABLE ? d : -INFINITY;
+    *within = d > -INFINITY && d < Q->iv[k];
     if (*within && !(Q->reach_v && Q->rate * (d - Q->mv[k]) >= Q->reach_v[k])) {
+        int apart = d > SEPARATED;
         if (*count >= Q->N) {
             PyErr_SetString(PyExc_ValueError,
                             "collision_rows: more pairs within influence than rows");
             bad = 1;
-        } else {
-            bad = query_row(Q, res, k, d, Q->rv + 13 * *count) != 0;
-            *count += bad ? 0 : 1;
+        } else if (!(bad = res && python_points(res, apart, out))) {
+            query_row(Q, k, out, apart, Q->rv + 13 * *count);
+            *count += 1;
         }
     }
-    Py_DECREF(res);
+    Py_XDECREF(res);
     return bad ? -1 : 0;
 }
 
@@ -602,8 +660,8 @@ static void release_queries(Queries *Q)
 
 /* collision_rows' witness rows after the `count` rows of Q's pairs `found` (witness_rows with
  * the arrays of fixed); the number of rows, -1 with a Python error set */
-static Py_ssize_t witnesses_of(PyObject *const *F, PyObject *data, const Queries *Q,
-                               PyObject *found, Py_ssize_t count, double tick)
+static Py_ssize_t witnesses_of(PyObject *const *F, PyObject *data, PyObject *views,
+                               const Queries *Q, PyObject *found, Py_ssize_t count, double tick)
 {
     double keep = PyFloat_AsDouble(F[10]), apart = PyFloat_AsDouble(F[11]);
     if (PyErr_Occurred()) return -1;
@@ -618,7 +676,8 @@ static Py_ssize_t witnesses_of(PyObject *const *F, PyObject *data, const Queries
     Py_ssize_t n;
     if (!pv || !mv || !sv || !ov || pair_indices(found, &fv, &n)
         || !witness_args_fit(&poses, &Q->rows, &memory, &state, &owners, fv, count, &W)
-        || witness_poses(data, 1, pv, poses.view.shape[0], Q->rv, fv, sv, count, keep))
+        || witness_poses(views ? views : data, views ? 2 : 1, pv, poses.view.shape[0], Q->rv,
+                         fv, sv, count, keep))
         goto done;
     total = witness_rows_c(pv, Q->rv, fv, count, mv, W, sv, tick, keep, apart, ov);
 done:
@@ -643,13 +702,14 @@ static void fold_columns(const double *X, Py_ssize_t k, Py_ssize_t N, Mat G, dou
 /* collision_rows' A and b from the first `total` rows of Q (damper_rows at `rate`, 1/s), A
  * folded by the mimic map (fixed's last; None: none) onto the velocity coordinates, into
  * out[0] (A, read-only) and out[1] (b, read-only); -1 with a Python error set */
-static int dampers_of(PyObject *const *F, PyObject *data, const Queries *Q, Py_ssize_t total,
-                      double rate, PyObject **out)
+static int dampers_of(PyObject *const *F, PyObject *data, PyObject *views, const Queries *Q,
+                      Py_ssize_t total, double rate, PyObject **out)
 {
     Arg J = {0}, sup = {0}, map = {0};
     int bad = 1, folds = F[17] != Py_None;
     double *X = NULL;
-    PyObject *J_obj = PyObject_GetAttrString(data, "J");
+    PyObject *J_obj = views ? PyTuple_GET_ITEM(views, 1) : PyObject_GetAttrString(data, "J");
+    Py_XINCREF(views ? J_obj : NULL);
     if (!J_obj || acquire(J_obj, &J, 0, 2, "J") || acquire(F[13], &sup, 0, 2, "support")
         || (folds && acquire(F[17], &map, 0, 2, "mimic")))
         goto done;
@@ -684,12 +744,15 @@ done:
 /* collision_rows(fixed, near, data, rate, influence, tick, reach, compute) -> (within, found,
  * A, b, witnesses) | None: a step's rows of the collision limit in one call
  * (limits/collision.py, _rows), at the joint poses and WORLD joint Jacobians of Pinocchio's
- * `data`. fixed: the limit's (geometry, geometry_data, floor, margins, joints, rows, failures,
+ * `data`, or of data views (data, data.J, rotations, translations): data and numpy views onto
+ * its J and each joint's data.oMi[j].rotation and .translation (lists), read without Python. fixed: the limit's (geometry, geometry_data, floor, margins, joints, rows, failures,
  * poses, memory, state, keep, apart, owners, support, update, model, witnesses, mimic).
  * 1. The geometries' placements: update(model, data, geometry, geometry_data) (Pinocchio's
  *    updateGeometryPlacements).
  * 2. The exact distance queries: for each pair k of the list `near`, res = compute(geometry,
- *    geometry_data, k) (Pinocchio's computeDistance), d = res.min_distance, floor[k] = d (-inf
+ *    geometry_data, k) (Pinocchio's computeDistance; or, where compute is a capsule of the
+ *    compiled queries, distances.h, the same without a Python call), d = res.min_distance,
+ *    floor[k] = d (-inf
  *    for a failed query: d NaN or no closest points). A pair with d < influence[k] (npairs,)
  *    is within influence; it gets the next row of rows (N, 13) as damper_rows reads it (d,
  *    margins[k], joints[k] (npairs, 2), the normal, res.getNearestPoint1(),
@@ -711,7 +774,19 @@ PyObject *py_collision_rows(PyObject *self, PyObject *const *args, Py_ssize_t na
         PyErr_SetString(PyExc_TypeError, "collision_rows: fixed must be a tuple of 18");
         return NULL;
     }
-    PyObject *const *F = &PyTuple_GET_ITEM(args[0], 0), *data = args[2];
+    PyObject *const *F = &PyTuple_GET_ITEM(args[0], 0), *data = args[2], *views = NULL;
+    if (PyTuple_Check(data)) {  /* (data, J, rotations, translations): views onto its arrays */
+        if (PyTuple_GET_SIZE(data) != 4 || !PyList_Check(PyTuple_GET_ITEM(data, 2))
+            || !PyList_Check(PyTuple_GET_ITEM(data, 3))
+            || PyList_GET_SIZE(PyTuple_GET_ITEM(data, 2)) != PyList_GET_SIZE(
+                   PyTuple_GET_ITEM(data, 3))) {
+            PyErr_SetString(PyExc_TypeError, "collision_rows: data views must be (data, J, "
+                            "rotations, translations), the last two lists of one per joint");
+            return NULL;
+        }
+        views = data;
+        data = PyTuple_GET_ITEM(views, 0);
+    }
     double rate = PyFloat_AsDouble(args[3]), tick = PyFloat_AsDouble(args[5]);
     int witnesses = PyObject_IsTrue(F[16]);
     if (PyErr_Occurred() || witnesses < 0) return NULL;
@@ -723,6 +798,15 @@ PyObject *py_collision_rows(PyObject *self, PyObject *const *args, Py_ssize_t na
     PyObject *AB[2] = {NULL, NULL};
     if (query_args(F, args[4], &Q)) goto done;
     Q.compute = args[7];
+    if (PyCapsule_CheckExact(Q.compute)) {
+        Q.direct = (Distances *)PyCapsule_GetPointer(Q.compute, DISTANCES_CAPSULE);
+        if (!Q.direct) goto done;
+        if (Q.direct->npairs != Q.npairs) {
+            PyErr_Format(PyExc_ValueError, "collision_rows: the compiled queries hold %zd "
+                         "pairs, floor %zd", Q.direct->npairs, Q.npairs);
+            goto done;
+        }
+    }
     Q.rate = rate;
     if (args[6] != Py_None) {
         if (acquire(args[6], &Q.reach, 0, 1, "reach") || !(Q.reach_v = vec(&Q.reach, "reach")))
@@ -745,8 +829,8 @@ PyObject *py_collision_rows(PyObject *self, PyObject *const *args, Py_ssize_t na
         result = Py_BuildValue("(OOOOn)", within, found, Py_None, Py_None, (Py_ssize_t)0);
         goto done;
     }
-    total = witnesses ? witnesses_of(F, data, &Q, found, count, tick) : count;
-    if (total < 0 || dampers_of(F, data, &Q, total, rate, AB)) goto done;
+    total = witnesses ? witnesses_of(F, data, views, &Q, found, count, tick) : count;
+    if (total < 0 || dampers_of(F, data, views, &Q, total, rate, AB)) goto done;
     result = Py_BuildValue("(OOOOn)", within, found, AB[0], AB[1], total - count);
 done:
     Py_XDECREF(placed);
@@ -764,11 +848,14 @@ done:
 static int lever_within(const double *q, const double *ref, const double *lo, const double *hi,
                         Mat L, const double *gap, const double *influence)
 {
-    for (Py_ssize_t j = 0; j < L.n; j++)
+    double moved[L.n > 0 ? L.n : 1];
+    for (Py_ssize_t j = 0; j < L.n; j++) {
         if (!(q[j] >= lo[j] && q[j] <= hi[j])) return 0;
+        moved[j] = fabs(q[j] - ref[j]);
+    }
     for (Py_ssize_t k = 0; k < L.m; k++) {
         double acc = 0.0;
-        for (Py_ssize_t j = 0; j < L.n; j++) acc += AT(L, k, j) * fabs(q[j] - ref[j]);
+        for (Py_ssize_t j = 0; j < L.n; j++) acc += AT(L, k, j) * moved[j];
         if (!(acc + influence[k] < gap[k])) return 0;
     }
     return 1;
@@ -784,6 +871,8 @@ static PyObject *pairs_to_query(PyObject *near_seq, double *floor_, double *floo
     PyObject *out = PyList_New(0);
     Py_ssize_t m = PySequence_Fast_GET_SIZE(near);
     PyObject **items = PySequence_Fast_ITEMS(near);
+    double moved[L.n > 0 ? L.n : 1];
+    for (Py_ssize_t j = 0; j < L.n; j++) moved[j] = fabs(q[j] - floor_q[j]);
     for (Py_ssize_t i = 0; i < m && out; i++) {
         Py_ssize_t k = PyLong_AsSsize_t(items[i]);
         if (k == -1 && PyErr_Occurred()) {
@@ -792,9 +881,9 @@ static PyObject *pairs_to_query(PyObject *near_seq, double *floor_, double *floo
             PyErr_Format(PyExc_ValueError, "near[%zd] = %zd is no pair (npairs %zd)", i, k, L.m);
             Py_CLEAR(out);
         } else {
-            double moved = 0.0;
-            for (Py_ssize_t j = 0; j < L.n; j++) moved += AT(L, k, j) * fabs(q[j] - floor_q[j]);
-            floor_[k] -= moved;
+            double closed = 0.0;
+            for (Py_ssize_t j = 0; j < L.n; j++) closed += AT(L, k, j) * moved[j];
+            floor_[k] -= closed;
             if (!(floor_[k] > influence[k]) && PyList_Append(out, items[i]) < 0) Py_CLEAR(out);
         }
     }

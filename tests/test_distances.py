@@ -1,0 +1,146 @@
+"""The compiled distance queries (sjt_pin.kernels.distance_queries, src/distances.cpp): built,
+the same distances and closest points as Pinocchio's computeDistance on every kind of shape,
+the same rows as the queries through Python, and clear errors for bad input."""
+
+from __future__ import annotations
+
+import coal
+import numpy as np
+import pinocchio as pin
+import pytest
+
+import sjt_pin as sjt
+from sjt_pin import kernels
+from sjt_pin.kernels import _distances
+from sjt_pin.kinematics import Kinematics
+from sjt_pin.limits import CollisionLimit, Motion
+
+
+def _mesh():
+    """A tetrahedron as a coal mesh (BVHModel) and as a convex hull."""
+    points = np.array([[0, 0, 0], [0.08, 0, 0], [0, 0.08, 0], [0, 0, 0.08]], dtype=float)
+    mesh = coal.BVHModelOBBRSS()
+    mesh.beginModel(4, 4)
+    mesh.addVertices(points)
+    mesh.addTriangles(np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]))
+    mesh.endModel()
+    hull = mesh.clone()
+    hull.buildConvexHull(False, "Qt")
+    return mesh, hull.convex
+
+
+def _scene():
+    """Panda with self-collision beside one obstacle of every kind the limit takes."""
+    robot = sjt.Robot.from_example("panda")
+    hand = robot.fk(robot.q0).translation
+    mesh, hull = _mesh()
+    shapes = [coal.Sphere(0.04), coal.Box(0.1, 0.05, 0.08), coal.Capsule(0.03, 0.1),
+              coal.Cylinder(0.03, 0.1), hull, mesh]
+    offsets = [[0.0, 0.2, 0.0], [0.0, -0.2, 0.0], [0.2, 0.0, 0.05], [0.12, 0.15, 0.15],
+               [0.15, -0.12, -0.1], [0.0, 0.0, 0.22]]
+    rng = np.random.default_rng(3)
+    obstacles = [(shape, pin.SE3(pin.exp3(rng.normal(size=3)), hand + offset))
+                 for shape, offset in zip(shapes, offsets, strict=True)]
+    obstacles.append((coal.Halfspace(np.array([0.0, 0.0, 1.0]), -0.3), pin.SE3.Identity()))
+    return robot, obstacles
+
+
+def test_the_compiled_queries_are_built():
+    # what pyproject.toml's build requirements make: a missing module is a slower limit
+    assert kernels.distance_queries is not None, kernels.distance_queries_missing
+
+
+def test_the_compiled_queries_match_pinocchio_on_every_shape():
+    robot, obstacles = _scene()
+    limit = CollisionLimit(robot, obstacles, self_collision=True)
+    geometry, gdata = limit.geometry, limit.geometry_data
+    queries = limit._compiled_queries()
+    assert queries is not None
+    model, data = robot.model, robot.model.createData()
+    rng = np.random.default_rng(0)
+    worst = checked = 0
+    for _ in range(20):
+        q = pin.randomConfiguration(model)
+        q[:7] = robot.q0[:7] + rng.normal(0, 0.4, 7)
+        pin.updateGeometryPlacements(model, data, geometry, gdata, q)
+        for k in range(len(limit.pairs)):
+            expected = pin.computeDistance(geometry, gdata, k)
+            d, _, p1, p2 = _distances.distance(queries, k)
+            worst = max(worst, abs(d - expected.min_distance),
+                        np.abs(np.subtract(p1, expected.getNearestPoint1())).max(),
+                        np.abs(np.subtract(p2, expected.getNearestPoint2())).max())
+            checked += 1
+    assert checked > 1000
+    assert worst < 1e-12
+
+
+def _rows_of(limit, robot, qs, python: bool):
+    """The limit's rows at each q, through the compiled queries and data views (python False)
+    or through Pinocchio's Python bindings alone."""
+    if python:
+        limit._compute = pin.computeDistance
+    kinematics = Kinematics(robot.model)
+    motion = Motion(qs[0], np.zeros(robot.nv), np.zeros(robot.nv), 1e-3)
+    out = []
+    for q in qs:
+        kinematics.update(q)
+        if python:
+            limit._views = (kinematics.data, kinematics.data)
+        rows = limit.rows(kinematics, motion)
+        out.append(None if rows is None else (rows[0].copy(), rows[1].copy(),
+                                               list(limit.active), limit.witness_pairs))
+    return out
+
+
+def test_the_rows_are_those_of_the_queries_through_python():
+    # a path that brushes the obstacles: rows, witnesses and the skip as a step meets them
+    robot, obstacles = _scene()
+    rng = np.random.default_rng(1)
+    start = robot.q0.copy()
+    qs = [start + np.concatenate([np.sin(0.002 * k + rng.normal(0, 0.01, 7)) * 0.6,
+                                  np.zeros(robot.nq - 7)]) for k in range(600)]
+    compiled = _rows_of(CollisionLimit(robot, obstacles, self_collision=True), robot, qs, False)
+    python = _rows_of(CollisionLimit(robot, obstacles, self_collision=True), robot, qs, True)
+    assert sum(r is not None for r in compiled) > 100
+    for a, b in zip(compiled, python, strict=True):
+        assert (a is None) == (b is None)
+        if a is not None:
+            assert a[2] == b[2] and a[3] == b[3]
+            np.testing.assert_allclose(a[0], b[0], atol=1e-12)
+            np.testing.assert_allclose(a[1], b[1], atol=1e-9)
+
+
+def test_bad_input_is_refused_clearly():
+    sphere = coal.Sphere(0.1)
+    R, t = np.eye(3), np.zeros(3)
+    with pytest.raises(TypeError, match="shape 1 is not a coal shape"):
+        _distances.queries([sphere, "box"], [(0, 1)], [coal.DistanceRequest()], [R, R],
+                           [t, t], None)
+    with pytest.raises(ValueError, match="one rotation and translation per shape"):
+        _distances.queries([sphere, sphere], [(0, 1)], [coal.DistanceRequest()], [R], [t, t],
+                           None)
+    with pytest.raises(ValueError, match="pair 0 names no shape"):
+        _distances.queries([sphere, sphere], [(0, 2)], [coal.DistanceRequest()], [R, R],
+                           [t, t], None)
+    with pytest.raises(ValueError, match=r"rotation must be a float64 array of shape \(3, 3\)"):
+        _distances.queries([sphere, sphere], [(0, 1)], [coal.DistanceRequest()],
+                           [R, np.eye(4)], [t, t], None)
+    queries = _distances.queries([sphere, sphere], [(0, 1)], [coal.DistanceRequest()], [R, R],
+                                 [t, np.array([1.0, 0.0, 0.0])], None)
+    assert _distances.distance(queries, 0)[0] == pytest.approx(0.8)
+    with pytest.raises(IndexError, match="pair 1 out of range"):
+        _distances.distance(queries, 1)
+
+
+def test_the_queries_read_the_placements_where_they_live():
+    # the arrays are read at each query, not copied: moving them moves the shapes
+    R, t = np.eye(3), np.array([1.0, 0.0, 0.0])
+    queries = _distances.queries([coal.Sphere(0.1), coal.Box(0.2, 0.2, 0.2)], [(0, 1)],
+                                 [coal.DistanceRequest()], [np.eye(3), R], [np.zeros(3), t],
+                                 None)
+    assert _distances.distance(queries, 0)[0] == pytest.approx(0.8)
+    t[0] = 2.0
+    R[:] = pin.exp3(np.array([0.0, 0.0, np.pi / 4]))
+    d, normal, p1, p2 = _distances.distance(queries, 0)
+    assert d == pytest.approx(2.0 - 0.1 * np.sqrt(2) - 0.1)
+    np.testing.assert_allclose(normal, [1.0, 0.0, 0.0], atol=1e-9)
