@@ -175,6 +175,7 @@ def test_the_compiled_damper_rows_are_the_numpy_ones(panda):
         assert rows is not None
         A, b = rows
         pairs = []
+        pin.updateGeometryPlacements(model, kin.data, limit.geometry, limit.geometry_data)
         for k in limit.active:
             res = pin.computeDistance(limit.geometry, limit.geometry_data, k)
             a, g = limit.pairs[k]

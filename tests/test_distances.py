@@ -50,6 +50,11 @@ def test_the_compiled_queries_are_built():
     assert kernels.distance_queries is not None, kernels.distance_queries_missing
 
 
+def _joint_poses(data) -> np.ndarray:
+    """Pinocchio's data.oMi as the compiled queries read it: (njoints, 16), row-major."""
+    return np.array([M.homogeneous.ravel() for M in data.oMi])
+
+
 def test_the_compiled_queries_match_pinocchio_on_every_shape():
     robot, obstacles = _scene()
     limit = CollisionLimit(robot, obstacles, self_collision=True)
@@ -63,15 +68,31 @@ def test_the_compiled_queries_match_pinocchio_on_every_shape():
         q = pin.randomConfiguration(model)
         q[:7] = robot.q0[:7] + rng.normal(0, 0.4, 7)
         pin.updateGeometryPlacements(model, data, geometry, gdata, q)
+        poses = _joint_poses(data)
         for k in range(len(limit.pairs)):
             expected = pin.computeDistance(geometry, gdata, k)
-            d, _, p1, p2 = _distances.distance(queries, k)
+            d, _, p1, p2 = _distances.distance(queries, k, poses)
             worst = max(worst, abs(d - expected.min_distance),
                         np.abs(np.subtract(p1, expected.getNearestPoint1())).max(),
                         np.abs(np.subtract(p2, expected.getNearestPoint2())).max())
             checked += 1
     assert checked > 1000
     assert worst < 1e-12
+
+
+def test_a_moved_obstacle_is_queried_where_it_now_lies():
+    robot, obstacles = _scene()
+    limit = CollisionLimit(robot, obstacles[:1])
+    data = robot.model.createData()
+    pin.forwardKinematics(robot.model, data, robot.q0)
+    before = _distances.distance(limit._compute, 0, _joint_poses(data))[0]
+    shape, pose = obstacles[0]
+    limit.move(0, pin.SE3(pose.rotation, pose.translation + [0.0, 0.0, 0.5]))
+    after = _distances.distance(limit._compute, 0, _joint_poses(data))[0]
+    pin.updateGeometryPlacements(robot.model, data, limit.geometry, limit.geometry_data)
+    assert after == pytest.approx(pin.computeDistance(limit.geometry, limit.geometry_data,
+                                                      0).min_distance, abs=1e-12)
+    assert after > before + 0.1
 
 
 def _rows_of(limit, robot, qs, python: bool):
@@ -110,37 +131,44 @@ def test_the_rows_are_those_of_the_queries_through_python():
             np.testing.assert_allclose(a[1], b[1], atol=1e-9)
 
 
+def _two(shapes=None, pairs=((0, 1),), joints=(0, 0), placements=None):
+    shapes = [coal.Sphere(0.1), coal.Box(0.2, 0.2, 0.2)] if shapes is None else shapes
+    if placements is None:
+        placements = np.array([np.eye(4)] * 2)
+        placements[1, 0, 3] = 1.0
+    return _distances.queries(shapes, list(pairs), [coal.DistanceRequest()] * len(pairs),
+                              list(joints), placements)
+
+
 def test_bad_input_is_refused_clearly():
-    sphere = coal.Sphere(0.1)
-    R, t = np.eye(3), np.zeros(3)
     with pytest.raises(TypeError, match="shape 1 is not a coal shape"):
-        _distances.queries([sphere, "box"], [(0, 1)], [coal.DistanceRequest()], [R, R],
-                           [t, t], None)
-    with pytest.raises(ValueError, match="one rotation and translation per shape"):
-        _distances.queries([sphere, sphere], [(0, 1)], [coal.DistanceRequest()], [R], [t, t],
-                           None)
+        _two(shapes=[coal.Sphere(0.1), "box"])
+    with pytest.raises(ValueError, match="one shape, joint and placement per geometry"):
+        _two(joints=(0,))
     with pytest.raises(ValueError, match="pair 0 names no shape"):
-        _distances.queries([sphere, sphere], [(0, 2)], [coal.DistanceRequest()], [R, R],
-                           [t, t], None)
-    with pytest.raises(ValueError, match=r"rotation must be a float64 array of shape \(3, 3\)"):
-        _distances.queries([sphere, sphere], [(0, 1)], [coal.DistanceRequest()],
-                           [R, np.eye(4)], [t, t], None)
-    queries = _distances.queries([sphere, sphere], [(0, 1)], [coal.DistanceRequest()], [R, R],
-                                 [t, np.array([1.0, 0.0, 0.0])], None)
-    assert _distances.distance(queries, 0)[0] == pytest.approx(0.8)
+        _two(pairs=((0, 2),))
+    with pytest.raises(ValueError, match=r"C-contiguous float64 array of shape \(ngeoms, 4, 4\)"):
+        _two(placements=np.zeros((2, 3, 4)))
+    queries = _two(joints=(0, 1))
     with pytest.raises(IndexError, match="pair 1 out of range"):
-        _distances.distance(queries, 1)
+        _distances.distance(queries, 1, np.eye(4).reshape(1, 16).repeat(2, axis=0))
+    with pytest.raises(ValueError, match="its joints are not among the 1 poses"):
+        _distances.distance(queries, 0, np.eye(4).reshape(1, 16))
 
 
-def test_the_queries_read_the_placements_where_they_live():
-    # the arrays are read at each query, not copied: moving them moves the shapes
-    R, t = np.eye(3), np.array([1.0, 0.0, 0.0])
-    queries = _distances.queries([coal.Sphere(0.1), coal.Box(0.2, 0.2, 0.2)], [(0, 1)],
-                                 [coal.DistanceRequest()], [np.eye(3), R], [np.zeros(3), t],
-                                 None)
-    assert _distances.distance(queries, 0)[0] == pytest.approx(0.8)
-    t[0] = 2.0
-    R[:] = pin.exp3(np.array([0.0, 0.0, np.pi / 4]))
-    d, normal, p1, p2 = _distances.distance(queries, 0)
-    assert d == pytest.approx(2.0 - 0.1 * np.sqrt(2) - 0.1)
-    np.testing.assert_allclose(normal, [1.0, 0.0, 0.0], atol=1e-9)
+def test_the_queries_read_poses_and_placements_where_they_live():
+    # the placements array is read at each query (move() writes it), the poses are the call's
+    placements = np.array([np.eye(4)] * 2)
+    placements[1, 0, 3] = 1.0
+    queries = _two(joints=(0, 1), placements=placements)
+    poses = np.eye(4).reshape(1, 16).repeat(2, axis=0)
+    assert _distances.distance(queries, 0, poses)[0] == pytest.approx(0.8)
+    placements[1, 0, 3] = 2.0
+    assert _distances.distance(queries, 0, poses)[0] == pytest.approx(1.8)
+    turn = np.eye(4)
+    turn[:3, :3] = pin.exp3(np.array([0.0, 0.0, np.pi / 4]))
+    poses[1] = turn.ravel()  # the box's joint turns about the world's z: the box orbits
+    d, normal, p1, p2 = _distances.distance(queries, 0, poses)
+    assert d == pytest.approx(1.8)
+    np.testing.assert_allclose(normal, turn[:3, 0], atol=1e-9)
+    np.testing.assert_allclose(p2, 1.9 * turn[:3, 0], atol=1e-9)

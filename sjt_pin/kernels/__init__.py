@@ -25,6 +25,7 @@ against the numpy reference formulas of :mod:`sjt_pin.mappings` and against Pino
   ``stoppable_rows``: their bounds cut to closing speeds the acceleration limits can stop;
   ``witness_rows``: the rows of its pairs' remembered closest points (and their memory);
   ``near_pairs``: the pairs it must query, or whether its broad phase must run again;
+  ``sphere_gaps``: its broad phase's gaps between the pairs' bounding spheres;
   ``collision_rows``: a step's exact distance queries (through Pinocchio's ``computeDistance``,
   or :data:`distance_queries`' compiled ones), witness and damper rows in one call;
   ``distance_queries(shapes, pairs, requests, rotations, translations, keep)``: coal's
@@ -68,6 +69,7 @@ from ._kernels import (  # noqa: F401
     search_iteration,
     search_pose,
     smooth_rows_step,
+    sphere_gaps,
     stoppable_rows,
     symmetric_eigen,
     transpose_step,

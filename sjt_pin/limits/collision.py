@@ -80,6 +80,7 @@ from ..kernels import (
     damper_rows,
     distance_queries,
     near_pairs,
+    sphere_gaps,
     stoppable_rows,
     witness_rows,
 )
@@ -392,26 +393,9 @@ class CollisionLimit(Limit):
         for req in self.geometry_data.distanceRequests:
             req.enable_signed_distance = True
             req.gjk_tolerance = req.epa_tolerance = GJK_TOLERANCE
-        self._compute = self._compiled_queries() or pin.computeDistance
         #: the distance each pair keeps (m): ``margin``, or less for a pair of the robot's own
         #: links that was closer than ``margin`` where the limit started
         self.margins = np.full(len(chosen), self.margin)
-
-    def _compiled_queries(self):
-        """``kernels.distance_queries`` of the pairs (coal's queries at the placements in
-        ``geometry_data``, which ``kernels.collision_rows`` then runs without a Python call), or
-        None where that module is missing or Pinocchio's placements are not numpy views of
-        its own memory."""
-        if distance_queries is None:
-            return None
-        data = self.geometry_data
-        rotations = [data.oMg[g].rotation for g in range(self.geometry.ngeoms)]
-        translations = [data.oMg[g].translation for g in range(self.geometry.ngeoms)]
-        if any(part.flags.owndata or part.base is not None for part in rotations + translations):
-            return None  # (copies: the compiled queries would read placements that never move)
-        return distance_queries([g.geometry for g in self.geometry.geometryObjects],
-                                self.pairs.tolist(), list(data.distanceRequests), rotations,
-                                translations, data)
 
     def _prepare_broad_phase(self) -> None:
         """Everything a step reads, as arrays: each geometry's bounding volumes, the pairs as
@@ -423,6 +407,18 @@ class CollisionLimit(Limit):
         self._sphere_stack()
         self._jacobian_support()
         self._skip_state()
+        self._compute = self._compiled_queries() or pin.computeDistance
+
+    def _compiled_queries(self):
+        """``kernels.distance_queries`` of the pairs (coal's queries with each geometry at its
+        joint's pose times its placement, ``_placement``, which :meth:`move` writes; run by
+        ``kernels.collision_rows`` without a Python call), or None where that module is
+        missing."""
+        if distance_queries is None:
+            return None
+        return distance_queries([g.geometry for g in self.geometry.geometryObjects],
+                                self.pairs.tolist(), list(self.geometry_data.distanceRequests),
+                                self._joint.tolist(), self._placement)
 
     def _bounding_volumes(self) -> None:
         """Per geometry: its parent joint, coal's local AABB (centre and half extents, in the
@@ -453,6 +449,8 @@ class CollisionLimit(Limit):
         self._pa, self._pb = self.pairs[:, 0].copy(), self.pairs[:, 1].copy()
         ja, jb = self._joint[self._pa], self._joint[self._pb]
         self._joint_table = np.column_stack([ja, jb]).astype(float).reshape(-1, 2)
+        self._pair_f = self.pairs.astype(float)  # (kernels.sphere_gaps')
+        self._joint_f = self._joint.astype(float)
         self._pair_rows = np.zeros((max(len(self.pairs), 1) * (1 + self.witnesses), 13))
         self._span = self._radius[self._pa] + self._radius[self._pb]
 
@@ -697,6 +695,11 @@ class CollisionLimit(Limit):
         First the spheres of both (for every pair), then, where exact distances are dear
         (meshes), for the few pairs left, the sphere of either one against the other's box:
         volumes contain their geometry, so neither test drops a pair within its influence."""
+        views = self._views[1] if self._views[0] is data else self._data_views(data)
+        if views is not data and not self._refine:  # (compiled: joint poses read in place)
+            gap = np.empty(len(self.pairs))
+            sphere_gaps(views, self._joint_f, self._center_local, self._pair_f, self._span, gap)
+            return np.flatnonzero(gap < influence), gap
         oMi = data.oMi.tolist()
         H = np.concatenate([oMi[j].homogeneous for j in self._joints] + [self._world])
         center = (H @ self._centers_in).take(self._pick)
@@ -713,17 +716,18 @@ class CollisionLimit(Limit):
         gap[near] = np.maximum(box_gap[0], box_gap[1])
         return np.flatnonzero(gap < influence), gap
 
-    def _near(self, data, q: np.ndarray | None, influence: np.ndarray) -> np.ndarray:
+    def _near(self, data, q: np.ndarray | None, influence: np.ndarray,
+              stale: bool = False) -> np.ndarray:
         """:meth:`_broad_phase`'s pairs at ``q``, from the last broad phase while ``q`` is close
         to where it ran: a displacement ``dq`` from there changes the distance of a pair's
         bounding spheres by at most ``sum_j lever_j |dq_j|`` (:meth:`_pair_levers`), so a
         pair it left out stays out until that plus its influence reaches the gap it left the
-        pair at. A new broad phase keeps the floors of the pairs it had before (the others
-        have none)."""
+        pair at (``stale``: ``kernels.near_pairs`` found it does). A new broad phase keeps the
+        floors of the pairs it had before (the others have none)."""
         inside = q is not None and self._inside(q)
         ref = self._reference if inside and self._reference is not None \
             and self._reference[0] == self._version else None  # (None: floors gone too)
-        if ref is not None and q is not None:  # (ref: q inside the box)
+        if ref is not None and q is not None and not stale:  # (ref: q inside the box)
             if (self._pair_lever @ self._moved(ref[1], q) + influence < ref[3]).all():
                 return ref[2]
         near, gap = self._broad_phase(data, influence)
@@ -943,8 +947,11 @@ class CollisionLimit(Limit):
                 skip = self._skip = (ref[1], self._lower, self._upper, self._pair_lever, ref[3],
                                      ref[4], self._floor, self._floor_q)
             listed = near_pairs(q, skip, influence)
+            stale = listed is None
+        else:
+            stale = False
         if listed is None:
-            listed = self._aged(q, self._near(data, q, influence), influence).tolist()
+            listed = self._aged(q, self._near(data, q, influence, stale), influence).tolist()
         if not listed:
             return None
         # the geometries' placements, coal's distance of each pair listed (those within

@@ -362,46 +362,72 @@ static int witness_args_fit(const Arg *poses, const Arg *rows, const Arg *memory
     return 1;
 }
 
-/* The world poses (P, njoints x 16; joint 0 the identity) of the joints of the rows whose
- * pairs remember (d - margin under keep, state not -1: found, state as witness_rows_c's),
- * from Pinocchio's oMi, each joint once; `source` is oMi, or (of_data 1) Pinocchio's data,
- * whose oMi is read only when some row needs a pose, or (of_data 2) collision_rows' data views;
- * -1 with a Python error set */
-static int witness_poses(PyObject *source, int of_data, double *P, Py_ssize_t nj,
-                         const double *rv, const double *found, const double *state,
-                         Py_ssize_t count, double keep)
+/* Joint world poses read on demand into P (njoints x 16, row-major; joint 0 the identity),
+ * each once a call: from collision_rows' data views (of 2), Pinocchio's data (of 1: its oMi
+ * read when a pose is first needed) or its oMi (of 0) */
+typedef struct {
+    PyObject *source, *oMi;
+    int of;
+    double *P;
+    char *fetched;
+    Py_ssize_t nj;
+} Poses;
+
+static int poses_init(Poses *S, PyObject *source, int of, double *P, Py_ssize_t nj)
 {
-    char *fetched = (char *)calloc((size_t)nj, 1);
-    if (!fetched) {
+    S->source = source;
+    S->oMi = of == 0 ? source : NULL;
+    S->of = of;
+    S->P = P;
+    S->nj = nj;
+    if (!(S->fetched = (char *)calloc((size_t)nj + 1, 1))) {
         PyErr_NoMemory();
         return -1;
     }
     for (int c = 0; c < 16; c++) P[c] = c % 5 == 0 ? 1.0 : 0.0;
-    fetched[0] = 1;
-    int bad = 0;
-    PyObject *oMi = of_data ? NULL : source;
-    for (Py_ssize_t i = 0; i < count && !bad; i++) {
+    S->fetched[0] = 1;
+    return 0;
+}
+
+/* joint j's pose in S->P (fetched if not yet); -1 with a Python error set */
+static int pose_at(Poses *S, Py_ssize_t j)
+{
+    if (j < 0 || j >= S->nj) {
+        PyErr_Format(PyExc_ValueError, "joint %zd: poses has %zd", j, S->nj);
+        return -1;
+    }
+    if (S->fetched[j]) return 0;
+    int bad;
+    if (S->of == 2) {
+        bad = view_pose(S->source, j, S->P + 16 * j);
+    } else {
+        if (!S->oMi && !(S->oMi = PyObject_GetAttrString(S->source, "oMi"))) return -1;
+        bad = fetch_pose(S->oMi, j, S->P + 16 * j);
+    }
+    S->fetched[j] = !bad;
+    return bad ? -1 : 0;
+}
+
+static void poses_free(Poses *S)
+{
+    if (S->of == 1) Py_XDECREF(S->oMi);
+    S->oMi = NULL;
+    free(S->fetched);
+    S->fetched = NULL;
+}
+
+/* The poses (S) of the joints of the rows whose pairs remember (d - margin under keep, state
+ * not -1: found, state as witness_rows_c's); -1 with a Python error set */
+static int witness_poses(Poses *S, const double *rv, const double *found, const double *state,
+                         Py_ssize_t count, double keep)
+{
+    for (Py_ssize_t i = 0; i < count; i++) {
         const double *row = rv + 13 * i;
         if (!(row[0] - row[1] < keep) || state[2 * (Py_ssize_t)found[i]] < 0.0) continue;
-        for (int side = 0; side < 2 && !bad; side++) {
-            Py_ssize_t j = (Py_ssize_t)row[2 + side];
-            if (fetched[j]) continue;
-            if (of_data == 2) {
-                bad = view_pose(source, j, P + 16 * j) != 0;
-                fetched[j] = 1;
-                continue;
-            }
-            if (!oMi && !(oMi = PyObject_GetAttrString(source, "oMi"))) {
-                bad = 1;
-                break;
-            }
-            bad = fetch_pose(oMi, j, P + 16 * j) != 0;
-            fetched[j] = 1;
-        }
+        for (int side = 0; side < 2; side++)
+            if (pose_at(S, (Py_ssize_t)row[2 + side])) return -1;
     }
-    if (of_data == 1) Py_XDECREF(oMi);
-    free(fetched);
-    return bad ? -1 : 0;
+    return 0;
 }
 
 PyObject *py_witness_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
@@ -427,9 +453,13 @@ PyObject *py_witness_rows(PyObject *self, PyObject *const *args, Py_ssize_t narg
     if (!pv || !rv || !mv || !sv || !ov || pair_indices(args[2], &fv, &count)
         || !witness_args_fit(&poses, &rows, &memory, &state, &owners, fv, count, &W))
         goto done;
-    if (oMi != Py_None
-        && witness_poses(oMi, 0, pv, poses.view.shape[0], rv, fv, sv, count, keep))
-        goto done;
+    if (oMi != Py_None) {
+        Poses S;
+        if (poses_init(&S, oMi, 0, pv, poses.view.shape[0])) goto done;
+        int bad = witness_poses(&S, rv, fv, sv, count, keep);
+        poses_free(&S);
+        if (bad) goto done;
+    }
     result = PyLong_FromSsize_t(witness_rows_c(pv, rv, fv, count, mv, W, sv, tick, keep, apart,
                                                ov));
 done:
@@ -471,13 +501,15 @@ static int query_names(void)
 }
 
 /* the queries: compute(geometry, geometry_data, k) (Pinocchio's computeDistance), each pair's
- * floor, margin and influence, its two joints, and the rows written; and, when a pair's row
- * may be left out where it cannot bind, its reach (the closing speed, m/s, the joints' speed
- * limits can give it at most) and the damper's rate (1/s) */
+ * floor, margin and influence, its two joints, the joints' poses (S, read on demand) and the
+ * rows written; and, when a pair's row may be left out where it cannot bind, its reach (the
+ * closing speed, m/s, the joints' speed limits can give it at most) and the damper's rate
+ * (1/s) */
 typedef struct {
     PyObject *compute, *geometry, *geometry_data;
     Distances *direct;  /* the compiled queries (compute a capsule of them), or NULL */
-    Arg floor_, margins, influence, joints, rows, failures, reach;
+    Arg floor_, margins, influence, joints, rows, failures, reach, poses;
+    Poses S;
     double *fv, *mv, *iv, *rv, *failed;
     const double *reach_v;
     double rate;
@@ -494,7 +526,8 @@ static int query_args(PyObject *const *F, PyObject *influence, Queries *Q)
         || acquire(F[4], &Q->joints, 0, 2, "joints")
         || acquire(influence, &Q->influence, 0, 1, "influence")
         || acquire(F[5], &Q->rows, 1, 2, "rows")
-        || acquire(F[6], &Q->failures, 1, 1, "failures"))
+        || acquire(F[6], &Q->failures, 1, 1, "failures")
+        || acquire(F[7], &Q->poses, 1, 2, "poses") || !out_mat(&Q->poses, "poses"))
         return -1;
     Q->geometry = F[0];
     Q->geometry_data = F[1];
@@ -513,9 +546,11 @@ static int query_args(PyObject *const *F, PyObject *influence, Queries *Q)
     Q->npairs = length(&Q->floor_);
     Q->N = Q->rows.view.shape[0];
     if (length(&Q->margins) != Q->npairs || length(&Q->influence) != Q->npairs
-        || Q->Jm.m != Q->npairs || Q->Jm.n != 2 || Q->rows.view.shape[1] != 13) {
+        || Q->Jm.m != Q->npairs || Q->Jm.n != 2 || Q->rows.view.shape[1] != 13
+        || Q->poses.view.shape[1] != 16) {
         PyErr_Format(PyExc_ValueError, "collision_rows: floor, margins, influence (npairs,), "
-                     "joints (npairs, 2) and rows (N, 13) do not fit (npairs %zd)", Q->npairs);
+                     "joints (npairs, 2), rows (N, 13) and poses (njoints, 16) do not fit "
+                     "(npairs %zd)", Q->npairs);
         return -1;
     }
     return 0;
@@ -579,13 +614,16 @@ static void query_row(const Queries *Q, Py_ssize_t k, const double *out, int apa
  * when it is within influence (*within then 1) its row at *count (which grows) unless its
  * damper's bound rate (d - margin) is not below its reach (no joint speed within the limits
  * closes it that fast: the row could never bind); -1 with a Python error set */
-static int query_pair(const Queries *Q, PyObject *item, Py_ssize_t k, Py_ssize_t *count,
+static int query_pair(Queries *Q, PyObject *item, Py_ssize_t k, Py_ssize_t *count,
                       int *within)
 {
     double out[10];
     PyObject *res = NULL;
     if (Q->direct) {
-        if (Q->direct->distance(Q->direct, k, out)) return -1;
+        if (pose_at(&Q->S, (Py_ssize_t)AT(Q->Jm, k, 0))
+            || pose_at(&Q->S, (Py_ssize_t)AT(Q->Jm, k, 1))
+            || Q->direct->distance(Q->direct, k, Q->S.P, Q->S.nj, out))
+            return -1;
     } else {
         PyObject *call[3] = {Q->geometry, Q->geometry_data, item};
         if (!(res = PyObject_Vectorcall(Q->compute, call, 3, NULL))) return -1;
@@ -656,33 +694,34 @@ static void release_queries(Queries *Q)
 {
     release(&Q->floor_); release(&Q->margins); release(&Q->influence);
     release(&Q->joints); release(&Q->rows); release(&Q->failures); release(&Q->reach);
+    release(&Q->poses);
+    poses_free(&Q->S);
 }
 
 /* collision_rows' witness rows after the `count` rows of Q's pairs `found` (witness_rows with
  * the arrays of fixed); the number of rows, -1 with a Python error set */
-static Py_ssize_t witnesses_of(PyObject *const *F, PyObject *data, PyObject *views,
-                               const Queries *Q, PyObject *found, Py_ssize_t count, double tick)
+static Py_ssize_t witnesses_of(PyObject *const *F, Queries *Q, PyObject *found,
+                               Py_ssize_t count, double tick)
 {
     double keep = PyFloat_AsDouble(F[10]), apart = PyFloat_AsDouble(F[11]);
     if (PyErr_Occurred()) return -1;
-    Arg poses = {0}, memory = {0}, state = {0}, owners = {0};
+    Arg memory = {0}, state = {0}, owners = {0};
     Py_ssize_t total = -1, W;
     double *fv = NULL;
-    if (acquire(F[7], &poses, 1, 2, "poses") || acquire(F[8], &memory, 1, 2, "memory")
-        || acquire(F[9], &state, 1, 2, "state") || acquire(F[12], &owners, 1, 1, "owners"))
+    if (acquire(F[8], &memory, 1, 2, "memory") || acquire(F[9], &state, 1, 2, "state")
+        || acquire(F[12], &owners, 1, 1, "owners"))
         goto done;
-    double *pv = out_mat(&poses, "poses"), *mv = out_mat(&memory, "memory");
+    double *mv = out_mat(&memory, "memory");
     double *sv = out_mat(&state, "state"), *ov = out_vec(&owners, "owners");
     Py_ssize_t n;
-    if (!pv || !mv || !sv || !ov || pair_indices(found, &fv, &n)
-        || !witness_args_fit(&poses, &Q->rows, &memory, &state, &owners, fv, count, &W)
-        || witness_poses(views ? views : data, views ? 2 : 1, pv, poses.view.shape[0], Q->rv,
-                         fv, sv, count, keep))
+    if (!mv || !sv || !ov || pair_indices(found, &fv, &n)
+        || !witness_args_fit(&Q->poses, &Q->rows, &memory, &state, &owners, fv, count, &W)
+        || witness_poses(&Q->S, Q->rv, fv, sv, count, keep))
         goto done;
-    total = witness_rows_c(pv, Q->rv, fv, count, mv, W, sv, tick, keep, apart, ov);
+    total = witness_rows_c(Q->S.P, Q->rv, fv, count, mv, W, sv, tick, keep, apart, ov);
 done:
     free(fv);
-    release(&poses); release(&memory); release(&state); release(&owners);
+    release(&memory); release(&state); release(&owners);
     return total;
 }
 
@@ -790,13 +829,16 @@ PyObject *py_collision_rows(PyObject *self, PyObject *const *args, Py_ssize_t na
     double rate = PyFloat_AsDouble(args[3]), tick = PyFloat_AsDouble(args[5]);
     int witnesses = PyObject_IsTrue(F[16]);
     if (PyErr_Occurred() || witnesses < 0) return NULL;
-    PyObject *update[4] = {F[15], data, F[0], F[1]};
+    PyObject *update[4] = {F[15], data, F[0], F[1]};  /* (the queries through Python's) */
     Queries Q;
     memset(&Q, 0, sizeof Q);
     Py_ssize_t count = 0, total;
     PyObject *found = NULL, *within = NULL, *result = NULL, *placed = NULL;
     PyObject *AB[2] = {NULL, NULL};
-    if (query_args(F, args[4], &Q)) goto done;
+    if (query_args(F, args[4], &Q)
+        || poses_init(&Q.S, views ? views : data, views ? 2 : 1, (double *)Q.poses.view.buf,
+                      Q.poses.view.shape[0]))
+        goto done;
     Q.compute = args[7];
     if (PyCapsule_CheckExact(Q.compute)) {
         Q.direct = (Distances *)PyCapsule_GetPointer(Q.compute, DISTANCES_CAPSULE);
@@ -817,7 +859,7 @@ PyObject *py_collision_rows(PyObject *self, PyObject *const *args, Py_ssize_t na
             goto done;
         }
     }
-    if (!(placed = PyObject_Vectorcall(F[14], update, 4, NULL))
+    if ((!Q.direct && !(placed = PyObject_Vectorcall(F[14], update, 4, NULL)))
         || !(found = run_queries(args[1], &Q, &count, &within)))
         goto done;
     if (PyList_GET_SIZE(within) == 0) {
@@ -829,7 +871,7 @@ PyObject *py_collision_rows(PyObject *self, PyObject *const *args, Py_ssize_t na
         result = Py_BuildValue("(OOOOn)", within, found, Py_None, Py_None, (Py_ssize_t)0);
         goto done;
     }
-    total = witnesses ? witnesses_of(F, data, views, &Q, found, count, tick) : count;
+    total = witnesses ? witnesses_of(F, &Q, found, count, tick) : count;
     if (total < 0 || dampers_of(F, data, views, &Q, total, rate, AB)) goto done;
     result = Py_BuildValue("(OOOOn)", within, found, AB[0], AB[1], total - count);
 done:
@@ -839,6 +881,93 @@ done:
     Py_XDECREF(AB[0]);
     Py_XDECREF(AB[1]);
     release_queries(&Q);
+    return result;
+}
+
+/* sphere_gaps(views, joints, centres, pairs, span, gap): the broad phase's test of every
+ * pair's bounding spheres (limits/collision.py, _broad_phase): gap[k] = |c_a - c_b| - span[k]
+ * (m), c_g = oMi[joints[g]] centres[g] the world centre of geometry g's sphere from its centre
+ * in its joint's frame (centres (n, 4), homogeneous; joint 0 the world), joint poses read from
+ * collision_rows' data views (views), pairs (npairs, 2) geometry indices. */
+PyObject *py_sphere_gaps(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (!nargs_ok(nargs, 6, "sphere_gaps")) return NULL;
+    PyObject *views = args[0];
+    if (!PyTuple_Check(views) || PyTuple_GET_SIZE(views) != 4
+        || !PyList_Check(PyTuple_GET_ITEM(views, 2)) || !PyList_Check(PyTuple_GET_ITEM(views, 3))
+        || PyList_GET_SIZE(PyTuple_GET_ITEM(views, 2))
+               != PyList_GET_SIZE(PyTuple_GET_ITEM(views, 3))) {
+        PyErr_SetString(PyExc_TypeError, "sphere_gaps: views must be (data, J, rotations, "
+                        "translations), the last two lists of one per joint");
+        return NULL;
+    }
+    Arg joints = {0}, centres = {0}, pairs = {0}, span = {0}, gap = {0};
+    PyObject *result = NULL;
+    double *world = NULL, *poses = NULL;
+    char *fetched = NULL;
+    if (acquire(args[1], &joints, 0, 1, "joints") || acquire(args[2], &centres, 0, 2, "centres")
+        || acquire(args[3], &pairs, 0, 2, "pairs") || acquire(args[4], &span, 0, 1, "span")
+        || acquire(args[5], &gap, 1, 1, "gap"))
+        goto done;
+    const double *jv = vec(&joints, "joints"), *sv = vec(&span, "span");
+    double *gv = out_vec(&gap, "gap");
+    if (!jv || !sv || !gv) goto done;
+    Mat C = mat(&centres), P = mat(&pairs);
+    Py_ssize_t n = length(&joints), npairs = P.m;
+    Py_ssize_t nj = PyList_GET_SIZE(PyTuple_GET_ITEM(views, 2));
+    if (C.m != n || C.n != 4 || P.n != 2 || length(&span) != npairs || length(&gap) != npairs) {
+        PyErr_Format(PyExc_ValueError, "sphere_gaps: joints (n,), centres (n, 4), pairs "
+                     "(npairs, 2), span and gap (npairs,) do not fit (n %zd, npairs %zd)", n,
+                     npairs);
+        goto done;
+    }
+    world = (double *)malloc((size_t)(3 * n + 1) * sizeof(double));
+    poses = (double *)malloc((size_t)(16 * nj + 1) * sizeof(double));
+    fetched = (char *)calloc((size_t)nj + 1, 1);
+    if (!world || !poses || !fetched) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    for (Py_ssize_t g = 0; g < n; g++) {
+        double jf = jv[g];
+        if (!(jf >= 0.0 && jf < (double)nj)) {
+            PyErr_Format(PyExc_ValueError, "sphere_gaps: geometry %zd's joint is not one of "
+                         "the %zd joints", g, nj);
+            goto done;
+        }
+        Py_ssize_t j = (Py_ssize_t)jf;
+        const double *c = C.p + g * C.s0;
+        double *w = world + 3 * g;
+        if (j == 0) {  /* the world */
+            for (int r = 0; r < 3; r++) w[r] = c[r * C.s1];
+            continue;
+        }
+        if (!fetched[j]) {
+            if (view_pose(views, j, poses + 16 * j)) goto done;
+            fetched[j] = 1;
+        }
+        const double *H = poses + 16 * j;
+        for (int r = 0; r < 3; r++)
+            w[r] = H[4 * r] * c[0] + H[4 * r + 1] * c[C.s1] + H[4 * r + 2] * c[2 * C.s1]
+                   + H[4 * r + 3];
+    }
+    for (Py_ssize_t k = 0; k < npairs; k++) {
+        double a = AT(P, k, 0), b = AT(P, k, 1);
+        if (!(a >= 0.0 && a < (double)n && b >= 0.0 && b < (double)n)) {
+            PyErr_Format(PyExc_ValueError, "sphere_gaps: pair %zd names no geometry", k);
+            goto done;
+        }
+        const double *wa = world + 3 * (Py_ssize_t)a, *wb = world + 3 * (Py_ssize_t)b;
+        double dx = wa[0] - wb[0], dy = wa[1] - wb[1], dz = wa[2] - wb[2];
+        gv[k] = sqrt(dx * dx + dy * dy + dz * dz) - sv[k];
+    }
+    result = Py_None;
+    Py_INCREF(result);
+done:
+    free(world);
+    free(poses);
+    free(fetched);
+    release(&joints); release(&centres); release(&pairs); release(&span); release(&gap);
     return result;
 }
 

@@ -1,9 +1,10 @@
 /* sjt_pin.kernels._distances: coal's distance queries of a collision limit's pairs, called from
- * the C kernels (distances.h) without a Python call: what Pinocchio's computeDistance does
- * (coal::ComputeDistance on the pair's shapes at GeometryData.oMg's placements), the shapes
- * taken from coal's own Python objects through Boost.Python's registry. Built against the
- * libcoal its build found; the module refuses to load beside another coal (a C++ ABI), and
- * sjt_pin.limits.collision then queries through Pinocchio's Python bindings instead. */
+ * the C kernels (distances.h) without a Python call: what Pinocchio's updateGeometryPlacements
+ * and computeDistance do (each geometry at its joint's pose times its placement, then
+ * coal::ComputeDistance on the pair's shapes), the shapes taken from coal's own Python objects
+ * through Boost.Python's registry. Built against the libcoal its build found; the module
+ * refuses to load beside another coal (a C++ ABI), and sjt_pin.limits.collision then queries
+ * through Pinocchio's Python bindings instead. */
 
 #include "distances.h"
 
@@ -21,38 +22,35 @@ namespace bp = boost::python;
 
 namespace {
 
-/* a 3x3 rotation and a 3-vector translation in memory another object owns (numpy views onto
- * Pinocchio's GeometryData.oMg), read with their strides (bytes) */
-struct Placement {
-    const char *R;
-    Py_ssize_t r0, r1;
-    const char *t;
-    Py_ssize_t t0;
-
-    coal::Transform3s transform() const
-    {
-        coal::Matrix3s rotation;
-        coal::Vec3s translation;
-        for (int r = 0; r < 3; r++) {
-            for (int c = 0; c < 3; c++)
-                rotation(r, c) = *reinterpret_cast<const double *>(R + r * r0 + c * r1);
-            translation(r) = *reinterpret_cast<const double *>(t + r * t0);
-        }
-        return coal::Transform3s(rotation, translation);
-    }
-};
-
 struct Queries {
     Distances api;  /* first: the C kernels see a Queries * as a Distances * */
     std::vector<std::unique_ptr<coal::ComputeDistance>> functors;
     std::vector<coal::DistanceRequest> requests;
     std::vector<coal::DistanceResult> results;
     std::vector<std::pair<Py_ssize_t, Py_ssize_t>> pairs;
-    std::vector<Placement> placements;
-    PyObject *keep = nullptr;  /* the shapes, the placements' arrays and what they view */
+    std::vector<Py_ssize_t> joints;  /* each geometry's parent joint */
+    const double *placements = nullptr;  /* (ngeoms, 4, 4) row-major, read at each query */
+    PyObject *keep = nullptr;  /* the shapes and the placements' array */
+
+    /* geometry g's world pose: its joint's (4x4 row-major in poses) times its placement */
+    coal::Transform3s transform(const double *poses, Py_ssize_t g) const
+    {
+        const double *H = poses + 16 * joints[g], *M = placements + 16 * g;
+        coal::Matrix3s rotation;
+        coal::Vec3s translation;
+        for (int r = 0; r < 3; r++) {
+            for (int c = 0; c < 3; c++)
+                rotation(r, c) = H[4 * r] * M[c] + H[4 * r + 1] * M[4 + c]
+                                 + H[4 * r + 2] * M[8 + c];
+            translation(r) = H[4 * r] * M[3] + H[4 * r + 1] * M[7] + H[4 * r + 2] * M[11]
+                             + H[4 * r + 3];
+        }
+        return coal::Transform3s(rotation, translation);
+    }
 };
 
-int distance(Distances *self, Py_ssize_t k, double *out)
+int distance(Distances *self, Py_ssize_t k, const double *poses, Py_ssize_t njoints,
+             double *out)
 {
     Queries *Q = reinterpret_cast<Queries *>(self);
     if (k < 0 || k >= self->npairs) {
@@ -60,11 +58,16 @@ int distance(Distances *self, Py_ssize_t k, double *out)
         return -1;
     }
     const auto &pair = Q->pairs[k];
+    if (Q->joints[pair.first] >= njoints || Q->joints[pair.second] >= njoints) {
+        PyErr_Format(PyExc_ValueError, "pair %zd: its joints are not among the %zd poses", k,
+                     njoints);
+        return -1;
+    }
     coal::DistanceResult &result = Q->results[k];
     result.clear();
     try {
-        (*Q->functors[k])(Q->placements[pair.first].transform(),
-                          Q->placements[pair.second].transform(), Q->requests[k], result);
+        (*Q->functors[k])(Q->transform(poses, pair.first), Q->transform(poses, pair.second),
+                          Q->requests[k], result);
     } catch (const std::exception &exc) {
         PyErr_Format(PyExc_RuntimeError, "coal: %s", exc.what());
         return -1;
@@ -86,27 +89,6 @@ void free_queries(PyObject *capsule)
     delete Q;
 }
 
-/* the float64 array's data pointer and strides, checked to hold `n` by `m` (m 0: a vector of
- * n); false with a Python error set */
-bool placement_part(PyObject *array, Py_ssize_t n, Py_ssize_t m, const char **data,
-                    Py_ssize_t *s0, Py_ssize_t *s1)
-{
-    Py_buffer view;
-    if (PyObject_GetBuffer(array, &view, PyBUF_STRIDES | PyBUF_FORMAT) < 0) return false;
-    bool ok = view.format && std::strcmp(view.format, "d") == 0
-              && view.ndim == (m ? 2 : 1) && view.shape[0] == n && (!m || view.shape[1] == m);
-    if (ok) {
-        *data = static_cast<const char *>(view.buf);
-        *s0 = view.strides[0];
-        *s1 = m ? view.strides[1] : 0;
-    } else {
-        PyErr_Format(PyExc_ValueError, "a placement's %s must be a float64 array of shape %s",
-                     m ? "rotation" : "translation", m ? "(3, 3)" : "(3,)");
-    }
-    PyBuffer_Release(&view);
-    return ok;
-}
-
 template <typename T>
 T *extract_pointer(PyObject *obj, const char *what, Py_ssize_t i)
 {
@@ -118,46 +100,57 @@ T *extract_pointer(PyObject *obj, const char *what, Py_ssize_t i)
     return get();
 }
 
-/* queries(shapes, pairs, requests, rotations, translations, keep) -> capsule: shapes (coal's
- * shapes, one per geometry), pairs ((first, second) geometry indices), requests (coal
- * DistanceRequests, one per pair, copied), rotations and translations (one per geometry: the
- * (3, 3) and (3,) float64 arrays whose memory holds its placement, read at each query), keep
- * (the object that owns that memory where the arrays are views onto it; kept alive with the
- * shapes and the arrays) */
+/* queries(shapes, pairs, requests, joints, placements) -> capsule: shapes (coal's shapes, one
+ * per geometry), pairs ((first, second) geometry indices), requests (coal DistanceRequests, one
+ * per pair, copied), joints (each geometry's parent joint) and placements (a C-contiguous
+ * float64 array (ngeoms, 4, 4): each geometry's pose in its joint's frame, read at each query,
+ * so that moving an obstacle is writing its placement) */
 PyObject *py_queries(PyObject *, PyObject *args)
 {
-    PyObject *shapes, *pairs, *requests, *rotations, *translations, *keep;
-    if (!PyArg_ParseTuple(args, "OOOOOO:queries", &shapes, &pairs, &requests, &rotations,
-                          &translations, &keep))
+    PyObject *shapes, *pairs, *requests, *joints, *placements;
+    if (!PyArg_ParseTuple(args, "OOOOO:queries", &shapes, &pairs, &requests, &joints,
+                          &placements))
         return nullptr;
     std::unique_ptr<Queries> Q(new Queries());
+    Py_buffer view;
+    if (PyObject_GetBuffer(placements, &view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0)
+        return nullptr;
+    bool ok = view.format && std::strcmp(view.format, "d") == 0 && view.ndim == 3
+              && view.shape[1] == 4 && view.shape[2] == 4;
+    Py_ssize_t ngeoms = ok ? view.shape[0] : 0;
+    Q->placements = static_cast<const double *>(view.buf);
+    PyBuffer_Release(&view);  /* (the array is kept alive with the capsule) */
+    if (!ok) {
+        PyErr_SetString(PyExc_ValueError, "placements must be a C-contiguous float64 array of "
+                        "shape (ngeoms, 4, 4)");
+        return nullptr;
+    }
+    PyObject *seq[4] = {PySequence_Fast(shapes, "shapes must be a sequence"),
+                        PySequence_Fast(pairs, "pairs must be a sequence"),
+                        PySequence_Fast(requests, "requests must be a sequence"),
+                        PySequence_Fast(joints, "joints must be a sequence")};
     try {
-        PyObject *seq[4] = {PySequence_Fast(shapes, "shapes must be a sequence"),
-                            PySequence_Fast(pairs, "pairs must be a sequence"),
-                            PySequence_Fast(requests, "requests must be a sequence"), nullptr};
-        bool ok = seq[0] && seq[1] && seq[2];
-        Py_ssize_t ngeoms = ok ? PySequence_Fast_GET_SIZE(seq[0]) : 0;
+        ok = seq[0] && seq[1] && seq[2] && seq[3];
         Py_ssize_t npairs = ok ? PySequence_Fast_GET_SIZE(seq[1]) : 0;
-        if (ok && (PySequence_Size(rotations) != ngeoms || PySequence_Size(translations) != ngeoms
+        if (ok && (PySequence_Fast_GET_SIZE(seq[0]) != ngeoms
+                   || PySequence_Fast_GET_SIZE(seq[3]) != ngeoms
                    || PySequence_Fast_GET_SIZE(seq[2]) != npairs)) {
-            PyErr_SetString(PyExc_ValueError, "queries: one rotation and translation per shape "
-                            "and one request per pair");
+            PyErr_SetString(PyExc_ValueError, "queries: one shape, joint and placement per "
+                            "geometry and one request per pair");
             ok = false;
         }
         std::vector<const coal::CollisionGeometry *> geometry;
         for (Py_ssize_t g = 0; ok && g < ngeoms; g++) {
             auto *shape = extract_pointer<coal::CollisionGeometry>(
                 PySequence_Fast_GET_ITEM(seq[0], g), "shape", g);
-            Placement p{};
-            Py_ssize_t unused;
-            PyObject *R = shape ? PySequence_GetItem(rotations, g) : nullptr;
-            PyObject *t = R ? PySequence_GetItem(translations, g) : nullptr;
-            ok = t && placement_part(R, 3, 3, &p.R, &p.r0, &p.r1)
-                 && placement_part(t, 3, 0, &p.t, &p.t0, &unused);
-            Py_XDECREF(R);
-            Py_XDECREF(t);
+            Py_ssize_t j = shape ? PyLong_AsSsize_t(PySequence_Fast_GET_ITEM(seq[3], g)) : -1;
+            if (shape && j < 0) {
+                if (!PyErr_Occurred())
+                    PyErr_Format(PyExc_ValueError, "geometry %zd's joint is negative", g);
+            }
+            ok = shape && j >= 0;
             geometry.push_back(shape);
-            Q->placements.push_back(p);
+            Q->joints.push_back(j);
         }
         for (Py_ssize_t k = 0; ok && k < npairs; k++) {
             PyObject *item = PySequence_Fast(PySequence_Fast_GET_ITEM(seq[1], k),
@@ -169,8 +162,9 @@ PyObject *py_queries(PyObject *, PyObject *args)
                 b = PyLong_AsSsize_t(PySequence_Fast_GET_ITEM(item, 1));
             }
             Py_XDECREF(item);
-            if (PyErr_Occurred()) ok = false;
-            else if (!(0 <= a && a < ngeoms && 0 <= b && b < ngeoms)) {
+            if (PyErr_Occurred()) {
+                ok = false;
+            } else if (!(0 <= a && a < ngeoms && 0 <= b && b < ngeoms)) {
                 PyErr_Format(PyExc_ValueError, "pair %zd names no shape", k);
                 ok = false;
             }
@@ -185,33 +179,46 @@ PyObject *py_queries(PyObject *, PyObject *args)
             Q->requests.push_back(*request);
             Q->functors.emplace_back(new coal::ComputeDistance(geometry[a], geometry[b]));
         }
-        for (PyObject *s : seq) Py_XDECREF(s);
-        if (!ok) return nullptr;
-        Q->results.resize(Q->pairs.size());
-        Q->api.distance = distance;
-        Q->api.npairs = npairs;
+        if (ok) {
+            Q->results.resize(Q->pairs.size());
+            Q->api.distance = distance;
+            Q->api.npairs = npairs;
+        }
     } catch (const bp::error_already_set &) {
-        return nullptr;
+        ok = false;
     } catch (const std::exception &exc) {
         PyErr_Format(PyExc_RuntimeError, "coal: %s", exc.what());
-        return nullptr;
+        ok = false;
     }
-    Q->keep = Py_BuildValue("(OOOO)", shapes, rotations, translations, keep);
-    if (!Q->keep) return nullptr;
+    for (PyObject *item : seq) Py_XDECREF(item);
+    if (!ok || !(Q->keep = Py_BuildValue("(OO)", shapes, placements))) return nullptr;
     PyObject *capsule = PyCapsule_New(Q.get(), DISTANCES_CAPSULE, free_queries);
     if (capsule) Q.release();
     return capsule;
 }
 
-/* distance(capsule, k) -> (d, normal, p1, p2): Distances.distance from Python (tests) */
+/* distance(capsule, k, poses) -> (d, normal, p1, p2): Distances.distance from Python (tests);
+ * poses (njoints, 16) float64, C-contiguous */
 PyObject *py_distance(PyObject *, PyObject *args)
 {
-    PyObject *capsule;
+    PyObject *capsule, *poses;
     Py_ssize_t k;
-    if (!PyArg_ParseTuple(args, "On:distance", &capsule, &k)) return nullptr;
+    if (!PyArg_ParseTuple(args, "OnO:distance", &capsule, &k, &poses)) return nullptr;
     auto *D = static_cast<Distances *>(PyCapsule_GetPointer(capsule, DISTANCES_CAPSULE));
+    if (!D) return nullptr;
+    Py_buffer view;
+    if (PyObject_GetBuffer(poses, &view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0) return nullptr;
     double out[10];
-    if (!D || D->distance(D, k, out)) return nullptr;
+    int bad = 0;
+    if (!(view.format && std::strcmp(view.format, "d") == 0 && view.ndim == 2
+          && view.shape[1] == 16)) {
+        PyErr_SetString(PyExc_ValueError, "poses must be a float64 array (njoints, 16)");
+        bad = 1;
+    } else {
+        bad = D->distance(D, k, static_cast<const double *>(view.buf), view.shape[0], out);
+    }
+    PyBuffer_Release(&view);
+    if (bad) return nullptr;
     return Py_BuildValue("(d(ddd)(ddd)(ddd))", out[0], out[1], out[2], out[3], out[4], out[5],
                          out[6], out[7], out[8], out[9]);
 }

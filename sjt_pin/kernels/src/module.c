@@ -81,6 +81,9 @@ static PyMethodDef methods[] = {
     {"near_pairs", (PyCFunction)(void (*)(void))py_near_pairs, METH_FASTCALL,
      "near_pairs(q, skip, influence) -> list | None: "
      "the collision limit's pairs to query, or None when its broad phase must run again."},
+    {"sphere_gaps", (PyCFunction)(void (*)(void))py_sphere_gaps, METH_FASTCALL,
+     "sphere_gaps(views, joints, centres, pairs, span, gap): the gap (m) between the bounding "
+     "spheres of each collision pair, at the joint poses of collision_rows' data views."},
     {"braking_reach", (PyCFunction)(void (*)(void))py_braking_reach, METH_FASTCALL,
      "braking_reach(lever, dq, accelerations, jerks, dt, share, influence, margin, out): each "
      "collision pair's influence for an arm with acceleration limits (m)."},
