@@ -638,18 +638,17 @@ class CollisionLimit(Limit):
         limits (``motion.velocity_limits``) do not keep within them already (a free-flying
         base without a speed limit, a long period), never where they do; without speed limits
         (``solve()``'s iterations), while a pair is within ``influence``."""
-        dt = motion.dt
-        speeds = motion.velocity_limits
-        if self._bounds is None or self._bounds[0] != dt or self._bounds[1] is not speeds:
+        dt, speeds, known = motion.dt, motion.velocity_limits, self._bounds
+        if known is None or known[1] is not speeds or known[0] != dt:
             cap = self.speed_caps(dt)
             lower = -cap
             lower.setflags(write=False)
             loose = speeds is not None and not bool(np.all(speeds <= cap))
-            self._bounds = (dt, speeds, loose, (lower, cap))
+            self._bounds = known = (dt, speeds, loose, (lower, cap))
         if speeds is not None:
-            return self._bounds[3] if self._bounds[2] else None
+            return known[3] if known[2] else None
         # no speed limits (solve()'s iterations): while a pair is within influence
-        return self._bounds[3] if self.rows(kinematics, motion) is not None else None
+        return known[3] if self.rows(kinematics, motion) is not None else None
 
     def speed_caps(self, dt: float) -> np.ndarray:
         """The speed bounds of :meth:`bounds` at period ``dt`` (s): ``(influence - margin) /
@@ -678,6 +677,7 @@ class CollisionLimit(Limit):
         self._center_local[g] = self._centers_in[:, g] = (self._placement[g]
                                                           @ np.append(self._box_center[g], 1.0))
         self._version += 1
+        self._skip = None  # (its broad phase is of the old scene)
         self._tick += 2.0  # the remembered points on the obstacle moved: forget every one
 
     @property
@@ -876,7 +876,16 @@ class CollisionLimit(Limit):
         (module docstring, "Acceleration limits"), and every pair within influence has its
         row. A second call at the same configuration, period, obstacle poses and motion
         returns the same (read-only) arrays."""
-        data, q, dt = kinematics.data, kinematics.q, motion.dt
+        skip, q, listed = self._skip, kinematics.q, False
+        if skip is not None and q is not None and motion.acceleration_limits is None \
+                and motion.dt > 0:  # (most steps: nothing to query, as near_pairs finds)
+            listed = near_pairs(q, skip, self._influence)
+            if listed == []:
+                if self.active or self.within:
+                    self.active, self.within = [], []
+                self._witness_count = 0
+                return None
+        data, dt = kinematics.data, motion.dt
         accelerations, jerks = motion.acceleration_limits, motion.jerk_limits
         where = None if q is None else q.tobytes()
         key = (where, dt, self._version, id(motion.velocity_limits)) if accelerations is None \
@@ -900,7 +909,7 @@ class CollisionLimit(Limit):
             reach = reaches[1] if reaches[0] is speeds else self._reach(speeds)
         else:
             reach = None  # (the stoppable rows below are tighter than the damper's)
-        out = self._rows(data, dt, q, influence, reach)
+        out = self._rows(data, dt, q, influence, reach, listed)
         if out is not None and accelerations is not None:
             b = out[1]
             b.setflags(write=True)  # (its own data: the rows' bounds, cut in place)
@@ -931,7 +940,10 @@ class CollisionLimit(Limit):
         return self._owners[:self._witness_count].astype(int).tolist()
 
     def _rows(self, data, dt: float, q: np.ndarray | None, influence: np.ndarray,
-              reach: np.ndarray | None) -> tuple[np.ndarray, np.ndarray] | None:
+              reach: np.ndarray | None, listed: list[int] | None | bool = False
+              ) -> tuple[np.ndarray, np.ndarray] | None:
+        """rows() at ``q``; ``listed``: ``kernels.near_pairs``' answer at ``q`` with these
+        ``influence`` where rows() asked it already (False where it did not)."""
         self.active = []  # indices into self.pairs / self.pair_names of the rows returned
         self.within = []
         self._witness_count = 0
@@ -939,8 +951,9 @@ class CollisionLimit(Limit):
         # a pair's distance changes by at most its levers' bound (_near): one that was beyond
         # influence by more than that at its last query still is; both tests compiled where q
         # is its own tangent space, else _near, _aged and numpy
-        listed = None
-        if (self._flat and q is not None and ref is not None and ref[0] == self._version
+        if listed is not False:
+            stale = listed is None
+        elif (self._flat and q is not None and ref is not None and ref[0] == self._version
                 and self._floor_q is not None):
             skip = self._skip
             if skip is None:  # (what near_pairs reads, since the last broad phase)
@@ -949,7 +962,7 @@ class CollisionLimit(Limit):
             listed = near_pairs(q, skip, influence)
             stale = listed is None
         else:
-            stale = False
+            listed, stale = None, False
         if listed is None:
             listed = self._aged(q, self._near(data, q, influence, stale), influence).tolist()
         if not listed:
