@@ -50,12 +50,16 @@ the band ``influence - margin`` or when the pair leaves ``influence``, and a pai
 than that from its margin remembers nothing (its row binds nothing); nor does a pair with a
 sphere (or an ellipsoid), whose closest points are unique and move continuously.
 
-Distances and closest points come from coal (through Pinocchio's ``GeometryModel``); only the
-pairs whose bounding spheres come within ``influence`` (plus a skin of half the band
-``influence - margin`` while the broad phase's result is reused, as in a Verlet list) pay for
-an exact distance query, and a pair whose last exact distance was beyond ``influence`` is not
-queried again until the joints' moves since that query can have closed the gap (a bound from
-the joint offsets and the ranges of the prismatic joints between, summed step by step:
+Distances and closest points come from coal on the shapes of Pinocchio's ``GeometryModel``:
+coal's ``ComputeDistance`` called from compiled code (``kernels.distance_queries``, C++
+against libcoal, each geometry at its joint's pose times its placement, as Pinocchio places
+it), or, where that module is not built or was built against another coal, Pinocchio's
+``computeDistance`` (the same distances). Only the pairs whose bounding spheres come within
+``influence`` (plus a skin of half the band ``influence - margin`` while the broad phase's
+result is reused, as in a Verlet list) pay for an exact distance query, and a pair whose last
+exact distance was beyond ``influence`` is not queried again until the joints' moves since
+that query can have closed the gap (a bound from the joint offsets and the ranges of the
+prismatic joints between, summed step by step:
 :meth:`CollisionLimit._near`, :meth:`CollisionLimit._aged`).
 """
 
