@@ -172,3 +172,23 @@ def test_the_queries_read_poses_and_placements_where_they_live():
     assert d == pytest.approx(1.8)
     np.testing.assert_allclose(normal, turn[:3, 0], atol=1e-9)
     np.testing.assert_allclose(p2, 1.9 * turn[:3, 0], atol=1e-9)
+
+
+def test_the_compiled_sphere_gaps_are_the_spheres_distances():
+    # the broad phase's test (kernels.sphere_gaps, joint poses read through the data views)
+    # against the bounding spheres' centres placed here with numpy
+    robot, obstacles = _scene()
+    limit = CollisionLimit(robot, obstacles[:5], self_collision=True)
+    data = robot.model.createData()
+    views = limit._data_views(data)
+    assert views is not data
+    for _ in range(20):
+        pin.forwardKinematics(robot.model, data, pin.randomConfiguration(robot.model))
+        gap = np.empty(len(limit.pairs))
+        kernels.sphere_gaps(views, limit._joint_f, limit._center_local, limit._pair_f,
+                            limit._span, gap)
+        centres = np.array([data.oMi[int(j)].homogeneous @ c
+                            for j, c in zip(limit._joint, limit._center_local, strict=True)])
+        a, b = limit.pairs[:, 0], limit.pairs[:, 1]
+        expected = np.linalg.norm(centres[a, :3] - centres[b, :3], axis=1) - limit._span
+        np.testing.assert_allclose(gap, expected, atol=1e-12)

@@ -991,7 +991,7 @@ class CollisionLimit(Limit):
             self._tick += 1.0
         return A, b
 
-    def _data_views(self, data) -> tuple:
+    def _data_views(self, data) -> object:
         """``kernels.collision_rows``' views onto ``data`` (Pinocchio's data of the solver's
         kinematics): ``(data, data.J, [oMi[j].rotation], [oMi[j].translation])``, numpy
         arrays on its own memory that the kernel reads without a Python call (kept while the

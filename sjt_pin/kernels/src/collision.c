@@ -784,15 +784,16 @@ done:
  * A, b, witnesses) | None: a step's rows of the collision limit in one call
  * (limits/collision.py, _rows), at the joint poses and WORLD joint Jacobians of Pinocchio's
  * `data`, or of data views (data, data.J, rotations, translations): data and numpy views onto
- * its J and each joint's data.oMi[j].rotation and .translation (lists), read without Python. fixed: the limit's (geometry, geometry_data, floor, margins, joints, rows, failures,
- * poses, memory, state, keep, apart, owners, support, update, model, witnesses, mimic).
- * 1. The geometries' placements: update(model, data, geometry, geometry_data) (Pinocchio's
- *    updateGeometryPlacements).
+ * its J and each joint's data.oMi[j].rotation and .translation (lists), read without Python.
+ * fixed: the limit's (geometry, geometry_data, floor, margins, joints, rows, failures, poses,
+ * memory, state, keep, apart, owners, support, update, model, witnesses, mimic).
+ * 1. Where compute is Pinocchio's computeDistance, the geometries' placements: update(model,
+ *    data, geometry, geometry_data) (Pinocchio's updateGeometryPlacements).
  * 2. The exact distance queries: for each pair k of the list `near`, res = compute(geometry,
- *    geometry_data, k) (Pinocchio's computeDistance; or, where compute is a capsule of the
- *    compiled queries, distances.h, the same without a Python call), d = res.min_distance,
- *    floor[k] = d (-inf
- *    for a failed query: d NaN or no closest points). A pair with d < influence[k] (npairs,)
+ *    geometry_data, k), d = res.min_distance; or, where compute is a capsule of the compiled
+ *    queries (distances.h), the same without a Python call, at the poses (njoints, 16) of the
+ *    pair's joints, read into `poses` once a call. floor[k] = d (-inf for a failed query: d
+ *    NaN or no closest points). A pair with d < influence[k] (npairs,)
  *    is within influence; it gets the next row of rows (N, 13) as damper_rows reads it (d,
  *    margins[k], joints[k] (npairs, 2), the normal, res.getNearestPoint1(),
  *    res.getNearestPoint2()) unless reach (npairs,; None: every pair within influence) says
