@@ -169,7 +169,17 @@ class ConstraintStage:
             rows = limit.rows(kinematics, motion)
             if rows is None:
                 continue
-            A, b = self._checked_rows(limit, rows, check)
+            A, b = rows
+            if not (type(A) is np.ndarray and type(b) is np.ndarray and A.dtype == _F64
+                    and b.dtype == _F64 and A.ndim == 2 and b.ndim == 1):
+                A, b = np.atleast_2d(np.asarray(A, dtype=float)), np.atleast_1d(
+                    np.asarray(b, dtype=float))
+            if A.shape != (b.size, self.nv):
+                raise ValueError(f"{limit!r}.rows() must return A of shape (k, {self.nv}) and "
+                                 f"b of shape (k,), got {A.shape} and {b.shape}")
+            if check and (not math.isfinite(float(A.sum())) or math.isnan(float(b.sum()))):
+                raise ValueError(f"{limit!r}.rows() returned NaN or inf in A or NaN in b: a row "
+                                 "that bounds nothing would let the joints move freely")
             blocks.append((A, b))
             owners += [limit.name] * b.size
         if not blocks:
@@ -178,22 +188,6 @@ class ConstraintStage:
             return blocks[0][0], blocks[0][1], owners
         return np.vstack([a for a, _ in blocks]), np.concatenate([b for _, b in blocks]), owners
 
-    def _checked_rows(self, limit: Limit, rows, check: bool) -> tuple[np.ndarray, np.ndarray]:
-        """``limit``'s rows ``(A, b)`` as float arrays of shapes (k, nv) and (k,); a
-        ``ValueError`` naming it for other shapes and (``check``) NaN."""
-        A, b = rows
-        if not (type(A) is np.ndarray and type(b) is np.ndarray and A.dtype == _F64
-                and b.dtype == _F64 and A.ndim == 2 and b.ndim == 1):
-            A, b = np.atleast_2d(np.asarray(A, dtype=float)), np.atleast_1d(
-                np.asarray(b, dtype=float))
-        if A.shape != (b.size, self.nv):
-            raise ValueError(f"{limit!r}.rows() must return A of shape (k, {self.nv}) and "
-                             f"b of shape (k,), got {A.shape} and {b.shape}")
-        if check and (not math.isfinite(float(A.sum())) or math.isnan(float(b.sum()))):
-            raise ValueError(f"{limit!r}.rows() returned NaN or inf in A or NaN in b: a row "
-                             "that bounds nothing would let the joints move freely")
-        return A, b
-
     def hard_parts(self, kinematics, motion: Motion):
         """This stage's bounds and rows at this step, for a step that the solver's kernel
         checks and corrects itself (``kernels.rows_step``): ``(lower, upper, rows)`` with the
@@ -201,8 +195,7 @@ class ConstraintStage:
         :meth:`general_rows`; ``None`` when a smoothness limit bounds the step (only
         :meth:`enforce` weighs those)."""
         lower = upper = None
-        limits = self.limits
-        for limit in limits:  # (the kernels check the bounds and rows for NaN)
+        for limit in self.limits:  # (the kernels check the bounds and rows for NaN)
             bounds = limit.bounds(kinematics, motion)
             if bounds is None:
                 continue
@@ -212,14 +205,7 @@ class ConstraintStage:
                 lower, upper = bounds
             else:
                 lower, upper = np.maximum(lower, bounds[0]), np.minimum(upper, bounds[1])
-        if len(limits) != 1:
-            return lower, upper, self.general_rows(kinematics, motion, check=False)
-        limit = limits[0]  # (every step's path: general_rows for one limit, one call less)
-        rows = limit.rows(kinematics, motion)
-        if rows is None:
-            return lower, upper, None
-        A, b = self._checked_rows(limit, rows, False)
-        return lower, upper, (A, b, [limit.name] * b.size)
+        return lower, upper, self.general_rows(kinematics, motion, check=False)
 
     def check(self, kinematics, motion: Motion) -> None:
         """Raise the ``ValueError`` that names the limit whose bounds or rows are broken

@@ -28,11 +28,11 @@ against the numpy reference formulas of :mod:`sjt_pin.mappings` and against Pino
   ``sphere_gaps``: its broad phase's gaps between the pairs' bounding spheres;
   ``collision_rows``: a step's exact distance queries (through Pinocchio's ``computeDistance``,
   or :data:`distance_queries`' compiled ones), witness and damper rows in one call;
-  ``distance_queries(shapes, pairs, requests, rotations, translations, keep)``: coal's
-  distance queries of a limit's pairs in C++ (``src/distances.cpp``, on coal's shapes and the
-  placements in Pinocchio's ``GeometryData``) for ``collision_rows`` to call without Python;
-  None where that module is not built or was built against another coal
-  (:data:`distance_queries_missing` says why);
+  ``distance_queries(shapes, pairs, requests, joints, placements)``: coal's distance queries
+  of a limit's pairs in C++ (``src/distances.cpp``, on coal's shapes, each placed at its
+  joint's pose times its placement) for ``collision_rows`` to call without Python; None where
+  that module is not built or was built against another coal (:data:`distance_queries_missing`
+  says why);
   ``braking_reach``: each pair's influence for an arm with acceleration limits;
 - ``frame_velocity``, ``position_rows``, ``rotation_defect``: the tasks' small transforms;
 - ``follow_motion(step, dt, dq, ddq)``: the velocity and acceleration a step commands (the

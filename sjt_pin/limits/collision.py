@@ -699,7 +699,7 @@ class CollisionLimit(Limit):
         First the spheres of both (for every pair), then, where exact distances are dear
         (meshes), for the few pairs left, the sphere of either one against the other's box:
         volumes contain their geometry, so neither test drops a pair within its influence."""
-        views = self._views[1] if self._views[0] is data else self._data_views(data)
+        views = self._data_views(data)
         if views is not data and not self._refine:  # (compiled: joint poses read in place)
             gap = np.empty(len(self.pairs))
             sphere_gaps(views, self._joint_f, self._center_local, self._pair_f, self._span, gap)
@@ -976,7 +976,7 @@ class CollisionLimit(Limit):
         # witnesses' rows and the damper rows of them all, in one compiled call (the Python
         # around each query and between the parts cost more than the queries)
         rate = self.gain / dt
-        views = self._views[1] if self._views[0] is data else self._data_views(data)
+        views = self._data_views(data)
         out = collision_rows(self._fixed, listed, views, rate, influence, self._tick + 1.0,
                              reach, self._compute)
         if out is None:
@@ -996,6 +996,8 @@ class CollisionLimit(Limit):
         kinematics): ``(data, data.J, [oMi[j].rotation], [oMi[j].translation])``, numpy
         arrays on its own memory that the kernel reads without a Python call (kept while the
         same data comes back); ``data`` itself where Pinocchio's bindings give copies."""
+        if self._views[0] is data:
+            return self._views[1]
         parts = [data.J] + [getattr(data.oMi[j], name) for name in ("rotation", "translation")
                             for j in range(self.model.njoints)]
         n = self.model.njoints

@@ -274,6 +274,20 @@ static int fetch_pose(PyObject *oMi, Py_ssize_t j, double *out)
     return bad ? -1 : 0;
 }
 
+/* Whether views (a tuple) are collision_rows' data views: (data, J, rotations, translations),
+ * the last two lists of one array per joint; TypeError naming `who` otherwise */
+static int views_ok(PyObject *views, const char *who)
+{
+    if (PyTuple_GET_SIZE(views) == 4 && PyList_Check(PyTuple_GET_ITEM(views, 2))
+        && PyList_Check(PyTuple_GET_ITEM(views, 3))
+        && PyList_GET_SIZE(PyTuple_GET_ITEM(views, 2))
+               == PyList_GET_SIZE(PyTuple_GET_ITEM(views, 3)))
+        return 1;
+    PyErr_Format(PyExc_TypeError, "%s: data views must be (data, J, rotations, translations), "
+                 "the last two lists of one array per joint", who);
+    return 0;
+}
+
 /* the 4x4 world pose of joint j into out (row-major) from data views (collision_rows): its
  * rotation (3, 3) and translation (3,) arrays, numpy views onto Pinocchio's data.oMi[j] */
 static int view_pose(PyObject *views, Py_ssize_t j, double *out)
@@ -816,14 +830,7 @@ PyObject *py_collision_rows(PyObject *self, PyObject *const *args, Py_ssize_t na
     }
     PyObject *const *F = &PyTuple_GET_ITEM(args[0], 0), *data = args[2], *views = NULL;
     if (PyTuple_Check(data)) {  /* (data, J, rotations, translations): views onto its arrays */
-        if (PyTuple_GET_SIZE(data) != 4 || !PyList_Check(PyTuple_GET_ITEM(data, 2))
-            || !PyList_Check(PyTuple_GET_ITEM(data, 3))
-            || PyList_GET_SIZE(PyTuple_GET_ITEM(data, 2)) != PyList_GET_SIZE(
-                   PyTuple_GET_ITEM(data, 3))) {
-            PyErr_SetString(PyExc_TypeError, "collision_rows: data views must be (data, J, "
-                            "rotations, translations), the last two lists of one per joint");
-            return NULL;
-        }
+        if (!views_ok(data, "collision_rows")) return NULL;
         views = data;
         data = PyTuple_GET_ITEM(views, 0);
     }
@@ -894,18 +901,11 @@ PyObject *py_sphere_gaps(PyObject *self, PyObject *const *args, Py_ssize_t nargs
 {
     if (!nargs_ok(nargs, 6, "sphere_gaps")) return NULL;
     PyObject *views = args[0];
-    if (!PyTuple_Check(views) || PyTuple_GET_SIZE(views) != 4
-        || !PyList_Check(PyTuple_GET_ITEM(views, 2)) || !PyList_Check(PyTuple_GET_ITEM(views, 3))
-        || PyList_GET_SIZE(PyTuple_GET_ITEM(views, 2))
-               != PyList_GET_SIZE(PyTuple_GET_ITEM(views, 3))) {
-        PyErr_SetString(PyExc_TypeError, "sphere_gaps: views must be (data, J, rotations, "
-                        "translations), the last two lists of one per joint");
-        return NULL;
-    }
+    if (!PyTuple_Check(views) || !views_ok(views, "sphere_gaps")) return NULL;
     Arg joints = {0}, centres = {0}, pairs = {0}, span = {0}, gap = {0};
     PyObject *result = NULL;
     double *world = NULL, *poses = NULL;
-    char *fetched = NULL;
+    Poses S = {0};
     if (acquire(args[1], &joints, 0, 1, "joints") || acquire(args[2], &centres, 0, 2, "centres")
         || acquire(args[3], &pairs, 0, 2, "pairs") || acquire(args[4], &span, 0, 1, "span")
         || acquire(args[5], &gap, 1, 1, "gap"))
@@ -923,12 +923,12 @@ PyObject *py_sphere_gaps(PyObject *self, PyObject *const *args, Py_ssize_t nargs
         goto done;
     }
     world = (double *)malloc((size_t)(3 * n + 1) * sizeof(double));
-    poses = (double *)malloc((size_t)(16 * nj + 1) * sizeof(double));
-    fetched = (char *)calloc((size_t)nj + 1, 1);
-    if (!world || !poses || !fetched) {
+    poses = (double *)malloc((size_t)(16 * nj + 16) * sizeof(double));
+    if (!world || !poses) {
         PyErr_NoMemory();
         goto done;
     }
+    if (poses_init(&S, views, 2, poses, nj)) goto done;
     for (Py_ssize_t g = 0; g < n; g++) {
         double jf = jv[g];
         if (!(jf >= 0.0 && jf < (double)nj)) {
@@ -939,14 +939,7 @@ PyObject *py_sphere_gaps(PyObject *self, PyObject *const *args, Py_ssize_t nargs
         Py_ssize_t j = (Py_ssize_t)jf;
         const double *c = C.p + g * C.s0;
         double *w = world + 3 * g;
-        if (j == 0) {  /* the world */
-            for (int r = 0; r < 3; r++) w[r] = c[r * C.s1];
-            continue;
-        }
-        if (!fetched[j]) {
-            if (view_pose(views, j, poses + 16 * j)) goto done;
-            fetched[j] = 1;
-        }
+        if (pose_at(&S, j)) goto done;  /* (joint 0, the world: the identity) */
         const double *H = poses + 16 * j;
         for (int r = 0; r < 3; r++)
             w[r] = H[4 * r] * c[0] + H[4 * r + 1] * c[C.s1] + H[4 * r + 2] * c[2 * C.s1]
@@ -965,9 +958,9 @@ PyObject *py_sphere_gaps(PyObject *self, PyObject *const *args, Py_ssize_t nargs
     result = Py_None;
     Py_INCREF(result);
 done:
+    poses_free(&S);
     free(world);
     free(poses);
-    free(fetched);
     release(&joints); release(&centres); release(&pairs); release(&span); release(&gap);
     return result;
 }
