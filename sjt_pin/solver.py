@@ -305,10 +305,12 @@ class Solver:
         by = np.full(speeds.size, "velocity", dtype=object)
         user = self._user_stage
         limits = user.limits if self._kernel_bounds and user is not None else ()
+        capped = 0
         for limit in limits:
             caps = limit.speed_caps(self._dt)
             if caps is None:
                 continue
+            capped += 1
             caps = np.asarray(caps, dtype=float)
             if caps.shape != speeds.shape or np.isnan(caps).any() or (caps <= 0).any():
                 raise ValueError(f"{limit!r}.speed_caps() must return ({speeds.size},) speeds "
@@ -319,6 +321,9 @@ class Solver:
         #: the speeds the kernel holds (rad/s, m/s; inf for none) and the limit each is
         #: (StepInfo.active_limits)
         self._held_speeds, self._speed_by = speeds, by
+        #: every user's limit has speed caps the kernel holds: a step within them meets their
+        #: bounds, which never go below the caps, so only their rows are asked
+        self._rows_only = bool(limits) and capped == len(limits)
         if self._kernel_bounds:
             self._layout.inverse_speeds(self._work)[:] = np.where(np.isfinite(speeds),
                                                                   1.0 / speeds, 0.0)
@@ -538,17 +543,23 @@ class Solver:
         stack, user, motion = self.stack, self._user_stage, self._motion
         assert user is not None  # (for a user's limits)
         motion.q = q
-        parts = user.hard_parts(stack.kinematics, motion)
-        if parts is None:
-            return False
-        lower, upper, rows = parts
-        if rows is None and lower is None:
-            return True
+        if self._rows_only:  # (their bounds cannot cut a step the kernel kept: _hold_speeds)
+            rows = user.general_rows(stack.kinematics, motion, check=False)
+            if rows is None:
+                return True
+            lower, upper = self._no_bounds
+        else:
+            parts = user.hard_parts(stack.kinematics, motion)
+            if parts is None:
+                return False
+            lower, upper, rows = parts
+            if rows is None and lower is None:
+                return True
+            if lower is None or upper is None:
+                lower, upper = self._no_bounds
         A, b = (rows[0], rows[1]) if rows is not None else self._no_rows
         try:
-            done = kernels.rows_step(J, q, A, b, self._no_bounds[0] if lower is None else lower,
-                                     self._no_bounds[1] if upper is None else upper,
-                                     self._work, step)
+            done = kernels.rows_step(J, q, A, b, lower, upper, self._work, step)
         except ValueError:  # rows or bounds that do not fit or hold NaN: name the limit
             user.check(stack.kinematics, motion)
             raise

@@ -86,7 +86,8 @@ class Limit:
         below at period ``dt`` (s) and that may bound every step without changing what it
         admits; ``None`` (the default) for none. A solver whose kernel holds its speed limits
         holds these with them, so that a step they cut is saturated there (joints held at
-        their caps, the others taking over the task) instead of by the whole stage in Python;
+        their caps, the others taking over the task) instead of by the whole stage in Python,
+        and does not ask for :meth:`bounds` then (a step within the caps meets them);
         :class:`~sjt_pin.StepInfo` names this limit where they bind."""
         return None
 
