@@ -310,6 +310,90 @@ def test_rows_hold_every_pair_within_influence_though_most_are_not_queried(
         assert queries[0] < 0.6 * candidates  # and most candidates were not queried
 
 
+@pytest.mark.parametrize("name", ["panda", "ur5", "revolute_prismatic"])
+def test_the_compiled_refresh_lists_what_the_numpy_broad_phase_lists(
+        name, panda, ur5, revolute_prismatic, monkeypatch):
+    """Along random walks (every 50th step a leap, so the broad phase runs again and again), a
+    limit whose broad phase hands its candidates and aged floors to kernels.refresh_pairs gives
+    the same rows, pairs within influence and pairs queried as one that does it in numpy
+    (_near, then _aged)."""
+    robot = {"panda": panda, "ur5": ur5, "revolute_prismatic": revolute_prismatic}[name]
+    rng = np.random.default_rng(17)
+    q, ball, drift = _walk_scene(robot, rng)
+    compiled = CollisionLimit(robot, [ball], self_collision=True, influence=0.08)
+    numpy_path = CollisionLimit(robot, [ball], self_collision=True, influence=0.08)
+    for limit in (compiled, numpy_path):
+        limit._checked = True  # every pair stays, the ball wherever the walk takes the arm
+    kin = Kinematics(robot.model)
+    motion = Motion(q, np.zeros(robot.nv), np.zeros(robot.nv), 1e-3)
+    import sjt_pin.limits.collision as collision
+    refresh = collision.refresh_pairs
+    refreshed, rows_seen = [0], 0
+
+    def counted(*args):
+        refreshed[0] += 1
+        return refresh(*args)
+
+    for step in range(300):
+        q = _walk_step(robot, q, drift, 0.3 if step % 50 == 0 else 0.003, rng)
+        kin.update(q)
+        monkeypatch.setattr(collision, "refresh_pairs", counted)
+        a = compiled.rows(kin, motion)
+        monkeypatch.setattr(collision, "refresh_pairs", lambda *args: None)
+        b = numpy_path.rows(kin, motion)
+        assert (a is None) == (b is None), step
+        assert compiled.active == numpy_path.active and compiled.within == numpy_path.within
+        np.testing.assert_array_equal(compiled._floor, numpy_path._floor)
+        if a is not None:
+            rows_seen += 1
+            np.testing.assert_array_equal(a[0], b[0])
+            np.testing.assert_array_equal(a[1], b[1])
+    assert refreshed[0] >= 6 and rows_seen >= 10  # the refresh ran, and pairs came near
+
+
+def test_refresh_pairs_is_the_numpy_bookkeeping():
+    """kernels.refresh_pairs against its formula on random floors, gaps and levers: the
+    candidates (gap below influence plus the skin, their gaps then inf), the floors kept or
+    forgotten, aged and compared with influence; None, with nothing changed, outside the box."""
+    rng = np.random.default_rng(18)
+    for trial in range(200):
+        n, npairs = int(rng.integers(1, 8)), int(rng.integers(1, 30))
+        q, start = rng.normal(size=n), rng.normal(size=n)
+        lever = rng.uniform(0.0, 1.0, (npairs, n))
+        gap = rng.uniform(-0.05, 0.3, npairs)
+        influence = np.full(npairs, 0.05)
+        floor = rng.uniform(-0.1, 0.5, npairs)
+        kept = sorted(rng.choice(npairs, int(rng.integers(0, npairs + 1)), replace=False)
+                      .tolist()) if trial % 4 else None
+        aged = trial % 3 != 0
+        floor_q = start.copy() if aged else None
+        near = np.flatnonzero(gap < influence + 0.02)
+        expect_floor = np.full(npairs, -np.inf)
+        if kept is not None:
+            expect_floor[kept] = floor[kept]
+        if aged:
+            expect_floor[near] -= lever[near] @ np.abs(q - start)
+        listed = near[expect_floor[near] <= influence[near]] if aged else near
+        expect_gap = gap.copy()
+        expect_gap[near] = np.inf
+        out = K.refresh_pairs(q, q - 1.0, q + 1.0, gap, influence, 0.02, floor, kept, floor_q,
+                              lever)
+        assert out == (near.tolist(), listed.tolist())
+        np.testing.assert_allclose(floor, expect_floor, rtol=0, atol=1e-12)
+        np.testing.assert_array_equal(gap, expect_gap)
+        if aged:
+            np.testing.assert_array_equal(floor_q, q)
+    before = floor.copy()
+    assert K.refresh_pairs(q, q + 1.0, q + 2.0, gap, influence, 0.02, floor, None, None,
+                           lever) is None
+    np.testing.assert_array_equal(floor, before)
+    with pytest.raises(ValueError, match="kept\\[0\\] = 99 is no pair"):
+        K.refresh_pairs(q, q - 1.0, q + 1.0, gap, influence, 0.02, floor, [99], None, lever)
+    with pytest.raises(ValueError, match="do not fit"):
+        K.refresh_pairs(q, q - 1.0, q + 1.0, gap[:-1], influence, 0.02, floor, None, None,
+                        lever)
+
+
 def _witness_reference(poses, rows, found, memory, state, tick, keep, apart):
     """kernels.witness_rows in numpy (limits/collision.py, "Witnesses")."""
     W = memory.shape[0] // state.shape[0]

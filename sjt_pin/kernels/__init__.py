@@ -26,6 +26,7 @@ against the numpy reference formulas of :mod:`sjt_pin.mappings` and against Pino
   ``witness_rows``: the rows of its pairs' remembered closest points (and their memory);
   ``near_pairs``: the pairs it must query, or whether its broad phase must run again;
   ``sphere_gaps``: its broad phase's gaps between the pairs' bounding spheres;
+  ``refresh_pairs``: its candidates and pairs to query after that broad phase, floors aged;
   ``collision_rows``: a step's exact distance queries (through Pinocchio's ``computeDistance``,
   or :data:`distance_queries`' compiled ones), witness and damper rows in one call;
   ``distance_queries(shapes, pairs, requests, joints, placements)``: coal's distance queries
@@ -64,6 +65,7 @@ from ._kernels import (  # noqa: F401
     nonnegative_qp,
     position_rows,
     project_rows,
+    refresh_pairs,
     rotation_defect,
     rows_step,
     search_iteration,

@@ -84,6 +84,7 @@ from ..kernels import (
     damper_rows,
     distance_queries,
     near_pairs,
+    refresh_pairs,
     sphere_gaps,
     stoppable_rows,
     witness_rows,
@@ -755,6 +756,31 @@ class CollisionLimit(Limit):
         self._skip = None
         return near
 
+    def _refresh(self, data, q: np.ndarray, influence: np.ndarray) -> list[int] | None:
+        """A new broad phase at ``q`` and the pairs to query, as :meth:`_near` (stale) then
+        :meth:`_aged` make them, in two compiled calls (``kernels.sphere_gaps`` and
+        ``kernels.refresh_pairs``); None (nothing changed) where those do not apply: the
+        sphere-box refinement, no levers, the views missing, ``q`` outside the box the
+        levers hold in."""
+        views = self._data_views(data)
+        if views is data or self._refine or self._pair_lever is None:
+            return None
+        gap = np.empty(len(self.pairs))
+        sphere_gaps(views, self._joint_f, self._center_local, self._pair_f, self._span, gap)
+        ref = self._reference
+        kept = ref[4] if ref is not None and ref[0] == self._version else None
+        out = refresh_pairs(q, self._lower, self._upper, gap, influence,
+                            0.5 * (self.influence - self.margin), self._floor, kept,
+                            self._floor_q, self._pair_lever)
+        if out is None:
+            return None
+        near, listed = out
+        self._reference = (self._version, q.copy(), np.array(near, dtype=np.intp), gap, near)
+        if self._floor_q is None:
+            self._floor_q = q.copy()
+        self._skip = None
+        return listed
+
     def _aged(self, q: np.ndarray | None, near: np.ndarray, influence: np.ndarray) -> np.ndarray:
         """The pairs of ``near`` (the last broad phase's, :meth:`_near`) to query at ``q``:
         those whose floor, aged from ``_floor_q`` to ``q`` by the levers' bound, is within
@@ -967,6 +993,9 @@ class CollisionLimit(Limit):
             stale = listed is None
         else:
             listed, stale = None, False
+        if listed is None and q is not None and self._flat and (
+                stale or ref is None or ref[0] != self._version):
+            listed = self._refresh(data, q, influence)
         if listed is None:
             listed = self._aged(q, self._near(data, q, influence, stale), influence).tolist()
         if not listed:

@@ -1069,6 +1069,130 @@ done:
     return result;
 }
 
+/* The indices k of `seq` (pair indices below npairs) with floor_[k] kept: every other
+ * floor becomes -inf (no bound known); seq None keeps none. 0, or -1 with the error set. */
+static int keep_floors(PyObject *seq, double *floor_, Py_ssize_t npairs)
+{
+    char *keep = (char *)calloc((size_t)(npairs > 0 ? npairs : 1), 1);
+    if (!keep) {
+        PyErr_NoMemory();
+        return -1;
+    }
+    if (seq != Py_None) {
+        PyObject *kept = PySequence_Fast(seq, "kept must be a sequence of pair indices");
+        if (!kept) {
+            free(keep);
+            return -1;
+        }
+        Py_ssize_t m = PySequence_Fast_GET_SIZE(kept);
+        PyObject **items = PySequence_Fast_ITEMS(kept);
+        for (Py_ssize_t i = 0; i < m; i++) {
+            Py_ssize_t k = PyLong_AsSsize_t(items[i]);
+            if ((k == -1 && PyErr_Occurred()) || k < 0 || k >= npairs) {
+                if (!PyErr_Occurred())
+                    PyErr_Format(PyExc_ValueError, "kept[%zd] = %zd is no pair (npairs %zd)", i,
+                                 k, npairs);
+                Py_DECREF(kept);
+                free(keep);
+                return -1;
+            }
+            keep[k] = 1;
+        }
+        Py_DECREF(kept);
+    }
+    for (Py_ssize_t k = 0; k < npairs; k++)
+        if (!keep[k]) floor_[k] = -INFINITY;
+    free(keep);
+    return 0;
+}
+
+/* refresh_pairs' lists: near (the pairs with gap < influence + skin, their gap set to inf)
+ * and listed (those of near whose floor, aged from floor_q to q by lever |q - floor_q| where
+ * floor_q is given, is not above their influence); floor_q then q. 0, or -1 with the error
+ * set. */
+static int candidates(const double *q, double *gap, const double *influence, double skin,
+                      double *floor_, double *floor_q, Mat L, PyObject *near, PyObject *listed)
+{
+    Py_ssize_t n = L.n;
+    double moved[n > 0 ? n : 1];
+    for (Py_ssize_t j = 0; j < n; j++) moved[j] = floor_q ? fabs(q[j] - floor_q[j]) : 0.0;
+    for (Py_ssize_t k = 0; k < L.m; k++) {
+        if (!(gap[k] < influence[k] + skin)) continue;
+        gap[k] = INFINITY;
+        PyObject *index = PyLong_FromSsize_t(k);
+        if (!index) return -1;
+        int failed = PyList_Append(near, index) < 0;
+        if (!failed && floor_q) {
+            double closed = 0.0;
+            for (Py_ssize_t j = 0; j < n; j++) closed += AT(L, k, j) * moved[j];
+            floor_[k] -= closed;
+        }
+        if (!failed && (!floor_q || !(floor_[k] > influence[k])))
+            failed = PyList_Append(listed, index) < 0;
+        Py_DECREF(index);
+        if (failed) return -1;
+    }
+    if (floor_q)
+        for (Py_ssize_t j = 0; j < n; j++) floor_q[j] = q[j];
+    return 0;
+}
+
+/* refresh_pairs(q, lower, upper, gap, influence, skin, floor, kept, floor_q, lever) ->
+ * (near, listed) | None: the collision limit's new candidate list after a broad phase
+ * (limits/collision.py, _near and _aged, in one call): None, changing nothing, when q leaves
+ * the box lower <= q <= upper (n,) the levers hold in; else near, the pairs whose bounding
+ * volumes' gap (npairs,; m, from sphere_gaps) is below their influence (npairs,) plus skin (m),
+ * their gaps set to inf (a candidate stays one); every floor (npairs,) but those of the pairs in
+ * the sequence kept (None: none) becomes -inf; with floor_q (n,; None: not yet) the floors of
+ * near aged from floor_q to q by lever (npairs, n) |q - floor_q|, floor_q then q, and listed the
+ * pairs of near whose floor is not above their influence (without floor_q: near). */
+PyObject *py_refresh_pairs(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (!nargs_ok(nargs, 10, "refresh_pairs")) return NULL;
+    Arg q = {0}, lo = {0}, hi = {0}, gap = {0}, infl = {0}, floor_ = {0}, floor_q = {0},
+        lever = {0};
+    PyObject *result = NULL, *near = NULL, *listed = NULL;
+    double skin = PyFloat_AsDouble(args[5]);
+    if (skin == -1.0 && PyErr_Occurred()) return NULL;
+    int aged = args[8] != Py_None;
+    if (acquire(args[0], &q, 0, 1, "q") || acquire(args[1], &lo, 0, 1, "lower")
+        || acquire(args[2], &hi, 0, 1, "upper") || acquire(args[3], &gap, 1, 1, "gap")
+        || acquire(args[4], &infl, 0, 1, "influence") || acquire(args[6], &floor_, 1, 1, "floor")
+        || (aged && acquire(args[8], &floor_q, 1, 1, "floor_q"))
+        || acquire(args[9], &lever, 0, 2, "lever"))
+        goto done;
+    double *qv = vec(&q, "q"), *lov = vec(&lo, "lower"), *hiv = vec(&hi, "upper");
+    double *gv = out_vec(&gap, "gap"), *iv = vec(&infl, "influence");
+    double *fv = out_vec(&floor_, "floor"), *fqv = aged ? out_vec(&floor_q, "floor_q") : NULL;
+    if (!qv || !lov || !hiv || !gv || !iv || !fv || (aged && !fqv)) goto done;
+    Mat L = mat(&lever);
+    Py_ssize_t n = length(&q), npairs = L.m;
+    if (length(&lo) != n || length(&hi) != n || L.n != n || (aged && length(&floor_q) != n)
+        || length(&gap) != npairs || length(&floor_) != npairs || length(&infl) != npairs) {
+        PyErr_Format(PyExc_ValueError, "refresh_pairs: q, lower, upper, floor_q (n,), lever "
+                     "(npairs, n), gap, floor and influence (npairs,) do not fit (n %zd, npairs "
+                     "%zd)", n, npairs);
+        goto done;
+    }
+    for (Py_ssize_t j = 0; j < n; j++)
+        if (!(qv[j] >= lov[j] && qv[j] <= hiv[j])) {
+            result = Py_None;
+            Py_INCREF(result);
+            goto done;
+        }
+    if (keep_floors(args[7], fv, npairs)) goto done;
+    near = PyList_New(0);
+    listed = PyList_New(0);
+    if (!near || !listed || candidates(qv, gv, iv, skin, fv, fqv, L, near, listed)) goto done;
+    result = PyTuple_Pack(2, near, listed);
+done:
+    Py_XDECREF(near);
+    Py_XDECREF(listed);
+    release(&q); release(&lo); release(&hi); release(&gap); release(&infl); release(&floor_);
+    release(&floor_q); release(&lever);
+    return result;
+}
+
 /* braking_reach(lever, dq, accelerations, jerks, dt, share, influence, margin, out): each
  * pair's influence (m) for a step of an arm with acceleration (and jerk) limits: out_k =
  * max(influence, margin + s_k (tau + T_k / (2 share))), the distance within which a damper

@@ -84,6 +84,10 @@ static PyMethodDef methods[] = {
     {"sphere_gaps", (PyCFunction)(void (*)(void))py_sphere_gaps, METH_FASTCALL,
      "sphere_gaps(views, joints, centres, pairs, span, gap): the gap (m) between the bounding "
      "spheres of each collision pair, at the joint poses of collision_rows' data views."},
+    {"refresh_pairs", (PyCFunction)(void (*)(void))py_refresh_pairs, METH_FASTCALL,
+     "refresh_pairs(q, lower, upper, gap, influence, skin, floor, kept, floor_q, lever) -> "
+     "(near, listed) | None: the collision limit's candidates and pairs to query after a "
+     "broad phase, its floors aged."},
     {"braking_reach", (PyCFunction)(void (*)(void))py_braking_reach, METH_FASTCALL,
      "braking_reach(lever, dq, accelerations, jerks, dt, share, influence, margin, out): each "
      "collision pair's influence for an arm with acceleration limits (m)."},
