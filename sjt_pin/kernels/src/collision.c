@@ -976,7 +976,25 @@ static int lever_within(const double *q, const double *ref, const double *lo, co
         if (!(q[j] >= lo[j] && q[j] <= hi[j])) return 0;
         moved[j] = fabs(q[j] - ref[j]);
     }
-    for (Py_ssize_t k = 0; k < L.m; k++) {
+    Py_ssize_t k = 0;
+    if (L.s1 == 1)  /* four pairs at a time: four sums that do not wait on each other (each
+                     * summed in the same order as one at a time) */
+        for (; k + 4 <= L.m; k += 4) {
+            const double *r0 = L.p + k * L.s0, *r1 = r0 + L.s0, *r2 = r1 + L.s0;
+            const double *r3 = r2 + L.s0;
+            double a0 = 0.0, a1 = 0.0, a2 = 0.0, a3 = 0.0;
+            for (Py_ssize_t j = 0; j < L.n; j++) {
+                double m = moved[j];
+                a0 += r0[j] * m;
+                a1 += r1[j] * m;
+                a2 += r2[j] * m;
+                a3 += r3[j] * m;
+            }
+            if (!(a0 + influence[k] < gap[k]) || !(a1 + influence[k + 1] < gap[k + 1])
+                || !(a2 + influence[k + 2] < gap[k + 2]) || !(a3 + influence[k + 3] < gap[k + 3]))
+                return 0;
+        }
+    for (; k < L.m; k++) {
         double acc = 0.0;
         for (Py_ssize_t j = 0; j < L.n; j++) acc += AT(L, k, j) * moved[j];
         if (!(acc + influence[k] < gap[k])) return 0;
