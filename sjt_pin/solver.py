@@ -324,6 +324,8 @@ class Solver:
         #: every user's limit has speed caps the kernel holds: a step within them meets their
         #: bounds, which never go below the caps, so only their rows are asked
         self._rows_only = bool(limits) and capped == len(limits)
+        #: the one such limit, whose rows are asked directly (no stacking of blocks)
+        self._only = limits[0] if self._rows_only and len(limits) == 1 else None
         if self._kernel_bounds:
             self._layout.inverse_speeds(self._work)[:] = np.where(np.isfinite(speeds),
                                                                   1.0 / speeds, 0.0)
@@ -543,7 +545,17 @@ class Solver:
         stack, user, motion = self.stack, self._user_stage, self._motion
         assert user is not None  # (for a user's limits)
         motion.q = q
-        if self._rows_only:  # (their bounds cannot cut a step the kernel kept: _hold_speeds)
+        only = self._only
+        if only is not None:  # (its bounds cannot cut a step the kernel kept)
+            rows = only.rows(stack.kinematics, motion)
+            if rows is None:
+                return True
+            if type(rows[0]) is np.ndarray and type(rows[1]) is np.ndarray:
+                rows = (rows[0], rows[1], only.name)  # (rows_step checks shapes and values)
+            else:  # (converted as the stage does)
+                rows = user.general_rows(stack.kinematics, motion, check=False)
+            lower, upper = self._no_bounds
+        elif self._rows_only:  # (their bounds cannot cut a step the kernel kept: _hold_speeds)
             rows = user.general_rows(stack.kinematics, motion, check=False)
             if rows is None:
                 return True
@@ -706,9 +718,10 @@ class Solver:
             if outcome is None:
                 outcome = Outcome(step / self._dt)
             if self._checked_rows[0] == self._count and self._checked_rows[1] is not None:
-                A, b, owners = self._checked_rows[1]
+                A, b, owners = self._checked_rows[1]  # (owners: a name for every row)
                 tight = A @ (step / self._dt) - b > -1e-9 * (1.0 + np.abs(b))
-                outcome.rows = tuple(sorted({owners[i] for i in np.flatnonzero(tight)}))
+                outcome.rows = tuple(sorted({owners if isinstance(owners, str) else owners[i]
+                                             for i in np.flatnonzero(tight)}))
             names: tuple[str, ...] = tuple(dict.fromkeys(joint for _, joint in outcome.active))
             index = {name: i for i, name in enumerate(self._v_names)}
             clamped = np.array([index[name] for name in names], dtype=np.int64)

@@ -15,7 +15,7 @@ a geometry model of its own, built from the robot's collision meshes (not the li
 hulls, not the limit's numbers; each pair's hull distance, a lower bound, picks the pairs whose
 mesh distance is computed), the task error 2 s after the target stops, the RMS joint speed over
 the last second, and the CPU time per step (process time, so other processes do not count;
-the least of three runs).
+the least of five runs).
 pink runs its ``SelfCollisionBarrier`` on a geometry model with the obstacles attached to the
 world joint (its way to handle obstacles: every pair of its collision model is a barrier row),
 on the same convex hulls as the limit, with a ``FrameTask`` and a small ``PostureTask``.
@@ -39,10 +39,11 @@ from ..trajectories import PoseInterpolation
 DT = 1e-3
 MARGIN = 0.01
 #: runs of each line whose least CPU time per step is reported (as timeit's best of
-#: several): another process's burst slows one run by up to 3x on a shared machine, and
-#: the ratio of two single runs inherits both runs' noise; the runs are deterministic (the
-#: same configurations each time), so the first one's are checked
-TIMING_RUNS = 3
+#: several), the runs without and with the limit in turn: another process's burst slows one
+#: run by up to 3x on a shared machine, and the ratio of two single runs inherits both runs'
+#: noise; the runs are deterministic (the same configurations each time), so the first
+#: one's are checked
+TIMING_RUNS = 5
 #: the hull distance (m) under which a pair's mesh distance is computed in the check
 CHECK_BELOW = 0.03
 UR5_START = np.array([0.0, -1.2, 1.5, -1.9, -1.57, 0.0])
@@ -254,21 +255,22 @@ def collision(methods=("sjt", "dls"), peers: bool = True, progress=None) -> list
                                margin=MARGIN)
         checker = Checker(scene.robot, scene.obstacles, limit.pair_names)
         for method in methods:
-            plain_us = float("nan")
-            for with_limit in (False, True):
-                runs = []
-                for _ in range(TIMING_RUNS):
+            runs: dict[bool, list] = {False: [], True: []}
+            for _ in range(TIMING_RUNS):  # (without and with in turn: both see the same load)
+                for with_limit in (False, True):
                     fence = CollisionLimit(scene.robot, scene.obstacles,
                                            self_collision=scene.self_collision, margin=MARGIN)
                     solver = make_solver(method, scene.robot, dt=DT,
                                          limits=[fence] if with_limit else ())
-                    runs.append(_run(scene, lambda q, pose, v, s=solver: s.step(q, pose, v)))
-                qs, us = runs[0][0], min(us for _, us in runs)
+                    runs[with_limit].append(
+                        (*_run(scene, lambda q, pose, v, s=solver: s.step(q, pose, v)), fence))
+            plain_us = min(us for _, us, _ in runs[False])
+            for with_limit in (False, True):
+                qs, _, fence = runs[with_limit][0]
+                us = min(us for _, us, _ in runs[with_limit])
                 row = _row(scene, method.upper(), with_limit, qs, us, checker)
                 if with_limit:
                     row.floor_us, row.rows_us = _floor(scene, fence, qs, plain_us)
-                else:
-                    plain_us = us
                 rows.append(row)
                 if progress:
                     progress(row)

@@ -915,6 +915,19 @@ class CollisionLimit(Limit):
                     self.active, self.within = [], []
                 self._witness_count = 0
                 return None
+            views, speeds = self._views, motion.velocity_limits
+            if listed and views[0] is kinematics.data and self._reaches[0] is speeds \
+                    and self._checked:  # (a step like the last: no check, views and reach)
+                key = (q.tobytes(), motion.dt, self._version, id(speeds))
+                cache = self._cache
+                if cache is not None and cache[0] is views[0] and cache[1] == key:
+                    self.active, self.within, self._witness_count = cache[2]
+                else:
+                    out = self._queried(views, listed, self._influence, self._reaches[1],
+                                        motion.dt)
+                    cache = self._cache = (views[0], key, (self.active, self.within,
+                                                           self._witness_count), out)
+                return cache[3]
         data, dt = kinematics.data, motion.dt
         accelerations, jerks = motion.acceleration_limits, motion.jerk_limits
         where = None if q is None else q.tobytes()
@@ -1000,22 +1013,29 @@ class CollisionLimit(Limit):
             listed = self._aged(q, self._near(data, q, influence, stale), influence).tolist()
         if not listed:
             return None
-        # the geometries' placements, coal's distance of each pair listed (those within
-        # influence get a row, unless it cannot bind at the speed limits: _reach), their
-        # witnesses' rows and the damper rows of them all, in one compiled call (the Python
-        # around each query and between the parts cost more than the queries)
+        self._data_views(data)
+        return self._queried(self._views, listed, influence, reach, dt)
+
+    def _queried(self, views: tuple, listed: list[int], influence: np.ndarray,
+                 reach: np.ndarray | None, dt: float) -> tuple[np.ndarray, np.ndarray] | None:
+        """The rows of the pairs ``listed`` (:attr:`active`, :attr:`within` and the witness
+        count set): the geometries' placements, coal's distance of each pair (those within
+        influence get a row, unless it cannot bind at the speed limits: :meth:`_reach`), their
+        witnesses' rows and the damper rows of them all, in one compiled call (the Python
+        around each query and between the parts cost more than the queries); ``views``:
+        :attr:`_views`, ``(data, its views or data itself)``."""
         rate = self.gain / dt
-        views = self._data_views(data)
-        out = collision_rows(self._fixed, listed, views, rate, influence, self._tick + 1.0,
+        out = collision_rows(self._fixed, listed, views[1], rate, influence, self._tick + 1.0,
                              reach, self._compute)
         if out is None:
+            self.active, self.within, self._witness_count = [], [], 0
             return None
         self.within, found, A, b, self._witness_count = out
+        self.active = found
         if not found:
             return None
-        self.active = found
         if A is None:  # a query found no closest points: its row first, then the rest
-            return self._formed_rows(data, found, rate)
+            return self._formed_rows(views[0], found, rate)
         if self.witnesses:
             self._tick += 1.0
         return A, b
