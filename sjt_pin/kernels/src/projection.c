@@ -177,7 +177,7 @@ static size_t dual_sizes(Dual *d, const double *dq, const double *lower, const d
         d->hi_count += isfinite(upper[j]) ? 1 : 0;
     }
     Py_ssize_t nc = d->nc, rows = d->rows = k + d->lo_count + d->hi_count;
-    return (size_t)(d->n + nc * nc + rows * nc + 2 * rows + rows * rows + 2 * nc
+    return (size_t)(d->n + rows * nc + 2 * rows + rows * rows + 2 * nc
                     + nonnegative_qp_scratch(rows));
 }
 
@@ -186,8 +186,7 @@ static void dual_buffers(Dual *d, double *mem, const double *moving)
 {
     Py_ssize_t nc = d->nc, rows = d->rows;
     d->cols = (Py_ssize_t *)mem;
-    d->L = mem + d->n;
-    d->C = d->L + nc * nc;
+    d->C = mem + d->n;
     d->h = d->C + rows * nc;
     d->y = d->h + rows;
     d->Q = d->y + rows;
@@ -199,24 +198,26 @@ static void dual_buffers(Dual *d, double *mem, const double *moving)
         if (moving[j] != 0.0) d->cols[c++] = j;
 }
 
-/* x0 = dq_c and L: H = Jw_c^T Jw_c + rho I factored (rho the mean of Jw_c^T Jw_c's diagonal);
+/* L: H = Jw_c^T Jw_c + rho I factored on the moving joints (rho the mean of Jw_c^T Jw_c's
+ * diagonal), the same for every dual of one projection (project_c): nc * nc doubles in L;
  * returns 0 only if the factorisation failed (not reached: H is positive definite) */
-static int dual_metric(Dual *d, const double *dq, Mat Jw)
+static int metric_factor(Mat Jw, const double *moving, double *L)
 {
-    Py_ssize_t nc = d->nc;
+    Py_ssize_t n = Jw.n, nc = 0;
+    Py_ssize_t cols[n > 0 ? n : 1];
+    for (Py_ssize_t j = 0; j < n; j++)
+        if (moving[j] != 0.0) cols[nc++] = j;
     double trace = 0.0;
     for (Py_ssize_t a = 0; a < nc; a++) {
-        d->x0[a] = dq[d->cols[a]];
         for (Py_ssize_t c = 0; c <= a; c++) {
             double acc = 0.0;
-            for (Py_ssize_t i = 0; i < Jw.m; i++)
-                acc += AT(Jw, i, d->cols[a]) * AT(Jw, i, d->cols[c]);
-            d->L[a * nc + c] = d->L[c * nc + a] = acc;
+            for (Py_ssize_t i = 0; i < Jw.m; i++) acc += AT(Jw, i, cols[a]) * AT(Jw, i, cols[c]);
+            L[a * nc + c] = L[c * nc + a] = acc;
         }
-        trace += d->L[a * nc + a];
+        trace += L[a * nc + a];
     }
     double rho = dmax(trace / (double)(nc > 0 ? nc : 1), 1e-12);
-    return nc == 0 || cholesky_factor(d->L, nc, rho);
+    return nc == 0 || cholesky_factor(L, nc, rho);
 }
 
 /* Row i of G into g (nc) and its h - G x0 into h[i]; *next walks the columns with a finite
@@ -293,19 +294,18 @@ static void dual_primal(const Dual *d, const double *lower, const double *upper,
 /* project_once_c on the rows and the finite bounds of [lower, upper] given (the others
  * -inf/inf): the dual's answer, each moving joint within those bounds. Returns the
  * passive-set solves, -1 when out of memory. */
-static int project_dual(const double *dq, Mat Jw, Mat A, const double *b, const double *lower,
-                        const double *upper, const double *moving, double *out)
+static int project_dual(const double *dq, const double *L, Py_ssize_t n, Mat A, const double *b,
+                        const double *lower, const double *upper, const double *moving,
+                        double *out)
 {
     Dual d;
-    d.n = Jw.n;
+    d.n = n;
     size_t size = dual_sizes(&d, dq, lower, upper, moving, A.m, out);
     double *mem = (double *)malloc(size * sizeof(double));
     if (!mem) return -1;
     dual_buffers(&d, mem, moving);
-    if (!dual_metric(&d, dq, Jw)) {
-        free(mem);
-        return 0;  /* not reached: H + rho I is positive definite */
-    }
+    d.L = (double *)L;  /* (read only) */
+    for (Py_ssize_t a = 0; a < d.nc; a++) d.x0[a] = dq[d.cols[a]];
     dual_problem(&d, A, b, lower, upper, moving, dq);
     int solves = nonnegative_qp_c(d.Q, d.h, d.rows, 1e-13, d.y, d.scratch);
     dual_primal(&d, lower, upper, out);
@@ -340,11 +340,10 @@ static int broken_bounds_join(const double *x, const double *lower, const double
  * the optimum of a convex problem with fewer constraints that meets the others is its optimum
  * (the speed and position bounds seldom bind where the rows do, and each bound in the dual is
  * one row more of it). Returns the passive-set solves, -1 when out of memory. */
-static int project_once_c(const double *dq, Mat Jw, Mat A, const double *b,
-                          const double *lower, const double *upper, const double *moving,
-                          double *out)
+static int project_once_c(const double *dq, const double *L, Py_ssize_t n, Mat A,
+                          const double *b, const double *lower, const double *upper,
+                          const double *moving, double *out)
 {
-    Py_ssize_t n = Jw.n;
     double *in = (double *)malloc((size_t)(2 * n + 1) * sizeof(double));
     if (!in) return -1;
     double *lo_in = in, *hi_in = in + n;
@@ -354,7 +353,7 @@ static int project_once_c(const double *dq, Mat Jw, Mat A, const double *b,
     }
     int solves = 0;
     for (Py_ssize_t round = 0; round <= 2 * n; round++) {
-        int now = project_dual(dq, Jw, A, b, lo_in, hi_in, moving, out);
+        int now = project_dual(dq, L, n, A, b, lo_in, hi_in, moving, out);
         if (now < 0) {
             solves = now;
             break;
@@ -431,19 +430,22 @@ static int rest_target_c(const double *dq, Mat Jw, const double *moving, const d
 static int project_c(const double *dq, Mat Jw, Mat A, const double *b, const double *lower,
                      const double *upper, const double *moving, double *out)
 {
-    int solves = project_once_c(dq, Jw, A, b, lower, upper, moving, out);
-    if (solves < 0) return solves;
     Py_ssize_t n = Jw.n;
+    double *L = (double *)malloc((size_t)(n * n + n + 1) * sizeof(double)), *target = L + n * n;
+    if (!L) return -1;
+    if (!metric_factor(Jw, moving, L)) {  /* not reached: H + rho I is positive definite */
+        memcpy(out, dq, (size_t)n * sizeof(double));
+        free(L);
+        return 0;
+    }
+    int solves = project_once_c(dq, L, n, A, b, lower, upper, moving, out);
     int changed = 0;
-    for (Py_ssize_t j = 0; j < n && !changed; j++) changed = out[j] != dq[j];
-    if (!changed) return solves;
-    double *target = (double *)malloc((size_t)(n > 0 ? n : 1) * sizeof(double));
-    if (!target) return -1;
-    if (rest_target_c(dq, Jw, moving, out, target)) {
-        int again = project_once_c(target, Jw, A, b, lower, upper, moving, out);
+    for (Py_ssize_t j = 0; j < n && !changed && solves >= 0; j++) changed = out[j] != dq[j];
+    if (changed && rest_target_c(dq, Jw, moving, out, target)) {
+        int again = project_once_c(target, L, n, A, b, lower, upper, moving, out);
         solves = again < 0 ? again : solves + again;
     }
-    free(target);
+    free(L);
     return solves;
 }
 
