@@ -65,15 +65,20 @@ class Sampler:
         """The numbers of ``rng.uniform(lower, upper)`` for the limited joints, then of
         ``rng.uniform(-pi, pi)`` for the others, bitwise (``low + (high - low) u`` on one draw
         of ``rng.random``: numpy's uniform checks array bounds at 10 us a call)."""
-        q = seed.copy()
-        u = rng.random(self.draws)
+        return self.many(seed, rng, 1)[0]
+
+    def many(self, seed: np.ndarray, rng: np.random.Generator, count: int) -> np.ndarray:
+        """``count`` starts (count, nq) in one draw: the same numbers as ``count`` calls in
+        turn (``rng.random`` fills its array in the order of successive calls)."""
+        q = np.repeat(seed[None, :], count, axis=0)
+        u = rng.random((count, self.draws))
         k, t = self.limited.size, self.limited.size + self.turning.size
-        q[self.limited] = self.lower + self.span * u[:k]
+        q[:, self.limited] = self.lower + self.span * u[:, :k]
         if t > k:
-            q[self.turning] += -np.pi + _TURN * u[k:t]
+            q[:, self.turning] += -np.pi + _TURN * u[:, k:t]
         if self.circle.size:
-            angles = -np.pi + _TURN * u[t:]
-            q[self.circle], q[self.circle + 1] = np.cos(angles), np.sin(angles)
+            angles = -np.pi + _TURN * u[:, t:]
+            q[:, self.circle], q[:, self.circle + 1] = np.cos(angles), np.sin(angles)
         return q
 
 
@@ -95,7 +100,7 @@ class NearStarts:
         data = model.createData()
         rng = np.random.default_rng(seed)
         neutral = pin.neutral(model)
-        self.configurations = np.array([sampler(neutral, rng) for _ in range(size)])
+        self.configurations = sampler.many(neutral, rng, size)
         self.configurations.flags.writeable = False  # next() hands out views
         frames = np.empty((size, 3, 4))
         for i, q in enumerate(self.configurations):

@@ -121,3 +121,20 @@ def test_a_table_that_does_not_fit_the_robot_is_refused(panda):
         with pytest.raises(ValueError, match="table's arrays do not fit"):
             search_pose(*call, 10, configurations, distance, search.state.copy(),
                         np.zeros(panda.nq), 1, 10, np.inf)
+
+
+def test_many_starts_are_those_of_one_call_each(ur5, continuous_wrist):
+    """Sampler.many (the table's starts in one draw) gives bitwise the starts of as many calls
+    in turn: limited joints, a continuous joint's (cos, sin), and an unlimited revolute joint
+    (UR5's last joint taken as one)."""
+    turning = Sampler(ur5)
+    turning.limited, turning.turning = turning.limited[:5], turning.limited[5:]
+    turning.lower, turning.upper = turning.lower[:5], turning.upper[:5]
+    turning.span = turning.upper - turning.lower
+    for robot, sampler in ((ur5, Sampler(ur5)), (continuous_wrist, Sampler(continuous_wrist)),
+                           (ur5, turning)):
+        seed = robot.random_configuration(np.random.default_rng(3))
+        one = [sampler(seed, rng) for rng in [np.random.default_rng(4)] for _ in range(40)]
+        many = sampler.many(seed, np.random.default_rng(4), 40)
+        np.testing.assert_array_equal(many, np.array(one))
+    assert Sampler(continuous_wrist).circle.size and turning.turning.size
