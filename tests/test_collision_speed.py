@@ -351,6 +351,52 @@ def test_the_compiled_refresh_lists_what_the_numpy_broad_phase_lists(
     assert refreshed[0] >= 6 and rows_seen >= 10  # the refresh ran, and pairs came near
 
 
+def test_near_pairs_answers_the_same_with_its_prefilter():
+    """near_pairs with the prefilter (a ninth item of skip: the lever test ordered by each
+    pair's slack over its lever's norm, the pairs far beyond reach not summed) answers exactly
+    what the whole test answers, on random levers, gaps (some infinite, some below influence)
+    and moves, a tenth of them scaled onto a pair's boundary to the last bits; and the same
+    floors after. A prefilter made for other influences is not used."""
+    rng = np.random.default_rng(19)
+    decided = {None: 0, "list": 0}
+    for trial in range(300):
+        n, npairs = int(rng.integers(1, 9)), int(rng.integers(1, 40))
+        ref = rng.normal(size=n)
+        lever = rng.uniform(0.0, 1.5, (npairs, n)) * (rng.random((npairs, n)) < 0.8)
+        gap = rng.uniform(-0.01, 0.4, npairs)
+        gap[rng.random(npairs) < 0.2] = np.inf
+        influence = np.full(npairs, 0.05)
+        near = sorted(rng.choice(npairs, int(rng.integers(0, npairs + 1)), replace=False)
+                      .tolist())
+        prefilter = np.full(1 + 3 * npairs, -1.0)
+        floor, floor_q = rng.uniform(-0.1, 0.3, npairs), ref.copy()
+        for _ in range(8):
+            move = rng.normal(size=n) * rng.uniform(0.0, 0.05)
+            k = int(rng.integers(npairs))
+            acc = lever[k] @ np.abs(move)
+            if rng.random() < 0.1 and acc > 0 and np.isfinite(gap[k]) and gap[k] > 0.05:
+                move *= (gap[k] - 0.05) / acc  # pair k's bound on its gap, up to rounding
+            q = ref + move
+            answers = []
+            for extra in ((), (prefilter,)):
+                f, fq = floor.copy(), floor_q.copy()
+                skip = (ref, ref - 1.0, ref + 1.0, lever, gap, near, f, fq) + extra
+                answers.append((K.near_pairs(q, skip, influence), f, fq))
+            assert answers[0][0] == answers[1][0]
+            np.testing.assert_array_equal(answers[0][1], answers[1][1])
+            np.testing.assert_array_equal(answers[0][2], answers[1][2])
+            decided[None if answers[0][0] is None else "list"] += 1
+        assert prefilter[0] == 1.0  # built once, on the first call
+    assert min(decided.values()) > 200  # both answers came often
+    ref, prefilter = np.zeros(2), np.full(10, -1.0)
+    skip = (ref, ref - 1.0, ref + 1.0, np.ones((3, 2)), np.full(3, 0.3), [], np.zeros(3),
+            np.zeros(2), prefilter)
+    assert K.near_pairs(ref, skip, np.full(3, 0.05)) == [] and prefilter[0] == 1.0
+    assert K.near_pairs(ref, skip, np.full(3, 1.0)) is None  # other influences: whole test
+    with pytest.raises(ValueError, match="do not fit"):
+        K.near_pairs(ref, skip[:8] + (np.zeros(9),), np.full(3, 0.05))
+
+
 def test_refresh_pairs_is_the_numpy_bookkeeping():
     """kernels.refresh_pairs against its formula on random floors, gaps and levers: the
     candidates (gap below influence plus the skin, their gaps then inf), the floors kept or

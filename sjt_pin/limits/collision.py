@@ -538,6 +538,7 @@ class CollisionLimit(Limit):
         self._pair_lever, self._flat = self._pair_levers()
         self._reference: tuple[int, np.ndarray, np.ndarray, np.ndarray, list] | None = None
         self._floor = np.full(len(self.pairs), -np.inf)
+        self._prefilter = np.full(1 + 3 * len(self.pairs), -1.0)  # (near_pairs' order)
         self._floor_q: np.ndarray | None = None  # where the floors hold (None: nowhere)
         self._influence = np.full(len(self.pairs), self.influence)  # each pair's, m
         self._braking_influence = np.zeros(len(self.pairs))  # kernels.braking_reach's output
@@ -1000,8 +1001,9 @@ class CollisionLimit(Limit):
                 and self._floor_q is not None):
             skip = self._skip
             if skip is None:  # (what near_pairs reads, since the last broad phase)
+                self._prefilter[0] = -1.0  # (near_pairs orders its test for this gap)
                 skip = self._skip = (ref[1], self._lower, self._upper, self._pair_lever, ref[3],
-                                     ref[4], self._floor, self._floor_q)
+                                     ref[4], self._floor, self._floor_q, self._prefilter)
             listed = near_pairs(q, skip, influence)
             stale = listed is None
         else:

@@ -965,16 +965,85 @@ done:
     return result;
 }
 
+/* Whether pair k's bound lever_k |q - reference| (moved) plus its influence stays under its
+ * gap */
+static int lever_holds(Mat L, Py_ssize_t k, const double *moved, const double *gap,
+                       const double *influence)
+{
+    double acc = 0.0;
+    for (Py_ssize_t j = 0; j < L.n; j++) acc += AT(L, k, j) * moved[j];
+    return acc + influence[k] < gap[k];
+}
+
+/* The order of near_pairs' test (prefilter, 1 + 3 npairs: a flag, then thresholds, pairs and
+ * the influence they were made for): each pair's r_k = s_k / |lever_k| with its slack s_k =
+ * gap_k - influence_k less 1e-12 (1 + |gap_k| + |influence_k|) (inf where the gap is; -inf
+ * where s_k is not > 0 or the lever's norm is 0 or not finite), ascending. As lever_k . m <=
+ * |lever_k| |m| (Cauchy-Schwarz), a pair with r_k (1 - 1e-9) > |m| meets the test at m, beyond
+ * the rounding of either side; the pairs are tested from the smallest r_k on, until one
+ * exceeds |m|: after a broad phase most pairs lie far beyond their influence and none of
+ * them is summed. */
+static int by_threshold(const void *a, const void *b)
+{
+    double x = ((const double *)a)[0], y = ((const double *)b)[0];
+    return (x > y) - (x < y);
+}
+
+static int prefilter_build(Mat L, const double *gap, const double *influence, double *P)
+{
+    Py_ssize_t m = L.m;
+    double *pairs = (double *)malloc((size_t)(2 * (m > 0 ? m : 1)) * sizeof(double));
+    if (!pairs) return -1;
+    for (Py_ssize_t k = 0; k < m; k++) {
+        double norm = 0.0;
+        for (Py_ssize_t j = 0; j < L.n; j++) norm += AT(L, k, j) * AT(L, k, j);
+        norm = sqrt(norm);
+        double slack = gap[k] - influence[k]
+                       - 1e-12 * (1.0 + fabs(gap[k]) + fabs(influence[k]));
+        double r = -INFINITY;
+        if (isinf(gap[k]) && gap[k] > 0 && isfinite(influence[k]) && isfinite(norm))
+            r = INFINITY;
+        else if (slack > 0.0 && norm > 0.0 && isfinite(norm))
+            r = slack / norm;
+        pairs[2 * k] = r;
+        pairs[2 * k + 1] = (double)k;
+    }
+    qsort(pairs, (size_t)m, 2 * sizeof(double), by_threshold);
+    for (Py_ssize_t i = 0; i < m; i++) {
+        P[1 + i] = pairs[2 * i];
+        P[1 + m + i] = pairs[2 * i + 1];
+        P[1 + 2 * m + i] = influence[i];
+    }
+    P[0] = 1.0;
+    free(pairs);
+    return 0;
+}
+
 /* Whether q lies in the box [lower, upper] the levers hold in and every pair's bound
  * lever |q - reference| plus its influence stays under its gap (else the broad phase must run
- * again) */
+ * again); with a prefilter (prefilter_build's, or P[0] < 0: built here first) only the pairs
+ * whose threshold does not clear |q - reference| are summed, which answers the same. -1 when
+ * out of memory. */
 static int lever_within(const double *q, const double *ref, const double *lo, const double *hi,
-                        Mat L, const double *gap, const double *influence)
+                        Mat L, const double *gap, const double *influence, double *P)
 {
-    double moved[L.n > 0 ? L.n : 1];
+    double moved[L.n > 0 ? L.n : 1], norm = 0.0;
     for (Py_ssize_t j = 0; j < L.n; j++) {
         if (!(q[j] >= lo[j] && q[j] <= hi[j])) return 0;
         moved[j] = fabs(q[j] - ref[j]);
+        norm += moved[j] * moved[j];
+    }
+    if (P) {
+        if (P[0] < 0.0 && prefilter_build(L, gap, influence, P)) return -1;
+        int same = 1;  /* (made for these influences: near_pairs' callers pass one array) */
+        for (Py_ssize_t k = 0; k < L.m && same; k++) same = P[1 + 2 * L.m + k] == influence[k];
+        if (same) {
+            norm = sqrt(norm);
+            for (Py_ssize_t i = 0; i < L.m && !(P[1 + i] * (1.0 - 1e-9) > norm); i++)
+                if (!lever_holds(L, (Py_ssize_t)P[1 + L.m + i], moved, gap, influence))
+                    return 0;
+            return 1;
+        }
     }
     Py_ssize_t k = 0;
     if (L.s1 == 1)  /* four pairs at a time: four sums that do not wait on each other (each
@@ -994,11 +1063,8 @@ static int lever_within(const double *q, const double *ref, const double *lo, co
                 || !(a2 + influence[k + 2] < gap[k + 2]) || !(a3 + influence[k + 3] < gap[k + 3]))
                 return 0;
         }
-    for (; k < L.m; k++) {
-        double acc = 0.0;
-        for (Py_ssize_t j = 0; j < L.n; j++) acc += AT(L, k, j) * moved[j];
-        if (!(acc + influence[k] < gap[k])) return 0;
-    }
+    for (; k < L.m; k++)
+        if (!lever_holds(L, k, moved, gap, influence)) return 0;
     return 1;
 }
 
@@ -1042,40 +1108,50 @@ static PyObject *pairs_to_query(PyObject *near_seq, double *floor_, double *floo
  * lever |q - reference| plus its influence (npairs,) reaches the gap (npairs,) its bounding
  * volumes had at the reference (the broad phase must run again); else the pairs of the list
  * `near` whose floor (npairs,; a lower bound of their distance at floor_q (n,), m), aged to q,
- * is not above their influence (those to query), floor_q then q. */
+ * is not above their influence (those to query), floor_q then q. A ninth item of skip, a
+ * writable prefilter (1 + 3 npairs,; its first number < 0 until the first call builds it for
+ * this gap), orders the lever test so that the pairs far beyond reach are not summed (the
+ * same answer: lever_within). */
 PyObject *py_near_pairs(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     if (!nargs_ok(nargs, 3, "near_pairs")) return NULL;
-    if (!PyTuple_Check(args[1]) || PyTuple_GET_SIZE(args[1]) != 8) {
-        PyErr_SetString(PyExc_TypeError, "near_pairs: skip must be a tuple of 8");
+    Py_ssize_t size = PyTuple_Check(args[1]) ? PyTuple_GET_SIZE(args[1]) : 0;
+    if (size != 8 && size != 9) {
+        PyErr_SetString(PyExc_TypeError, "near_pairs: skip must be a tuple of 8 or 9");
         return NULL;
     }
     PyObject *const *S = &PyTuple_GET_ITEM(args[1], 0);
     Arg q = {0}, ref = {0}, lo = {0}, hi = {0}, lever = {0}, gap = {0}, floor_ = {0},
-        floor_q = {0}, infl = {0};
+        floor_q = {0}, infl = {0}, pre = {0};
     PyObject *result = NULL;
     if (acquire(args[0], &q, 0, 1, "q") || acquire(S[0], &ref, 0, 1, "reference")
         || acquire(S[1], &lo, 0, 1, "lower") || acquire(S[2], &hi, 0, 1, "upper")
         || acquire(S[3], &lever, 0, 2, "lever") || acquire(S[4], &gap, 0, 1, "gap")
         || acquire(S[6], &floor_, 1, 1, "floor") || acquire(S[7], &floor_q, 1, 1, "floor_q")
-        || acquire(args[2], &infl, 0, 1, "influence"))
+        || acquire(args[2], &infl, 0, 1, "influence")
+        || (size == 9 && acquire(S[8], &pre, 1, 1, "prefilter")))
         goto done;
     double *qv = vec(&q, "q"), *rv = vec(&ref, "reference"), *gv = vec(&gap, "gap");
+    double *pv = size == 9 ? out_vec(&pre, "prefilter") : NULL;
     double *lov = vec(&lo, "lower"), *hiv = vec(&hi, "upper");
     double *fv = out_vec(&floor_, "floor"), *fqv = out_vec(&floor_q, "floor_q");
     double *iv = vec(&infl, "influence");
-    if (!qv || !rv || !lov || !hiv || !gv || !fv || !fqv || !iv) goto done;
+    if (!qv || !rv || !lov || !hiv || !gv || !fv || !fqv || !iv || (size == 9 && !pv))
+        goto done;
     Mat L = mat(&lever);
     Py_ssize_t n = length(&q), npairs = L.m;
     if (length(&ref) != n || length(&lo) != n || length(&hi) != n || L.n != n
         || length(&floor_q) != n || length(&gap) != npairs || length(&floor_) != npairs
-        || length(&infl) != npairs) {
+        || length(&infl) != npairs || (pv && length(&pre) != 1 + 3 * npairs)) {
         PyErr_Format(PyExc_ValueError, "near_pairs: q, reference, lower, upper, floor_q (n,), "
-                     "lever (npairs, n), gap, floor and influence (npairs,) do not fit (n %zd, "
-                     "npairs %zd)", n, npairs);
+                     "lever (npairs, n), gap, floor and influence (npairs,), prefilter (1 + 3 "
+                     "npairs,) do not fit (n %zd, npairs %zd)", n, npairs);
         goto done;
     }
-    if (!lever_within(qv, rv, lov, hiv, L, gv, iv)) {
+    int within = lever_within(qv, rv, lov, hiv, L, gv, iv, pv);
+    if (within < 0) {
+        PyErr_NoMemory();
+    } else if (!within) {
         result = Py_None;
         Py_INCREF(result);
     } else {
@@ -1083,7 +1159,7 @@ PyObject *py_near_pairs(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     }
 done:
     release(&q); release(&ref); release(&lo); release(&hi); release(&lever); release(&gap);
-    release(&floor_); release(&floor_q); release(&infl);
+    release(&floor_); release(&floor_q); release(&infl); release(&pre);
     return result;
 }
 
