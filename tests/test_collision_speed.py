@@ -359,7 +359,7 @@ def test_near_pairs_answers_the_same_with_its_prefilter():
     floors after. A prefilter made for other influences is not used."""
     rng = np.random.default_rng(19)
     decided = {None: 0, "list": 0}
-    for trial in range(300):
+    for _ in range(300):
         n, npairs = int(rng.integers(1, 9)), int(rng.integers(1, 40))
         ref = rng.normal(size=n)
         lever = rng.uniform(0.0, 1.5, (npairs, n)) * (rng.random((npairs, n)) < 0.8)
