@@ -550,10 +550,12 @@ class Solver:
             rows = only.rows(stack.kinematics, motion)
             if rows is None:
                 return True
-            if type(rows[0]) is np.ndarray and type(rows[1]) is np.ndarray:
-                rows = (rows[0], rows[1], only.name)  # (rows_step checks shapes and values)
-            else:  # (converted as the stage does)
-                rows = user.general_rows(stack.kinematics, motion, check=False)
+            A, b = rows  # (rows_step checks their shapes and values)
+            if not (type(A) is np.ndarray and type(b) is np.ndarray and A.dtype == _F64
+                    and b.dtype == _F64):  # (converted as the stage converts them)
+                A, b = np.atleast_2d(np.asarray(A, dtype=float)), np.atleast_1d(
+                    np.asarray(b, dtype=float))
+            rows = (A, b, only.name)
             lower, upper = self._no_bounds
         elif self._rows_only:  # (their bounds cannot cut a step the kernel kept: _hold_speeds)
             rows = user.general_rows(stack.kinematics, motion, check=False)
