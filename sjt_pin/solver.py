@@ -546,11 +546,12 @@ class Solver:
         assert user is not None  # (for a user's limits)
         motion.q = q
         only = self._only
+        rows: tuple | None
         if only is not None:  # (its bounds cannot cut a step the kernel kept)
-            rows = only.rows(stack.kinematics, motion)
-            if rows is None:
+            own = only.rows(stack.kinematics, motion)
+            if own is None:
                 return True
-            A, b = rows  # (rows_step checks their shapes and values)
+            A, b = own  # (rows_step checks their shapes and values)
             if not (type(A) is np.ndarray and type(b) is np.ndarray and A.dtype == _F64
                     and b.dtype == _F64):  # (converted as the stage converts them)
                 A, b = np.atleast_2d(np.asarray(A, dtype=float)), np.atleast_1d(

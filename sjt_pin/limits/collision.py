@@ -919,15 +919,15 @@ class CollisionLimit(Limit):
             views, speeds = self._views, motion.velocity_limits
             if listed and views[0] is kinematics.data and self._reaches[0] is speeds \
                     and self._checked:  # (a step like the last: no check, views and reach)
-                key = (q.tobytes(), motion.dt, self._version, id(speeds))
+                here = (q.tobytes(), motion.dt, self._version, id(speeds))  # (the cache key)
                 cache = self._cache
-                if cache is not None and cache[0] is views[0] and cache[1] == key:
+                if cache is not None and cache[0] is views[0] and cache[1] == here:
                     self.active, self.within, self._witness_count = cache[2]
                 else:
                     out = self._queried(views, listed, self._influence, self._reaches[1],
                                         motion.dt)
-                    cache = self._cache = (views[0], key, (self.active, self.within,
-                                                           self._witness_count), out)
+                    cache = self._cache = (views[0], here, (self.active, self.within,
+                                                            self._witness_count), out)
                 return cache[3]
         data, dt = kinematics.data, motion.dt
         accelerations, jerks = motion.acceleration_limits, motion.jerk_limits
@@ -1013,7 +1013,7 @@ class CollisionLimit(Limit):
             listed = self._refresh(data, q, influence)
         if listed is None:
             listed = self._aged(q, self._near(data, q, influence, stale), influence).tolist()
-        if not listed:
+        if not (isinstance(listed, list) and listed):
             return None
         self._data_views(data)
         return self._queried(self._views, listed, influence, reach, dt)
