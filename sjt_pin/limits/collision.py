@@ -703,8 +703,7 @@ class CollisionLimit(Limit):
         volumes contain their geometry, so neither test drops a pair within its influence."""
         views = self._data_views(data)
         if views is not data and not self._refine:  # (compiled: joint poses read in place)
-            gap = np.empty(len(self.pairs))
-            sphere_gaps(views, self._joint_f, self._center_local, self._pair_f, self._span, gap)
+            gap = self._sphere_gaps(views)
             return np.flatnonzero(gap < influence), gap
         oMi = data.oMi.tolist()
         H = np.concatenate([oMi[j].homogeneous for j in self._joints] + [self._world])
@@ -766,8 +765,7 @@ class CollisionLimit(Limit):
         views = self._data_views(data)
         if views is data or self._refine or self._pair_lever is None:
             return None
-        gap = np.empty(len(self.pairs))
-        sphere_gaps(views, self._joint_f, self._center_local, self._pair_f, self._span, gap)
+        gap = self._sphere_gaps(views)
         ref = self._reference
         kept = ref[4] if ref is not None and ref[0] == self._version else None
         out = refresh_pairs(q, self._lower, self._upper, gap, influence,
@@ -781,6 +779,13 @@ class CollisionLimit(Limit):
             self._floor_q = q.copy()
         self._skip = None
         return listed
+
+    def _sphere_gaps(self, views) -> np.ndarray:
+        """The gap (m) between the bounding spheres of each pair (npairs,), from the joint
+        poses the ``views`` (:meth:`_data_views`) read in place (``kernels.sphere_gaps``)."""
+        gap = np.empty(len(self.pairs))
+        sphere_gaps(views, self._joint_f, self._center_local, self._pair_f, self._span, gap)
+        return gap
 
     def _aged(self, q: np.ndarray | None, near: np.ndarray, influence: np.ndarray) -> np.ndarray:
         """The pairs of ``near`` (the last broad phase's, :meth:`_near`) to query at ``q``:
@@ -919,7 +924,7 @@ class CollisionLimit(Limit):
             views, speeds = self._views, motion.velocity_limits
             if listed and views[0] is kinematics.data and self._reaches[0] is speeds \
                     and self._checked:  # (a step like the last: no check, views and reach)
-                here = (q.tobytes(), motion.dt, self._version, id(speeds))  # (the cache key)
+                here = self._key(q, motion)
                 cache = self._cache
                 if cache is not None and cache[0] is views[0] and cache[1] == here:
                     self.active, self.within, self._witness_count = cache[2]
@@ -931,10 +936,7 @@ class CollisionLimit(Limit):
                 return cache[3]
         data, dt = kinematics.data, motion.dt
         accelerations, jerks = motion.acceleration_limits, motion.jerk_limits
-        where = None if q is None else q.tobytes()
-        key = (where, dt, self._version, id(motion.velocity_limits)) if accelerations is None \
-            else (where, dt, self._version, id(accelerations), id(jerks),
-                  motion.dq.tobytes() + motion.ddq.tobytes())
+        key = self._key(q, motion)
         cache = self._cache
         if cache is not None and q is not None and cache[0] is data and cache[1] == key:
             self.active, self.within, self._witness_count = cache[2]
@@ -962,6 +964,17 @@ class CollisionLimit(Limit):
             b.setflags(write=False)
         self._cache = (data, key, (self.active, self.within, self._witness_count), out)
         return out
+
+    def _key(self, q: np.ndarray | None, motion: Motion) -> tuple:
+        """What :meth:`rows` answers for, its cache's key: the configuration, the period, the
+        obstacles' poses (``_version``) and the motion's limits, with acceleration limits its
+        joint speeds and accelerations too."""
+        where = None if q is None else q.tobytes()
+        accelerations = motion.acceleration_limits
+        if accelerations is None:
+            return (where, motion.dt, self._version, id(motion.velocity_limits))
+        return (where, motion.dt, self._version, id(accelerations), id(motion.jerk_limits),
+                motion.dq.tobytes() + motion.ddq.tobytes())
 
     def _reach(self, speeds: np.ndarray | None) -> np.ndarray | None:
         """Each pair's reach (npairs,; m/s; kept for these ``speeds``): the fastest its
