@@ -169,11 +169,7 @@ class ConstraintStage:
             rows = limit.rows(kinematics, motion)
             if rows is None:
                 continue
-            A, b = rows
-            if not (type(A) is np.ndarray and type(b) is np.ndarray and A.dtype == _F64
-                    and b.dtype == _F64 and A.ndim == 2 and b.ndim == 1):
-                A, b = np.atleast_2d(np.asarray(A, dtype=float)), np.atleast_1d(
-                    np.asarray(b, dtype=float))
+            A, b = as_rows(rows)
             if A.shape != (b.size, self.nv):
                 raise ValueError(f"{limit!r}.rows() must return A of shape (k, {self.nv}) and "
                                  f"b of shape (k,), got {A.shape} and {b.shape}")
@@ -309,6 +305,17 @@ class ConstraintStage:
         if _inside(dq, lower, upper) and np.all(A @ dq <= b + TOLERANCE * (1 + np.abs(b))):
             return dq
         return project(dq, Jw, A, b, lower, upper, self.moving)
+
+
+def as_rows(rows) -> tuple[np.ndarray, np.ndarray]:
+    """A limit's rows ``(A, b)``, ``A q_dot <= b``, as the stage takes them: float64 arrays,
+    ``A`` (k, n) and ``b`` (k,) (one row may come as a vector; lists and integer arrays are
+    converted); ``rows`` itself where its arrays are that already."""
+    A, b = rows
+    if type(A) is np.ndarray and type(b) is np.ndarray and A.dtype == _F64 \
+            and b.dtype == _F64 and A.ndim == 2 and b.ndim == 1:
+        return rows
+    return np.atleast_2d(np.asarray(A, dtype=float)), np.atleast_1d(np.asarray(b, dtype=float))
 
 
 def active_limits(dq: np.ndarray, box: Box, limit_names: Mapping[int, str] | Sequence[str],

@@ -43,7 +43,7 @@ import numpy as np
 import pinocchio as pin
 
 from . import kernels
-from .constraints import Bounds, Box, ConstraintStage, Outcome, active_limits
+from .constraints import Bounds, Box, ConstraintStage, Outcome, active_limits, as_rows
 from .escape import SaddleEscape
 from .exceptions import ConcurrentStepError
 from .gains import FixedGain, Gain, as_gain
@@ -551,11 +551,7 @@ class Solver:
             own = only.rows(stack.kinematics, motion)
             if own is None:
                 return True
-            A, b = own  # (rows_step checks their shapes and values)
-            if not (type(A) is np.ndarray and type(b) is np.ndarray and A.dtype == _F64
-                    and b.dtype == _F64):  # (converted as the stage converts them)
-                A, b = np.atleast_2d(np.asarray(A, dtype=float)), np.atleast_1d(
-                    np.asarray(b, dtype=float))
+            A, b = as_rows(own)  # (rows_step checks their shapes and values)
             rows = (A, b, only.name)
             lower, upper = self._no_bounds
         elif self._rows_only:  # (their bounds cannot cut a step the kernel kept: _hold_speeds)

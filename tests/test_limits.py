@@ -316,18 +316,21 @@ def test_speed_caps_that_are_no_speeds_are_refused_naming_the_limit(ur5):
 
 
 class _FirstJointBack(sjt.limits.Limit):
-    """One row, ``q_dot_0 <= 0``, as float arrays or as lists of ints, and speed caps that
-    bound nothing: the solver asks such a lone limit for its rows directly."""
+    """One row, ``q_dot_0 <= 0``, as float arrays, as lists of ints or as one float vector
+    (the row alone), and speed caps that bound nothing: the solver asks such a lone limit for
+    its rows directly."""
 
     name = "back"
     uses_motion = False
 
-    def __init__(self, as_lists):
-        self.as_lists = as_lists
+    def __init__(self, form):
+        self.form = form
 
     def rows(self, kinematics, motion):
-        if self.as_lists:
+        if self.form == "lists":
             return [[1, 0, 0, 0, 0, 0]], [0]
+        if self.form == "vector":
+            return np.array([1.0, 0.0, 0.0, 0.0, 0.0, 0.0]), np.zeros(1)
         return np.array([[1.0, 0.0, 0.0, 0.0, 0.0, 0.0]]), np.zeros(1)
 
     def speed_caps(self, dt):
@@ -335,11 +338,12 @@ class _FirstJointBack(sjt.limits.Limit):
 
 
 def test_a_lone_limit_s_rows_as_lists_are_taken_as_arrays_are(ur5):
-    """Rows given as lists of ints hold as the same rows as float arrays (the same steps, the
-    same StepInfo.active_rows), and the row holds: the first joint never turns forward."""
+    """Rows given as lists of ints, or one row as a vector, hold as the same rows as float
+    arrays (the same steps, the same StepInfo.active_rows; as the stage takes them from a
+    limit without speed caps), and the row holds: the first joint never turns forward."""
     runs = []
-    for as_lists in (False, True):
-        solver = sjt.SJTSolver(ur5, dt=1e-3, limits=[_FirstJointBack(as_lists)])
+    for form in ("arrays", "lists", "vector"):
+        solver = sjt.SJTSolver(ur5, dt=1e-3, limits=[_FirstJointBack(form)])
         q = np.array([0.3, -1.2, 1.4, -0.5, 0.8, 0.1])
         target = ur5.fk(q + [0.3, 0.1, 0.0, 0.0, 0.0, 0.0])
         qs, rows = [q], []
@@ -348,6 +352,8 @@ def test_a_lone_limit_s_rows_as_lists_are_taken_as_arrays_are(ur5):
             qs.append(q)
             rows.append(solver.last.active_rows)
         runs.append((np.array(qs), rows))
-    np.testing.assert_array_equal(runs[0][0], runs[1][0])
-    assert runs[0][1] == runs[1][1] and ("back",) in runs[0][1]
+    for qs, rows in runs[1:]:
+        np.testing.assert_array_equal(runs[0][0], qs)
+        assert rows == runs[0][1]
+    assert ("back",) in runs[0][1]
     assert (np.diff(runs[0][0][:, 0]) <= 1e-12).all()
