@@ -1,0 +1,12 @@
+// sjt_pin.kernels._core: the compiled kernels, one file per idea, each registering its Python
+// entries here. Arrays cross the boundary through array.hpp's checks.
+#include <nanobind/nanobind.h>
+
+#include "array.hpp"
+#include "registry.hpp"
+
+NB_MODULE(_core, m) {
+  sjt::import_numpy();
+  m.doc() = "The compiled kernels of sjt-pin (C++17 on Eigen, bound with nanobind).";
+  sjt::register_boundary(m);
+}
