@@ -56,7 +56,7 @@ from .kernels import (
 )
 from .kinematics import Kinematics
 from .limits.base import Motion
-from .mappings import COLUMN_TOL
+from .methods.transpose import COLUMN_TOL
 from .restarts import NearStarts, Sampler
 from .tasks import PoseTask
 from .validation import integer, positive, raise_non_finite_targets
@@ -132,7 +132,7 @@ class Search:
                        .astype(float))
         # the user's limits hold at every iteration too (the URDF's position limits are the
         # search kernel's own): each displacement is a velocity over a period of 1
-        self.user_limits = solver.stage.user_limits()
+        self.user_limits = solver.user_limits
         self.kinematics = Kinematics(robot.model)
         self.state = np.zeros(STATE_SIZE)
         self._initial = np.zeros(STATE_SIZE)  # the state at every start (see aim)

@@ -8,10 +8,10 @@ from __future__ import annotations
 
 from typing import cast
 
-from .mappings import COLUMN_TOL, JP_RCOND
 from .methods import DLS, JP, JT, SJT
 from .methods.dls import DLS_DAMPING
-from .methods.transpose import FF_DAMPING
+from .methods.jp import JP_RCOND
+from .methods.transpose import COLUMN_TOL, FF_DAMPING
 from .options import SolverOptions
 from .robot import Robot
 from .solver import Solver

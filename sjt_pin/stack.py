@@ -44,8 +44,19 @@ def normalise_tasks(task, posture) -> list[Task]:
         if not isinstance(posture, PostureTask):
             raise TypeError(f"posture must be a PostureTask, got {type(posture).__name__}")
         tasks.append(posture)
-    # the tasks that take targets first: their rows are the error a step reports
-    return [t for t in tasks if t.takes_target] + [t for t in tasks if not t.takes_target]
+    return tasks
+
+
+def ordered_by_level(tasks: list[Task]) -> tuple[list[Task], list[int]]:
+    """``tasks`` in the order of their priority levels (0 first; ``None``: after every other
+    level), and within a level those that take targets first (their rows are the error a step
+    reports); and each task's level index (0, 1, ...)."""
+    given = sorted({t.priority for t in tasks if t.priority is not None})
+    rank = {p: k for k, p in enumerate(given)}
+    lowest = len(given)
+    levels = [lowest if t.priority is None else rank[t.priority] for t in tasks]
+    order = sorted(range(len(tasks)), key=lambda i: (levels[i], not tasks[i].takes_target))
+    return [tasks[i] for i in order], [levels[i] for i in order]
 
 
 def _on_frame(task: Task, frame: str) -> Task:
@@ -59,15 +70,19 @@ def _on_frame(task: Task, frame: str) -> Task:
 class TaskStack:
     """Bound tasks and the stacked buffers of their rows.
 
-    ``J`` (m, nv), ``e`` (m,) and ``ff`` (m,) hold every task's rows in order; ``sqrt_weight``
-    (m,) the weights' square roots; ``chain`` (nv,) is 1 for the joints that move at least one
-    task (``Task.joints``; a posture task moves all). With a single task, :meth:`evaluate`
-    returns that task's own arrays without copying.
+    ``J`` (m, nv), ``e`` (m,) and ``ff`` (m,) hold every task's rows, level by level
+    (:func:`ordered_by_level`); ``levels`` says which rows each priority level has:
+    ``(begin, end, identity, targets)`` — ``identity`` for a level that is a posture task's
+    rows alone, ``targets`` the level's leading rows of tasks that take targets.
+    ``sqrt_weight`` (m,) holds the weights' square roots; ``chain`` (nv,) is 1 for the joints
+    that move at least one task (``Task.joints``; a posture task moves all). With a single
+    task, :meth:`evaluate` returns that task's own arrays without copying.
     """
 
     def __init__(self, robot, tasks: list[Task]):
         self.robot = robot
-        self.tasks = [t.bind(robot) for t in tasks]
+        ordered, task_levels = ordered_by_level([t.bind(robot) for t in tasks])
+        self.tasks = ordered
         self.targeted = [t for t in self.tasks if t.takes_target]
         if not self.targeted:
             raise ValueError("a solver needs at least one task that takes a target (PoseTask, "
@@ -82,16 +97,31 @@ class TaskStack:
         #: rows of the tasks that take targets (a per-row gain has one entry for each)
         self.target_dim = sum(t.dim for t in self.targeted)
         self.posture_dim = self.dim - self.target_dim
-        #: trailing rows that are rows of the identity (a posture task's): the kernels solve
-        #: the stacked system as diagonal plus low rank, linear in nv
-        self.identity_rows = (nv if len(self.tasks) > len(self.targeted)
-                              and isinstance(self.tasks[-1], PostureTask) else 0)
         bounds = np.cumsum([0, *self.dims])
         self.slices = [slice(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
+        #: the priority levels: (begin, end, identity, targets) rows of each, top first
+        self.levels: list[tuple[int, int, bool, int]] = []
+        for level in sorted(set(task_levels)):
+            members = [k for k, lv in enumerate(task_levels) if lv == level]
+            begin, end = self.slices[members[0]].start, self.slices[members[-1]].stop
+            targets = sum(self.tasks[k].dim for k in members if self.tasks[k].takes_target)
+            identity = (level > 0 and len(members) == 1
+                        and isinstance(self.tasks[members[0]], PostureTask))
+            self.levels.append((begin, end, identity, targets))
+        #: trailing rows that are rows of the identity (a posture task's, last): the set-point
+        #: search solves the stacked system as diagonal plus low rank, linear in nv
+        self.identity_rows = (nv if self.tasks and isinstance(self.tasks[-1], PostureTask)
+                              and len(self.tasks) > len(self.targeted) else 0)
+        #: the rows of the tasks that take targets (the error a step reports), in order
+        self.error_rows = np.concatenate(
+            [np.arange(s.start, s.stop) for t, s in zip(self.tasks, self.slices, strict=True)
+             if t.takes_target]).astype(np.int64)
+        contiguous = np.array_equal(self.error_rows, np.arange(self.target_dim))
         self.J = np.zeros((self.dim, nv))
         self.e = np.zeros(self.dim)
-        #: the rows of ``e`` that are the tasks' error (without the posture rows)
-        self.error = self.e[:self.target_dim]
+        #: the rows of ``e`` that are the tasks' error (without the posture rows): a view when
+        #: they come first, else gathered (:meth:`task_error`)
+        self.error = self.e[:self.target_dim] if contiguous else None
         self.ff = np.zeros(self.dim)
         self.sqrt_weight = np.concatenate([np.ones(t.dim) if t.sqrt_weight is None
                                            else t.sqrt_weight for t in self.tasks])
@@ -104,6 +134,12 @@ class TaskStack:
         self.chain = chain
         self.n_chain = int(chain.sum())
         self.kinematics = Kinematics(model)
+        #: whether every task is one of the package's, whose rows are C-contiguous float64
+        #: arrays (a task of your own may return any array: :meth:`contiguous` converts it)
+        self.trusted = all(type(t).__module__.startswith("sjt_pin.") for t in self.tasks)
+        #: where each target-taking task sits in ``tasks`` (targets() fills those slots)
+        self._slots = [k for k, t in enumerate(self.tasks) if t.takes_target]
+        self._aligned = self._slots == list(range(len(self._slots)))
         self._tail = [None] * (len(self.tasks) - len(self.targeted))
         self._frame_set = set(self.frames)
         # per task: its index, the task, its rows, and whether its Jacobian rows are constant
@@ -117,6 +153,25 @@ class TaskStack:
                 self.J[rows] = t.compute(self.kinematics, None, None)[0]
             self._plan.append((k, t, rows, t.constant_jacobian))
 
+    @staticmethod
+    def contiguous(J, e, ff):
+        """``(J, e, ff)`` as C-contiguous float64 arrays (the compiled step reads nothing else)."""
+        return (np.ascontiguousarray(J, dtype=float), np.ascontiguousarray(e, dtype=float),
+                None if ff is None else np.ascontiguousarray(ff, dtype=float))
+
+    def task_error(self, e: np.ndarray) -> np.ndarray:
+        """The error rows of the stacked ``e`` (a view when they come first)."""
+        return e[:self.target_dim] if self.error is not None else e[self.error_rows]
+
+    def _align(self, values: list) -> list:
+        """Per-task values of the target-taking tasks, aligned with :attr:`tasks`."""
+        if self._aligned:
+            return values + self._tail
+        out: list = [None] * len(self.tasks)
+        for slot, value in zip(self._slots, values, strict=True):
+            out[slot] = value
+        return out
+
     def copy(self) -> TaskStack:
         """An independent stack on the same tasks (its own kinematics and buffers)."""
         return TaskStack(self.robot, self.tasks)
@@ -126,15 +181,15 @@ class TaskStack:
         """``target`` and ``target_velocity`` validated per task: lists aligned with
         :attr:`tasks` (``None`` for tasks that take no target, and for missing velocities).
         With one task that takes targets, ``target`` may be that target itself."""
-        targeted, tail = self.targeted, self._tail
+        targeted = self.targeted
         kind = type(target)
         mapping = kind is dict or (kind not in _NOT_MAPPINGS and isinstance(target, Mapping))
         if len(targeted) == 1 and not mapping:
             task = self.task
-            targets = [task.target(target)] + tail
+            targets = self._align([task.target(target)])
             if target_velocity is None:
                 return targets, None
-            return targets, [task.velocity(target_velocity)] + tail
+            return targets, self._align([task.velocity(target_velocity)])
         if not mapping:
             if len(self.frames) != 1:
                 raise ValueError(f"target must be a {{frame: target}} mapping for frames "
@@ -151,7 +206,7 @@ class TaskStack:
             missing = sorted(str(f) for f in set(self.frames) - set(target))
             raise ValueError(f"target must have exactly the frames {self.frames}; "
                              f"missing {missing}, unknown {unknown}")
-        targets += tail
+        targets = self._align(targets)
         if target_velocity is None:
             return targets, None
         if not (type(target_velocity) is dict or isinstance(target_velocity, Mapping)):
@@ -163,14 +218,14 @@ class TaskStack:
             except KeyError:
                 every = []
             if every:
-                return targets, every + tail
+                return targets, self._align(every)
         if not target_velocity.keys() <= self._frame_set:
             unknown = sorted(map(str, set(target_velocity) - self._frame_set))
             raise ValueError(f"target_velocity has frames {unknown} that are not task frames "
                              f"{self.frames}")
         velocities: list = [task.velocity(target_velocity[task.key])
                             if task.key in target_velocity else None for task in targeted]
-        return targets, velocities + tail
+        return targets, self._align(velocities)
 
     # -- rows --------------------------------------------------------------------------------
     def evaluate(self, q: np.ndarray, targets: list, velocities: list | None

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -30,6 +31,18 @@ def makes_no_progress(Jw: np.ndarray, ew: np.ndarray, dq: np.ndarray, ffw: np.nd
 
 
 @dataclass(frozen=True)
+class LevelInfo:
+    """One priority level of a step: ``error_norm`` (|e| of its tasks' target rows, task units;
+    0 for a posture level) and ``scale``, the share in [0, 1] of the motion its rows asked for
+    that the step kept (the projection of the achieved task velocity onto the asked one, over
+    the asked one's squared norm; 1 when the limits left the level whole)."""
+
+    priority: int
+    error_norm: float
+    scale: float
+
+
+@dataclass(frozen=True)
 class StepInfo:
     """What one ``step()`` computed, at the configuration it was given.
 
@@ -50,11 +63,14 @@ class StepInfo:
         clamped: velocity (tangent) indices — columns of J, entries of ``dq`` — of the joints
             at a bound of the constraint stage (held there while the others take over the
             task); ``clamped_joints`` are their names.
-        task_scale: the factor s in [0, 1] by which the constraint stage scaled the task
-            velocity (x_dot_d + K e) because no joint velocity within the limits could meet
-            all of it (1: the whole task).
-        active_limits: ``(limit, joint)`` name pairs of the bounds the joint velocity is on
-            (``("velocity", "torso_lift_joint")``, ``("position", "elbow_joint")``, ...).
+        task_scale: the share s in [0, 1] of the method's task motion (the first level's)
+            that the step kept: the achieved task velocity projected onto the asked one, over
+            its squared norm (1: the method's step was within every limit, or the others took
+            over what the held joints could not do).
+        active_limits: ``(limit, joint)`` name pairs of the bounds the stage held a joint on
+            (``("velocity", "torso_lift_joint")``, ``("position", "elbow_joint")``;
+            ``"braking"``: the braking that lets a joint stop where the feedback sends it,
+            under acceleration and jerk limits).
         active_rows: names of the limits whose general rows (``A q_dot <= b``) are active.
         limit_conflicts: joints whose acceleration or jerk limit had to yield to a position or
             speed limit (a start outside the range, limits changed between steps).
@@ -67,13 +83,16 @@ class StepInfo:
             the convergence floor (``ERROR_FLOOR`` times the tasks' length, see
             :class:`~sjt_pin.escape.SaddleEscape`): the joint velocity, beyond following the
             target's own velocity, lowers ``1/2 |e_w|^2`` by less than :data:`STALL_RATE` of
-            itself per second. The arm comes to rest short of the target, and the other fields
-            say why: ``task_scale == 0`` with ``active_limits`` — limits hold it (the stage
-            could not move the task along its own direction); otherwise a minimum of the error
-            — a target out of reach, or one reachable only on another branch of the inverse
-            kinematics (``solver.solve(target, q)`` searches for it; a controller does not
-            jump branches), or, for JT and SJT, a saddle that the escape tests after a window
-            of stalled steps (``escaped`` is then true on the steps that follow).
+            itself per second. The stage never stops an arm that some admissible velocity
+            would bring closer (its step is a descent direction of the error whenever one
+            exists), so the arm is at a stationary point of its error: with ``active_limits``
+            naming the limits that hold it, a minimum against them (``solver.move_to()``
+            reaches such targets by another way); without, a minimum of the error itself — a
+            target out of reach, or one reachable only on another branch of the inverse
+            kinematics — or, for JT and SJT, a saddle that the escape tests after a window of
+            stalled steps (``escaped`` is then true on the steps that follow).
+        levels: one :class:`LevelInfo` per priority level, top first: its error norm and
+            the share of its task motion the step kept.
         velocity_scale: the same as ``task_scale`` (its former name).
     """
 
@@ -93,6 +112,7 @@ class StepInfo:
     limit_conflicts: tuple[str, ...] = ()
     outside_limits: tuple[str, ...] = ()
     stalled: bool = False
+    levels: tuple[LevelInfo, ...] = ()
 
     @property
     def velocity_scale(self) -> float:
@@ -101,3 +121,51 @@ class StepInfo:
     def __repr__(self) -> str:
         return (f"StepInfo(error_norm={self.error_norm:.3g}, "
                 f"|dq|={float(np.linalg.norm(self.dq)):.3g} rad/s)")
+
+
+def step_info(controller, stack, robot, J: np.ndarray, e: np.ndarray, q: np.ndarray,
+              ff: np.ndarray | None, step: np.ndarray, owners, user, speed_by, fixed_gain,
+              alpha: bool, escaped: bool) -> StepInfo:
+    """The :class:`StepInfo` of a solver's last step from what its compiled ``controller``
+    reports (its views are read, not kept) and the step's rows ``J``, error ``e``,
+    configuration ``q``, feed-forward ``ff`` and displacement ``step`` (rad, m; its velocity
+    ``step / dt`` is the step's ``dq``); ``owners`` names the limit of each user row,
+    ``speed_by`` the limit behind each joint's speed bound; ``fixed_gain``: K as given (None
+    for "auto", whose K the controller reports); ``alpha``: whether the method has SJT's
+    scaling factors."""
+    from .constraints import active_limits
+    from .joint_ranges import outside
+
+    c = controller
+    names = robot.velocity_names
+    sw, chain = stack.sqrt_weight, stack.chain
+    Jw = sw[:, None] * J * chain
+    dq = step / c.dt
+    active = active_limits(c, names, user, speed_by)
+    joints = tuple(dict.fromkeys(joint for _, joint in active))
+    index = {name: i for i, name in enumerate(names)}
+    rows = stack.error_rows
+    ffw = np.zeros(rows.size) if ff is None else (sw * ff)[rows]
+    stalled = not escaped and makes_no_progress(Jw[rows], (sw * e)[rows], dq, ffw,
+                                                c.stall_floor_sq)
+    levels = []
+    for k, (begin, end, identity, targets) in enumerate(stack.levels):
+        Jk = Jw[begin:end]
+        asked = Jk @ (c.desired_top if k == 0 else c.desired)
+        got = Jk @ dq
+        size = float(asked @ asked)
+        scale = 1.0 if size == 0.0 else min(max(float(got @ asked) / size, 0.0), 1.0)
+        error = 0.0 if identity else float(np.linalg.norm(e[begin:begin + targets]))
+        levels.append(LevelInfo(k, error, scale))
+    return StepInfo(
+        error=np.array(stack.task_error(e), dtype=float), error_norm=math.sqrt(c.e_sq), dq=dq,
+        gain=fixed_gain if fixed_gain is not None else c.gain,
+        loop_bound=c.loop_bound if fixed_gain is None else 1.0, pose=stack.poses(),
+        alpha=c.alpha.copy() if alpha else None, escaped=escaped,
+        clamped=np.array([index[name] for name in joints], dtype=np.int64),
+        clamped_joints=joints, task_scale=c.task_scale, active_limits=active,
+        active_rows=tuple(sorted({owners[i] for i in c.rows_active})) if owners else (),
+        limit_conflicts=tuple(names[j] for j in np.flatnonzero(c.torn)),
+        outside_limits=outside(robot.model, q, robot.lower_limits, robot.upper_limits,
+                               robot.mimic_joints),
+        stalled=stalled, levels=tuple(levels))

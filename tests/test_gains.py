@@ -7,8 +7,8 @@ from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 import sjt_pin as sjt
-from sjt_pin import mappings
 
+from .reference import mappings
 from .test_pipeline import random_chain
 
 DT = 1e-3

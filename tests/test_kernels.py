@@ -7,7 +7,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sjt_pin import kernels as K
-from sjt_pin import mappings
+
+from .reference import mappings
 
 DT = 1e-3
 

@@ -7,7 +7,8 @@ from hypothesis import strategies as st
 from sjt_pin.robots.planar3 import serial_chain, to_xml
 
 import sjt_pin as sjt
-from sjt_pin import mappings
+
+from .reference import mappings
 
 
 def check_sjt_properties(J, chain_mask, revolute=True):

@@ -9,8 +9,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import sjt_pin as sjt
-from sjt_pin import mappings
 from sjt_pin.bench.random_robots import random_urdf  # the bench's random robots, shared
+
+from .reference import mappings
 
 
 def goal_near(robot, q, rng):

@@ -1,11 +1,15 @@
 """StepInfo.stalled: a solver that comes to rest short of its target says so, and says why
 (limits, or a minimum of the error); one on its way or at the target does not."""
 
+from pathlib import Path
+
 import numpy as np
 import pinocchio as pin
 import pytest
 
 import sjt_pin as sjt
+
+FIXTURES = Path(__file__).resolve().parent / "fixtures" / "urdf"
 
 #: UR10 with its elbow exactly straight, and a pose 6.6 cm off along the direction the
 #: stretched arm cannot move in (``fk(Q_STRETCHED) * exp6(TWIST)``): a true minimum of the
@@ -104,21 +108,41 @@ def test_a_stretched_elbow_at_a_minimum_rests_and_says_so():
     assert found.success and found.restarts >= 1 and abs(found.q[2]) > 0.5
 
 
-@pytest.mark.parametrize("options", [{}, {"acceleration_limits": 10.0, "jerk_limits": 5000.0}],
-                         ids=["kernel", "stage"])
-def test_an_arm_held_by_a_position_limit_says_it_stalled_and_which_limit(options):
-    """UR5 whose wrist 1 starts 2 mrad inside its lower limit, asked for a pose that the limit
-    blocks on the way: the constraint stage cannot move the task along its own direction
-    (six joints, one held), scales it to zero, and the step says so."""
+LIMITS = [{}, {"acceleration_limits": 10.0, "jerk_limits": 5000.0}]
+
+
+@pytest.mark.parametrize("options", LIMITS, ids=["bounds", "acceleration and jerk"])
+def test_an_arm_with_a_joint_at_its_limit_still_reaches_its_target(options):
+    """UR5 whose wrist 1 sits at its lower limit, asked for a pose that the limit blocks on the
+    way: the method's step pushes the wrist into the limit. Scaling the task along its own
+    direction (Saturation in the Null Space) gives scale 0 here and froze the arm 1.4 away for
+    good; the stage's least-distortion step keeps going, and the arm arrives."""
     ur5 = sjt.Robot.from_example("ur5")
     q_target = np.array([-6.072386126449824, 5.387477139779545, -3.068270570368208,
                          -6.281078043905902, 3.6155887483706675, 0.10398509194774963])
     q = q_target.copy()
     q[2] = 0.0
     solver = sjt.SJTSolver(ur5, dt=1e-3, **options)
-    for _ in range(1000):
+    speeds = ur5.velocity_limits
+    for _ in range(4000):
         q = solver.step(q, ur5.fk(q_target))
+        assert np.all(np.abs(solver.last.dq) <= speeds * (1 + 1e-9))
+        assert np.all(q >= ur5.lower_limits) and np.all(q <= ur5.upper_limits)
+    assert solver.error_norm < 1e-9 and not solver.last.stalled
+
+
+@pytest.mark.parametrize("options", LIMITS, ids=["bounds", "acceleration and jerk"])
+def test_an_arm_held_by_a_position_limit_says_it_stalled_and_which_limit(options):
+    """A one-joint arm asked to turn past its upper limit (2 rad): it turns to the limit and
+    stops there, a minimum of its error against the limit; the step says it stalled and names
+    the limit that holds it."""
+    arm = sjt.Robot.from_urdf(str(FIXTURES / "one_joint.urdf"), load_visuals=False)
+    target = arm.fk(np.array([2.6]))
+    solver = sjt.SJTSolver(arm, task=sjt.PositionTask("xy"), dt=1e-3, **options)
+    q = np.array([1.0])
+    for _ in range(3000):
+        q = solver.step(q, target.translation)
     info = solver.last
-    assert info.error_norm > 1.0 and np.abs(info.dq).max() < 1e-12  # at rest
-    assert info.stalled and info.task_scale == 0.0
-    assert ("position", "wrist_1_joint") in info.active_limits
+    assert q[0] == pytest.approx(2.0, abs=1e-12) and np.abs(info.dq).max() < 1e-12  # at rest
+    assert info.error_norm > 0.1 and info.stalled
+    assert ("position", "shoulder") in info.active_limits

@@ -4,16 +4,20 @@ A limit does not change a step itself. It says what joint velocities ``q_dot`` (
 m/s per velocity coordinate) are admissible at the step's configuration, in one of two shapes
 (the shapes of pink's ``compute_qp_inequalities(configuration, dt)``):
 
-- **bounds** on each velocity coordinate, ``lower <= q_dot <= upper`` (box rows: position,
-  speed, acceleration and jerk limits, a joint band), from :meth:`Limit.bounds`;
+- **bounds** on each velocity coordinate, ``lower <= q_dot <= upper`` (a joint band), from
+  :meth:`Limit.bounds`;
 - **general rows** ``A q_dot <= b`` computed from the step's
   :class:`~sjt_pin.kinematics.Kinematics` (a workspace bound, a collision damper), from
   :meth:`Limit.rows`.
 
-The solver's constraint stage (:mod:`sjt_pin.constraints`) intersects every limit's
-inequalities and enforces them after the method, whatever the method: joints that reach a
-bound are held there and the others take over the task; a task that cannot be met at all is
-scaled down along its own direction. A new limit is one subclass; see the README's "Extend it".
+The solver's compiled constraint stage intersects them with the built-in limits (position,
+speed, acceleration, jerk: :mod:`.position`, :mod:`.velocity`, :mod:`.acceleration`,
+:mod:`.jerk`) and enforces them after the method, whatever the method: the method's step
+where it is within every limit, else the admissible velocity nearest to it in the method's own
+metric — joints at a bound are held there and the others take over the task, and the task's
+error still falls wherever some admissible velocity makes it fall. A user's bounds and rows are
+hard limits: where they cannot hold together with the acceleration and jerk limits, those
+yield. A new limit is one subclass; see the documentation's "Extending".
 """
 
 from __future__ import annotations
@@ -50,24 +54,12 @@ class Limit:
 
     Attributes:
         name: how :class:`~sjt_pin.StepInfo` names the limit when it is active.
-        hard: ``True`` for limits the stage never gives up (positions, speeds, collisions);
-            ``False`` for smoothness limits (acceleration, jerk), which yield to the hard ones
-            when both cannot hold (a start outside the position range, limits changed between
-            steps).
         uses_motion: whether :meth:`bounds` or :meth:`rows` read ``motion.dq`` or
-            ``motion.ddq``; the solver keeps them up to date (a few microseconds a step) only
-            when one of its limits does.
-        yields_first: for a smoothness limit, whether it gives way to the other smoothness
-            limits where they contradict each other (jerk: an acceleration beyond its limit,
-            which collision rows may ask for, cannot return within one step of the jerk
-            limit, so the acceleration limit's bound wins); where none or both yield, the
-            middle of the two bounds.
+            ``motion.ddq`` (informational: the solver always keeps them).
     """
 
     name: str = "limit"
-    hard: bool = True
     uses_motion: bool = True
-    yields_first: bool = False
 
     def bounds(self, kinematics: Kinematics, motion: Motion
                ) -> tuple[np.ndarray, np.ndarray] | None:
@@ -83,12 +75,9 @@ class Limit:
 
     def speed_caps(self, dt: float) -> np.ndarray | None:
         """Speeds (nv,; rad/s or m/s, ``inf`` where none) this limit's :meth:`bounds` never go
-        below at period ``dt`` (s) and that may bound every step without changing what it
-        admits; ``None`` (the default) for none. A solver whose kernel holds its speed limits
-        holds these with them, so that a step they cut is saturated there (joints held at
-        their caps, the others taking over the task) instead of by the whole stage in Python,
-        and does not ask for :meth:`bounds` then (a step within the caps meets them);
-        :class:`~sjt_pin.StepInfo` names this limit where they bind."""
+        below at period ``dt`` (s), which the solver may hold with its speed limits instead of
+        asking :meth:`bounds` every step; ``None`` (the default) for none. A limit with caps
+        whose bounds are exactly the caps need not define :meth:`bounds`."""
         return None
 
     def __repr__(self) -> str:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from .. import mappings
 from ..validation import positive
 from .least_squares import LeastSquaresMethod
 
@@ -27,11 +26,6 @@ class DLS(LeastSquaresMethod):
     def __init__(self, damping: float = DLS_DAMPING, error_damping: float | None = None):
         super().__init__(error_damping)
         self.damping = positive(damping, "damping", "task units (m, rad)")
-
-    def matrix(self, J):
-        """``J^T (J J^T + lambda^2 I)^-1``: the mapping at its least damping (at zero error;
-        the error's term only adds to it), whose loop eigenvalues the stability check bounds."""
-        return mappings.dls_matrix(J, self.damping)
 
     def __repr__(self):
         return f"DLS(damping={self.damping:g}, error_damping={self.error_damping!r})"

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
-from .. import mappings
 from ..validation import positive
 from .least_squares import LeastSquaresMethod
+
+#: Singular values below ``JP_RCOND * sigma_max`` are treated as zero by the pseudoinverse.
+JP_RCOND = 1e-12
 
 
 class JP(LeastSquaresMethod):
@@ -22,13 +24,9 @@ class JP(LeastSquaresMethod):
 
     name = "jp"
 
-    def __init__(self, rcond: float = mappings.JP_RCOND, error_damping: float | None = None):
+    def __init__(self, rcond: float = JP_RCOND, error_damping: float | None = None):
         super().__init__(error_damping)
         self.rcond = positive(rcond, "rcond")
-
-    def matrix(self, J):
-        """``J^+``: the mapping at zero error (the error's term only damps it)."""
-        return mappings.jp_matrix(J, self.rcond)
 
     def __repr__(self):
         return f"JP(rcond={self.rcond:g}, error_damping={self.error_damping!r})"

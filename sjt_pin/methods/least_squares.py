@@ -48,9 +48,8 @@ class LeastSquaresMethod(Method):
             update (the paper's baselines).
     """
 
-    kernel = staticmethod(kernels.least_squares_step)
     damping = 0.0
-    rcond = 0.0
+    rcond = 1e-12
 
     def __init__(self, error_damping: float | None = None):
         if error_damping is not None:
@@ -71,11 +70,13 @@ class LeastSquaresMethod(Method):
             rotational = all(isinstance(t, (PoseTask, OrientationTask)) for t in tasks)
             self.lm_weight = POSE_LM_WEIGHT if rotational and tasks else LM_WEIGHT
 
-    def configure(self, work, gain, dt, n_chain):
-        super().configure(work, gain, dt, n_chain)
-        work[kernels.P_MU] = self.damping
-        work[kernels.P_RCOND] = self.rcond
-        work[kernels.P_LM] = self.lm_weight * self.length  # w L (m): the kernel multiplies |e_w|
+    def parameters(self) -> kernels.MethodParameters:
+        p = kernels.MethodParameters()
+        p.family = kernels.Family.least_squares
+        p.mu = self.damping
+        p.rcond = self.rcond
+        p.lm = self.lm_weight * self.length  # w L (m): the kernel multiplies |e_w|
+        return p
 
     def bound(self, n_chain):
         return 1.0

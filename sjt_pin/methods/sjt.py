@@ -2,12 +2,8 @@
 
 from __future__ import annotations
 
-from .. import mappings
+from .. import kernels
 from .transpose import TransposeMethod
-
-#: The floor l (m) of SJT's former default, ``alpha_i = 1 / max(J_i^T W J_i, l^2)``; the default
-#: is now relative (``FLOOR`` times the tasks' characteristic length, see ``TransposeMethod``).
-SJT_LENGTH = 0.1
 
 
 class SJT(TransposeMethod):
@@ -33,13 +29,4 @@ class SJT(TransposeMethod):
         return float(max(n_chain, 1))  # tr(J D J^T) = n_active <= n_chain
 
     def scaling_factors(self, J):
-        return mappings.scaling_factors(J, self.column_tol, self.length)
-
-    def matrix(self, J):
-        """``D J^T`` (eq. 20), or with the damped feedback ``D J^T (J D J^T + mu^2 I)^-1`` at
-        its least damping mu^2 (the error's Levenberg-Marquardt term only adds to it): the
-        mapping whose loop eigenvalues the stability check bounds."""
-        if self.feedback == "damped":
-            return mappings.damped_sjt_matrix(J, self.ff_damping ** 2, self.column_tol,
-                                              self.length)
-        return mappings.sjt_matrix(J, self.column_tol, self.length)
+        return kernels.scaling_factors(self.parameters(), J)

@@ -3,14 +3,14 @@
 from __future__ import annotations
 
 from .. import kernels
-from ..mappings import COLUMN_TOL
 from ..tasks import OrientationTask, PoseTask
 from ..validation import positive, real_number
 from .base import Method
 
-#: Feed-forward and feedback modes of the transpose methods.
-FEEDFORWARDS = {"damped": kernels.FF_DAMPED, "transpose": kernels.FF_TRANSPOSE}
-FEEDBACKS = {"damped": kernels.FB_DAMPED, "transpose": kernels.FB_TRANSPOSE}
+#: the feed-forward and feedback forms of the transpose methods
+FORMS = ("damped", "transpose")
+#: the squared column norm below which a joint counts as not moving the tasks (task units^2)
+COLUMN_TOL = 1e-10
 #: Levenberg-Marquardt weight of the damped feedback: its damping is mu^2 + LM_WEIGHT |e_w|
 #: sqrt(max alpha), a bound of the curvature of 1/2 |e_w|^2 on the unit-norm columns that the
 #: linear model leaves out (unit-free); the same term bounds the transpose feedback's gain.
@@ -36,12 +36,12 @@ class TransposeMethod(Method):
 
     Args:
         feedforward: ``"damped"``: the desired velocity through
-            ``D J^T (J D J^T + mu^2 I)^-1`` — a least-squares solve on the columns
-            ``J sqrt(D)`` of unit norm, unit-free, damped by ``ff_damping`` near
+            ``S J^T (J S J^T + mu^2 I)^-1`` — a least-squares solve on the columns
+            ``J sqrt(S)`` (of unit norm for SJT: unit-free), damped by ``ff_damping`` near
             singularities — while the feedback keeps ``S J^T K e``; ``"transpose"``: through
             ``S J^T`` like the feedback, exactly the paper's eq. (10) / (21).
         feedback: ``"transpose"``: ``S J^T K e`` (eq. 10, 21); ``"damped"``: the feedback goes
-            through the damped solve too, ``D J^T (J D J^T + lambda I)^-1 (x_dot_d + K e)``,
+            through the damped solve too, ``S J^T (J S J^T + lambda I)^-1 (x_dot_d + K e)``,
             ``lambda = mu^2 + w |e_w| sqrt(max alpha)`` — the damped least squares of the
             unit-norm columns, with a Levenberg-Marquardt term that grows with the error (w:
             ``LM_WEIGHT``, or ``POSE_LM_WEIGHT`` for SJT on pose and orientation rows only;
@@ -51,21 +51,19 @@ class TransposeMethod(Method):
             the tasks (alpha_i = 0 instead of a division by almost zero).
         length: the floor l (m) under the column norms: ``alpha_i = 1 / max(J_i^T W J_i,
             l^2)``; ``None``: ``FLOOR`` times the characteristic length of the solver's tasks
-            (set by :meth:`scale`), so that it follows the robot's size and length unit.
+            (set by :meth:`adapt`), so that it follows the robot's size and length unit.
     """
 
     stalls = True
-    kernel = staticmethod(kernels.transpose_step)
     scaled = False
 
     def __init__(self, feedforward: str = "damped", ff_damping: float = FF_DAMPING,
                  column_tol: float = COLUMN_TOL, length: float | None = 0.0,
                  feedback: str = "transpose"):
-        if feedforward not in FEEDFORWARDS:
-            raise ValueError(f"feedforward must be one of {sorted(FEEDFORWARDS)}, "
-                             f"got {feedforward!r}")
-        if feedback not in FEEDBACKS:
-            raise ValueError(f"feedback must be one of {sorted(FEEDBACKS)}, got {feedback!r}")
+        if feedforward not in FORMS:
+            raise ValueError(f"feedforward must be one of {sorted(FORMS)}, got {feedforward!r}")
+        if feedback not in FORMS:
+            raise ValueError(f"feedback must be one of {sorted(FORMS)}, got {feedback!r}")
         if feedback == "damped" and feedforward != "damped":
             raise ValueError("feedback='damped' sends the feed-forward through the damped solve "
                              "too: it needs feedforward='damped'")
@@ -75,7 +73,7 @@ class TransposeMethod(Method):
         self.lm_weight = LM_WEIGHT
         self.ff_damping = positive(ff_damping, "ff_damping")
         self.column_tol = positive(column_tol, "column_tol", "task units squared")
-        #: whether ``length`` follows the tasks' characteristic length (see :meth:`scale`)
+        #: whether ``length`` follows the tasks' characteristic length (see :meth:`adapt`)
         self.relative = length is None
         self.length = 0.0 if length is None else real_number(length, "length", "m")
         if not 0.0 <= self.length < float("inf"):
@@ -87,20 +85,20 @@ class TransposeMethod(Method):
         rotational = all(isinstance(t, (PoseTask, OrientationTask)) for t in tasks)
         self.lm_weight = POSE_LM_WEIGHT if self.scaled and rotational and tasks else LM_WEIGHT
 
-    def configure(self, work, gain, dt, n_chain):
-        super().configure(work, gain, dt, n_chain)
-        work[kernels.P_MU] = self.ff_damping
-        work[kernels.P_COL_TOL] = self.column_tol
-        work[kernels.P_SCALED] = 1.0 if self.scaled else 0.0
-        work[kernels.P_LENGTH2] = self.length**2
-        work[kernels.P_FB_MODE] = FEEDBACKS[self.feedback]
-        work[kernels.P_LM] = self.lm_weight
+    def parameters(self) -> kernels.MethodParameters:
+        p = kernels.MethodParameters()
+        p.family = kernels.Family.transpose
+        p.scaled = self.scaled
+        p.damped_feedback = self.feedback == "damped"
+        p.damped_feedforward = self.feedforward == "damped"
+        p.mu = self.ff_damping
+        p.column_tol = self.column_tol
+        p.length2 = self.length ** 2
+        p.lm = self.lm_weight
+        return p
 
     def bound(self, n_chain):
         return 1.0 if self.feedback == "damped" else None
-
-    def feedforward_mode(self):
-        return FEEDFORWARDS[self.feedforward]
 
     def __repr__(self):
         return (f"{type(self).__name__}(feedforward={self.feedforward!r}, "

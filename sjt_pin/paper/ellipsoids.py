@@ -1,6 +1,6 @@
 """Analysis of a mapping M(J): motion ellipsoids (paper Section 3.3) and stability bounds.
 
-Pure numpy on top of :mod:`sjt_pin.mappings`.
+Pure numpy on the matrices of :meth:`sjt_pin.methods.Method.matrix`.
 """
 
 from __future__ import annotations
@@ -9,7 +9,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..mappings import max_loop_eigenvalue
+
+def max_loop_eigenvalue(J: np.ndarray, M: np.ndarray) -> float:
+    """Largest eigenvalue of the loop matrix ``J M`` (m x m): the discrete loop
+    ``e_{k+1} = (I - dt K J M) e_k`` is stable iff ``k dt lambda_max(J M) < 2``."""
+    JM = J @ M
+    return float(np.linalg.eigvalsh(0.5 * (JM + JM.T))[-1]) if JM.size else 0.0
 
 
 @dataclass

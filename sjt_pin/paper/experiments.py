@@ -34,7 +34,7 @@ from ..extras import require
 
 require("yourdfpy")  # the planar arms are generated as URDF
 
-from ..mappings import jt_matrix, sjt_matrix  # noqa: E402
+from ..methods import JT, SJT  # noqa: E402
 from ..robot import Robot  # noqa: E402
 from ..robots import planar3 as generator  # noqa: E402
 from ..solvers import make_solver  # noqa: E402
@@ -326,8 +326,8 @@ def ellipsoids(postures: int = 5) -> list[dict]:
             "q": q,
             "elbow": arm.fk(q, frame="link2").translation[:2],
             "hand": pose.translation[:2],
-            "jt": motion_ellipsoid(jt_matrix(J)),
-            "sjt": motion_ellipsoid(sjt_matrix(J)),
+            "jt": motion_ellipsoid(JT(feedforward="transpose").matrix(J)),
+            "sjt": motion_ellipsoid(SJT(feedforward="transpose").matrix(J)),
         })
     return out
 

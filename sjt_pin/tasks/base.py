@@ -36,6 +36,16 @@ def checked_weight(weight) -> np.ndarray:
     return w
 
 
+def checked_priority(priority) -> int | None:
+    """``priority`` as an int >= 0, or ``None`` (below every other level)."""
+    if priority is None:
+        return None
+    if isinstance(priority, bool) or not isinstance(priority, (int, np.integer)) or priority < 0:
+        raise ValueError(f"priority must be an int >= 0 (0: the highest level) or None (the "
+                         f"lowest), got {priority!r}")
+    return int(priority)
+
+
 def jlog6_rows(error: np.ndarray, J: np.ndarray) -> np.ndarray:
     """``Jlog6(N^-1) J`` for a pose error ``error = log6(N)`` (6,) and its rows ``J`` (6, nv):
     the pose tasks' :meth:`Task.error_jacobian`."""
@@ -52,7 +62,11 @@ class Task(ABC):
         weight: a positive number or one per row (dimensionless): rows are weighted in the
             least-squares sense, the mappings see ``sqrt(W) J`` and ``sqrt(W) e``, so SJT's
             scaling factors become ``alpha_i = 1 / (J_i^T W J_i)`` (eq. 18 with a weighted
-            norm).
+            norm). Weights order tasks within one priority level.
+        priority: the task's level (an int >= 0; 0, the default, is the highest). A lower
+            level moves only in the null space of the levels above it, so it costs them
+            nothing where the limits allow (Siciliano and Slotine's recursion); ``None``: below
+            every other level (a posture task's default).
 
     A task given to a solver is bound to its robot (:meth:`bind` returns a copy), so one task
     object can serve several solvers.
@@ -64,9 +78,10 @@ class Task(ABC):
     #: whether the Jacobian rows never change (the stack then copies them once)
     constant_jacobian: ClassVar[bool] = False
 
-    def __init__(self, frame: str | None = None, weight=None):
+    def __init__(self, frame: str | None = None, weight=None, priority: int | None = 0):
         if frame is not None and not isinstance(frame, str):
             raise TypeError(f"frame must be a frame name (str) or None, got {frame!r}")
+        self.priority = checked_priority(priority)
         self.frame = frame
         self._weight = weight
         self.sqrt_weight: np.ndarray | None = None

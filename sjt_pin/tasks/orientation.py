@@ -30,8 +30,9 @@ class OrientationTask(Task):
 
     dim = 3
 
-    def __init__(self, frame: str | None = None, weight=None, length: float | None = None):
-        super().__init__(frame, weight)
+    def __init__(self, frame: str | None = None, weight=None, length: float | None = None,
+                 priority: int | None = 0):
+        super().__init__(frame, weight, priority)
         self.length = checked_length(length)
         self._offset = np.eye(3)  # R^T R_d at the last compute
 

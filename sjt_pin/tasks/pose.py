@@ -93,8 +93,9 @@ class PoseTask(Task):
 
     dim = 6
 
-    def __init__(self, frame: str | None = None, weight=None, length: float | None = None):
-        super().__init__(frame, weight)
+    def __init__(self, frame: str | None = None, weight=None, length: float | None = None,
+                 priority: int | None = 0):
+        super().__init__(frame, weight, priority)
         self.length = checked_length(length)
         self._ff = np.zeros(6)
         self._error = np.zeros(6)  # e at the last compute

@@ -26,14 +26,15 @@ class PositionTask(Task):
     ``alpha_i = 1 / max(|J_i|^2, l^2)``, so ``|q_dot_i| <= k |e| / l``.
     """
 
-    def __init__(self, axes: str = "xyz", frame: str | None = None, weight=None):
+    def __init__(self, axes: str = "xyz", frame: str | None = None, weight=None,
+                 priority: int | None = 0):
         if (not isinstance(axes, str) or not axes or set(axes) - set(_AXES)
                 or len(set(axes)) != len(axes)):
             raise ValueError(f"axes must be a non-empty subset of 'xyz', got {axes!r}")
         self.axes = axes
         self.dim = len(axes)
         self._rows = np.array([_AXES[a] for a in axes], dtype=np.int64)
-        super().__init__(frame, weight)
+        super().__init__(frame, weight, priority)
 
     def bind(self, robot):
         bound = super().bind(robot)

@@ -11,22 +11,25 @@ from .base import Task, checked_weight
 class PostureTask(Task):
     """Every joint pulled toward ``q_ref`` (nv rows; rad or m per joint), for redundant robots.
 
-    Stacked under the other tasks with a low ``weight`` (dimensionless per joint, default
-    1e-2), it keeps the self-motion of a 7-DoF arm from drifting over long runs at the price of
-    a small bias of the main tasks of order ``weight``. Its error is ``q_ref ⊖ q`` (Pinocchio's
-    ``difference``), its rows the identity; SJT's scaling factors then become
-    ``alpha_i = 1 / (J_i^T W J_i + weight_i)``, and the loop's eigenvalues stay in [0, n].
-    ``q_ref`` defaults to the robot's ``q0``. It takes no target: ``step`` leaves it out of the
-    targets and its rows take the scalar gain (the mean gain when the gain is given per row).
+    By default (``priority=None``) it is the lowest priority level: it moves the joints only in
+    the null space of the tasks above it, so their tracking is the same with or without it,
+    and it keeps the self-motion of a 7-DoF arm from drifting over long runs. There its joint
+    velocity is ``weight K (q_ref ⊖ q)`` (K: the solver's gain, ``1/dt`` for "auto"), so
+    ``weight`` (dimensionless per joint, default 1e-2) sets how fast it pulls: a time constant
+    of ``dt / weight``, 0.1 s at 1 kHz. Given ``priority=0`` it is stacked with the tasks
+    instead, a weighted compromise that biases them by about ``weight``. Its error is
+    ``q_ref ⊖ q`` (Pinocchio's ``difference``), its rows the identity; ``q_ref`` defaults to
+    the robot's ``q0``. It takes no target: ``step`` leaves it out of the targets, and its rows
+    take the scalar gain (the mean gain when the gain is given per row).
     """
 
     takes_target = False
     constant_jacobian = True
 
-    def __init__(self, q_ref=None, weight=1e-2):
+    def __init__(self, q_ref=None, weight=1e-2, priority: int | None = None):
         self.q_ref = None if q_ref is None else as_vector(q_ref, "q_ref")
         self.weight = checked_weight(weight)
-        super().__init__(None, None)
+        super().__init__(None, None, priority)
 
     def bind(self, robot):
         bound = super().bind(robot)

@@ -32,7 +32,8 @@ class RelativePoseTask(Task):
 
     dim = 6
 
-    def __init__(self, frame: str, reference: str, weight=None, name: str | None = None):
+    def __init__(self, frame: str, reference: str, weight=None, name: str | None = None,
+                 priority: int | None = 0):
         if not isinstance(frame, str) or not isinstance(reference, str):
             raise TypeError(f"frame and reference must be frame names, got {frame!r}, "
                             f"{reference!r}")
@@ -40,7 +41,7 @@ class RelativePoseTask(Task):
             raise ValueError(f"frame and reference must differ, got {frame!r} twice")
         if name is not None and not isinstance(name, str):
             raise TypeError(f"name must be a str or None, got {name!r}")
-        super().__init__(frame, weight)
+        super().__init__(frame, weight, priority)
         self.reference = reference
         self.name = f"{frame} in {reference}" if name is None else name
         self.reference_id = -1

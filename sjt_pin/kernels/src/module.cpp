@@ -9,4 +9,8 @@ NB_MODULE(_core, m) {
   sjt::import_numpy();
   m.doc() = "The compiled kernels of sjt-pin (C++17 on Eigen, bound with nanobind).";
   sjt::register_boundary(m);
+  sjt::register_controller(m);
+  sjt::register_braking(m);
+  sjt::register_projection(m);
+  sjt::register_method(m);
 }

@@ -15,9 +15,8 @@ damped sjt    D J^T (J D J^T + lambda I)^-1     SJT's D as the columns' scale of
                                                 least-squares step (this package's default)
 ============  ================================  ==========================================
 
-They are the reference formulas: the step kernels (:mod:`.kernels`) compute ``M(J) v`` without
-forming M and are tested against these; the paper's analysis (motion ellipsoids, stability
-bounds) uses them directly.
+They are the tests' reference formulas: the compiled step (``sjt_pin.kernels``) computes
+``M(J) v`` without forming M, and ``tests/`` checks it against these.
 """
 
 from __future__ import annotations

@@ -1,0 +1,151 @@
+// Each joint's box on this step's velocity (bounds.hpp).
+#include "bounds.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "braking.hpp"
+
+namespace sjt {
+
+namespace {
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
+inline void tighten_hi(double value, int8_t reason, double& hi, int8_t& by) {
+  if (value < hi) {
+    hi = value;
+    by = reason;
+  }
+}
+inline void tighten_lo(double value, int8_t reason, double& lo, int8_t& by) {
+  if (value > lo) {
+    lo = value;
+    by = reason;
+  }
+}
+
+}  // namespace
+
+void JointBox::resize(Index n) {
+  for (Vector* x : {&lo, &hi, &hard_lo, &hard_hi, &soft_lo, &soft_hi}) x->resize(n);
+  lo_by.resize(n);
+  hi_by.resize(n);
+  torn.resize(n);
+  soft_lo_by.resize(n);
+  soft_hi_by.resize(n);
+}
+
+void joint_box(const BoundsConfig& config, double dt, const double* q, const Vector& v,
+               const Vector& a, const Vector& fb, const Vector& ff, const Vector& delta,
+               const double* user_lo, const double* user_hi, JointBox& out) {
+  const Index n = config.nv;
+  out.resize(n);
+  std::vector<int8_t>& soft_lo_by = out.soft_lo_by;
+  std::vector<int8_t>& soft_hi_by = out.soft_hi_by;
+  const double keep = 1.0 - BoundsConfig::kReserve;
+  for (Index j = 0; j < n; ++j) {
+    double hl = -config.speed[j], hh = config.speed[j];
+    int8_t hl_by = std::isfinite(hl) ? kVelocity : kNone, hh_by = hl_by;
+    if (user_lo && user_lo[j] > hl) hl = user_lo[j], hl_by = kUser;
+    if (user_hi && user_hi[j] < hh) hh = user_hi[j], hh_by = kUser;
+    double sl = -kInf, sh = kInf;
+    int8_t sl_by = kNone, sh_by = kNone;
+    if (config.smooth && config.moving[j] != 0.0) {
+      const double A = config.acceleration[j], J = config.jerk[j];
+      sl = v[j] - A * dt, sh = v[j] + A * dt;
+      sl_by = sh_by = kAcceleration;
+      if (std::isfinite(J)) {
+        const double jl = v[j] + a[j] * dt - J * dt * dt, jh = v[j] + a[j] * dt + J * dt * dt;
+        if (jh >= sl && jl <= sh) {  // (else the jerk yields to the acceleration limit)
+          tighten_lo(jl, kJerk, sl, sl_by);
+          tighten_hi(jh, kJerk, sh, sh_by);
+        }
+        // the speed limit can still be held once the acceleration ramps down
+        const double V = config.speed[j];
+        if (std::isfinite(V)) {
+          tighten_hi(std::max(sl, approach_top(v[j], std::max(V, v[j]), dt, J)), kJerk, sh, sh_by);
+          tighten_lo(std::min(sh, -approach_top(-v[j], std::max(V, -v[j]), dt, J)), kJerk, sl,
+                     sl_by);
+        }
+        // approach the method's velocity without passing it
+        const double u = fb[j] + ff[j];
+        if (u > v[j]) tighten_hi(std::max(sl, approach_top(v[j], u, dt, J)), kBraking, sh, sh_by);
+        if (u < v[j]) tighten_lo(std::min(sh, -approach_top(-v[j], -u, dt, J)), kBraking, sl, sl_by);
+      }
+      // brake the feedback so that the joint can stop where it sends it (relative to the
+      // feed-forward's velocity)
+      const double d = delta[j];
+      if (d > 0.0) {
+        const double f = ff[j];
+        const double top = f + largest_stoppable(sl - f, sh - f, v[j] - f, d, dt, keep * A, keep * J);
+        tighten_hi(std::max(sl, top), kBraking, sh, sh_by);
+      } else if (d < 0.0) {
+        const double f = ff[j];
+        const double top = f - largest_stoppable(f - sh, f - sl, f - v[j], -d, dt, keep * A, keep * J);
+        tighten_lo(std::min(sh, top), kBraking, sl, sl_by);
+      }
+    }
+    if (config.moving[j] == 0.0) {  // no task moves it: it stays
+      hl = std::max(hl, 0.0), hh = std::min(hh, 0.0);
+      hl_by = hh_by = kFixed;
+    }
+    out.hard_lo[j] = hl, out.hard_hi[j] = hh, out.soft_lo[j] = sl, out.soft_hi[j] = sh;
+    out.lo_by[j] = hl_by, out.hi_by[j] = hh_by;
+    soft_lo_by[j] = sl_by, soft_hi_by[j] = sh_by;
+  }
+  // position limits (hard), planned within the smooth box
+  for (const PositionRange& r : config.ranges) {
+    const Index j = r.v;
+    if (config.moving[j] == 0.0) continue;
+    const double x = q[r.q];
+    const double room_up = r.upper - x, room_down = x - r.lower;
+    if (room_up < 0.0 || room_down < 0.0) {  // outside: back toward the range, ramped
+      const bool above = room_up < 0.0;
+      double back = std::min(r.recovery, std::abs(above ? room_up : room_down) / dt);
+      if (config.smooth) {
+        const double toward = std::max(above ? -v[j] : v[j], 0.0);
+        const double A = config.acceleration[j], J = config.jerk[j];
+        back = std::min(back, approach_top(toward, std::max(back, toward), dt, J));
+        back = std::min(back, toward + A * dt);
+      }
+      const double value = above ? -back : back;
+      out.hard_lo[j] = out.hard_hi[j] = value;
+      out.lo_by[j] = out.hi_by[j] = kPosition;
+      continue;
+    }
+    double up = room_up / dt, down = room_down / dt;
+    if (config.smooth) {
+      const double A = keep * config.acceleration[j], J = keep * config.jerk[j];
+      double lo = std::max(out.soft_lo[j], out.hard_lo[j]), hi = std::min(out.soft_hi[j], out.hard_hi[j]);
+      if (lo > hi) lo = out.soft_lo[j], hi = out.soft_hi[j];
+      up = std::min(up, largest_stoppable(lo, hi, v[j], room_up, dt, A, J));
+      down = std::min(down, largest_stoppable(-hi, -lo, -v[j], room_down, dt, A, J));
+    }
+    // (a braking bound no tighter than the smooth box is that box's, not the position's)
+    up = std::max(up, 0.0), down = std::max(down, 0.0);
+    if (up < out.soft_hi[j]) tighten_hi(up, kPosition, out.hard_hi[j], out.hi_by[j]);
+    if (-down > out.soft_lo[j]) tighten_lo(-down, kPosition, out.hard_lo[j], out.lo_by[j]);
+  }
+  // the combined box: the hard one wins where they are apart
+  for (Index j = 0; j < n; ++j) {
+    double lo = out.hard_lo[j], hi = out.hard_hi[j];
+    int8_t lo_by = out.lo_by[j], hi_by = out.hi_by[j];
+    tighten_lo(out.soft_lo[j], soft_lo_by[j], lo, lo_by);
+    tighten_hi(out.soft_hi[j], soft_hi_by[j], hi, hi_by);
+    out.torn[j] = lo > hi;
+    if (out.torn[j]) {
+      const double near = std::min(std::max(out.soft_hi[j] < out.hard_lo[j] ? out.soft_hi[j]
+                                                                             : out.soft_lo[j],
+                                            out.hard_lo[j]),
+                                   out.hard_hi[j]);
+      lo = hi = near;
+      lo_by = near == out.hard_lo[j] ? out.lo_by[j] : out.hi_by[j];
+      hi_by = lo_by;
+    }
+    out.lo[j] = lo, out.hi[j] = hi, out.lo_by[j] = lo_by, out.hi_by[j] = hi_by;
+  }
+}
+
+}  // namespace sjt

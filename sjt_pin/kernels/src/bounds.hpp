@@ -1,0 +1,72 @@
+// Each joint's bounds on this step's velocity (rad/s or m/s) from the built-in limits, in two
+// classes: hard (position, speed, a user's bounds) and smooth (acceleration, jerk, and the
+// braking that lets each joint stop where the feedback sends it). Where the two contradict each
+// other the hard box wins: the velocity is its point nearest the smooth box, and the joint is
+// reported torn (StepInfo.limit_conflicts).
+//
+// With acceleration limits A (and jerk limits J), from the last commanded velocity v and
+// acceleration a:
+// - acceleration: |x - v| <= A dt; jerk: |x - v - a dt| <= J dt^2 (the jerk yields to the
+//   acceleration limit where the two boxes are apart);
+// - the speed limit can still be held: x + a+|a+| / (2 J) <= V, a+ = (x - v) / dt;
+// - approach: toward the method's velocity u without passing it, x + a+^2 / (2 J) <= u;
+// - feedback braking: the joint can still stop (within (1 - RESERVE) A and J) before the
+//   displacement delta the feedback asks of it, relative to the feed-forward's velocity;
+// - position limits: the joint can still stop (same reserve) before each limit, and never
+//   passes it within the step; a joint outside its range returns at its recovery speed, ramped.
+// Together they make a target reached monotonically and at rest: each joint follows a
+// jerk-limited braking profile toward where the feedback sends it, within about 1.1-1.7 times
+// the time-optimal (Ruckig's) duration, never above a limit.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "array.hpp"
+
+namespace sjt {
+
+// which limit set a bound (StepInfo.active_limits names them)
+enum Reason : int8_t {
+  kNone = 0,
+  kPosition = 1,
+  kVelocity = 2,
+  kAcceleration = 3,
+  kJerk = 4,
+  kBraking = 5,  // the feedback's braking or approach (a smoothness bound)
+  kUser = 6,     // a user limit's bounds
+  kFixed = 7,    // a joint no task moves
+};
+
+struct PositionRange {
+  Index q = 0, v = 0;  // index in q and in the velocity
+  double lower = 0.0, upper = 0.0, recovery = 1.0;
+};
+
+struct BoundsConfig {
+  Index nv = 0;
+  Vector speed;                        // (nv) inf: none
+  std::vector<PositionRange> ranges;   // limited 1-DoF joints
+  bool smooth = false;                 // acceleration limits given
+  Vector acceleration, jerk;           // (nv) jerk inf: none
+  Vector moving;                       // (nv) 1: a task moves the joint
+  static constexpr double kReserve = 0.2;  // share of A and J a braking plan keeps in reserve
+};
+
+struct JointBox {
+  Vector lo, hi;                            // the combined box
+  Vector hard_lo, hard_hi, soft_lo, soft_hi;
+  std::vector<int8_t> lo_by, hi_by;         // Reason of each bound
+  std::vector<uint8_t> torn;                // the hard box overrode the smooth one
+  std::vector<int8_t> soft_lo_by, soft_hi_by;
+  void resize(Index n);
+};
+
+// The box of this step. q: the configuration; v, a: last velocity and acceleration; fb, ff: the
+// method's feedback and feed-forward velocity; delta: the displacement the feedback asks of each
+// joint (fb / K); user_lo/user_hi: a user's hard bounds (may be null).
+void joint_box(const BoundsConfig& config, double dt, const double* q, const Vector& v,
+               const Vector& a, const Vector& fb, const Vector& ff, const Vector& delta,
+               const double* user_lo, const double* user_hi, JointBox& out);
+
+}  // namespace sjt

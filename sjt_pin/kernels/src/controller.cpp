@@ -1,0 +1,345 @@
+// One CLIK step after the tasks (controller.hpp).
+#include "controller.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+namespace sjt {
+
+namespace {
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+constexpr double kBoundTol = 1e-12;  // rad/s: a velocity this close to a bound is on it
+// keeping the task's direction is taken alone while it leaves at least this share of the
+// progress the unconstrained projection makes (which is at most the whole step's)
+constexpr double kUseful = 0.1;
+// beta of the first projection: a task motion off the method's direction costs this much more
+constexpr double kKeepDirection = 1e4;
+
+}  // namespace
+
+Controller::Controller(const MethodParameters& method_, Index rows, Index nv_, Index nq_,
+                       double dt, const Vector& sqrt_weight_, const Vector& gains_,
+                       const Vector& moving_, Index error_rows_,
+                       const std::vector<Level>& levels_, const BoundsConfig& bounds_,
+                       double stall_ratio_, double stall_floor_)
+    : m(rows), nv(nv_), nq(nq_), error_rows(error_rows_), sqrt_weight(sqrt_weight_),
+      gains(gains_), moving(moving_), levels(levels_), bounds(bounds_),
+      stall_ratio(stall_ratio_), stall_floor(stall_floor_), dt_(dt) {
+  method.p = method_;
+  lower_.p = method_;
+  lower_.p.damped_feedback = true;  // lower levels solve for their task velocity
+  lower_.p.lm = 0.0;
+  if (sqrt_weight.size() != m || gains.size() != m) fail("sqrt_weight and gains must have one entry per row");
+  if (moving.size() != nv) fail("moving must have one entry per velocity coordinate");
+  if (levels.empty()) levels.push_back(Level{0, m, false, error_rows});
+  Index expect = 0;
+  for (const Level& l : levels) {
+    if (l.begin != expect || l.end < l.begin || l.end > m || l.targets > l.end - l.begin)
+      fail("levels must cover the rows in order, each (begin, end, identity, targets)");
+    if (l.identity && l.end - l.begin != nv) fail("an identity level has one row per joint");
+    expect = l.end;
+  }
+  if (expect != m) fail("levels must cover every row");
+  if (levels[0].identity) fail("the first level cannot be a posture's identity rows alone");
+  bounds.nv = nv;
+  if (bounds.speed.size() != nv || bounds.moving.size() != nv) fail("bounds: speed and moving need nv entries");
+  if (bounds.smooth && (bounds.acceleration.size() != nv || bounds.jerk.size() != nv))
+    fail("bounds: acceleration and jerk need nv entries");
+  for (const PositionRange& r : bounds.ranges)
+    if (r.q < 0 || r.q >= nq || r.v < 0 || r.v >= nv) fail("bounds: a position range's index is out of range");
+  dq.setZero(nv);
+  ddq.setZero(nv);
+  escape_velocity.setZero(nv);
+  for (Vector* v : {&desired, &fb, &ff, &velocity, &fb0_, &ff0_, &desired_top, &x0_, &xa_, &tmp_, &tmp2_, &lam_low_})
+    v->setZero(nv);
+  Jw_.resize(m, nv);
+  ew_.resize(m);
+  ffw_.resize(m);
+  k_.resize(m);
+  Bnone_.resize(0, nv);
+  Cnone_.resize(0, nv);
+  box.resize(nv);
+  for (Index j = 0; j < nv; ++j) lam_low_[j] = moving[j] != 0.0 ? 1.0 : kInf;
+}
+
+void Controller::set_gains(const Vector& gains_, bool auto_gain, double factor) {
+  if (gains_.size() != m) fail("gains must have one entry per row");
+  gains = gains_;
+  method.p.auto_gain = lower_.p.auto_gain = auto_gain;
+  method.p.gain_factor = lower_.p.gain_factor = factor;
+}
+
+void Controller::set_speed(const Vector& speed) {
+  if (speed.size() != nv) fail("speed must have one entry per velocity coordinate");
+  for (Index j = 0; j < nv; ++j)
+    if (std::isnan(speed[j]) || speed[j] < 0.0) fail("speed limits must be >= 0 (inf: none)");
+  bounds.speed = speed;
+}
+
+void Controller::reset() {
+  dq.setZero();
+  ddq.setZero();
+  escape_velocity.setZero();
+  escaping = false;
+  stall_run = -1.0;
+  stall_wait = 1e300;
+}
+
+bool Controller::feasible(const Vector& x, const Eigen::Ref<const RowMatrix>& A,
+                          const Eigen::Ref<const Vector>& b) const {
+  for (Index j = 0; j < nv; ++j)
+    if (x[j] < box.lo[j] - kBoundTol || x[j] > box.hi[j] + kBoundTol) return false;
+  for (Index i = 0; i < A.rows(); ++i)
+    if (A.row(i).dot(x) > b[i] + kBoundTol * (1.0 + std::abs(b[i]))) return false;
+  return true;
+}
+
+// x_fb, x_ff of the levels below the first, each in the null space of the rows above it
+// (Siciliano and Slotine's recursion): a posture's velocity K w (q_ref - q) replaces the
+// self-motion of the levels above, a task level solves its task velocity, less what the levels
+// above already do to it, with the method's damped solve on its projected rows.
+void Controller::lower_levels(const double* ffw) {
+  const Level& top_level = levels[0];
+  high_ = Jw_.middleRows(top_level.begin, top_level.end - top_level.begin);
+  for (size_t index = 1; index < levels.size(); ++index) {
+    const Level& level = levels[index];
+    const Index rows = level.end - level.begin;
+    if (rows == 0) continue;
+    // (high high^T)^+ by its eigen-decomposition, with a relative cutoff
+    gram_.noalias() = high_ * high_.transpose();
+    eigen_.compute(gram_);
+    const Vector& values = eigen_.eigenvalues();
+    const double cutoff = 1e-12 * std::max(values.maxCoeff(), 1e-300);
+    Vector inverse = values.unaryExpr([cutoff](double v) { return v > cutoff ? 1.0 / v : 0.0; });
+    const Eigen::MatrixXd& U = eigen_.eigenvectors();
+    auto null_project = [&](Vector& v) {  // v <- v - high^T (high high^T)^+ high v
+      tmp2_.resize(high_.rows());
+      tmp2_.noalias() = U.transpose() * (high_ * v);
+      tmp2_ = tmp2_.cwiseProduct(inverse);
+      v.noalias() -= high_.transpose() * (U * tmp2_);
+    };
+    const double gain = method.p.auto_gain ? method.p.gain_factor / dt_ : 1.0;
+    if (level.identity) {
+      for (Index j = 0; j < nv; ++j) {
+        const Index row = level.begin + j;
+        tmp_[j] = gain * gains[row] * sqrt_weight[row] * ew_[row] - fb[j];
+      }
+      null_project(tmp_);
+      fb += tmp_;
+      tmp_ = -ff;
+      null_project(tmp_);
+      ff += tmp_;
+      high_.conservativeResize(high_.rows() + rows, Eigen::NoChange);
+      high_.bottomRows(rows).setIdentity();
+      continue;
+    }
+    // the level's rows projected: Jhat = J_k - (J_k high^T) (high high^T)^+ high
+    const auto Jk = Jw_.middleRows(level.begin, rows);
+    Eigen::MatrixXd coupling = (Jk * high_.transpose()) * U;
+    coupling = coupling * inverse.asDiagonal() * U.transpose();
+    Jhat_ = Jk;
+    Jhat_.noalias() -= coupling * high_;
+    lower_.prepare(Jhat_, ew_.segment(level.begin, rows), gains.segment(level.begin, rows),
+                   level.targets, dt_, lower_step_);
+    Vector t = gain * gains.segment(level.begin, rows).cwiseProduct(ew_.segment(level.begin, rows));
+    t.noalias() -= Jk * fb;
+    const bool pseudo = method.p.family == Family::least_squares && method.p.mu == 0.0;
+    lower_.solve(Jhat_, t, lower_step_.s, lower_step_.damping, pseudo, tmp_);
+    null_project(tmp_);
+    fb += tmp_;
+    t = ffw ? Vector(ffw_.segment(level.begin, rows)) : Vector::Zero(rows);
+    t.noalias() -= Jk * ff;
+    lower_.solve(Jhat_, t, lower_step_.s, lower_step_.damping, pseudo, tmp_);
+    null_project(tmp_);
+    ff += tmp_;
+    high_.conservativeResize(high_.rows() + rows, Eigen::NoChange);
+    high_.bottomRows(rows) = Jk;
+  }
+}
+
+// The first level's step projected (see controller.hpp): first with its task motion kept along
+// the method's (SNS's answer: joints held, the others taking over, in the method's metric);
+// where that keeps less than kUseful of the progress the nearest feasible velocity without that
+// constraint makes (which lowers the error whenever any feasible velocity does), blended toward
+// it, fully where keeping the direction makes none (a joint at its limit that the others cannot
+// replace). Then the lower levels, nearest their own step with the first level's
+// task motion held.
+void Controller::project(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b,
+                         const Vector& lo, const Vector& hi) {
+  const Level& top_level = levels[0];
+  const auto J0 = Jw_.middleRows(top_level.begin, top_level.end - top_level.begin);
+  const bool lower = levels.size() > 1;
+  x0_ = desired_top;
+  bool inside = true;
+  for (Index j = 0; j < nv && inside; ++j)
+    inside = desired_top[j] >= lo[j] - kBoundTol && desired_top[j] <= hi[j] + kBoundTol;
+  for (Index i = 0; i < A.rows() && inside; ++i)
+    inside = A.row(i).dot(desired_top) <= b[i] + kBoundTol * (1.0 + std::abs(b[i]));
+  if (!inside || !lower) {
+    method.forget();
+    tstar_.noalias() = J0 * desired_top;
+    // first the task's direction kept (a motion off it costs kKeepDirection times more)
+    method.metric(J0, top, tstar_, kKeepDirection, B_);
+    ProjectionReport r = projection_.solve(desired_top, top.lam, B_, lo, hi, A, b, Cnone_,
+                                           empty_, xa_);
+    report.iterations += r.iterations;
+    report.converged = report.converged && r.converged;
+    const Eigen::MatrixXd& G = method.task_metric();
+    gt_.noalias() = G * tstar_;
+    const double tgt = tstar_.dot(gt_);
+    const double scale_direction = tgt > 0.0 ? (J0 * xa_).dot(gt_) / tgt : 1.0;
+    x0_ = xa_;
+    // an upper bound of the unconstrained projection's progress: the box's best along G t*
+    double reach = 0.0;
+    if (tgt > 0.0) {
+      direction_.noalias() = J0.transpose() * gt_;
+      for (Index j = 0; j < nv; ++j)
+        reach += direction_[j] * (direction_[j] > 0.0 ? hi[j] : lo[j]);
+      reach /= tgt;
+    }
+    if (scale_direction < kUseful * reach) {
+      // ... and the nearest feasible velocity in the method's metric alone: blended in where
+      // keeping the direction makes little progress
+      method.metric(J0, top, tstar_, 0.0, B_);
+      r = projection_.solve(desired_top, top.lam, B_, lo, hi, A, b, Cnone_, empty_, x0_);
+      report.iterations += r.iterations;
+      report.converged = report.converged && r.converged;
+      const double scale_free = (J0 * x0_).dot(gt_) / tgt;
+      const double w = scale_free > 0.0
+                           ? std::clamp(scale_direction / (kUseful * scale_free), 0.0, 1.0)
+                           : 1.0;
+      x0_ = w * xa_ + (1.0 - w) * x0_;
+    }
+  }
+  if (!lower) {
+    velocity = x0_;
+    return;
+  }
+  // the lower levels: nearest (Euclidean) to their step, with level 0's task motion held
+  tmp_ = x0_ + (desired - desired_top);
+  Vector d = J0 * x0_;
+  RowMatrix C = J0;
+  ProjectionReport r = projection_.solve(tmp_, lam_low_, Bnone_, lo, hi, A, b, C, d, velocity);
+  report.iterations += r.iterations;
+  report.converged = report.converged && r.converged;
+}
+
+int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const Vector>& e,
+                    const double* ff_in, const double* q, Eigen::Ref<Vector> step,
+                    const double* fb_given, const double* ff_given, const double* user_lo,
+                    const double* user_hi, const Eigen::Ref<const RowMatrix>& A,
+                    const Eigen::Ref<const Vector>& b) {
+  const Index n = nv;
+  // 1. the weighted rows of the moving joints
+  Jw_.noalias() = sqrt_weight.asDiagonal() * J * moving.asDiagonal();
+  ew_ = sqrt_weight.cwiseProduct(e);
+  // |e|^2 of the target rows, summed in order (as the logs' norms are)
+  e_sq = 0.0;
+  for (const Level& l : levels)
+    for (Index i = l.begin; i < l.begin + l.targets; ++i) e_sq += e[i] * e[i];
+  ff_sq = 0.0;
+  if (ff_in) {
+    for (Index i = 0; i < m; ++i) {
+      ffw_[i] = sqrt_weight[i] * ff_in[i];
+      ff_sq += ff_in[i] * ff_in[i];
+    }
+  }
+  if (!std::isfinite(e_sq + ff_sq)) return kNonFinite;
+  // 2. the first level's method
+  const Level& L0 = levels[0];
+  const Index r0 = L0.end - L0.begin;
+  const auto J0 = Jw_.middleRows(L0.begin, r0);
+  method.prepare(J0, ew_.segment(L0.begin, r0), gains.segment(L0.begin, r0), L0.targets, dt_, top);
+  if (fb_given) {
+    fb0_ = Eigen::Map<const Vector>(fb_given, n);
+    if (ff_given) ff0_ = Eigen::Map<const Vector>(ff_given, n); else ff0_.setZero();
+  } else {
+    method.feedback(J0, ew_.segment(L0.begin, r0), gains.segment(L0.begin, r0), top, fb0_);
+    if (ff_in) method.feedforward(J0, ffw_.segment(L0.begin, r0), top, ff0_); else ff0_.setZero();
+  }
+  if (!fb0_.allFinite() || !ff0_.allFinite()) return kNonFinite;
+  regular = (fb0_ + ff0_).norm();
+  int status = 0;
+  // the stall the escape watches (transpose methods): the loop gain along the command below
+  // stall_ratio of its trace while the error is above the floor; Python hears of the first
+  // stalled step of a run and of each window's end
+  if (stall_ratio >= 0.0 && top.stall < stall_ratio && top.ew_sq > stall_floor) {
+    if (stall_run < 0.0) {
+      stall_run = 1.0;
+      status |= kStalled;
+    } else if ((stall_run += 1.0) >= stall_wait) {
+      status |= kStalled;
+    }
+  } else {
+    stall_run = -1.0;
+  }
+  if (escaping) ff0_ += escape_velocity;
+  // 3. the lower levels
+  fb = fb0_;
+  ff = ff0_;
+  if (levels.size() > 1) lower_levels(ff_in ? ffw_.data() : nullptr);
+  desired_top = fb0_ + ff0_;
+  desired = fb + ff;
+  // 4. each joint's box; the displacement the feedback asks of each joint: fb / K
+  const Index counted = L0.targets > 0 ? L0.targets : r0;
+  const double K = fb_given ? given_gain
+                           : (counted > 0 ? gains.segment(L0.begin, counted).mean() : 0.0) * top.gain;
+  if (K > 0.0) tmp_ = fb / K;
+  else tmp_.setZero();
+  joint_box(bounds, dt_, q, dq, ddq, fb, ff, tmp_, user_lo, user_hi, box);
+  bool torn = false;
+  for (Index j = 0; j < n; ++j) torn = torn || box.torn[j];
+  if (torn) status |= kConflict;
+  // 5. the method's step where it is feasible, else the nearest feasible one in its metric
+  report = ProjectionReport{};
+  kept = feasible(desired, A, b);
+  if (kept) {
+    velocity = desired;
+  } else {
+    status |= kConstrained;
+    project(A, b, box.lo, box.hi);
+    // rows that the smooth box keeps from holding: the hard box alone (the smoothness yields)
+    bool broken = false;
+    for (Index i = 0; i < A.rows(); ++i)
+      broken = broken || A.row(i).dot(velocity) > b[i] + 1e-9 * (1.0 + std::abs(b[i]));
+    if (broken && bounds.smooth) {
+      project(A, b, box.hard_lo, box.hard_hi);
+      for (Index j = 0; j < n; ++j)
+        if (velocity[j] < box.soft_lo[j] - kBoundTol || velocity[j] > box.soft_hi[j] + kBoundTol) {
+          box.torn[j] = 1;
+          status |= kConflict;
+        }
+      broken = false;
+      for (Index i = 0; i < A.rows(); ++i)
+        broken = broken || A.row(i).dot(velocity) > b[i] + 1e-9 * (1.0 + std::abs(b[i]));
+    }
+    if (broken) status |= kRowsBroken;
+    if (!report.converged) status |= kUnconverged;
+  }
+  rows_active.clear();
+  for (Index i = 0; i < A.rows(); ++i)
+    if (A.row(i).dot(velocity) >= b[i] - 1e-9 * (1.0 + std::abs(b[i]))) rows_active.push_back(static_cast<int>(i));
+  // the share of level 0's task motion kept
+  if (kept) {
+    task_scale = 1.0;
+  } else {
+    tstar_.noalias() = J0 * desired_top;
+    tmp2_.noalias() = J0 * velocity;
+    const double asked = tstar_.squaredNorm();
+    task_scale = asked > 0.0 ? std::clamp(tmp2_.dot(tstar_) / asked, 0.0, 1.0) : 1.0;
+  }
+  // 6. the displacement, exactly onto a limit it reaches (not a rounding past it); the state
+  step = velocity * dt_;
+  for (const PositionRange& r : bounds.ranges) {
+    const double x = q[r.q];
+    if (x >= r.lower && x <= r.upper)
+      step[r.v] = std::min(std::max(step[r.v], r.lower - x), r.upper - x);
+  }
+  ddq = (velocity - dq) / dt_;
+  dq = velocity;
+  return status;
+}
+
+}  // namespace sjt

@@ -1,0 +1,99 @@
+// One CLIK step after the tasks: the method on the stacked rows (level by level: a lower priority
+// level acts in the null space of the higher ones), the saddle escape's velocity, each joint's
+// box from the limits, a user's bounds and general rows, and the projection that keeps the
+// method's step where it is feasible and returns the feasible velocity nearest it in the
+// method's metric where it is not. Its state (the last commanded velocity and acceleration,
+// the escape, the stall count) is named fields that copies carry whole.
+#pragma once
+
+#include <vector>
+
+#include "array.hpp"
+#include "bounds.hpp"
+#include "method.hpp"
+#include "projection.hpp"
+
+namespace sjt {
+
+// A block of rows of one priority level: rows [begin, end) of the stacked J; `identity`: a
+// posture task's rows (J = I on the moving joints), whose velocity is K w (q_ref - q).
+struct Level {
+  Index begin = 0, end = 0;
+  bool identity = false;
+  Index targets = 0;  // leading rows of tasks that take targets (their error is reported)
+};
+
+// status bits of a step
+enum Status : int {
+  kNonFinite = 1,    // the error or the feed-forward is not finite: nothing was computed
+  kStalled = 2,      // a stall the escape looks at (first stalled step, or a window's end)
+  kConstrained = 4,  // the stage changed the method's step
+  kConflict = 8,     // a smoothness limit yielded to a hard one
+  kRowsBroken = 16,  // no velocity within the hard box meets every row (the least breach)
+  kUnconverged = 32, // the projection ran out of iterations (its last point, within the box)
+};
+
+class Controller {
+ public:
+  Controller(const MethodParameters& method, Index rows, Index nv, Index nq, double dt,
+             const Vector& sqrt_weight, const Vector& gains, const Vector& moving,
+             Index error_rows, const std::vector<Level>& levels, const BoundsConfig& bounds,
+             double stall_ratio, double stall_floor);
+
+  // One step: J (m x nv), e (m), ff (m) or none, q (nq); fb_given/ff_given: a user method's
+  // velocities (nv) instead of the built-in method's; user bounds (nv), rows A (k x nv), b (k).
+  // Writes the displacement q_dot dt into `step` (nv); returns the status bits.
+  int run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const Vector>& e,
+          const double* ff, const double* q, Eigen::Ref<Vector> step, const double* fb_given,
+          const double* ff_given, const double* user_lo, const double* user_hi,
+          const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b);
+
+  void set_dt(double dt) { dt_ = dt; }
+  double dt() const { return dt_; }
+  void set_gains(const Vector& gains, bool auto_gain, double factor);
+  void set_speed(const Vector& speed);
+  void reset();
+
+  // -- parameters
+  Method method;
+  Index m, nv, nq, error_rows;
+  Vector sqrt_weight, gains, moving;
+  std::vector<Level> levels;
+  BoundsConfig bounds;
+  double stall_ratio, stall_floor;
+
+  // -- state (copies carry it): the last commanded velocity and acceleration, the escape
+  Vector dq, ddq, escape_velocity;
+  bool escaping = false;
+  double given_gain = 1.0;  // K of a user method's feedback (its fb / K is the displacement)
+  double stall_run = -1.0, stall_wait = 1e300;
+
+  // -- the last step, for StepInfo
+  MethodStep top;                 // level 0's analysis (alpha, gain, loop bound, ...)
+  double e_sq = 0.0, ff_sq = 0.0, regular = 0.0, task_scale = 1.0;
+  Vector desired, fb, ff, velocity;  // the method's velocity, its two parts, and the result
+  Vector desired_top;                // the first level's own velocity (with the escape's)
+  JointBox box;
+  std::vector<int> rows_active;
+  ProjectionReport report;
+  bool kept = true;
+
+ private:
+  bool feasible(const Vector& x, const Eigen::Ref<const RowMatrix>& A,
+                const Eigen::Ref<const Vector>& b) const;
+  void lower_levels(const double* ffw);
+  void project(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b,
+               const Vector& lo, const Vector& hi);
+
+  double dt_;
+  RowMatrix Jw_, high_, Jhat_, Bnone_, Cnone_, B_, along_;
+  Vector ew_, ffw_, k_, fb0_, ff0_, t_, tfb_, tff_, x0_, xa_, tstar_, gt_, direction_, tmp_, tmp2_, lam_low_;
+  Vector empty_;
+  Eigen::MatrixXd gram_;
+  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eigen_;
+  Method lower_;
+  MethodStep lower_step_;
+  Projection projection_;
+};
+
+}  // namespace sjt

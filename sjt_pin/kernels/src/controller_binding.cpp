@@ -1,0 +1,200 @@
+// The Python side of the controller (controller.hpp): sjt_pin.kernels.Controller, its typed
+// parameters (MethodParameters) and its state and results as named numpy views.
+#include <nanobind/eigen/dense.h>
+#include <nanobind/ndarray.h>
+#include <nanobind/stl/tuple.h>
+#include <nanobind/stl/vector.h>
+
+#include <array>
+#include <optional>
+
+#include "controller.hpp"
+#include "registry.hpp"
+
+namespace sjt {
+
+namespace {
+
+using ReadView = nb::ndarray<nb::numpy, const double, nb::ndim<1>>;
+using WriteView = nb::ndarray<nb::numpy, double, nb::ndim<1>>;
+using CodeView = nb::ndarray<nb::numpy, const int8_t, nb::ndim<1>>;
+
+template <class View, class T>
+View view(Controller& c, T* data, Index n) {
+  size_t shape[1] = {static_cast<size_t>(n)};
+  return View(data, 1, shape, nb::find(&c));
+}
+
+// an optional checked array of n entries (None: null), held in `storage`
+const double* optional(nb::handle object, const char* name, Index n, std::optional<Array>& storage) {
+  if (object.is_none()) return nullptr;
+  storage.emplace(object, name, 1);
+  storage->length(n);
+  return storage->data();
+}
+
+Controller make(const MethodParameters& method, Index rows, Index nv, Index nq, double dt,
+                const Vector& sqrt_weight, const Vector& gains, const Vector& moving,
+                Index error_rows, const std::vector<std::tuple<Index, Index, bool, Index>>& levels,
+                const Vector& speed, const Eigen::Matrix<int64_t, Eigen::Dynamic, 1>& range_q,
+                const Eigen::Matrix<int64_t, Eigen::Dynamic, 1>& range_v, const Vector& lower,
+                const Vector& upper, const Vector& recovery, nb::object acceleration,
+                nb::object jerk, double stall_ratio, double stall_floor) {
+  if (!(dt > 0.0) || !std::isfinite(dt)) fail("dt must be a finite number > 0 (s)");
+  if (nv <= 0 || rows < 0 || nq < nv) fail("rows, nv and nq do not fit");
+  std::vector<Level> ls;
+  for (const auto& [begin, end, identity, targets] : levels) ls.push_back(Level{begin, end, identity, targets});
+  BoundsConfig bounds;
+  bounds.nv = nv;
+  bounds.speed = speed;
+  bounds.moving = moving;
+  const Index count = range_q.size();
+  if (range_v.size() != count || lower.size() != count || upper.size() != count ||
+      recovery.size() != count)
+    fail("the position ranges' arrays must have one length");
+  for (Index k = 0; k < count; ++k)
+    bounds.ranges.push_back(PositionRange{range_q[k], range_v[k], lower[k], upper[k], recovery[k]});
+  if (!acceleration.is_none()) {
+    bounds.smooth = true;
+    bounds.acceleration = nb::cast<Vector>(acceleration);
+    bounds.jerk = jerk.is_none() ? Vector::Constant(nv, std::numeric_limits<double>::infinity())
+                                 : nb::cast<Vector>(jerk);
+  }
+  return Controller(method, rows, nv, nq, dt, sqrt_weight, gains, moving, error_rows, ls, bounds,
+                    stall_ratio, stall_floor);
+}
+
+}  // namespace
+
+void register_controller(nb::module_& m) {
+  nb::enum_<Family>(m, "Family", "The CLIK mappings' two families.")
+      .value("transpose", Family::transpose, "JT (eq. 10) and SJT (eq. 21), and their damped forms")
+      .value("least_squares", Family::least_squares, "JP (eq. 8) and DLS");
+
+  nb::class_<MethodParameters>(m, "MethodParameters",
+                               "A method's parameters, by name (see sjt_pin.methods).")
+      .def(nb::init<>())
+      .def_rw("family", &MethodParameters::family)
+      .def_rw("scaled", &MethodParameters::scaled, "SJT's column scaling D (False: JT)")
+      .def_rw("damped_feedback", &MethodParameters::damped_feedback)
+      .def_rw("damped_feedforward", &MethodParameters::damped_feedforward)
+      .def_rw("mu", &MethodParameters::mu, "mu of the damped solve; DLS's lambda (task units)")
+      .def_rw("column_tol", &MethodParameters::column_tol, "task units^2")
+      .def_rw("length2", &MethodParameters::length2, "SJT's floor l^2 (task units^2)")
+      .def_rw("lm", &MethodParameters::lm, "the Levenberg-Marquardt weight")
+      .def_rw("rcond", &MethodParameters::rcond)
+      .def_rw("auto_gain", &MethodParameters::auto_gain)
+      .def_rw("gain_factor", &MethodParameters::gain_factor);
+
+  nb::class_<Controller>(m, "Controller",
+                         "One CLIK step after the tasks: method, priority levels, limits, "
+                         "projection (sjt_pin/kernels/src/controller.hpp).")
+      .def(nb::new_(&make), nb::arg("method"), nb::arg("rows"), nb::arg("nv"), nb::arg("nq"),
+           nb::arg("dt"), nb::arg("sqrt_weight"), nb::arg("gains"), nb::arg("moving"),
+           nb::arg("error_rows"), nb::arg("levels"), nb::arg("speed"), nb::arg("range_q"),
+           nb::arg("range_v"), nb::arg("lower"), nb::arg("upper"), nb::arg("recovery"),
+           nb::arg("acceleration").none(), nb::arg("jerk").none(), nb::arg("stall_ratio"),
+           nb::arg("stall_floor"))
+      .def(
+          "run",
+          [](Controller& c, nb::handle J, nb::handle e, nb::handle ff, nb::handle q,
+             nb::handle step, nb::handle fb_given, nb::handle ff_given, nb::handle lower,
+             nb::handle upper, nb::handle A, nb::handle b) -> int {
+            Array Ja(J, "J", 2), ea(e, "e", 1), qa(q, "q", 1), sa(step, "step", 1, Access::write);
+            Ja.shape(c.m, c.nv);
+            ea.length(c.m);
+            qa.length(c.nq);
+            sa.length(c.nv);
+            std::optional<Array> s1, s2, s3, s4, s5;
+            const double* ffp = optional(ff, "ff", c.m, s1);
+            const double* fbg = optional(fb_given, "fb", c.nv, s2);
+            const double* ffg = optional(ff_given, "ff_given", c.nv, s3);
+            const double* lo = optional(lower, "lower", c.nv, s4);
+            const double* hi = optional(upper, "upper", c.nv, s5);
+            if ((lo == nullptr) != (hi == nullptr)) fail("lower and upper come together");
+            if (lo) {
+              for (Index j = 0; j < c.nv; ++j)
+                if (std::isnan(lo[j]) || std::isnan(hi[j]))
+                  fail("a limit's bounds contain NaN (inf: no bound)");
+            }
+            if (A.is_none() != b.is_none()) fail("A and b come together");
+            if (!A.is_none()) {
+              Array Aa(A, "A", 2), ba(b, "b", 1);
+              Aa.shape(ba.size(), c.nv);
+              Aa.finite();
+              ba.no_nan();
+              nb::gil_scoped_release release;
+              return c.run(Ja.matrix(), ea.vector(), ffp, qa.data(), sa.vector(), fbg, ffg, lo,
+                           hi, Aa.matrix(), ba.vector());
+            }
+            RowMatrix none(0, c.nv);
+            Vector nob(0);
+            nb::gil_scoped_release release;
+            return c.run(Ja.matrix(), ea.vector(), ffp, qa.data(), sa.vector(), fbg, ffg, lo, hi,
+                         none, nob);
+          },
+          nb::arg("J"), nb::arg("e"), nb::arg("ff").none(), nb::arg("q"), nb::arg("step"),
+          nb::arg("fb").none(), nb::arg("ff_given").none(), nb::arg("lower").none(),
+          nb::arg("upper").none(), nb::arg("A").none(), nb::arg("b").none(),
+          "run(J, e, ff, q, step, fb, ff_given, lower, upper, A, b) -> status: one step; "
+          "None for what a step does not have.")
+      .def("set_dt", &Controller::set_dt)
+      .def("set_gains", &Controller::set_gains, nb::arg("gains"), nb::arg("auto_gain"),
+           nb::arg("factor"))
+      .def("set_speed", &Controller::set_speed, nb::arg("speed"))
+      .def("reset", &Controller::reset)
+      .def_rw("given_gain", &Controller::given_gain)
+      .def_prop_ro("dt", &Controller::dt)
+      .def_prop_ro("dq", [](Controller& c) { return view<WriteView>(c, c.dq.data(), c.nv); },
+                   nb::rv_policy::reference_internal)
+      .def_prop_ro("ddq", [](Controller& c) { return view<WriteView>(c, c.ddq.data(), c.nv); },
+                   nb::rv_policy::reference_internal)
+      .def_prop_ro("escape_velocity",
+                   [](Controller& c) { return view<WriteView>(c, c.escape_velocity.data(), c.nv); },
+                   nb::rv_policy::reference_internal)
+      .def_rw("escaping", &Controller::escaping)
+      .def_rw("stall_run", &Controller::stall_run)
+      .def_rw("stall_wait", &Controller::stall_wait)
+      .def_prop_ro("desired", [](Controller& c) { return view<ReadView>(c, c.desired.data(), c.nv); },
+                   nb::rv_policy::reference_internal)
+      .def_prop_ro("desired_top",
+                   [](Controller& c) { return view<ReadView>(c, c.desired_top.data(), c.nv); },
+                   nb::rv_policy::reference_internal)
+      .def_prop_ro("stall_floor_sq", [](Controller& c) { return c.stall_floor; })
+      .def_prop_ro("feedback", [](Controller& c) { return view<ReadView>(c, c.fb.data(), c.nv); },
+                   nb::rv_policy::reference_internal)
+      .def_prop_ro("feedforward", [](Controller& c) { return view<ReadView>(c, c.ff.data(), c.nv); },
+                   nb::rv_policy::reference_internal)
+      .def_prop_ro("velocity", [](Controller& c) { return view<ReadView>(c, c.velocity.data(), c.nv); },
+                   nb::rv_policy::reference_internal)
+      .def_prop_ro("alpha", [](Controller& c) { return view<ReadView>(c, c.top.alpha.data(), c.nv); },
+                   nb::rv_policy::reference_internal)
+      .def_prop_ro("lower", [](Controller& c) { return view<ReadView>(c, c.box.lo.data(), c.nv); },
+                   nb::rv_policy::reference_internal)
+      .def_prop_ro("upper", [](Controller& c) { return view<ReadView>(c, c.box.hi.data(), c.nv); },
+                   nb::rv_policy::reference_internal)
+      .def_prop_ro("lower_by", [](Controller& c) { return view<CodeView>(c, c.box.lo_by.data(), c.nv); },
+                   nb::rv_policy::reference_internal)
+      .def_prop_ro("upper_by", [](Controller& c) { return view<CodeView>(c, c.box.hi_by.data(), c.nv); },
+                   nb::rv_policy::reference_internal)
+      .def_prop_ro("torn", [](Controller& c) {
+             return nb::ndarray<nb::numpy, const uint8_t, nb::ndim<1>>(
+                 c.box.torn.data(), 1, std::array<size_t, 1>{static_cast<size_t>(c.nv)}.data(),
+                 nb::find(&c));
+           }, nb::rv_policy::reference_internal)
+      .def_prop_ro("rows_active", [](Controller& c) { return c.rows_active; })
+      .def_prop_ro("e_sq", [](Controller& c) { return c.e_sq; })
+      .def_prop_ro("ew_sq", [](Controller& c) { return c.top.ew_sq; })
+      .def_prop_ro("ff_sq", [](Controller& c) { return c.ff_sq; })
+      .def_prop_ro("gain", [](Controller& c) { return c.top.gain; })
+      .def_prop_ro("loop_bound", [](Controller& c) { return c.top.loop_bound; })
+      .def_prop_ro("stall", [](Controller& c) { return c.top.stall; })
+      .def_prop_ro("trace", [](Controller& c) { return c.top.trace; })
+      .def_prop_ro("regular", [](Controller& c) { return c.regular; })
+      .def_prop_ro("task_scale", [](Controller& c) { return c.task_scale; })
+      .def_prop_ro("kept", [](Controller& c) { return c.kept; })
+      .def_prop_ro("iterations", [](Controller& c) { return c.report.iterations; })
+      .def_prop_ro("converged", [](Controller& c) { return c.report.converged; });
+}
+
+}  // namespace sjt
