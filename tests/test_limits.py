@@ -75,7 +75,9 @@ def test_a_joint_at_its_speed_limit_is_held_and_the_others_keep_the_task(ur5):
     info = limited.last
     assert ("velocity", "shoulder_pan_joint") in info.active_limits
     assert abs(info.dq[0]) == pytest.approx(0.2)
-    assert info.task_scale == 1.0  # the other five joints make up for it: the whole task
+    # the other five joints make up for it: the whole task (to the 1e-6 by which the stage's
+    # metric puts the task before self-motion)
+    assert info.task_scale == pytest.approx(1.0, abs=1e-6)
     J = ur5.jacobian(q, reference=pin.LOCAL_WORLD_ALIGNED)[:3]
     # within the damping of the solve on five columns (constraints.TASK_KEPT)
     made, wanted = J @ info.dq, J @ free.last.dq
@@ -97,9 +99,10 @@ def test_a_task_beyond_every_speed_is_scaled_along_its_direction(ur5):
     J = ur5.jacobian(q)
     wanted, made = J @ free.last.dq, J @ info.dq
     cosine = wanted @ made / np.linalg.norm(wanted) / np.linalg.norm(made)
-    assert cosine > 1 - 1e-9  # the same task direction, slower
+    # the same task direction, slower (a motion off it costs the stage 1e4 times more)
+    assert cosine > 1 - 1e-5
     assert np.linalg.norm(made) == pytest.approx(info.task_scale * np.linalg.norm(wanted),
-                                                 rel=1e-6)
+                                                 rel=1e-3)
 
 
 def test_a_start_outside_the_limits_returns_at_the_allowed_speed():
@@ -135,29 +138,35 @@ def _run(solver, q, targets):
     return np.array(steps), clamped
 
 
-def test_the_reference_limits_as_extra_limits_give_the_kernel_steps(ur5, rng):
-    """PositionLimit and VelocityLimit, run in Python through ``limits=``, take the same steps
-    as the limits compiled into the step kernel, where only one of them acts."""
-    from sjt_pin.limits import PositionLimit, VelocityLimit
+class _Box(sjt.limits.Limit):
+    """The URDF's position range and a speed, as a user's bounds (one step never leaves the
+    range, no joint faster than ``speed``)."""
 
+    name = "box"
+    uses_motion = True
+
+    def __init__(self, robot, speed):
+        self.lower, self.upper, self.speed = robot.lower_limits, robot.upper_limits, speed
+
+    def bounds(self, kinematics, motion):
+        room_up = (self.upper - motion.q) / motion.dt
+        room_down = (motion.q - self.lower) / motion.dt
+        return np.maximum(-room_down, -self.speed), np.minimum(room_up, self.speed)
+
+
+def test_the_built_in_limits_and_the_same_bounds_as_a_user_limit_take_the_same_steps(ur5, rng):
+    """The position range and a speed given as a user's limit's bounds take the steps of the
+    built-in position and speed limits: both are hard bounds of the same stage."""
     q = np.array([0.3, -1.2, ur5.upper_limits[2] - 0.02, -1.8, -1.5, 0.2])
     targets = [ur5.fk(q) * pin.exp6(pin.Motion(rng.normal(scale=0.05, size=6)))
                for _ in range(60)]
-    moving = np.ones(6)
-    box = PositionLimit(ur5, moving, ur5.velocity_limits)
-    compiled = sjt.SJTSolver(ur5, dt=0.01, velocity_limits=False)
-    python = sjt.SJTSolver(ur5, dt=0.01, velocity_limits=False, position_limits=False,
-                           limits=[box])
-    reference, clamped = _run(compiled, q, targets)
-    assert clamped > 0  # the elbow's limit acted
-    np.testing.assert_allclose(_run(python, q, targets)[0], reference, atol=1e-12)
     speeds = np.full(6, 0.3)
-    compiled = sjt.SJTSolver(ur5, dt=0.01, velocity_limits=speeds, position_limits=False)
-    python = sjt.SJTSolver(ur5, dt=0.01, velocity_limits=False, position_limits=False,
-                           limits=[VelocityLimit(speeds)])
-    reference, _ = _run(compiled, q, targets)
-    assert np.abs(reference / 0.01).max() == pytest.approx(0.3)  # the speed limit acted
-    np.testing.assert_allclose(_run(python, q, targets)[0], reference, atol=1e-12)
+    built_in = sjt.SJTSolver(ur5, dt=0.01, velocity_limits=speeds)
+    user = sjt.SJTSolver(ur5, dt=0.01, velocity_limits=False, position_limits=False,
+                         limits=[_Box(ur5, speeds)])
+    reference, clamped = _run(built_in, q, targets)
+    assert clamped > 0  # the limits acted
+    np.testing.assert_allclose(_run(user, q, targets)[0], reference, atol=1e-12)
 
 
 def test_extra_limits_must_be_limit_objects(ur5):
@@ -266,28 +275,14 @@ def _cap_run(ur5, declared, method="sjt", steps=600, **options):
 
 
 @pytest.mark.parametrize("method", ["sjt", "jt", "jp", "dls"])
-def test_speed_caps_are_held_in_the_kernel_as_the_stage_holds_the_bounds(ur5, method,
-                                                                         monkeypatch):
-    """A limit that declares its bounds as speed caps gets, from the kernel's saturation,
-    exactly the steps and StepInfo the whole stage in Python gives the same bounds (the task
-    carried by the joints below their caps), and the stage does not run."""
-    from sjt_pin.constraints import ConstraintStage
-
-    calls = [0]
-    enforce = ConstraintStage.enforce
-
-    def counted(*args, **kwargs):
-        calls[0] += 1
-        return enforce(*args, **kwargs)
-
-    monkeypatch.setattr(ConstraintStage, "enforce", counted)
-    staged, staged_info = _cap_run(ur5, False, method)
-    assert calls[0] > 0
-    calls[0] = 0
+def test_speed_caps_hold_as_the_same_bounds_do(ur5, method):
+    """A limit that declares its bounds as speed caps (held with the speed limits, its bounds
+    not asked) takes exactly the steps, and gets the StepInfo, of the same bounds asked every
+    step."""
+    asked, asked_info = _cap_run(ur5, False, method)
     held, held_info = _cap_run(ur5, True, method)
-    assert calls[0] == 0
-    np.testing.assert_array_equal(held, staged)
-    assert held_info == staged_info
+    np.testing.assert_array_equal(held, asked)
+    assert held_info == asked_info
     speeds = np.abs(np.diff(held, axis=0)) / 1e-3
     assert (speeds <= _CAPS * (1 + 1e-12)).all()
     assert speeds[:, 0].max() == pytest.approx(0.5)  # the caps acted, named

@@ -34,12 +34,12 @@ def test_the_characteristic_length_scales_with_the_unit(arms):
 @pytest.mark.parametrize("variant", ["SJT (paper, eq. 21)", "SJT", "SJT, transpose feedback"])
 def test_every_sjt_form_runs_alike_in_mm_and_in_m(variant):
     """Baxter's arm on a circle and a wrist screw at 1 and 4 ms: the same joint trajectory
-    (1e-8 rad) and the same errors in the scaled unit (a ratio of 1). (Where the wrist screw
+    (1e-7 rad) and the same errors in the scaled unit (a ratio of 1). (Where the wrist screw
     meets a limit, the stage's projection puts the task first by a factor 1e6 over
     self-motion, so the rounding of the two units' inputs reaches the joints amplified by about
-    1e3: 1e-9 rad after 2.5 s, where the other steps keep 1e-13.)"""
+    1e3: 1e-9 to 2e-8 rad after 2.5 s, where the other steps keep 1e-13.)"""
     for row in units(variants=(variant,)):
-        assert row.joint_difference < 1e-8, row
+        assert row.joint_difference < 1e-7, row
         assert row.position_ratio == pytest.approx(1.0, abs=1e-9), row
         assert row.orientation_ratio == pytest.approx(1.0, abs=1e-9), row
 

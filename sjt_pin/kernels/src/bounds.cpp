@@ -29,7 +29,8 @@ inline void tighten_lo(double value, int8_t reason, double& lo, int8_t& by) {
 }  // namespace
 
 void JointBox::resize(Index n) {
-  for (Vector* x : {&lo, &hi, &hard_lo, &hard_hi, &soft_lo, &soft_hi}) x->resize(n);
+  for (Vector* x : {&lo, &hi, &hard_lo, &hard_hi, &soft_lo, &soft_hi, &cap_lo, &cap_hi})
+    x->resize(n);
   lo_by.resize(n);
   hi_by.resize(n);
   torn.resize(n);
@@ -37,19 +38,11 @@ void JointBox::resize(Index n) {
   soft_hi_by.resize(n);
 }
 
-void joint_box(const BoundsConfig& config, double dt, const double* q, const Vector& v,
-               const Vector& a, const Vector& fb, const Vector& ff, const Vector& delta,
-               const double* user_lo, const double* user_hi, JointBox& out) {
+void capability(const BoundsConfig& config, double dt, const Vector& v, const Vector& a,
+                JointBox& out) {
   const Index n = config.nv;
   out.resize(n);
-  std::vector<int8_t>& soft_lo_by = out.soft_lo_by;
-  std::vector<int8_t>& soft_hi_by = out.soft_hi_by;
-  const double keep = 1.0 - BoundsConfig::kReserve;
   for (Index j = 0; j < n; ++j) {
-    double hl = -config.speed[j], hh = config.speed[j];
-    int8_t hl_by = std::isfinite(hl) ? kVelocity : kNone, hh_by = hl_by;
-    if (user_lo && user_lo[j] > hl) hl = user_lo[j], hl_by = kUser;
-    if (user_hi && user_hi[j] < hh) hh = user_hi[j], hh_by = kUser;
     double sl = -kInf, sh = kInf;
     int8_t sl_by = kNone, sh_by = kNone;
     if (config.smooth && config.moving[j] != 0.0) {
@@ -65,24 +58,46 @@ void joint_box(const BoundsConfig& config, double dt, const double* q, const Vec
         // the speed limit can still be held once the acceleration ramps down
         const double V = config.speed[j];
         if (std::isfinite(V)) {
-          tighten_hi(std::max(sl, approach_top(v[j], std::max(V, v[j]), dt, J)), kJerk, sh, sh_by);
+          tighten_hi(std::max(sl, approach_top(v[j], std::max(V, v[j]), dt, J)), kJerk, sh,
+                     sh_by);
           tighten_lo(std::min(sh, -approach_top(-v[j], std::max(V, -v[j]), dt, J)), kJerk, sl,
                      sl_by);
         }
-        // approach the method's velocity without passing it
+      }
+    }
+    out.cap_lo[j] = sl, out.cap_hi[j] = sh;
+    out.soft_lo_by[j] = sl_by, out.soft_hi_by[j] = sh_by;
+  }
+}
+
+void joint_box(const BoundsConfig& config, double dt, const double* q, const Vector& v,
+               const Vector& fb, const Vector& ff, const Vector& delta, const double* user_lo,
+               const double* user_hi, JointBox& out) {
+  const Index n = config.nv;
+  std::vector<int8_t>& soft_lo_by = out.soft_lo_by;
+  std::vector<int8_t>& soft_hi_by = out.soft_hi_by;
+  const double keep = 1.0 - BoundsConfig::kReserve;
+  for (Index j = 0; j < n; ++j) {
+    double hl = -config.speed[j], hh = config.speed[j];
+    int8_t hl_by = std::isfinite(hl) ? kVelocity : kNone, hh_by = hl_by;
+    if (user_lo && user_lo[j] > hl) hl = user_lo[j], hl_by = kUser;
+    if (user_hi && user_hi[j] < hh) hh = user_hi[j], hh_by = kUser;
+    double sl = out.cap_lo[j], sh = out.cap_hi[j];
+    int8_t sl_by = soft_lo_by[j], sh_by = soft_hi_by[j];
+    if (config.smooth && config.moving[j] != 0.0) {
+      const double A = config.acceleration[j], J = config.jerk[j];
+      if (std::isfinite(J)) {  // approach the method's velocity without passing it
         const double u = fb[j] + ff[j];
         if (u > v[j]) tighten_hi(std::max(sl, approach_top(v[j], u, dt, J)), kBraking, sh, sh_by);
         if (u < v[j]) tighten_lo(std::min(sh, -approach_top(-v[j], -u, dt, J)), kBraking, sl, sl_by);
       }
       // brake the feedback so that the joint can stop where it sends it (relative to the
       // feed-forward's velocity)
-      const double d = delta[j];
+      const double d = delta[j], f = ff[j];
       if (d > 0.0) {
-        const double f = ff[j];
         const double top = f + largest_stoppable(sl - f, sh - f, v[j] - f, d, dt, keep * A, keep * J);
         tighten_hi(std::max(sl, top), kBraking, sh, sh_by);
       } else if (d < 0.0) {
-        const double f = ff[j];
         const double top = f - largest_stoppable(f - sh, f - sl, f - v[j], -d, dt, keep * A, keep * J);
         tighten_lo(std::min(sh, top), kBraking, sl, sl_by);
       }
@@ -116,10 +131,10 @@ void joint_box(const BoundsConfig& config, double dt, const double* q, const Vec
       continue;
     }
     double up = room_up / dt, down = room_down / dt;
-    if (config.smooth) {
+    if (config.smooth) {  // within what the joint can do this step
       const double A = keep * config.acceleration[j], J = keep * config.jerk[j];
-      double lo = std::max(out.soft_lo[j], out.hard_lo[j]), hi = std::min(out.soft_hi[j], out.hard_hi[j]);
-      if (lo > hi) lo = out.soft_lo[j], hi = out.soft_hi[j];
+      double lo = std::max(out.cap_lo[j], out.hard_lo[j]), hi = std::min(out.cap_hi[j], out.hard_hi[j]);
+      if (lo > hi) lo = out.cap_lo[j], hi = out.cap_hi[j];
       up = std::min(up, largest_stoppable(lo, hi, v[j], room_up, dt, A, J));
       down = std::min(down, largest_stoppable(-hi, -lo, -v[j], room_down, dt, A, J));
     }

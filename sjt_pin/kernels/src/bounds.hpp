@@ -56,17 +56,23 @@ struct BoundsConfig {
 struct JointBox {
   Vector lo, hi;                            // the combined box
   Vector hard_lo, hard_hi, soft_lo, soft_hi;
+  Vector cap_lo, cap_hi;                    // the acceleration/jerk box alone (no preference)
   std::vector<int8_t> lo_by, hi_by;         // Reason of each bound
   std::vector<uint8_t> torn;                // the hard box overrode the smooth one
   std::vector<int8_t> soft_lo_by, soft_hi_by;
   void resize(Index n);
 };
 
-// The box of this step. q: the configuration; v, a: last velocity and acceleration; fb, ff: the
-// method's feedback and feed-forward velocity; delta: the displacement the feedback asks of each
-// joint (fb / K); user_lo/user_hi: a user's hard bounds (may be null).
+// What each joint can do this step (its acceleration and jerk box, and the speed it can still
+// hold) into out.cap_lo/cap_hi: the first part of joint_box, which feedback_scale needs.
+void capability(const BoundsConfig& config, double dt, const Vector& v, const Vector& a,
+                JointBox& out);
+
+// The box of this step (after capability()). q: the configuration; v: the last velocity; fb,
+// ff: the method's feedback and feed-forward velocity; delta: the displacement the feedback asks
+// of each joint (fb / K); user_lo/user_hi: a user's hard bounds (may be null).
 void joint_box(const BoundsConfig& config, double dt, const double* q, const Vector& v,
-               const Vector& a, const Vector& fb, const Vector& ff, const Vector& delta,
-               const double* user_lo, const double* user_hi, JointBox& out);
+               const Vector& fb, const Vector& ff, const Vector& delta, const double* user_lo,
+               const double* user_hi, JointBox& out);
 
 }  // namespace sjt

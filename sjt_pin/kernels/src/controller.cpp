@@ -88,9 +88,10 @@ void Controller::reset() {
 }
 
 bool Controller::feasible(const Vector& x, const Eigen::Ref<const RowMatrix>& A,
-                          const Eigen::Ref<const Vector>& b) const {
+                          const Eigen::Ref<const Vector>& b, const Vector& lo,
+                          const Vector& hi) const {
   for (Index j = 0; j < nv; ++j)
-    if (x[j] < box.lo[j] - kBoundTol || x[j] > box.hi[j] + kBoundTol) return false;
+    if (x[j] < lo[j] - kBoundTol || x[j] > hi[j] + kBoundTol) return false;
   for (Index i = 0; i < A.rows(); ++i)
     if (A.row(i).dot(x) > b[i] + kBoundTol * (1.0 + std::abs(b[i]))) return false;
   return true;
@@ -282,40 +283,56 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
   if (levels.size() > 1) lower_levels(ff_in ? ffw_.data() : nullptr);
   desired_top = fb0_ + ff0_;
   desired = fb + ff;
-  // 4. each joint's box; the displacement the feedback asks of each joint: fb / K
-  const Index counted = L0.targets > 0 ? L0.targets : r0;
-  const double K = fb_given ? given_gain
-                           : (counted > 0 ? gains.segment(L0.begin, counted).mean() : 0.0) * top.gain;
-  if (K > 0.0) tmp_ = fb / K;
-  else tmp_.setZero();
-  joint_box(bounds, dt_, q, dq, ddq, fb, ff, tmp_, user_lo, user_hi, box);
+  // 4. each joint's box: what it can do this step, and the braking that lets it stop where the
+  // feedback sends it (the displacement fb / K it asks of each)
+  capability(bounds, dt_, dq, ddq, box);
+  if (bounds.smooth) {
+    const Index counted = L0.targets > 0 ? L0.targets : r0;
+    const double K = fb_given ? given_gain
+                              : (counted > 0 ? gains.segment(L0.begin, counted).mean() : 0.0) *
+                                    top.gain;
+    if (K > 0.0) tmp_ = fb / K;
+    else tmp_.setZero();
+  }
+  joint_box(bounds, dt_, q, dq, fb, ff, tmp_, user_lo, user_hi, box);
   bool torn = false;
   for (Index j = 0; j < n; ++j) torn = torn || box.torn[j];
   if (torn) status |= kConflict;
-  // 5. the method's step where it is feasible, else the nearest feasible one in its metric
+  // 5. the method's step where it is within every limit; else first the hard limits (position,
+  // speed, a user's bounds and rows) by the projection, where joints held at a bound leave the
+  // task to the others; then each joint's smoothness box (acceleration, jerk, braking) on its
+  // own, the hard box winning where the two are apart: each joint follows its jerk-limited
+  // braking profile toward where the feedback sends it (redistributing what a braking joint
+  // leaves to the others would bring its share of the error back step after step); and where
+  // that breaks a row, the projection within the whole box, or the hard box alone (the
+  // smoothness yields to a collision row).
   report = ProjectionReport{};
-  kept = feasible(desired, A, b);
+  kept = feasible(desired, A, b, box.lo, box.hi);
   if (kept) {
     velocity = desired;
   } else {
     status |= kConstrained;
-    project(A, b, box.lo, box.hi);
-    // rows that the smooth box keeps from holding: the hard box alone (the smoothness yields)
-    bool broken = false;
-    for (Index i = 0; i < A.rows(); ++i)
-      broken = broken || A.row(i).dot(velocity) > b[i] + 1e-9 * (1.0 + std::abs(b[i]));
-    if (broken && bounds.smooth) {
-      project(A, b, box.hard_lo, box.hard_hi);
-      for (Index j = 0; j < n; ++j)
-        if (velocity[j] < box.soft_lo[j] - kBoundTol || velocity[j] > box.soft_hi[j] + kBoundTol) {
-          box.torn[j] = 1;
-          status |= kConflict;
-        }
-      broken = false;
+    if (feasible(desired, A, b, box.hard_lo, box.hard_hi)) velocity = desired;
+    else project(A, b, box.hard_lo, box.hard_hi);
+    for (Index j = 0; j < n; ++j) velocity[j] = std::min(std::max(velocity[j], box.lo[j]), box.hi[j]);
+    if (!feasible(velocity, A, b, box.lo, box.hi)) {
+      project(A, b, box.lo, box.hi);
+      bool broken = false;
       for (Index i = 0; i < A.rows(); ++i)
         broken = broken || A.row(i).dot(velocity) > b[i] + 1e-9 * (1.0 + std::abs(b[i]));
+      if (broken && bounds.smooth) {
+        project(A, b, box.hard_lo, box.hard_hi);
+        for (Index j = 0; j < n; ++j)
+          if (velocity[j] < box.soft_lo[j] - kBoundTol || velocity[j] > box.soft_hi[j] + kBoundTol) {
+            box.torn[j] = 1;
+            status |= kConflict;
+          }
+        broken = false;
+        for (Index i = 0; i < A.rows(); ++i)
+          broken = broken || A.row(i).dot(velocity) > b[i] + 1e-9 * (1.0 + std::abs(b[i]));
+      }
+      if (broken) status |= kRowsBroken;
     }
-    if (broken) status |= kRowsBroken;
     if (!report.converged) status |= kUnconverged;
   }
   rows_active.clear();

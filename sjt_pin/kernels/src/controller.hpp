@@ -80,7 +80,7 @@ class Controller {
 
  private:
   bool feasible(const Vector& x, const Eigen::Ref<const RowMatrix>& A,
-                const Eigen::Ref<const Vector>& b) const;
+                const Eigen::Ref<const Vector>& b, const Vector& lo, const Vector& hi) const;
   void lower_levels(const double* ffw);
   void project(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b,
                const Vector& lo, const Vector& hi);

@@ -86,6 +86,37 @@ int Projection::inner(const Eigen::Ref<const Vector>& xb, const Eigen::Ref<const
   }
 }
 
+void Projection::polish(const Eigen::Ref<const RowMatrix>& C, const Eigen::Ref<const Vector>& d,
+                        const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b,
+                        const Eigen::Ref<const Vector>& lo, const Eigen::Ref<const Vector>& hi) {
+  const Index n = gx_.size(), c = C.rows(), w = static_cast<Index>(working_.size());
+  if (c + w == 0) return;
+  rows_.resize(c + w, n);
+  residual_.resize(c + w);
+  rows_.topRows(c) = C;
+  residual_.head(c).noalias() = C * gx_ - d;
+  for (Index a = 0; a < w; ++a) {
+    rows_.row(c + a) = A.row(working_[a]);
+    residual_[c + a] = A.row(working_[a]).dot(gx_) - b[working_[a]];
+  }
+  for (int pass = 0; pass < 2; ++pass) {
+    // rows over the free joints, in the metric lam^-1
+    for (Index j = 0; j < n; ++j) {
+      const bool free = inv_[j] > 0.0 && gx_[j] > lo[j] && gx_[j] < hi[j];
+      w_[j] = free ? inv_[j] : 0.0;
+    }
+    M_.topLeftCorner(c + w, c + w).noalias() = rows_ * w_.asDiagonal() * rows_.transpose();
+    cod_.compute(M_.topLeftCorner(c + w, c + w));
+    step_.head(c + w) = cod_.solve(residual_);
+    z_.noalias() = rows_.transpose() * step_.head(c + w);
+    for (Index j = 0; j < n; ++j) gx_[j] = clip(gx_[j] - w_[j] * z_[j], lo[j], hi[j]);
+    residual_.head(c).noalias() = C * gx_ - d;
+    for (Index a = 0; a < w; ++a)
+      residual_[c + a] = A.row(working_[a]).dot(gx_) - b[working_[a]];
+    if (residual_.cwiseAbs().maxCoeff() <= 1e-15 * (1.0 + gx_.cwiseAbs().maxCoeff())) break;
+  }
+}
+
 ProjectionReport Projection::solve(
     const Eigen::Ref<const Vector>& xb, const Eigen::Ref<const Vector>& lam,
     const Eigen::Ref<const RowMatrix>& B, const Eigen::Ref<const Vector>& lo,
@@ -121,9 +152,15 @@ ProjectionReport Projection::solve(
   G_.topRows(r) = B;
   G_.middleRows(r, c) = C;
   off_.head(r).noalias() = B * xb;
-  off_.segment(r, c) = d;
   ridge_.head(r).setOnes();
-  for (Index i = 0; i < c; ++i) ridge_[r + i] = kRidge * (1e-300 + C.row(i).cwiseAbs2().cwiseProduct(inv_.transpose()).sum());
+  // the rows' ridge: 1e-12 of the least curvature a row can have in the metric,
+  // |row|^2 / (max lam + |B|^2): a row stiff in the task's metric gets a multiplier of that
+  // metric's size, and what the ridge lets it break (ridge times multiplier) stays negligible
+  double stiffness = B.squaredNorm();
+  for (Index j = 0; j < n; ++j)
+    if (std::isfinite(lam[j])) stiffness = std::max(stiffness, lam[j] + B.squaredNorm());
+  const double row_ridge = kRidge / std::max(stiffness, 1e-300);
+  for (Index i = 0; i < c; ++i) ridge_[r + i] = row_ridge * (1e-300 + C.row(i).squaredNorm());
 
   // the gradient's scale, for a tolerance that does not depend on the units
   double scale = 0.0;
@@ -134,44 +171,55 @@ ProjectionReport Projection::solve(
   ProjectionReport report;
   for (int outer = 0; outer < 3 * k + 10; ++outer) {
     const Index m = r + c + static_cast<Index>(working_.size());
+    off_.segment(r, c) = d;
     for (size_t a = 0; a < working_.size(); ++a) {
       const Index i = working_[a];
       G_.row(r + c + a) = A.row(i);
       off_[r + c + a] = b[i];
-      ridge_[r + c + a] = kRidge * (1e-300 + A.row(i).cwiseAbs2().cwiseProduct(inv_.transpose()).sum());
+      ridge_[r + c + a] = row_ridge * (1e-300 + A.row(i).squaredNorm());
     }
     const int it = inner(xb, lo, hi, m, scale);
     report.iterations += it + 1;
     if (it >= kInnerIterations) report.converged = false;
-    // a working row whose multiplier turned negative leaves
-    Index worst = -1;
-    double most_negative = -kTolerance * (1.0 + (m ? y_.head(m).cwiseAbs().maxCoeff() : 0.0));
-    for (size_t a = 0; a < working_.size(); ++a)
-      if (y_[r + c + a] < most_negative) {
-        most_negative = y_[r + c + a];
-        worst = static_cast<Index>(a);
-      }
-    if (worst >= 0) {
-      working_.erase(working_.begin() + worst);
-      for (Index a = r + c + worst; a + 1 < m; ++a) y_[a] = y_[a + 1];
-      continue;
-    }
-    // the most violated row outside joins
-    Index join = -1;
-    double violation = kTolerance * scale;
-    for (Index i = 0; i < k; ++i) {
-      if (std::find(working_.begin(), working_.end(), static_cast<int>(i)) != working_.end())
+    {
+      // a working row whose multiplier turned negative leaves
+      Index worst = -1;
+      double most_negative = -kTolerance * (1.0 + (m ? y_.head(m).cwiseAbs().maxCoeff() : 0.0));
+      for (size_t a = 0; a < working_.size(); ++a)
+        if (y_[r + c + a] < most_negative) {
+          most_negative = y_[r + c + a];
+          worst = static_cast<Index>(a);
+        }
+      if (worst >= 0) {
+        working_.erase(working_.begin() + worst);
+        for (Index a = r + c + worst; a + 1 < m; ++a) y_[a] = y_[a + 1];
         continue;
-      const double norm = std::sqrt(A.row(i).cwiseAbs2().cwiseProduct(inv_.transpose()).sum());
-      const double v = (A.row(i).dot(gx_) - b[i]) / (norm + 1e-300);
-      if (v > violation) {
-        violation = v;
-        join = i;
+      }
+      // the most violated row outside joins
+      Index join = -1;
+      double violation = kTolerance * scale;
+      for (Index i = 0; i < k; ++i) {
+        if (std::find(working_.begin(), working_.end(), static_cast<int>(i)) != working_.end())
+          continue;
+        const double norm = std::sqrt(A.row(i).cwiseAbs2().cwiseProduct(inv_.transpose()).sum());
+        const double v = (A.row(i).dot(gx_) - b[i]) / (norm + 1e-300);
+        if (v > violation) {
+          violation = v;
+          join = i;
+        }
+      }
+      if (join >= 0) {
+        working_.push_back(static_cast<int>(join));
+        y_[m] = 0.0;
+        continue;
       }
     }
-    if (join < 0) break;
-    working_.push_back(static_cast<int>(join));
-    y_[m] = 0.0;
+    // the working set is settled; the ridge that keeps the dual regular leaves the equalities
+    // and working rows broken by the ridge times their multiplier: the least correction of the
+    // joints strictly inside their box in the metric diag(lam) meets them exactly (a polish of
+    // the size of that breach)
+    polish(C, d, A, b, lo, hi);
+    break;
   }
   x = gx_;
   report.rows_active = static_cast<int>(working_.size());

@@ -54,11 +54,15 @@ class Projection {
   static constexpr double kRidge = 1e-12;
 
  private:
+  void polish(const Eigen::Ref<const RowMatrix>& C, const Eigen::Ref<const Vector>& d,
+              const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b,
+              const Eigen::Ref<const Vector>& lo, const Eigen::Ref<const Vector>& hi);
   int inner(const Eigen::Ref<const Vector>& xb, const Eigen::Ref<const Vector>& lo,
             const Eigen::Ref<const Vector>& hi, Index m, double scale);
 
-  Vector inv_, z_, gx_, grad_, step_, w_, gs_, off_, ridge_, y_, y_saved_;
-  RowMatrix G_;
+  Vector inv_, z_, gx_, grad_, step_, w_, gs_, off_, ridge_, y_, y_saved_, residual_;
+  RowMatrix G_, rows_;
+  Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod_;
   Eigen::MatrixXd M_;
   Eigen::LLT<Eigen::MatrixXd> llt_;
   std::vector<int> working_;
