@@ -13,6 +13,7 @@
 
 #include <Eigen/Core>
 #include <cstddef>
+#include <cstdint>
 #include <string>
 
 namespace sjt {
@@ -60,6 +61,43 @@ class Array {
   double* data_ = nullptr;
   Index size_ = 0, rows_ = 0, cols_ = 0;
 };
+
+// A checked int64 numpy array of indices (an index table: joints' coordinates, blocks of q),
+// read-only: native int64, of the expected number of dimensions, C-contiguous and aligned, as
+// Array; within() checks every entry against the range a kernel indexes with it. It borrows
+// the array as Array does.
+class IndexArray {
+ public:
+  IndexArray(nb::handle object, const char* name, int ndim);
+
+  Index size() const { return size_; }
+  Index rows() const { return rows_; }
+  Index cols() const { return cols_; }
+  const char* name() const { return name_; }
+  const std::int64_t* data() const { return data_; }
+  std::int64_t operator[](Index k) const { return data_[k]; }
+  std::int64_t operator()(Index row, Index col) const { return data_[row * cols_ + col]; }
+
+  // ValueError unless the array has `n` entries (1-D) / this shape (2-D)
+  const IndexArray& length(Index n) const;
+  const IndexArray& shape(Index rows, Index cols) const;
+  // ValueError unless every entry is in [lower, upper)
+  const IndexArray& within(std::int64_t lower, std::int64_t upper) const;
+
+ private:
+  const char* name_;
+  const std::int64_t* data_ = nullptr;
+  Index size_ = 0, rows_ = 0, cols_ = 0;
+};
+
+// The number of dimensions of a numpy array, -1 for any other object (for a kernel that
+// takes a vector or a matrix in one place).
+int ndim_of(nb::handle object);
+
+// A numpy array (C-contiguous float64: (rows,) for cols < 0, else (rows, cols)) on
+// memory that `owner` holds and never reallocates: the array keeps owner alive; read-only
+// unless access is Access::write.
+nb::object numpy_view(double* data, Index rows, Index cols, nb::handle owner, Access access);
 
 // ValueError with a formatted message (throws)
 [[noreturn]] void fail(const std::string& message);
