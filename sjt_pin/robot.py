@@ -452,9 +452,9 @@ class Robot:
 
     @property
     def unit_blocks(self) -> np.ndarray:
-        """``(first, size)`` of each unit-norm block of a configuration, flat (float): the
+        """``(first, size)`` of each unit-norm block of a configuration, (k, 2) int64: the
         quaternions of free flyers and spherical joints, the (cos, sin) pairs of continuous
-        and planar joints; empty when there are none."""
+        and planar joints; none (k = 0) when there are none."""
         return self._units.layout
 
     def check_reach(self, position, q=None, name: str = "target") -> None:

@@ -41,7 +41,8 @@ def name_list(names, limit: int = MAX_NAMES) -> str:
 
 
 def as_vector(value, name: str, size: int | None = None) -> np.ndarray:
-    """``value`` as a finite float vector of length ``size`` (any length if None)."""
+    """``value`` as a finite float vector of length ``size`` (any length if None): a
+    C-contiguous, aligned float64 array (a copy of a strided view), as the kernels read it."""
     if isinstance(value, (str, bytes)) or value is None:
         raise ValueError(f"{name} must be a vector of numbers, got {value!r}")
     if np.iscomplexobj(value):
@@ -55,7 +56,7 @@ def as_vector(value, name: str, size: int | None = None) -> np.ndarray:
         raise ValueError(f"{name} must have shape {want}, got shape {arr.shape}")
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{name} contains NaN or inf: {arr}")
-    return arr
+    return np.require(arr, requirements=("C", "A"))
 
 
 def configuration(value, name: str, nq: int, nv: int) -> np.ndarray:
@@ -87,9 +88,9 @@ class UnitBlocks:
                                for i in range(first, first + size)], dtype=np.intp)
         self.starts = np.cumsum([0] + [size for *_, size in blocks[:-1]], dtype=np.intp)
         self.sizes = np.array([size for *_, size in blocks], dtype=float)
-        #: (first, size) of each block, flat: what ``kernels.unit_defect`` takes
-        self.layout = np.array([v for _, _, first, size in blocks for v in (first, size)],
-                               dtype=float)
+        #: (first, size) of each block, (k, 2) int64: what ``kernels.unit_defect`` takes
+        self.layout = np.array([(first, size) for _, _, first, size in blocks],
+                               dtype=np.int64).reshape(-1, 2)
 
     def __bool__(self) -> bool:
         return bool(self.blocks)
@@ -182,7 +183,8 @@ def as_pose(value, name: str = "target") -> pin.SE3:
 def as_motion(value, name: str = "target_velocity") -> np.ndarray:
     """``value`` (a ``pin.Motion`` or a 6-vector [linear (m/s), angular (rad/s)]) as a float
     6-vector; finiteness is checked by the step (a NaN shows in the feed-forward)."""
-    if type(value) is np.ndarray and value.shape == (6,) and value.dtype == np.float64:
+    if (type(value) is np.ndarray and value.shape == (6,) and value.dtype == np.float64
+            and value.flags.c_contiguous and value.flags.aligned):
         return value
     if isinstance(value, pin.Motion):
         return value.vector

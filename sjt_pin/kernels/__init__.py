@@ -17,37 +17,41 @@ vector. The numpy references that pin them are in ``tests/``.
 - :func:`project`: the stage's projection on its own (tests, ``solve()``'s user limits);
 - :func:`stopping_distance`, :func:`largest_stoppable`, :func:`approach_top`: the jerk-limited
   braking of one joint;
-- :func:`check_array`: the boundary's check, on its own.
+- :func:`check_array`: the boundary's check, on its own;
+- ``jlog6_inverse(xi, out)`` (``src/lie.cpp``): ``Jlog6(N^-1)`` from ``xi = log6(N)``, the
+  exact derivative of a pose error in the rows of its Jacobian (the search's model);
+- ``frame_velocity``, ``position_rows``, ``rotation_defect``, ``unit_defect``
+  (``src/transforms.cpp``): the tasks' small transforms and the door's manifold check of q.
 """
 
-# (transition) the C kernels not yet replaced: collision, search, transforms
+# (transition) the C kernels not yet replaced: collision, search
 from ._core import (  # noqa: E402, F401
     Controller,
     Family,
     MethodParameters,
     approach_top,
     check_array,
+    frame_velocity,
+    jlog6_inverse,
     largest_stoppable,
     mapping_matrix,
+    position_rows,
     project,
+    rotation_defect,
     scaling_factors,
     stopping_distance,
+    unit_defect,
 )
 from ._kernels import (  # noqa: F401
     braking_reach,
     collision_rows,
     damper_rows,
-    frame_velocity,
-    jlog6_inverse,
     near_pairs,
-    position_rows,
     refresh_pairs,
-    rotation_defect,
     search_iteration,
     search_pose,
     sphere_gaps,
     stoppable_rows,
-    unit_defect,
     witness_rows,
 )
 from .layout import *  # noqa: E402, F401, F403 (the search's slots, until it is typed)

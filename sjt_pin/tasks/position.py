@@ -39,16 +39,12 @@ class PositionTask(Task):
     def bind(self, robot):
         bound = super().bind(robot)
         d, n = self.dim, robot.nv
-        # [axes | J | e | ff]: one buffer, one argument for the kernel
-        bound._out = np.zeros(d * (n + 3))
-        bound._out[:d] = self._rows
-        bound._J = bound._out[d:d + d * n].reshape(d, n)
-        bound._e = bound._out[d + d * n:2 * d + d * n]
-        bound._ff = bound._out[2 * d + d * n:]
+        bound._J, bound._e, bound._ff = np.zeros((d, n)), np.zeros(d), np.zeros(d)
         return bound
 
     def target(self, value):
-        if type(value) is np.ndarray and value.shape == (3,) and value.dtype == np.float64:
+        if (type(value) is np.ndarray and value.shape == (3,) and value.dtype == np.float64
+                and value.flags.c_contiguous and value.flags.aligned):
             return value  # finiteness shows in the error
         if isinstance(value, pin.SE3):
             return value.translation
@@ -57,7 +53,9 @@ class PositionTask(Task):
         return as_vector(value, "target", 3)
 
     def velocity(self, value):
-        if type(value) is np.ndarray and value.shape in ((3,), (6,)) and value.dtype == np.float64:
+        if (type(value) is np.ndarray and value.shape in ((3,), (6,))
+                and value.dtype == np.float64 and value.flags.c_contiguous
+                and value.flags.aligned):
             return value  # finiteness shows in the feed-forward
         if isinstance(value, pin.Motion):
             return value.vector
@@ -69,7 +67,7 @@ class PositionTask(Task):
         self.placement = oMf
         J6 = kinematics.world_aligned_jacobian(self.frame_id)
         position_rows(J6, oMf.np, target, _NO_VELOCITY if velocity is None else velocity,
-                      self._out)
+                      self._rows, self._J, self._e, self._ff)
         return self._J, self._e, None if velocity is None else self._ff
 
     def __repr__(self) -> str:

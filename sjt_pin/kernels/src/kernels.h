@@ -234,9 +234,6 @@ PyObject *py_cholesky_solve(PyObject *self, PyObject *const *args, Py_ssize_t na
 PyObject *py_loop_bound(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
 PyObject *py_symmetric_eigen(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
 
-/* lie.c */
-PyObject *py_jlog6_inverse(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
-
 /* methods.c */
 void damped_solve(Mat J, const double *v, const double *sw, const double *alpha,
                   double *work, double dt, double *step, double extra);
@@ -274,12 +271,6 @@ PyObject *py_follow_motion(PyObject *self, PyObject *const *args, Py_ssize_t nar
 /* search.c */
 PyObject *py_search_iteration(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
 PyObject *py_search_pose(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
-
-/* transforms.c */
-PyObject *py_frame_velocity(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
-PyObject *py_rotation_defect(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
-PyObject *py_position_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
-PyObject *py_unit_defect(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
 
 /* projection.c */
 PyObject *py_nonnegative_qp(PyObject *self, PyObject *const *args, Py_ssize_t nargs);

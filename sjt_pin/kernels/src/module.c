@@ -1,6 +1,6 @@
 /* The compiled inner loops of sjt-pin: one step of each family of CLIK mappings (the paper's
- * eq. 8, 10, 21 and the damped forms), their joint limits, the set-point search, and the
- * tasks' small transforms. Plain C on the CPython API, built by `pip install`: nothing is
+ * eq. 8, 10, 21 and the damped forms), their joint limits and the set-point search (the tasks'
+ * small transforms are C++, in the module _core). Plain C on the CPython API, built by `pip install`: nothing is
  * compiled at run time. Arrays come in through the buffer protocol (float64; 2-D arrays with
  * any strides, 1-D inputs copied when not contiguous); the Python reference formulas are in
  * sjt_pin/mappings.py and tests/test_kernels.py checks these functions against them.
@@ -33,14 +33,6 @@ static PyMethodDef methods[] = {
      "loop_bound(A, products, B, C) -> float: an upper bound of lambda_max of the PSD A."},
     {"symmetric_eigen", (PyCFunction)(void (*)(void))py_symmetric_eigen, METH_FASTCALL,
      "symmetric_eigen(A, V): Jacobi eigen-decomposition in place (diag A, columns of V)."},
-    {"frame_velocity", (PyCFunction)(void (*)(void))py_frame_velocity, METH_FASTCALL,
-     "frame_velocity(oMf, oMd, velocity, out): a desired twist seen from the frame (LOCAL)."},
-    {"rotation_defect", (PyCFunction)(void (*)(void))py_rotation_defect, METH_FASTCALL,
-     "rotation_defect(M) -> float: max |R^T R - I| of a 4x4 (inf: not rigid, nan: not finite)."},
-    {"position_rows", (PyCFunction)(void (*)(void))py_position_rows, METH_FASTCALL,
-     "position_rows(J6, oMf, p_d, velocity, out): a position task's rows into out."},
-    {"unit_defect", (PyCFunction)(void (*)(void))py_unit_defect, METH_FASTCALL,
-     "unit_defect(q, blocks) -> float: largest |squared norm - 1| of the unit blocks"},
     {"search_iteration", (PyCFunction)(void (*)(void))py_search_iteration, METH_FASTCALL,
      "search_iteration(J, e, q, J_cur, e_cur, q_cur, limits, work, state, step) -> status: "
      "one Levenberg-Marquardt iteration of solve()."},
@@ -50,9 +42,6 @@ static PyMethodDef methods[] = {
      "iterations of solve() on one pose task, each calling jacobian(*arguments) once; with "
      "configurations, distance, initial, best_q, starts, max_iters, best as well -> (status, "
      "iterations, starts, best): the restarts from the table of sjt_pin.restarts."},
-    {"jlog6_inverse", (PyCFunction)(void (*)(void))py_jlog6_inverse, METH_FASTCALL,
-     "jlog6_inverse(xi, out): out (6 x 6) = Jlog6(N^-1) for xi = log6(N), [linear; angular]: "
-     "the exact rows of a pose error log6 from its CLIK rows (-de/dq = G J)."},
     {"nonnegative_qp", (PyCFunction)(void (*)(void))py_nonnegative_qp, METH_FASTCALL,
      "nonnegative_qp(Q, r, y) -> int: y = argmin 1/2 y^T Q y + r^T y over y >= 0 (NNLS)."},
     {"project_rows", (PyCFunction)(void (*)(void))py_project_rows, METH_FASTCALL,

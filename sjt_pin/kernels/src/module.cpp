@@ -13,4 +13,6 @@ NB_MODULE(_core, m) {
   sjt::register_braking(m);
   sjt::register_projection(m);
   sjt::register_method(m);
+  sjt::register_lie(m);
+  sjt::register_transforms(m);
 }

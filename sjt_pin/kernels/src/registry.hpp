@@ -10,5 +10,7 @@ void register_controller(nanobind::module_& m);
 void register_braking(nanobind::module_& m);
 void register_projection(nanobind::module_& m);
 void register_method(nanobind::module_& m);
+void register_lie(nanobind::module_& m);
+void register_transforms(nanobind::module_& m);
 
 }  // namespace sjt
