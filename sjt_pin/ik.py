@@ -18,13 +18,16 @@ one iteration. A start ends when the error is below ``tol`` (success), or when i
 starts, has not halved in 4 while a joint is held at a limit or after a rejected step): then a
 new start.
 
-On a single :class:`~sjt_pin.tasks.PoseTask` (the usual case) every iteration of a start runs
-in one compiled call (``sjt_pin.kernels.search_pose``): per iteration one Pinocchio call for the
-kinematics and the frame's Jacobian, then the error (log6), the update, the limits and
-``integrate`` in C, about 1 us on a 6-joint arm; without a ``timeout``, the table's restarts
-run in one such call too. Other task stacks, and user limits (the
-constraint stage's, which hold at every iteration too), make one Python round trip per
-iteration: the stack's rows, then one compiled call (``sjt_pin.kernels.search_iteration``).
+The search's parameters, the options of a solve and the state of a start are named fields of
+one compiled object (``sjt_pin.kernels.SetPointSearch``, C++ on Eigen), which also holds its
+current point and next step. On a single :class:`~sjt_pin.tasks.PoseTask` (the usual case)
+every iteration of a start runs in one compiled call (``sjt_pin.kernels.search_pose``): per
+iteration one Pinocchio call for the kinematics and the frame's Jacobian, then the error
+(log6), the update, the limits and ``integrate`` compiled, about 1 us on a 6-joint arm; without
+a ``timeout``, the table's restarts run in one such call too (``search_table``). Other task
+stacks, and user limits (the constraint stage's, which hold at every iteration too), make one
+Python round trip per iteration: the stack's rows, then one compiled call
+(``SetPointSearch.iterate``).
 """
 
 from __future__ import annotations
@@ -36,24 +39,8 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from . import kernels
 from .joint_ranges import outside
-from .kernels import (
-    CONVERGED,
-    S_BEST,
-    S_E_SQ,
-    S_ERROR_ROWS,
-    S_HELD_LIMIT,
-    S_HELD_PROGRESS,
-    S_MAX_STEP,
-    S_NU,
-    S_PROGRESS,
-    S_STALE_LIMIT,
-    S_TOL_SQ,
-    STATE_SIZE,
-    search_iteration,
-    search_pose,
-)
+from .kernels import CONVERGED, SetPointSearch, search_pose, search_table
 from .kinematics import Kinematics
 from .limits.base import Motion
 from .methods.transpose import COLUMN_TOL
@@ -116,31 +103,32 @@ class Search:
         self.robot = robot = solver.robot
         self.stack = stack = solver.stack.copy()
         method = solver.method
-        m, n = stack.dim, robot.nv
-        self.layout = layout = kernels.Layout(m, n, 0)
-        self.work = work = layout.allocate()
-        layout.sqrt_weight(work)[:] = stack.sqrt_weight
-        work[kernels.P_IDENTITY_ROWS] = stack.identity_rows
-        layout.joint_mask(work)[:] = stack.chain
-        work[kernels.P_MU] = MU  # the search's own damping: DLS's tracking damping would stall it
-        work[kernels.P_COL_TOL] = getattr(method, "column_tol", COLUMN_TOL)
-        work[kernels.P_LENGTH2] = getattr(method, "length", 0.0) ** 2
-        work[kernels.P_SCALED] = 1.0 if getattr(method, "scaled", False) else 0.0
         limit = solver.position_limit
-        self.limits = (np.zeros((4, 0)) if limit is None else
-                       np.vstack([limit.q_index, limit.v_index, limit.lower, limit.upper])
-                       .astype(float))
+        empty = np.zeros(0, dtype=np.int64)
+        self.core = core = SetPointSearch(
+            np.ascontiguousarray(stack.sqrt_weight, dtype=float),
+            np.ascontiguousarray(stack.chain, dtype=float), robot.nq,
+            empty if limit is None else np.asarray(limit.q_index, dtype=np.int64),
+            empty if limit is None else np.asarray(limit.v_index, dtype=np.int64),
+            np.zeros(0) if limit is None else np.asarray(limit.lower, dtype=float),
+            np.zeros(0) if limit is None else np.asarray(limit.upper, dtype=float),
+            damping=MU,  # the search's own damping: DLS's tracking damping would stall it
+            column_tol=getattr(method, "column_tol", COLUMN_TOL),
+            length=getattr(method, "length", 0.0),
+            scaled=bool(getattr(method, "scaled", False)),
+            identity_rows=stack.identity_rows)
+        core.error_rows = stack.target_dim
+        core.max_step, core.nu_start = MAX_STEP, NU_START
+        core.stale_iters, core.progress = STALE_ITERS, PROGRESS
+        core.held_iters, core.held_progress = HELD_ITERS, HELD_PROGRESS
         # the user's limits hold at every iteration too (the URDF's position limits are the
         # search kernel's own): each displacement is a velocity over a period of 1
         self.user_limits = solver.user_limits
         self.kinematics = Kinematics(robot.model)
-        self.state = np.zeros(STATE_SIZE)
-        self._initial = np.zeros(STATE_SIZE)  # the state at every start (see aim)
         self.targets = []  # of the solve set up by aim
-        self.J = np.zeros((m, n))
-        self.e = np.zeros(m)
-        self.q = np.zeros(robot.nq)
-        self.step = np.zeros(n)
+        # the current point (J, e, q: read-only views) and the next step from it (writable:
+        # the user's limits correct it), the compiled search's own arrays
+        self.J, self.e, self.q, self.step = core.J, core.e, core.q, core.step
         self.best_q = np.zeros(robot.nq)  # the best start's q of run_nearest
         self._sampler = Sampler(robot)
         self._near: NearStarts | None = None  # built on the first restart (see near)
@@ -151,13 +139,7 @@ class Search:
     def aim(self, targets: list, tol: float) -> None:
         """Set up one solve: its targets (validated) and tolerance (|e|, task units)."""
         self.targets = targets
-        initial = self._initial
-        initial[:] = 0.0
-        initial[S_NU], initial[S_BEST] = NU_START, math.inf
-        initial[S_TOL_SQ], initial[S_MAX_STEP] = tol * tol, MAX_STEP
-        initial[S_ERROR_ROWS] = self.stack.target_dim
-        initial[S_STALE_LIMIT], initial[S_PROGRESS] = STALE_ITERS, PROGRESS
-        initial[S_HELD_LIMIT], initial[S_HELD_PROGRESS] = HELD_ITERS, HELD_PROGRESS
+        self.core.tol = tol
         if self.pose is not None:
             self.pose.aim(self, targets[0])
 
@@ -166,9 +148,8 @@ class Search:
         """One start from ``q0`` towards the targets of :meth:`aim`, of at most ``limit``
         iterations: (converged, iterations used). ``quick``: with the quick stall test (see
         ``HELD_ITERS``) as well as the patient one."""
-        self.state[:] = self._initial
-        if not quick:
-            self.state[S_HELD_LIMIT] = math.inf
+        core = self.core
+        core.start(quick)
         if self.pose is not None:
             return self.pose.run(q0, limit, deadline)
         stack, model, targets = self.stack, self.robot.model, self.targets
@@ -176,8 +157,7 @@ class Search:
         clock = time.perf_counter
         while iterations < limit:
             J, e = stack.search_rows(q, targets)
-            status = search_iteration(J, e, q, self.J, self.e, self.q, self.limits, self.work,
-                                      self.state, self.step)
+            status = core.iterate(J, e, q)
             iterations += 1
             if status == CONVERGED and self.user_limits is not None:
                 if not self.admissible(self.q):
@@ -212,7 +192,7 @@ class Search:
 
     def error(self) -> float:
         """|e| of the target rows at the current configuration (the kernel's |e|^2 there)."""
-        return math.sqrt(self.state[S_E_SQ])
+        return self.core.error
 
     def random(self, seed: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """A random start: ``seed`` with the drawn joints drawn from ``rng`` (see
@@ -248,9 +228,9 @@ class Search:
         many starts of :meth:`run`, without a Python round trip between them (no clock: for
         solves without a ``timeout``)."""
         assert self.pose is not None
-        status, used, made, lowest = search_pose(
-            *self.pose.call, count, table.configurations, table.distance, self._initial,
-            self.best_q, last - attempt + 1, max_iters, best)
+        status, used, made, lowest = search_table(
+            *self.pose.call, count, table.configurations, table.distance, self.best_q,
+            last - attempt + 1, max_iters, best)
         return status == CONVERGED, used, attempt + made - 1, lowest
 
     def generator(self, rng) -> np.random.Generator:
@@ -285,6 +265,9 @@ class _PoseLoop:
         self.data = data = model.createData()
         self.placement = placement = data.oMf[frame_id]  # views into data, kept alive here
         self.rotation, self.translation = placement.rotation, placement.translation
+        # R^T: Pinocchio's view of R is column-major, its transpose the C-contiguous rows the
+        # kernel reads
+        self.rotation_t = self.rotation.T
         self.trial = np.zeros(model.nq)
         self.arguments = (model, data, self.trial, frame_id, pin.LOCAL_WORLD_ALIGNED)
         self.joints = joints
@@ -323,9 +306,8 @@ class _PoseLoop:
 
     def aim(self, search: Search, target: pin.SE3) -> None:
         """The kernel's arguments for the starts of one solve of ``search`` to ``target``."""
-        self.call = (pin.computeFrameJacobian, self.arguments, self.rotation, self.translation,
-                     target.homogeneous, self.joints, self.trial, search.q, search.J, self.e,
-                     search.e, search.limits, search.work, search.state, search.step)
+        self.call = (search.core, pin.computeFrameJacobian, self.arguments, self.rotation_t,
+                     self.translation, target.homogeneous, self.joints, self.trial, self.e)
 
     def run(self, q0: np.ndarray, limit: int, deadline: float) -> tuple[bool, int]:
         """One start from ``q0`` (the search's state already reset): (converged, iterations
@@ -344,7 +326,7 @@ class _PoseLoop:
 
 
 def _joint_table(model: pin.Model) -> np.ndarray | None:
-    """(3, k): q index, v index and kind (0: one coordinate, q + v; 1: a continuous joint's
+    """(3, k) int64: q index, v index and kind (0: one coordinate, q + v; 1: a continuous joint's
     (cos, sin) pair) of every joint with coordinates, or ``None`` if a joint is of another
     kind."""
     rows = []
@@ -359,7 +341,7 @@ def _joint_table(model: pin.Model) -> np.ndarray | None:
             rows.append((joint.idx_q, joint.idx_v, 1))
         else:
             return None
-    return np.array(rows, dtype=float).reshape(-1, 3).T.copy()
+    return np.array(rows, dtype=np.int64).reshape(-1, 3).T.copy()
 
 
 def solve(solver, target, q0, *, tol: float = TOL, max_iters: int = MAX_ITERS,

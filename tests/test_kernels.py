@@ -183,16 +183,15 @@ def test_position_rows(rng):
 
 def test_the_slots_are_the_compiled_module_s_and_no_python_module_numbers_one():
     """The slot numbers come from the compiled module (src/kernels.h names each slot once):
-    the parameters are 0..INFO-1, the results and the search's state each 0..size-1, and no
-    module of the package assigns a number to a slot name."""
+    the parameters are 0..INFO-1, the results 0..size-1, and no module of the package assigns
+    a number to a slot name."""
     import re
     from pathlib import Path
 
     from sjt_pin.kernels import _kernels, layout
 
-    names = [n for n in dir(_kernels) if re.fullmatch(r"[PIS]_[A-Z0-9_]+", n)]
-    for prefix, size in (("P_", _kernels.INFO), ("I_", _kernels.INFO_SIZE),
-                         ("S_", _kernels.STATE_SIZE)):
+    names = [n for n in dir(_kernels) if re.fullmatch(r"[PI]_[A-Z0-9_]+", n)]
+    for prefix, size in (("P_", _kernels.INFO), ("I_", _kernels.INFO_SIZE)):
         slots = sorted(getattr(_kernels, n) for n in names if n.startswith(prefix))
         assert slots == list(range(size)), prefix
         assert all(getattr(layout, n) == getattr(_kernels, n) for n in names
@@ -203,14 +202,17 @@ def test_the_slots_are_the_compiled_module_s_and_no_python_module_numbers_one():
         assert not assignment.search(path.read_text()), path
     # the modes, status bits and tolerances the kernels share with Python are theirs too
     shared = ("GAIN_FIXED", "GAIN_AUTO", "FF_TRANSPOSE", "FF_DAMPED", "FB_TRANSPOSE", "FB_DAMPED",
-              "NON_FINITE", "STALLED", "CLAMPED", "SCALED", "CONTINUE", "CONVERGED",
-              "SEARCH_STALLED", "EIGEN_FLOOR", "BOUND_TOL", "RANK_TOL", "BRAKING_TOL",
-              "BRAKING_STEPS", "DUAL_RIDGE", "BOUND_PRODUCTS")
-    names = "|".join(shared)
+              "NON_FINITE", "STALLED", "CLAMPED", "SCALED", "EIGEN_FLOOR", "BOUND_TOL", "RANK_TOL",
+              "BRAKING_TOL", "BRAKING_STEPS", "DUAL_RIDGE", "BOUND_PRODUCTS")
+    searched = ("CONTINUE", "CONVERGED", "SEARCH_STALLED")  # the search's (the module _core)
+    names = "|".join(shared + searched)
     constant = re.compile(rf"^\s*(?:[A-Z_]+,\s*)*({names})\b[^=\n]*=\s*[-\d(]", re.M)
     for path in source.rglob("*.py"):
         assert not constant.search(path.read_text()), path
     assert all(getattr(layout, name) == getattr(_kernels, name) for name in shared)
+    from sjt_pin.kernels import _core
+
+    assert [getattr(K, name) for name in searched] == [getattr(_core, name) for name in searched]
 
 
 def test_bad_arguments_raise_instead_of_crashing():
@@ -335,7 +337,7 @@ def test_unit_defect_is_the_largest_squared_norm_defect(rng):
 
 def test_a_work_vector_or_table_that_does_not_fit_raises_instead_of_reading_past_it():
     """The kernels check the index tables they read against q and the velocity: a q shorter
-    than the limit box indexes, a box index past q, a search state shorter than its slots and a
+    than the limit box indexes, a box index past q, rows that are not the search's and a
     limits table indexing past q raise ValueError (before, some read or wrote out of bounds)."""
     rng = np.random.default_rng(3)
     layout = K.Layout(6, 7, 7)
@@ -350,16 +352,16 @@ def test_a_work_vector_or_table_that_does_not_fit_raises_instead_of_reading_past
     layout.box_part(work, 0)[:] = 10**9
     with pytest.raises(ValueError, match="work does not fit"):
         K.least_squares_step(J, e, ff, np.zeros(7), work, step)
-    search = K.Layout(6, 6, 0)
-    w = search.allocate()
-    q, Jc, ec, qc = np.zeros(6), np.zeros((6, 6)), np.zeros(6), np.zeros(6)
-    with pytest.raises(ValueError, match="do not fit"):
-        K.search_iteration(rng.random((6, 6)), rng.random(6), q, Jc, ec, qc, np.zeros((4, 0)),
-                           w, np.zeros(8), np.zeros(6))
-    limits = np.array([[9.0], [0.0], [-1.0], [1.0]])  # a q index past q's end
-    with pytest.raises(ValueError, match="limits: column 0"):
-        K.search_iteration(rng.random((6, 6)), rng.random(6), q, Jc, ec, qc, limits, w,
-                           np.zeros(K.STATE_SIZE), np.zeros(6))
+    none, box = np.zeros(0, dtype=np.int64), (np.array([-1.0]), np.array([1.0]))
+    search = K.SetPointSearch(np.ones(6), np.ones(6), 6, none, none, np.zeros(0), np.zeros(0),
+                              damping=1e-6, column_tol=0.0)
+    with pytest.raises(ValueError, match=r"J must have shape \(6, 6\), got \(5, 6\)"):
+        search.iterate(rng.random((5, 6)), rng.random(6), np.zeros(6))
+    with pytest.raises(ValueError, match="q must have length 6"):
+        search.iterate(rng.random((6, 6)), rng.random(6), np.zeros(5))
+    with pytest.raises(ValueError, match=r"limit_q: entry 0 is 9, outside \[0, 6\)"):
+        K.SetPointSearch(np.ones(6), np.ones(6), 6, np.array([9]), np.array([0]), *box,
+                         damping=1e-6, column_tol=0.0)  # a q index past q's end
 
 
 @pytest.mark.parametrize("angle", [0.0, 1e-9, 1e-5, 0.0099, 0.0101, 0.29, 0.31, 1.0, 2.0, 3.0,
@@ -390,3 +392,35 @@ def test_follow_motion_is_the_numpy_formula_bitwise(rng):
     assert np.array_equal(dq, expected_dq) and np.array_equal(ddq, expected_ddq)
     with pytest.raises(ValueError, match="one length"):
         follow_motion(step, dt, dq[:3], ddq)
+
+
+@pytest.mark.parametrize("m, n, posture", [(6, 7, False), (3, 3, False), (9, 4, False),
+                                           (6 + 7, 7, True), (3 + 30, 30, True),
+                                           (12 + 4, 4, True)])
+@pytest.mark.parametrize("scaled", [True, False])
+def test_the_search_step_is_the_damped_formula(m, n, posture, scaled):
+    """SetPointSearch's step from a first iteration (no limits) is
+    D J_w^T (J_w D J_w^T + (mu^2 + nu |W e|^2) I)^-1 W e, D the columns' scales (SJT's, or 1;
+    0 for masked joints and columns under the tolerance): whichever of its solves the rows
+    take (m x m, n x n, or a posture task's identity rows through the Woodbury identity)."""
+    rng = np.random.default_rng(m * 100 + n)
+    J, e = rng.normal(size=(m, n)), rng.normal(size=m)
+    if posture:
+        J[m - n:] = np.eye(n)
+    J[:, 1] = 0.0  # a column under the tolerance
+    sw, mask = rng.uniform(0.5, 2.0, m), (rng.random(n) > 0.2).astype(float)
+    none = np.zeros(0, dtype=np.int64)
+    search = K.SetPointSearch(sw, mask, n, none, none, np.zeros(0), np.zeros(0), damping=1e-3,
+                              column_tol=1e-10, length=0.3, scaled=scaled,
+                              identity_rows=n if posture else 0)
+    search.tol, search.max_step, search.error_rows, search.nu_start = 0.0, np.inf, m, 0.7
+    search.start()
+    assert search.iterate(J, e, np.zeros(n)) == K.CONTINUE
+    Jw = sw[:, None] * J
+    norms = np.sum(Jw**2, axis=0)
+    alpha = np.where((mask != 0) & (norms > 1e-10),
+                     1.0 / np.maximum(norms, 0.3**2) if scaled else 1.0, 0.0)
+    damping = 1e-3**2 + 0.7 * float(np.sum((sw * e) ** 2))
+    expected = alpha * (Jw.T @ np.linalg.solve((Jw * alpha) @ Jw.T + damping * np.eye(m), sw * e))
+    np.testing.assert_allclose(search.step, expected, rtol=1e-9,
+                               atol=1e-12 * np.abs(expected).max())

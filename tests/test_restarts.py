@@ -108,9 +108,9 @@ def test_the_table_s_starts_in_one_call_are_those_of_one_call_each(name):
 
 
 def test_a_table_that_does_not_fit_the_robot_is_refused(panda):
-    """search_pose with a table whose configurations are not the robot's q (or a distance of
+    """search_table with a table whose configurations are not the robot's q (or a distance of
     another length) raises ValueError instead of reading past them."""
-    from sjt_pin.kernels import search_pose
+    from sjt_pin.kernels import search_table
 
     solver = sjt.SJTSolver(panda)
     search = solver.search()
@@ -119,8 +119,7 @@ def test_a_table_that_does_not_fit_the_robot_is_refused(panda):
     for configurations, distance in ((np.zeros((5, panda.nq - 1)), np.zeros(5)),
                                      (np.zeros((5, panda.nq)), np.zeros(4))):
         with pytest.raises(ValueError, match="table's arrays do not fit"):
-            search_pose(*call, 10, configurations, distance, search.state.copy(),
-                        np.zeros(panda.nq), 1, 10, np.inf)
+            search_table(*call, 10, configurations, distance, np.zeros(panda.nq), 1, 10, np.inf)
 
 
 def test_many_starts_are_those_of_one_call_each(ur5, continuous_wrist):

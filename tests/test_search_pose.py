@@ -30,7 +30,7 @@ def _pair(robot, method="sjt"):
 @pytest.mark.parametrize("name", ["ur5", "panda", "kinova"])  # Kinova: continuous joints
 def test_one_call_per_start_is_the_python_loop(name):
     """Same accepted trials, stalls and restarts as the loop over stack.evaluate,
-    search_iteration and pin.integrate: the same q to rounding (the error in world axes)."""
+    SetPointSearch.iterate and pin.integrate: the same q to rounding (the error in world axes)."""
     robot = sjt.Robot.from_example(name)
     fast, loop = _pair(robot)
     for target, seed in problems(robot, 15, seed=21):
@@ -116,26 +116,22 @@ def test_other_task_stacks_take_the_python_loop(ur5):
     assert equal.search().pose is not None
 
 
-def _iterations_until_stop(errors, quick_limit):
-    """search_iteration fed the error vectors ``errors`` in turn (J fixed, no limits): the
-    iterations until it returns a status other than CONTINUE (None: it never did)."""
+def _iterations_until_stop(errors, quick):
+    """SetPointSearch.iterate fed the error vectors ``errors`` in turn (J fixed, no limits):
+    the iterations until it returns a status other than CONTINUE (None: it never did)."""
     from sjt_pin import ik
     from sjt_pin import kernels as K
 
-    layout = K.Layout(6, 6, 0)
-    work = layout.allocate()
-    layout.sqrt_weight(work)[:] = 1.0
-    layout.joint_mask(work)[:] = 1.0
-    work[K.P_MU] = ik.MU
-    state = np.zeros(K.STATE_SIZE)
-    state[K.S_NU], state[K.S_BEST], state[K.S_TOL_SQ] = ik.NU_START, math.inf, 1e-12
-    state[K.S_MAX_STEP], state[K.S_ERROR_ROWS] = ik.MAX_STEP, 6
-    state[K.S_STALE_LIMIT], state[K.S_PROGRESS] = ik.STALE_ITERS, ik.PROGRESS
-    state[K.S_HELD_LIMIT], state[K.S_HELD_PROGRESS] = quick_limit, ik.HELD_PROGRESS
+    none = np.zeros(0, dtype=np.int64)
+    search = K.SetPointSearch(np.ones(6), np.ones(6), 6, none, none, np.zeros(0), np.zeros(0),
+                              damping=ik.MU, column_tol=0.0)
+    search.tol, search.max_step, search.error_rows = 1e-6, ik.MAX_STEP, 6
+    search.nu_start, search.stale_iters, search.progress = ik.NU_START, ik.STALE_ITERS, ik.PROGRESS
+    search.held_iters, search.held_progress = ik.HELD_ITERS, ik.HELD_PROGRESS
+    search.start(quick)
     J, q = np.eye(6), np.zeros(6)
-    Jc, ec, qc, step = np.zeros((6, 6)), np.zeros(6), np.zeros(6), np.zeros(6)
     for k, e in enumerate(errors, 1):
-        if K.search_iteration(J, e, q, Jc, ec, qc, np.zeros((4, 0)), work, state, step):
+        if search.iterate(J, e, q):
             return k
     return None
 
@@ -149,8 +145,8 @@ def test_the_quick_stall_test_waits_for_a_rejected_step():
     from sjt_pin import ik
 
     stuck = [np.full(6, 0.1)] * 20  # every trial no better than the first: rejected
-    assert _iterations_until_stop(stuck, ik.HELD_ITERS) == 1 + ik.HELD_ITERS
-    assert _iterations_until_stop(stuck, math.inf) == 1 + ik.STALE_ITERS
+    assert _iterations_until_stop(stuck, True) == 1 + ik.HELD_ITERS
+    assert _iterations_until_stop(stuck, False) == 1 + ik.STALE_ITERS
     assert ik.HELD_ITERS < ik.STALE_ITERS
     slow = [np.full(6, 0.1 * 0.95**k) for k in range(20)]  # accepted, 5 % better each time
-    assert _iterations_until_stop(slow, ik.HELD_ITERS) is None
+    assert _iterations_until_stop(slow, True) is None

@@ -18,17 +18,30 @@ vector. The numpy references that pin them are in ``tests/``.
 - :func:`stopping_distance`, :func:`largest_stoppable`, :func:`approach_top`: the jerk-limited
   braking of one joint;
 - :func:`check_array`: the boundary's check, on its own;
+- :class:`SetPointSearch` (``src/search.hpp``): the set-point search of ``solve()``, one object
+  per search holding its parameters (the damping, the method's column tolerance, SJT's floor
+  length, whether columns are scaled, a posture task's identity rows), the options of a solve
+  and the state of a start as named fields, its current point and next step as arrays;
+  ``iterate(J, e, q)`` is one Levenberg-Marquardt iteration on SJT's normalised columns within
+  the joint limits; :func:`search_pose`: every iteration of one start on a single pose task in
+  one call (it calls Pinocchio's Jacobian once per iteration); :func:`search_table`: the nearest
+  starts of the restart table of :mod:`sjt_pin.restarts` in turn; ``CONTINUE``, ``CONVERGED``,
+  ``SEARCH_STALLED``: what an iteration reports;
 - ``jlog6_inverse(xi, out)`` (``src/lie.cpp``): ``Jlog6(N^-1)`` from ``xi = log6(N)``, the
   exact derivative of a pose error in the rows of its Jacobian (the search's model);
 - ``frame_velocity``, ``position_rows``, ``rotation_defect``, ``unit_defect``
   (``src/transforms.cpp``): the tasks' small transforms and the door's manifold check of q.
 """
 
-# (transition) the C kernels not yet replaced: collision, search
+# (transition) the C kernels not yet replaced: collision
 from ._core import (  # noqa: E402, F401
+    CONTINUE,
+    CONVERGED,
+    SEARCH_STALLED,
     Controller,
     Family,
     MethodParameters,
+    SetPointSearch,
     approach_top,
     check_array,
     frame_velocity,
@@ -39,6 +52,8 @@ from ._core import (  # noqa: E402, F401
     project,
     rotation_defect,
     scaling_factors,
+    search_pose,
+    search_table,
     stopping_distance,
     unit_defect,
 )
@@ -48,13 +63,11 @@ from ._kernels import (  # noqa: F401
     damper_rows,
     near_pairs,
     refresh_pairs,
-    search_iteration,
-    search_pose,
     sphere_gaps,
     stoppable_rows,
     witness_rows,
 )
-from .layout import *  # noqa: E402, F401, F403 (the search's slots, until it is typed)
+from .layout import *  # noqa: E402, F401, F403 (the C step kernels' slots, until removed)
 
 #: status bits of :meth:`Controller.run` (``src/controller.hpp``)
 NON_FINITE, STALLED, CONSTRAINED, CONFLICT, ROWS_BROKEN, UNCONVERGED = 1, 2, 4, 8, 16, 32

@@ -18,8 +18,6 @@ from ._kernels import (  # noqa: F401 (re-exported: the kernels' vocabulary)
     BRAKING_STEPS,
     BRAKING_TOL,
     CLAMPED,
-    CONTINUE,
-    CONVERGED,
     DUAL_RIDGE,
     EIGEN_FLOOR,
     FB_DAMPED,
@@ -74,23 +72,7 @@ from ._kernels import (  # noqa: F401 (re-exported: the kernels' vocabulary)
     P_STALL_RUN,
     P_STALL_WAIT,
     RANK_TOL,
-    S_BEST,
-    S_E_SQ,
-    S_ERROR_ROWS,
-    S_F,
-    S_HELD_BEST,
-    S_HELD_LIMIT,
-    S_HELD_PROGRESS,
-    S_HELD_STALE,
-    S_ITER,
-    S_MAX_STEP,
-    S_NU,
-    S_PROGRESS,
-    S_STALE,
-    S_STALE_LIMIT,
-    S_TOL_SQ,
     SCALED,
-    SEARCH_STALLED,
     SM_ACC,
     SM_BRAKE_ACC,
     SM_BRAKE_JERK,
@@ -113,7 +95,6 @@ from ._kernels import (  # noqa: F401 (re-exported: the kernels' vocabulary)
     SM_TORN,
     SMOOTH_SIZE,
     STALLED,
-    STATE_SIZE,
 )
 
 HEADER = INFO + INFO_SIZE
@@ -213,6 +194,3 @@ class Layout:
         start = self.smooth + part * self.n
         return work[start:start + (self.m if part == SM_GAINS else self.n)]
 
-
-# -- the set-point search (search_iteration): its state slots (S_*) are imported above ----------
-#: what an iteration reports: CONTINUE, CONVERGED, SEARCH_STALLED (imported above)

@@ -187,19 +187,3 @@ bad:
                  nq);
     return -1;
 }
-
-/* whether a table of c columns holds q indices (row 0; a (cos, sin) pair takes two when row 2
- * says so) below nq and velocity indices (row 1) below n: the search's limits and joints */
-int table_ok(const double *table, Py_ssize_t c, Py_ssize_t nq, Py_ssize_t n, int pairs,
-             const char *name)
-{
-    for (Py_ssize_t k = 0; k < c; k++) {
-        double width = pairs && table[2 * c + k] != 0.0 ? 2.0 : 1.0;
-        if (!(table[k] >= 0 && table[k] + width <= nq && table[c + k] >= 0 && table[c + k] < n)) {
-            PyErr_Format(PyExc_ValueError, "%s: column %zd indexes past q (%zd,) or the "
-                         "velocity (%zd,)", name, k, nq, n);
-            return -1;
-        }
-    }
-    return 0;
-}

@@ -19,10 +19,6 @@
     X(P_STALL_WAIT) X(P_SMOOTH) X(P_JERK)
 #define RESULTS(X) X(I_E_SQ) X(I_FF_SQ) X(I_GAIN) X(I_LOOP) X(I_STALL) X(I_TRACE) X(I_EW_SQ) \
     X(I_SCALE) X(I_REGULAR)
-#define SEARCH_STATE(X) X(S_F) X(S_NU) X(S_ITER) X(S_BEST) X(S_STALE) X(S_TOL_SQ) \
-    X(S_MAX_STEP) X(S_ERROR_ROWS) X(S_E_SQ) \
-    X(S_STALE_LIMIT) X(S_PROGRESS) \
-    X(S_HELD_BEST) X(S_HELD_STALE) X(S_HELD_LIMIT) X(S_HELD_PROGRESS) X(S_REJECTED)
 /* the acceleration/jerk stage's part of work (at P_SMOOTH; n numbers each, then m): the
  * motion state, the limits, the step's boxes and what they did (see smooth_stage_c) */
 #define SMOOTH_PARTS(X) X(SM_DQ) X(SM_DDQ) X(SM_ACC) X(SM_JERK) X(SM_JERK_SPEED) \
@@ -35,7 +31,6 @@
 #define SLOT_NAME(name) #name,
 enum { PARAMETERS(SLOT_ENUM) P_COUNT };
 enum { RESULTS(SLOT_ENUM) I_COUNT };
-enum { SEARCH_STATE(SLOT_ENUM) S_COUNT };
 enum { SMOOTH_PARTS(SLOT_ENUM) SM_COUNT };
 enum { LIMIT_CODES(SLOT_ENUM) L_COUNT };
 /* the results follow the parameters */
@@ -54,9 +49,6 @@ enum { LIMIT_CODES(SLOT_ENUM) L_COUNT };
 #define EIGEN_FLOOR (1e3 * 2.220446049250313e-16)
 #define TRANSPOSE 0
 #define LEAST_SQUARES 1
-#define CONTINUE 0
-#define CONVERGED 1
-#define SEARCH_STALLED 2
 
 /* a read-only matrix with element strides */
 typedef struct { const double *p; Py_ssize_t m, n, s0, s1; } Mat;
@@ -220,8 +212,6 @@ Mat mat(const Arg *a);
 double *out_mat(Arg *a, const char *name);
 int nargs_ok(Py_ssize_t got, Py_ssize_t want, const char *name);
 int check_work(const Arg *work, Py_ssize_t m, Py_ssize_t n, Py_ssize_t nq);
-int table_ok(const double *table, Py_ssize_t c, Py_ssize_t nq, Py_ssize_t n, int pairs,
-             const char *name);
 
 /* linalg.c */
 void gram(Mat J, const double *sw, const double *s, int use_rows, double *out);
@@ -267,10 +257,6 @@ int step_c(int kind, Mat J, const double *e, const double *ff, const double *q,
 PyObject *py_transpose_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
 PyObject *py_least_squares_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
 PyObject *py_follow_motion(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
-
-/* search.c */
-PyObject *py_search_iteration(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
-PyObject *py_search_pose(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
 
 /* projection.c */
 PyObject *py_nonnegative_qp(PyObject *self, PyObject *const *args, Py_ssize_t nargs);

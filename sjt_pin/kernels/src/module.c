@@ -1,9 +1,10 @@
 /* The compiled inner loops of sjt-pin: one step of each family of CLIK mappings (the paper's
- * eq. 8, 10, 21 and the damped forms), their joint limits and the set-point search (the tasks'
- * small transforms are C++, in the module _core). Plain C on the CPython API, built by `pip install`: nothing is
- * compiled at run time. Arrays come in through the buffer protocol (float64; 2-D arrays with
- * any strides, 1-D inputs copied when not contiguous); the Python reference formulas are in
- * sjt_pin/mappings.py and tests/test_kernels.py checks these functions against them.
+ * eq. 8, 10, 21 and the damped forms) and their joint limits (the set-point search and the
+ * tasks' small transforms are C++, in the module _core). Plain C on the CPython API, built by
+ * `pip install`: nothing is compiled at run time. Arrays come in through the buffer protocol
+ * (float64; 2-D arrays with any strides, 1-D inputs copied when not contiguous); the Python
+ * reference formulas are in sjt_pin/mappings.py and tests/test_kernels.py checks these
+ * functions against them.
  *
  * Every function keeps the name, arguments and results of the Python-visible kernel it
  * implements (see sjt_pin/kernels/__init__.py); the slot numbers of a solver's `work` vector
@@ -13,7 +14,6 @@
 
 static const char *const PARAMETER_NAMES[] = { PARAMETERS(SLOT_NAME) };
 static const char *const RESULT_NAMES[] = { RESULTS(SLOT_NAME) };
-static const char *const SEARCH_STATE_NAMES[] = { SEARCH_STATE(SLOT_NAME) };
 static const char *const SMOOTH_PART_NAMES[] = { SMOOTH_PARTS(SLOT_NAME) };
 static const char *const LIMIT_CODE_NAMES[] = { LIMIT_CODES(SLOT_NAME) };
 
@@ -33,15 +33,6 @@ static PyMethodDef methods[] = {
      "loop_bound(A, products, B, C) -> float: an upper bound of lambda_max of the PSD A."},
     {"symmetric_eigen", (PyCFunction)(void (*)(void))py_symmetric_eigen, METH_FASTCALL,
      "symmetric_eigen(A, V): Jacobi eigen-decomposition in place (diag A, columns of V)."},
-    {"search_iteration", (PyCFunction)(void (*)(void))py_search_iteration, METH_FASTCALL,
-     "search_iteration(J, e, q, J_cur, e_cur, q_cur, limits, work, state, step) -> status: "
-     "one Levenberg-Marquardt iteration of solve()."},
-    {"search_pose", (PyCFunction)(void (*)(void))py_search_pose, METH_FASTCALL,
-     "search_pose(jacobian, arguments, rotation, translation, target, joints, q, q_cur, J_cur, "
-     "e, e_cur, limits, work, state, step, count) -> (status, iterations): up to count "
-     "iterations of solve() on one pose task, each calling jacobian(*arguments) once; with "
-     "configurations, distance, initial, best_q, starts, max_iters, best as well -> (status, "
-     "iterations, starts, best): the restarts from the table of sjt_pin.restarts."},
     {"nonnegative_qp", (PyCFunction)(void (*)(void))py_nonnegative_qp, METH_FASTCALL,
      "nonnegative_qp(Q, r, y) -> int: y = argmin 1/2 y^T Q y + r^T y over y >= 0 (NNLS)."},
     {"project_rows", (PyCFunction)(void (*)(void))py_project_rows, METH_FASTCALL,
@@ -99,8 +90,6 @@ PyMODINIT_FUNC PyInit__kernels(void)
         if (PyModule_AddIntConstant(m, PARAMETER_NAMES[i], i) < 0) goto fail;
     for (int i = 0; i < I_COUNT; i++)
         if (PyModule_AddIntConstant(m, RESULT_NAMES[i], i) < 0) goto fail;
-    for (int i = 0; i < S_COUNT; i++)
-        if (PyModule_AddIntConstant(m, SEARCH_STATE_NAMES[i], i) < 0) goto fail;
     for (int i = 0; i < SM_COUNT; i++)
         if (PyModule_AddIntConstant(m, SMOOTH_PART_NAMES[i], i) < 0) goto fail;
     for (int i = 0; i < L_COUNT; i++)
@@ -114,15 +103,13 @@ PyMODINIT_FUNC PyInit__kernels(void)
     PyObject *value = NULL;
     EXPORT_INT(GAIN_FIXED) EXPORT_INT(GAIN_AUTO) EXPORT_INT(FF_TRANSPOSE) EXPORT_INT(FF_DAMPED)
     EXPORT_INT(FB_TRANSPOSE) EXPORT_INT(FB_DAMPED) EXPORT_INT(NON_FINITE) EXPORT_INT(STALLED)
-    EXPORT_INT(CLAMPED) EXPORT_INT(SCALED) EXPORT_INT(BOUND_PRODUCTS) EXPORT_INT(CONTINUE)
-    EXPORT_INT(CONVERGED) EXPORT_INT(SEARCH_STALLED) EXPORT_INT(BRAKING_STEPS)
+    EXPORT_INT(CLAMPED) EXPORT_INT(SCALED) EXPORT_INT(BOUND_PRODUCTS) EXPORT_INT(BRAKING_STEPS)
     EXPORT_FLOAT(EIGEN_FLOOR) EXPORT_FLOAT(BOUND_TOL) EXPORT_FLOAT(RANK_TOL)
     EXPORT_FLOAT(BRAKING_TOL) EXPORT_FLOAT(DUAL_RIDGE)
 #undef EXPORT_INT
 #undef EXPORT_FLOAT
     if (PyModule_AddIntConstant(m, "INFO", INFO) < 0
-        || PyModule_AddIntConstant(m, "INFO_SIZE", I_COUNT) < 0
-        || PyModule_AddIntConstant(m, "STATE_SIZE", S_COUNT) < 0)
+        || PyModule_AddIntConstant(m, "INFO_SIZE", I_COUNT) < 0)
         goto fail;
     return m;
 fail:

@@ -15,4 +15,6 @@ NB_MODULE(_core, m) {
   sjt::register_method(m);
   sjt::register_lie(m);
   sjt::register_transforms(m);
+  sjt::register_search(m);
+  sjt::register_search_pose(m);
 }

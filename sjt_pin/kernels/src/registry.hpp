@@ -12,5 +12,7 @@ void register_projection(nanobind::module_& m);
 void register_method(nanobind::module_& m);
 void register_lie(nanobind::module_& m);
 void register_transforms(nanobind::module_& m);
+void register_search(nanobind::module_& m);
+void register_search_pose(nanobind::module_& m);
 
 }  // namespace sjt

@@ -1,0 +1,354 @@
+// The set-point search of solve(): one Levenberg-Marquardt iteration (accept or reject the
+// trial, the stall tests, the next step from the best point within the joint limits), and the
+// class that holds a search's parameters, state and current point (search.hpp).
+#include "search.hpp"
+
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <sstream>
+
+#include "registry.hpp"
+
+namespace sjt {
+
+namespace {
+
+// the Levenberg-Marquardt damping's factors down and up, and its range
+constexpr double kNuDown = 3.0, kNuUp = 4.0, kNuMin = 1e-6, kNuMax = 1e8;
+constexpr double kTurn = 2.0 * 3.14159265358979323846;
+// a joint within this (rad, m) of one of its limits is held there (the quick stall test)
+constexpr double kHeldTol = 1e-9;
+
+// the smaller and larger of a and b, b when they do not compare (a NaN a): the search's
+// arithmetic on a NaN error follows one path to its stall
+inline double smaller(double a, double b) { return a < b ? a : b; }
+inline double larger(double a, double b) { return a > b ? a : b; }
+
+void finite_number(double value, const char* name) {
+  if (!std::isfinite(value) || value < 0.0) {
+    std::ostringstream out;
+    out << name << " must be a finite number >= 0, got " << value;
+    fail(out.str());
+  }
+}
+
+}  // namespace
+
+SetPointSearch::SetPointSearch(nb::handle sqrt_weight, nb::handle mask, Index coordinates,
+                               nb::handle limit_q, nb::handle limit_v, nb::handle lower,
+                               nb::handle upper, double mu, double tolerance, double floor,
+                               bool scale, Index identity)
+    : m(Array(sqrt_weight, "sqrt_weight", 1).size()),
+      n(Array(mask, "mask", 1).size()),
+      nq(coordinates),
+      damping(mu),
+      column_tol(tolerance),
+      length(floor),
+      scaled(scale),
+      identity_rows(identity) {
+  Array w(sqrt_weight, "sqrt_weight", 1), k(mask, "mask", 1);
+  w.finite();
+  k.finite();
+  if (m < 1) fail("sqrt_weight must have at least one row");
+  if (nq < 0) fail("nq must be >= 0");
+  finite_number(damping, "damping");
+  finite_number(column_tol, "column_tol");
+  finite_number(length, "length");
+  if (identity_rows != 0 && identity_rows != n) {
+    std::ostringstream out;
+    out << "identity_rows must be 0 or n = " << n << ", got " << identity_rows;
+    fail(out.str());
+  }
+  IndexArray lq(limit_q, "limit_q", 1), lv(limit_v, "limit_v", 1);
+  Array lo(lower, "lower", 1), hi(upper, "upper", 1);
+  Index c = lq.size();
+  lv.length(c);
+  lo.length(c).no_nan();
+  hi.length(c).no_nan();
+  lq.within(0, nq);
+  lv.within(0, n);
+  sqrt_weight_ = w.vector();
+  mask_ = k.vector();
+  limit_q_.assign(lq.data(), lq.data() + c);
+  limit_v_.assign(lv.data(), lv.data() + c);
+  lower_ = lo.vector();
+  upper_ = hi.vector();
+  J_ = RowMatrix::Zero(m, n);
+  e_ = Vector::Zero(m);
+  q_ = Vector::Zero(nq);
+  step_ = Vector::Zero(n);
+  Jw_.resize(m, n);
+  scaled_.resize(m, n);
+  alpha_.resize(n);
+  root_.resize(n);
+  fixed_.resize(n);
+  free_.resize(static_cast<size_t>(n));
+  v_.resize(m);
+  Index mt = woodbury_rows();
+  Index p = mt >= 0 ? mt : (m <= n ? m : n);
+  rhs_.resize(mt >= 0 ? n : p);
+  x_.resize(mt >= 0 ? n : p);
+  diagonal_.resize(n);
+  t_.resize(mt >= 0 ? 2 * mt : 0);
+  normal_.resize(p, p);
+  llt_ = Eigen::LLT<Eigen::MatrixXd>(p);
+  start(true);
+}
+
+// The task rows above a posture task's identity rows when the normal matrix is solved as
+// diagonal plus rank m_t (Woodbury: an m_t x m_t Cholesky, linear in n), where that is the
+// cheaper solve; -1 otherwise.
+Index SetPointSearch::woodbury_rows() const {
+  if (identity_rows != n || m <= n) return -1;
+  Index mt = m - n;
+  return n * mt + mt * mt + 2 * mt + n <= 3 * n * n ? mt : -1;
+}
+
+void SetPointSearch::start(bool quick) {
+  state = SearchState();
+  state.nu = nu_start;
+  state.best = std::numeric_limits<double>::infinity();
+  state.quick = quick;
+}
+
+int SetPointSearch::iterate(const double* J, const double* e, const double* q) {
+  double f = 0.0, e_sq = 0.0;
+  for (Index i = 0; i < m; ++i) {
+    double ew = sqrt_weight_[i] * e[i];
+    f += 0.5 * ew * ew;
+    if (i < error_rows) e_sq += e[i] * e[i];
+  }
+  bool first = state.iterations == 0;
+  state.iterations += 1;
+  if (first || f < state.f) {
+    // (memmove: a caller may hand this search's own current point back)
+    std::memmove(J_.data(), J, sizeof(double) * static_cast<size_t>(m * n));
+    std::memmove(e_.data(), e, sizeof(double) * static_cast<size_t>(m));
+    std::memmove(q_.data(), q, sizeof(double) * static_cast<size_t>(nq));
+    state.f = f;
+    state.e_sq = e_sq;
+    if (!first) state.nu = larger(state.nu / kNuDown, kNuMin);
+    if (e_sq <= tol * tol) return kConverged;
+  } else {
+    state.nu *= kNuUp;
+    state.rejected = true;
+  }
+  if (f < progress * state.best || first) {
+    state.best = smaller(f, state.f);
+    state.stale = 0;
+  } else {
+    state.stale += 1;
+  }
+  if (state.stale >= stale_iters || state.nu > kNuMax || !std::isfinite(f)) return kStalled;
+  // the quick test (a stricter progress over fewer iterations): with a joint held at its
+  // limit (heading for a minimum on the boundary of the box), or once a trial of the start has
+  // been rejected (its damping found: Levenberg-Marquardt then converges fast or not at all;
+  // before that, on a robot of metres-long links, the first damping holds a good start back
+  // for several iterations)
+  if (f < held_progress * state.held_best || first) {
+    state.held_best = smaller(f, state.f);
+    state.held_stale = 0;
+  } else {
+    state.held_stale += 1;
+  }
+  if (state.quick && state.held_stale >= held_iters && (state.rejected || held()))
+    return kStalled;
+  limited_step();
+  return kContinue;
+}
+
+// whether a joint of the current point sits on one of its position limits (to kHeldTol)
+bool SetPointSearch::held() const {
+  for (size_t k = 0; k < limit_q_.size(); ++k) {
+    double x = q_[limit_q_[k]];
+    if (x <= lower_[k] + kHeldTol || x >= upper_[k] - kHeldTol) return true;
+  }
+  return false;
+}
+
+// The damped step from the current point, scaled to the trust region max_step, within the
+// limits: a joint that the step takes out of its range is fixed on its limit (a joint whose
+// range spans a full turn wraps by 2 pi instead) and the others solved again, at most once
+// per limited joint.
+void SetPointSearch::limited_step() {
+  Jw_.noalias() = sqrt_weight_.asDiagonal() * J_;
+  double ew_sq = (sqrt_weight_.cwiseProduct(e_)).squaredNorm();
+  double mu2 = damping * damping + state.nu * ew_sq;
+  double length2 = length * length;
+  for (Index j = 0; j < n; ++j) {
+    free_[j] = mask_[j] != 0.0;
+    fixed_[j] = 0.0;
+  }
+  for (size_t round = 0; round <= limit_q_.size(); ++round) {
+    v_ = e_;
+    for (Index j = 0; j < n; ++j)
+      if (!free_[j] && mask_[j] != 0.0) v_.noalias() -= J_.col(j) * fixed_[j];
+    for (Index j = 0; j < n; ++j) {
+      double norm = free_[j] ? Jw_.col(j).squaredNorm() : 0.0;
+      alpha_[j] = norm <= column_tol ? 0.0 : scaled ? 1.0 / larger(norm, length2) : 1.0;
+    }
+    damped_solve(mu2);
+    double biggest = 0.0;
+    for (Index j = 0; j < n; ++j) {
+      if (!free_[j] && mask_[j] != 0.0) step_[j] = fixed_[j];
+      biggest = larger(biggest, std::fabs(step_[j]));
+    }
+    if (biggest > max_step) step_ *= max_step / biggest;
+    if (!clamp()) break;
+  }
+}
+
+// step = D J_w^T (J_w D J_w^T + mu2 I)^-1 (W v) with D = diag(alpha): an m x m solve when
+// m <= n, else the same as sqrt(D) (sqrt(D) J_w^T J_w sqrt(D) + mu2 I)^-1 sqrt(D) J_w^T (W v)
+// (n x n), and, above a posture task's identity rows, that n x n matrix as diagonal plus rank
+// m_t through the Woodbury identity.
+void SetPointSearch::damped_solve(double mu2) {
+  Index mt = woodbury_rows();
+  if (mt >= 0) {
+    // U = (W_t J_t sqrt(D))^T (n x m_t), the diagonal Dg = D w_p^2 + mu2, and
+    // x = (Dg + U U^T)^-1 rhs = Dg^-1 rhs - Dg^-1 U (I + U^T Dg^-1 U)^-1 U^T Dg^-1 rhs
+    auto Ut = scaled_.topRows(mt);
+    auto t = t_.head(mt), t2 = t_.tail(mt);
+    for (Index j = 0; j < n; ++j) {
+      double root = std::sqrt(alpha_[j]), wp = sqrt_weight_[mt + j] * sqrt_weight_[mt + j];
+      double task = 0.0;
+      for (Index a = 0; a < mt; ++a) task += Jw_(a, j) * sqrt_weight_[a] * v_[a];
+      Ut.col(j) = root * Jw_.col(j).head(mt);
+      root_[j] = root;
+      double Dg = alpha_[j] * wp + mu2;
+      diagonal_[j] = Dg > 0.0 ? 1.0 / Dg : 0.0;
+      rhs_[j] = root * (task + wp * v_[mt + j]);
+    }
+    x_ = diagonal_.cwiseProduct(rhs_);
+    t.noalias() = Ut * x_;
+    normal_.noalias() = Ut * diagonal_.asDiagonal() * Ut.transpose();
+    normal_.diagonal().array() += 1.0;
+    llt_.compute(normal_);
+    t2 = llt_.solve(t);
+    x_.noalias() -= diagonal_.asDiagonal() * (Ut.transpose() * t2);
+    step_ = root_.cwiseProduct(x_);
+    return;
+  }
+  if (m <= n) {
+    scaled_.noalias() = Jw_ * alpha_.asDiagonal();
+    normal_.noalias() = scaled_ * Jw_.transpose();
+    normal_.diagonal().array() += mu2;
+    rhs_ = sqrt_weight_.cwiseProduct(v_);
+    llt_.compute(normal_);
+    x_ = llt_.solve(rhs_);
+    step_.noalias() = scaled_.transpose() * x_;
+    return;
+  }
+  root_ = alpha_.cwiseSqrt();
+  scaled_.noalias() = Jw_ * root_.asDiagonal();
+  normal_.noalias() = scaled_.transpose() * scaled_;
+  normal_.diagonal().array() += mu2;
+  rhs_.noalias() = scaled_.transpose() * sqrt_weight_.cwiseProduct(v_);
+  llt_.compute(normal_);
+  x_ = llt_.solve(rhs_);
+  step_ = root_.cwiseProduct(x_);
+}
+
+// Wrap or fix the free joints that q + step takes out of their range; whether one was fixed
+bool SetPointSearch::clamp() {
+  bool changed = false;
+  for (size_t k = 0; k < limit_q_.size(); ++k) {
+    Index qi = limit_q_[k], vi = limit_v_[k];
+    if (!free_[vi]) continue;
+    double lo = lower_[k], hi = upper_[k];
+    double next = q_[qi] + step_[vi];
+    if (lo <= next && next <= hi) continue;
+    if (hi - lo >= kTurn) {
+      double turn = next > hi ? -kTurn : kTurn;
+      if (lo <= next + turn && next + turn <= hi) {
+        step_[vi] += turn;
+        continue;
+      }
+    }
+    free_[vi] = 0;
+    fixed_[vi] = smaller(larger(next, lo), hi) - q_[qi];
+    changed = true;
+  }
+  return changed;
+}
+
+void register_search(nb::module_& m) {
+  m.attr("CONTINUE") = static_cast<int>(kContinue);
+  m.attr("CONVERGED") = static_cast<int>(kConverged);
+  m.attr("SEARCH_STALLED") = static_cast<int>(kStalled);
+  using S = SetPointSearch;
+  nb::class_<S>(m, "SetPointSearch",
+                "SetPointSearch(sqrt_weight, mask, nq, limit_q, limit_v, lower, upper, *, "
+                "damping, column_tol, length, scaled, identity_rows): the set-point search of "
+                "solve() (Levenberg-Marquardt on SJT's normalised columns within the joint "
+                "limits): its parameters, the options of a solve, the state of a start and its "
+                "current point (J, e, q: read-only views) and next step (step).")
+      .def(nb::init<nb::handle, nb::handle, Index, nb::handle, nb::handle, nb::handle,
+                    nb::handle, double, double, double, bool, Index>(),
+           nb::arg("sqrt_weight").none(), nb::arg("mask").none(), nb::arg("nq"), nb::arg("limit_q").none(),
+           nb::arg("limit_v").none(), nb::arg("lower").none(), nb::arg("upper").none(), nb::kw_only(),
+           nb::arg("damping"), nb::arg("column_tol"), nb::arg("length") = 0.0,
+           nb::arg("scaled") = false, nb::arg("identity_rows") = 0)
+      .def_ro("m", &S::m)
+      .def_ro("n", &S::n)
+      .def_ro("nq", &S::nq)
+      .def_ro("damping", &S::damping, "mu: the damping's floor mu^2 (task units)")
+      .def_ro("column_tol", &S::column_tol, "columns of |W J_j|^2 at most this are left out")
+      .def_ro("length", &S::length, "SJT's floor under the column norms (m)")
+      .def_ro("scaled", &S::scaled, "whether the columns are scaled (SJT)")
+      .def_ro("identity_rows", &S::identity_rows, "n when the rows end with a posture's")
+      .def_rw("tol", &S::tol, "a start succeeds when |e| (target rows) is at most this")
+      .def_rw("max_step", &S::max_step, "the largest joint motion of one iteration (rad, m)")
+      .def_rw("error_rows", &S::error_rows, "the target rows (|e| is over these)")
+      .def_rw("stale_iters", &S::stale_iters)
+      .def_rw("progress", &S::progress)
+      .def_rw("held_iters", &S::held_iters)
+      .def_rw("held_progress", &S::held_progress)
+      .def_rw("nu_start", &S::nu_start)
+      .def_prop_ro("f", [](const S& s) { return s.state.f; }, "|W e|^2 / 2 at the current point")
+      .def_prop_ro("e_sq", [](const S& s) { return s.state.e_sq; })
+      .def_prop_ro("error", [](const S& s) { return std::sqrt(s.state.e_sq); },
+                   "|e| over the target rows at the current point")
+      .def_prop_ro("nu", [](const S& s) { return s.state.nu; })
+      .def_prop_ro("best", [](const S& s) { return s.state.best; })
+      .def_prop_ro("held_best", [](const S& s) { return s.state.held_best; })
+      .def_prop_ro("iterations", [](const S& s) { return s.state.iterations; })
+      .def_prop_ro("stale", [](const S& s) { return s.state.stale; })
+      .def_prop_ro("held_stale", [](const S& s) { return s.state.held_stale; })
+      .def_prop_ro("rejected", [](const S& s) { return s.state.rejected; })
+      .def_prop_ro("quick", [](const S& s) { return s.state.quick; })
+      .def_prop_ro("J", [](nb::handle self) {
+        S& s = nb::cast<S&>(self);
+        return numpy_view(s.J().data(), s.m, s.n, self, Access::read);
+      })
+      .def_prop_ro("e", [](nb::handle self) {
+        S& s = nb::cast<S&>(self);
+        return numpy_view(s.e().data(), s.m, -1, self, Access::read);
+      })
+      .def_prop_ro("q", [](nb::handle self) {
+        S& s = nb::cast<S&>(self);
+        return numpy_view(s.q().data(), s.nq, -1, self, Access::read);
+      })
+      .def_prop_ro("step", [](nb::handle self) {
+        S& s = nb::cast<S&>(self);
+        return numpy_view(s.step().data(), s.n, -1, self, Access::write);
+      }, "the next step from the current point (writable: a caller's limits correct it)")
+      .def("start", &S::start, nb::arg("quick") = true,
+           "start(quick=True): a new start's state (quick: with the quick stall test)")
+      .def(
+          "iterate",
+          [](S& s, nb::handle J, nb::handle e, nb::handle q) {
+            Array Ja(J, "J", 2), ea(e, "e", 1), qa(q, "q", 1);
+            Ja.shape(s.m, s.n);
+            ea.length(s.m);
+            qa.length(s.nq);
+            return s.iterate(Ja.data(), ea.data(), qa.data());
+          },
+          nb::arg("J").none(), nb::arg("e").none(), nb::arg("q").none(),
+          "iterate(J, e, q) -> status: one iteration at the trial point q (its rows J (m, n) "
+          "and error e (m,)): CONVERGED, SEARCH_STALLED, or CONTINUE with the next step in "
+          "step.");
+}
+
+}  // namespace sjt
