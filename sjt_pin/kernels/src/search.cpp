@@ -81,6 +81,7 @@ SetPointSearch::SetPointSearch(nb::handle sqrt_weight, nb::handle mask, Index co
   Jw_.resize(m, n);
   scaled_.resize(m, n);
   alpha_.resize(n);
+  norms_.resize(n);
   root_.resize(n);
   fixed_.resize(n);
   free_.resize(static_cast<size_t>(n));
@@ -152,8 +153,7 @@ int SetPointSearch::iterate(const double* J, const double* e, const double* q) {
   } else {
     state.held_stale += 1;
   }
-  if (state.quick && state.held_stale >= held_iters && (state.rejected || held()))
-    return kStalled;
+  if (state.quick && state.held_stale >= held_iters && (state.rejected || held())) return kStalled;
   limited_step();
   return kContinue;
 }
@@ -180,12 +180,18 @@ void SetPointSearch::limited_step() {
     free_[j] = mask_[j] != 0.0;
     fixed_[j] = 0.0;
   }
+  // |W J_j|^2 of every column (task units^2)
+  norms_.setZero();
+  for (Index i = 0; i < m; ++i) {
+    const double* row = Jw_.data() + i * n;
+    for (Index j = 0; j < n; ++j) norms_[j] += row[j] * row[j];
+  }
   for (size_t round = 0; round <= limit_q_.size(); ++round) {
     v_ = e_;
     for (Index j = 0; j < n; ++j)
       if (!free_[j] && mask_[j] != 0.0) v_.noalias() -= J_.col(j) * fixed_[j];
     for (Index j = 0; j < n; ++j) {
-      double norm = free_[j] ? Jw_.col(j).squaredNorm() : 0.0;
+      double norm = free_[j] ? norms_[j] : 0.0;
       alpha_[j] = norm <= column_tol ? 0.0 : scaled ? 1.0 / larger(norm, length2) : 1.0;
     }
     damped_solve(mu2);
@@ -199,10 +205,41 @@ void SetPointSearch::limited_step() {
   }
 }
 
+namespace {
+
+// out = A^-1 rhs for the symmetric positive definite A (p x p) by Eigen's LLT: of fixed size
+// for the usual 3 and 6 rows (a position or pose task), unrolled; of dynamic size otherwise
+template <int P>
+void fixed_llt_solve(const Eigen::MatrixXd& A, const double* rhs, double* out) {
+  using Matrix = Eigen::Matrix<double, P, P>;
+  using Vector = Eigen::Matrix<double, P, 1>;
+  Eigen::LLT<Matrix> llt(Eigen::Map<const Matrix>(A.data()));
+  Eigen::Map<Vector> x(out);
+  x = llt.solve(Eigen::Map<const Vector>(rhs));
+}
+
+}  // namespace
+
+void SetPointSearch::llt_solve(const double* rhs, double* out) {
+  switch (normal_.rows()) {
+    case 3:
+      fixed_llt_solve<3>(normal_, rhs, out);
+      return;
+    case 6:
+      fixed_llt_solve<6>(normal_, rhs, out);
+      return;
+    default:
+      llt_.compute(normal_);
+      Eigen::Map<Vector> x(out, normal_.rows());
+      x = llt_.solve(Eigen::Map<const Vector>(rhs, normal_.rows()));
+  }
+}
+
 // step = D J_w^T (J_w D J_w^T + mu2 I)^-1 (W v) with D = diag(alpha): an m x m solve when
 // m <= n, else the same as sqrt(D) (sqrt(D) J_w^T J_w sqrt(D) + mu2 I)^-1 sqrt(D) J_w^T (W v)
 // (n x n), and, above a posture task's identity rows, that n x n matrix as diagonal plus rank
-// m_t through the Woodbury identity.
+// m_t through the Woodbury identity. (The products are coefficient-wise: on these few rows
+// Eigen's blocked products cost more than they save.)
 void SetPointSearch::damped_solve(double mu2) {
   Index mt = woodbury_rows();
   if (mt >= 0) {
@@ -221,32 +258,42 @@ void SetPointSearch::damped_solve(double mu2) {
       rhs_[j] = root * (task + wp * v_[mt + j]);
     }
     x_ = diagonal_.cwiseProduct(rhs_);
-    t.noalias() = Ut * x_;
-    normal_.noalias() = Ut * diagonal_.asDiagonal() * Ut.transpose();
+    t.noalias() = Ut.lazyProduct(x_);
+    normal_.noalias() = (Ut * diagonal_.asDiagonal()).lazyProduct(Ut.transpose());
     normal_.diagonal().array() += 1.0;
-    llt_.compute(normal_);
-    t2 = llt_.solve(t);
-    x_.noalias() -= diagonal_.asDiagonal() * (Ut.transpose() * t2);
+    llt_solve(t.data(), t2.data());
+    x_.noalias() -= diagonal_.asDiagonal() * Ut.transpose().lazyProduct(t2);
     step_ = root_.cwiseProduct(x_);
     return;
   }
-  if (m <= n) {
-    scaled_.noalias() = Jw_ * alpha_.asDiagonal();
-    normal_.noalias() = scaled_ * Jw_.transpose();
+  if (m <= n) {  // (plain loops on the contiguous rows: a few rows, a few joints)
+    const double* W = Jw_.data();
+    for (Index a = 0; a < m; ++a)
+      for (Index b = 0; b <= a; ++b) {
+        const double *wa = W + a * n, *wb = W + b * n;
+        double acc = 0.0;
+        for (Index j = 0; j < n; ++j) acc += alpha_[j] * wa[j] * wb[j];
+        normal_(a, b) = normal_(b, a) = acc;
+      }
     normal_.diagonal().array() += mu2;
     rhs_ = sqrt_weight_.cwiseProduct(v_);
-    llt_.compute(normal_);
-    x_ = llt_.solve(rhs_);
-    step_.noalias() = scaled_.transpose() * x_;
+    llt_solve(rhs_.data(), x_.data());
+    for (Index j = 0; j < n; ++j) {
+      double acc = 0.0;
+      for (Index a = 0; a < m; ++a) acc += W[a * n + j] * x_[a];
+      step_[j] = alpha_[j] * acc;
+    }
     return;
   }
   root_ = alpha_.cwiseSqrt();
   scaled_.noalias() = Jw_ * root_.asDiagonal();
-  normal_.noalias() = scaled_.transpose() * scaled_;
+  for (Index i = 0; i < n; ++i)
+    for (Index j = 0; j <= i; ++j)
+      normal_(i, j) = normal_(j, i) = scaled_.col(i).dot(scaled_.col(j));
   normal_.diagonal().array() += mu2;
-  rhs_.noalias() = scaled_.transpose() * sqrt_weight_.cwiseProduct(v_);
-  llt_.compute(normal_);
-  x_ = llt_.solve(rhs_);
+  rhs_.setZero();
+  for (Index a = 0; a < m; ++a) rhs_ += (sqrt_weight_[a] * v_[a]) * scaled_.row(a).transpose();
+  llt_solve(rhs_.data(), x_.data());
   step_ = root_.cwiseProduct(x_);
 }
 
@@ -284,12 +331,12 @@ void register_search(nb::module_& m) {
                 "solve() (Levenberg-Marquardt on SJT's normalised columns within the joint "
                 "limits): its parameters, the options of a solve, the state of a start and its "
                 "current point (J, e, q: read-only views) and next step (step).")
-      .def(nb::init<nb::handle, nb::handle, Index, nb::handle, nb::handle, nb::handle,
-                    nb::handle, double, double, double, bool, Index>(),
-           nb::arg("sqrt_weight").none(), nb::arg("mask").none(), nb::arg("nq"), nb::arg("limit_q").none(),
-           nb::arg("limit_v").none(), nb::arg("lower").none(), nb::arg("upper").none(), nb::kw_only(),
-           nb::arg("damping"), nb::arg("column_tol"), nb::arg("length") = 0.0,
-           nb::arg("scaled") = false, nb::arg("identity_rows") = 0)
+      .def(nb::init<nb::handle, nb::handle, Index, nb::handle, nb::handle, nb::handle, nb::handle,
+                    double, double, double, bool, Index>(),
+           nb::arg("sqrt_weight").none(), nb::arg("mask").none(), nb::arg("nq"),
+           nb::arg("limit_q").none(), nb::arg("limit_v").none(), nb::arg("lower").none(),
+           nb::arg("upper").none(), nb::kw_only(), nb::arg("damping"), nb::arg("column_tol"),
+           nb::arg("length") = 0.0, nb::arg("scaled") = false, nb::arg("identity_rows") = 0)
       .def_ro("m", &S::m)
       .def_ro("n", &S::n)
       .def_ro("nq", &S::nq)
@@ -306,10 +353,12 @@ void register_search(nb::module_& m) {
       .def_rw("held_iters", &S::held_iters)
       .def_rw("held_progress", &S::held_progress)
       .def_rw("nu_start", &S::nu_start)
-      .def_prop_ro("f", [](const S& s) { return s.state.f; }, "|W e|^2 / 2 at the current point")
+      .def_prop_ro(
+          "f", [](const S& s) { return s.state.f; }, "|W e|^2 / 2 at the current point")
       .def_prop_ro("e_sq", [](const S& s) { return s.state.e_sq; })
-      .def_prop_ro("error", [](const S& s) { return std::sqrt(s.state.e_sq); },
-                   "|e| over the target rows at the current point")
+      .def_prop_ro(
+          "error", [](const S& s) { return std::sqrt(s.state.e_sq); },
+          "|e| over the target rows at the current point")
       .def_prop_ro("nu", [](const S& s) { return s.state.nu; })
       .def_prop_ro("best", [](const S& s) { return s.state.best; })
       .def_prop_ro("held_best", [](const S& s) { return s.state.held_best; })
@@ -318,22 +367,28 @@ void register_search(nb::module_& m) {
       .def_prop_ro("held_stale", [](const S& s) { return s.state.held_stale; })
       .def_prop_ro("rejected", [](const S& s) { return s.state.rejected; })
       .def_prop_ro("quick", [](const S& s) { return s.state.quick; })
-      .def_prop_ro("J", [](nb::handle self) {
-        S& s = nb::cast<S&>(self);
-        return numpy_view(s.J().data(), s.m, s.n, self, Access::read);
-      })
-      .def_prop_ro("e", [](nb::handle self) {
-        S& s = nb::cast<S&>(self);
-        return numpy_view(s.e().data(), s.m, -1, self, Access::read);
-      })
-      .def_prop_ro("q", [](nb::handle self) {
-        S& s = nb::cast<S&>(self);
-        return numpy_view(s.q().data(), s.nq, -1, self, Access::read);
-      })
-      .def_prop_ro("step", [](nb::handle self) {
-        S& s = nb::cast<S&>(self);
-        return numpy_view(s.step().data(), s.n, -1, self, Access::write);
-      }, "the next step from the current point (writable: a caller's limits correct it)")
+      .def_prop_ro("J",
+                   [](nb::handle self) {
+                     S& s = nb::cast<S&>(self);
+                     return numpy_view(s.J().data(), s.m, s.n, self, Access::read);
+                   })
+      .def_prop_ro("e",
+                   [](nb::handle self) {
+                     S& s = nb::cast<S&>(self);
+                     return numpy_view(s.e().data(), s.m, -1, self, Access::read);
+                   })
+      .def_prop_ro("q",
+                   [](nb::handle self) {
+                     S& s = nb::cast<S&>(self);
+                     return numpy_view(s.q().data(), s.nq, -1, self, Access::read);
+                   })
+      .def_prop_ro(
+          "step",
+          [](nb::handle self) {
+            S& s = nb::cast<S&>(self);
+            return numpy_view(s.step().data(), s.n, -1, self, Access::write);
+          },
+          "the next step from the current point (writable: a caller's limits correct it)")
       .def("start", &S::start, nb::arg("quick") = true,
            "start(quick=True): a new start's state (quick: with the quick stall test)")
       .def(

@@ -71,16 +71,17 @@ class SetPointSearch {
   Vector lower_, upper_;
   RowMatrix J_;
   Vector e_, q_, step_;
-  // scratch: the weighted rows, the columns' scales, the joints still free and the fixed
+  // scratch: the weighted rows, the columns' norms and scales, the joints still free and the fixed
   // ones' displacements, the right-hand side; the factored normal matrices
   RowMatrix Jw_, scaled_;
-  Vector alpha_, root_, fixed_, v_, rhs_, x_, diagonal_, t_;
+  Vector alpha_, norms_, root_, fixed_, v_, rhs_, x_, diagonal_, t_;
   std::vector<char> free_;
   Eigen::MatrixXd normal_;
   Eigen::LLT<Eigen::MatrixXd> llt_;
 
   void limited_step();
   void damped_solve(double mu2);
+  void llt_solve(const double* rhs, double* out);
   bool clamp();
   bool held() const;
   Index woodbury_rows() const;

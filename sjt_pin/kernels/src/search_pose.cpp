@@ -40,7 +40,10 @@ Vector3 log3(const Matrix3& R) {
 // w = log3(R_d R^T) and d = p_d - p, e_w = w and e_p = a d - w x d / 2 + b (w.d) w, where
 // a = (t / 2) / tan(t / 2), b = (1 - a) / t^2, t = |w| (the SE(3) logarithm's V^-1).
 void pose_error(const Array& rotation_t, const double* p, const Array& target, double* e) {
-  ConstMatrixMap Rt = rotation_t.matrix(), Md = target.matrix();
+  using Rows3 = Eigen::Matrix<double, 3, 3, Eigen::RowMajor>;
+  using Rows4 = Eigen::Matrix<double, 4, 4, Eigen::RowMajor>;
+  Eigen::Map<const Rows3> Rt(rotation_t.data());  // (shapes checked by PoseCall)
+  Eigen::Map<const Rows4> Md(target.data());
   Matrix3 error = Md.topLeftCorner<3, 3>() * Rt;
   Vector3 w = log3(error);
   Vector3 d = Md.block<3, 1>(0, 3) - Vector3(p[0], p[1], p[2]);
@@ -86,8 +89,7 @@ void integrate(const Vector& current, const Vector& step, const IndexArray& join
       q[qi] = current[qi] + step[vi];
       continue;
     }
-    double ca = current[qi], sa = current[qi + 1], co = std::cos(step[vi]),
-           si = std::sin(step[vi]);
+    double ca = current[qi], sa = current[qi + 1], co = std::cos(step[vi]), si = std::sin(step[vi]);
     double c = co * ca - si * sa, s = si * ca + co * sa, scale = 0.5 * (3.0 - c * c - s * s);
     q[qi] = scale * c;
     q[qi + 1] = scale * s;
@@ -103,8 +105,8 @@ struct PoseCall {
   Array trial, error;
 
   PoseCall(const SetPointSearch& s, nb::handle jacobian_, nb::handle arguments_,
-           nb::handle rotation_t_, nb::handle translation_, nb::handle target_,
-           nb::handle joints_, nb::handle trial_, nb::handle error_)
+           nb::handle rotation_t_, nb::handle translation_, nb::handle target_, nb::handle joints_,
+           nb::handle trial_, nb::handle error_)
       : jacobian(jacobian_.ptr()),
         arguments(arguments_.ptr()),
         rotation_t(rotation_t_, "rotation_t", 2),
@@ -173,9 +175,8 @@ nb::tuple table(SetPointSearch& s, PoseCall& call, long count, nb::handle config
       best_q.size() != s.nq) {
     std::ostringstream out;
     out << "the table's arrays do not fit: configurations must be (k, nq = " << s.nq
-        << ") with k >= 1, distance (k,) and best_q (nq,); got " << configurations.rows()
-        << " x " << configurations.cols() << ", " << distance.size() << " and "
-        << best_q.size();
+        << ") with k >= 1, distance (k,) and best_q (nq,); got " << configurations.rows() << " x "
+        << configurations.cols() << ", " << distance.size() << " and " << best_q.size();
     fail(out.str());
   }
   double* d = distance.data();
@@ -217,9 +218,9 @@ void register_search_pose(nb::module_& m) {
         auto [status, done] = run(s, call, count);
         return nb::make_tuple(status, done);
       },
-      nb::arg("search"), nb::arg("jacobian").none(), nb::arg("arguments").none(), nb::arg("rotation_t").none(),
-      nb::arg("translation").none(), nb::arg("target").none(), nb::arg("joints").none(), nb::arg("trial").none(),
-      nb::arg("error").none(), nb::arg("count"),
+      nb::arg("search"), nb::arg("jacobian").none(), nb::arg("arguments").none(),
+      nb::arg("rotation_t").none(), nb::arg("translation").none(), nb::arg("target").none(),
+      nb::arg("joints").none(), nb::arg("trial").none(), nb::arg("error").none(), nb::arg("count"),
       "search_pose(search, jacobian, arguments, rotation_t, translation, target, joints, "
       "trial, error, count) -> (status, iterations): up to count iterations of a start of "
       "search (a SetPointSearch of one pose task, its state reset) from trial (nq,), each "
@@ -237,10 +238,11 @@ void register_search_pose(nb::module_& m) {
                       error);
         return table(s, call, count, configurations, distance, best_q, starts, max_iters, best);
       },
-      nb::arg("search"), nb::arg("jacobian").none(), nb::arg("arguments").none(), nb::arg("rotation_t").none(),
-      nb::arg("translation").none(), nb::arg("target").none(), nb::arg("joints").none(), nb::arg("trial").none(),
-      nb::arg("error").none(), nb::arg("count"), nb::arg("configurations").none(), nb::arg("distance").none(),
-      nb::arg("best_q").none(), nb::arg("starts"), nb::arg("max_iters"), nb::arg("best"),
+      nb::arg("search"), nb::arg("jacobian").none(), nb::arg("arguments").none(),
+      nb::arg("rotation_t").none(), nb::arg("translation").none(), nb::arg("target").none(),
+      nb::arg("joints").none(), nb::arg("trial").none(), nb::arg("error").none(), nb::arg("count"),
+      nb::arg("configurations").none(), nb::arg("distance").none(), nb::arg("best_q").none(),
+      nb::arg("starts"), nb::arg("max_iters"), nb::arg("best"),
       "search_table(search, ... as search_pose ..., count, configurations, distance, best_q, "
       "starts, max_iters, best) -> (status, iterations, starts made, best |e|): the restart "
       "table's starts (sjt_pin.restarts.NearStarts: configurations (k, nq), distance (k,), "

@@ -79,7 +79,8 @@ void register_transforms(nb::module_& m) {
         o.length(6);
         frame_velocity(f, d, v.data(), o.data());
       },
-      nb::arg("oMf").none(), nb::arg("oMd").none(), nb::arg("velocity").none(), nb::arg("out").none(),
+      nb::arg("oMf").none(), nb::arg("oMd").none(), nb::arg("velocity").none(),
+      nb::arg("out").none(),
       "frame_velocity(oMf, oMd, velocity, out): the desired twist velocity (6,: [linear, "
       "angular], world axes at oMd's origin) seen from the frame oMf (4 x 4), LOCAL, into out.");
   m.def(
@@ -120,8 +121,9 @@ void register_transforms(nb::module_& m) {
           if (v.size() != 0) fo.data()[r] = v.data()[a];
         }
       },
-      nb::arg("J6").none(), nb::arg("oMf").none(), nb::arg("p_d").none(), nb::arg("velocity").none(), nb::arg("axes").none(),
-      nb::arg("J").none(), nb::arg("e").none(), nb::arg("ff").none(),
+      nb::arg("J6").none(), nb::arg("oMf").none(), nb::arg("p_d").none(),
+      nb::arg("velocity").none(), nb::arg("axes").none(), nb::arg("J").none(), nb::arg("e").none(),
+      nb::arg("ff").none(),
       "position_rows(J6, oMf, p_d, velocity, axes, J, e, ff): a position task's rows along "
       "axes (int64, 0-2): J = J6[axes] (the linear rows of the LOCAL_WORLD_ALIGNED Jacobian), "
       "e = (p_d - p)[axes] and, with a velocity (3 or 6 entries; none: length 0), "
@@ -135,8 +137,8 @@ void register_transforms(nb::module_& m) {
         for (Index i = 0; i < b.rows(); ++i)
           if (b(i, 0) < 0 || b(i, 1) < 0 || b(i, 1) > qa.size() || b(i, 0) > qa.size() - b(i, 1)) {
             std::ostringstream out;
-            out << "blocks: block (" << b(i, 0) << ", " << b(i, 1) << ") is outside q (" << qa.size()
-                << ",)";
+            out << "blocks: block (" << b(i, 0) << ", " << b(i, 1) << ") is outside q ("
+                << qa.size() << ",)";
             fail(out.str());
           }
         return unit_defect(qa.data(), b);
