@@ -93,7 +93,8 @@ SetPointSearch::SetPointSearch(nb::handle sqrt_weight, nb::handle mask, Index co
   diagonal_.resize(n);
   t_.resize(mt >= 0 ? 2 * mt : 0);
   normal_.resize(p, p);
-  llt_ = Eigen::LLT<Eigen::MatrixXd>(p);
+  // (llt_ sizes itself on its first compute: Eigen's LLT(size) leaves its info unset, and a
+  // copy of it reads that, undefined behaviour UBSan reports)
   start(true);
 }
 
