@@ -337,8 +337,8 @@ def test_unit_defect_is_the_largest_squared_norm_defect(rng):
 
 def test_a_work_vector_or_table_that_does_not_fit_raises_instead_of_reading_past_it():
     """The kernels check the index tables they read against q and the velocity: a q shorter
-    than the limit box indexes, a box index past q, rows that are not the search's and a
-    limits table indexing past q raise ValueError (before, some read or wrote out of bounds)."""
+    than the limit box indexes and a box index past q raise ValueError (before, some read or
+    wrote out of bounds)."""
     rng = np.random.default_rng(3)
     layout = K.Layout(6, 7, 7)
     work = layout.allocate()
@@ -352,6 +352,12 @@ def test_a_work_vector_or_table_that_does_not_fit_raises_instead_of_reading_past
     layout.box_part(work, 0)[:] = 10**9
     with pytest.raises(ValueError, match="work does not fit"):
         K.least_squares_step(J, e, ff, np.zeros(7), work, step)
+
+
+def test_the_search_refuses_rows_and_limits_that_do_not_fit():
+    """SetPointSearch checks the rows it is given against its own shape and its limits table
+    against q and the velocity, before it reads them: ValueError naming them."""
+    rng = np.random.default_rng(3)
     none, box = np.zeros(0, dtype=np.int64), (np.array([-1.0]), np.array([1.0]))
     search = K.SetPointSearch(np.ones(6), np.ones(6), 6, none, none, np.zeros(0), np.zeros(0),
                               damping=1e-6, column_tol=0.0)
