@@ -17,4 +17,9 @@ NB_MODULE(_core, m) {
   sjt::register_transforms(m);
   sjt::register_search(m);
   sjt::register_search_pose(m);
+  sjt::register_dampers(m);
+  sjt::register_collision_braking(m);
+  sjt::register_witnesses(m);
+  sjt::register_broad_phase(m);
+  sjt::register_collision_queries(m);
 }

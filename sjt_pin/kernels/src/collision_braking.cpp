@@ -1,0 +1,154 @@
+// Braking beside acceleration limits (sjt_pin/limits/collision.py, "Acceleration limits"): the
+// damper rows' bounds cut to closing speeds the arm can stop (stoppable_rows), and each pair's
+// influence grown to the distance within which a row may have to start braking (braking_reach).
+#include <algorithm>
+#include <cmath>
+#include <optional>
+#include <sstream>
+
+#include "array.hpp"
+#include "registry.hpp"
+
+namespace sjt {
+
+namespace {
+
+// The closing speed v >= 0 a row can hold for tau and still brake to rest at a within the
+// excess h (m): v tau + v^2 / (2 a) = |h|, signed as h (a row inside its margin separates)
+double stoppable_speed(double h, double a, double tau) {
+  double v = std::sqrt(a * tau * a * tau + 2.0 * a * std::fabs(h)) - a * tau;
+  return h >= 0.0 ? v : -v;
+}
+
+// The arm's limits of a stoppable_rows or braking_reach call: per joint (N,), jerks optional
+struct ArmLimits {
+  Array accelerations;
+  std::optional<Array> jerks;
+};
+
+ArmLimits arm_limits(nb::handle accelerations, nb::handle jerks, Index N, const char* who) {
+  ArmLimits limits{Array(accelerations, "accelerations", 1), std::nullopt};
+  if (!jerks.is_none()) limits.jerks.emplace(jerks, "jerks", 1);
+  if (limits.accelerations.size() != N || (limits.jerks && limits.jerks->size() != N)) {
+    std::ostringstream out;
+    out << who << ": accelerations and jerks must hold one number per joint (" << N
+        << "): they do not fit (accelerations " << limits.accelerations.size() << ")";
+    fail(out.str());
+  }
+  return limits;
+}
+
+}  // namespace
+
+void register_collision_braking(nb::module_& m) {
+  m.def(
+      "stoppable_rows",
+      [](nb::handle A_obj, nb::handle b_obj, nb::handle dq_obj, nb::handle ddq_obj,
+         nb::handle accelerations, nb::handle jerks, double rate, double dt, double share,
+         double slack) {
+        if (!(rate > 0.0 && dt > 0.0 && share > 0.0 && share <= 1.0 && slack >= 0.0))
+          fail("stoppable_rows: rate and dt must be > 0, share in (0, 1], slack >= 0");
+        const Array A(A_obj, "A", 2);
+        Array b(b_obj, "b", 1, Access::write);
+        Array dq(dq_obj, "dq", 1);
+        Array ddq(ddq_obj, "ddq", 1);
+        const Index k = A.rows(), N = A.cols();
+        if (b.size() != k || dq.size() != N || ddq.size() != N) {
+          std::ostringstream out;
+          out << "stoppable_rows: A (k, N), b (k,), dq, ddq, accelerations and jerks (N,) do "
+              << "not fit: A (" << k << ", " << N << "), b (" << b.size() << ",), dq ("
+              << dq.size() << ",), ddq (" << ddq.size() << ",)";
+          fail(out.str());
+        }
+        ArmLimits limits = arm_limits(accelerations, jerks, N, "stoppable_rows");
+        const bool jerk = limits.jerks.has_value();
+        auto rows = A.matrix();
+        auto acc = limits.accelerations.vector();
+        auto bound = b.vector();
+        for (Index i = 0; i < k; ++i) {
+          // along row i the closing speed s changes at up to a (m/s^2), that rate at up to j
+          auto magnitude = rows.row(i).cwiseAbs();
+          double a = magnitude.dot(acc);
+          double j = jerk ? magnitude.dot(limits.jerks->vector()) : 0.0;
+          double s = rows.row(i).dot(dq.vector()), sd = rows.row(i).dot(ddq.vector());
+          if (!(a > 0.0) || !std::isfinite(a)) continue;  // no joint moves it, or no limit
+          double ramp = jerk && j > 0.0 && std::isfinite(j) ? a / j : 0.0;  // s to reach a
+          double h = bound[i] / rate, v = stoppable_speed(h, share * a, dt + ramp);
+          double r = jerk && std::isfinite(j) ? std::max(-share * a, sd - share * j * dt)
+                                              : -share * a;
+          bound[i] = h >= 0.0 ? std::min(bound[i], v) : std::max(bound[i], v);
+          bound[i] = std::max(bound[i],
+                              std::min(s + r * dt, stoppable_speed(h + slack, a, dt + ramp)));
+        }
+      },
+      nb::arg("A"), nb::arg("b"), nb::arg("dq"), nb::arg("ddq"), nb::arg("accelerations"),
+      nb::arg("jerks").none(), nb::arg("rate"), nb::arg("dt"), nb::arg("share"),
+      nb::arg("slack"),
+      "stoppable_rows(A, b, dq, ddq, accelerations, jerks, rate, dt, share, slack): the damper\n"
+      "rows' bounds (in place) made ones an arm with acceleration (and jerk) limits can keep.\n"
+      "Along row i the closing speed s_i = A_i q_dot changes at up to a_i = sum_j |A_ij|\n"
+      "accelerations_j (m/s^2), and that rate at up to j_i = sum_j |A_ij| jerks_j (m/s^3;\n"
+      "jerks None: no limit). With h = b_i / rate the row's excess over its margin (m; rate =\n"
+      "gain / dt):\n"
+      "  - b_i = min(b_i, v(h)), v the closing speed that, held for tau = dt + a / j and then\n"
+      "    braked at a = share a_i (j = share j_i), covers h: v tau + v^2 / (2 a) = h (a row\n"
+      "    inside its margin separates no faster than v(|h|));\n"
+      "  - b_i = max(b_i, min(s_i + r dt, V(h + slack))), s_i = A_i dq and r = max(-a, A_i ddq\n"
+      "    - j dt) from the previous step's velocity dq and acceleration ddq, V as v at the\n"
+      "    whole a_i: a row whose closing speed jumps asks it to drop no faster than its share\n"
+      "    of the limits allows, while its pair, braking at a_i, stays at least margin - slack\n"
+      "    apart.\n"
+      "A (k, N), b (k,), dq, ddq, accelerations and jerks (N,).");
+
+  m.def(
+      "braking_reach",
+      [](nb::handle lever_obj, nb::handle dq_obj, nb::handle accelerations, nb::handle jerks,
+         double dt, double share, double influence, double margin, nb::handle out_obj) {
+        if (!(dt > 0.0 && share > 0.0 && share <= 1.0 && std::isfinite(influence) &&
+              std::isfinite(margin)))
+          fail("braking_reach: dt must be > 0, share in (0, 1], influence and margin finite");
+        const Array lever(lever_obj, "lever", 2);
+        Array dq(dq_obj, "dq", 1);
+        Array out(out_obj, "out", 1, Access::write);
+        const Index npairs = lever.rows(), N = lever.cols();
+        if (dq.size() != N || out.size() != npairs) {
+          std::ostringstream msg;
+          msg << "braking_reach: lever (npairs, N), dq, accelerations, jerks (N,) and out "
+              << "(npairs,) do not fit: lever (" << npairs << ", " << N << "), dq ("
+              << dq.size() << ",), out (" << out.size() << ",)";
+          fail(msg.str());
+        }
+        ArmLimits limits = arm_limits(accelerations, jerks, N, "braking_reach");
+        const double* acc = limits.accelerations.data();
+        const double* jerk = limits.jerks ? limits.jerks->data() : nullptr;
+        double tau = dt;
+        for (Index j = 0; j < N; ++j)
+          if (jerk && jerk[j] > 0.0 && std::isfinite(jerk[j]) && std::isfinite(acc[j]))
+            tau = std::max(tau, dt + acc[j] / jerk[j]);
+        auto L = lever.matrix();
+        for (Index k = 0; k < npairs; ++k) {
+          // s: the pair's closing speed bound after this step, T: the joints' time to stop
+          double s = 0.0, T = 0.0;
+          for (Index j = 0; j < N; ++j) {
+            double l = L(k, j);
+            if (!(l > 0.0) || !(acc[j] > 0.0) || !std::isfinite(acc[j])) continue;
+            double w = std::fabs(dq.data()[j]) + acc[j] * dt;
+            s += l * w;
+            T = std::max(T, w / acc[j]);
+          }
+          out.data()[k] = std::max(influence, margin + s * (tau + T / (2.0 * share)));
+        }
+      },
+      nb::arg("lever"), nb::arg("dq"), nb::arg("accelerations"), nb::arg("jerks").none(),
+      nb::arg("dt"), nb::arg("share"), nb::arg("influence"), nb::arg("margin"), nb::arg("out"),
+      "braking_reach(lever, dq, accelerations, jerks, dt, share, influence, margin, out): each\n"
+      "pair's influence (m) for a step of an arm with acceleration (and jerk) limits: out_k =\n"
+      "max(influence, margin + s_k (tau + T_k / (2 share))), the distance within which a damper\n"
+      "row may have to start braking the pair. With w_j = |dq_j| + accelerations_j dt (a\n"
+      "joint's speed after this step at most), s_k = sum_j lever_kj w_j bounds the pair's\n"
+      "closing speed (lever (npairs, N): m per unit of q_dot_j), T_k = max_j w_j /\n"
+      "accelerations_j over the joints that move it, tau = dt + max_j accelerations_j / jerks_j\n"
+      "(jerks None: dt).");
+}
+
+}  // namespace sjt
