@@ -136,15 +136,17 @@ def test_compiled_kernels_name_the_argument_that_does_not_fit():
         K.damper_rows(np.zeros((6, 3)), np.zeros((4, 3)), pairs, 1.0, np.zeros((1, 3)),
                       np.zeros(1))
     with pytest.raises(ValueError, match="near\\[0\\] = 5 is no pair"):
-        K.near_pairs(np.zeros(2), (np.zeros(2), np.full(2, -np.inf), np.full(2, np.inf),
-                                   np.zeros((3, 2)), np.ones(3), [5], np.zeros(3), np.zeros(2)),
+        K.near_pairs(np.zeros(2), K.Skip(np.zeros(2), np.full(2, -np.inf), np.full(2, np.inf),
+                                         np.zeros((3, 2)), np.ones(3), [5], np.zeros(3),
+                                         np.zeros(2)),
                      np.full(3, 0.05))
     with pytest.raises(ValueError, match="do not fit"):
-        K.collision_rows((None, None, np.zeros(3), np.zeros(2), np.zeros((3, 2)),
-                          np.zeros((3, 13)), np.zeros(1), np.zeros((2, 16)), np.zeros((3, 6)),
-                          np.zeros((3, 2)), 0.02, 1e-4, np.zeros(3), np.zeros((2, 2)),
-                          pin.updateGeometryPlacements, None, True, None), [0], None, 1.0,
-                         np.full(3, 0.05), 1.0, None, pin.computeDistance)
+        K.collision_rows(K.CollisionTables(
+            geometry=None, geometry_data=None, model=None, update=pin.updateGeometryPlacements,
+            floor=np.zeros(3), margins=np.zeros(2), joints=np.zeros((3, 2), dtype=np.int64),
+            rows=np.zeros((3, 13)), memory=np.zeros((3, 6)), state=np.zeros((3, 2)),
+            owners=np.zeros(3), support=np.zeros((2, 2)), mimic=None, keep=0.02, apart=1e-4,
+            witnesses=True), [0], None, 1.0, np.full(3, 0.05), 1.0, None, pin.computeDistance)
     with pytest.raises(ValueError, match="do not fit"):
         K.braking_reach(np.zeros((3, 2)), np.zeros(2), np.ones(2), None, 1e-3, 0.5, 0.05, 0.01,
                         np.zeros(2))
@@ -380,7 +382,7 @@ def test_near_pairs_answers_the_same_with_its_prefilter():
             answers = []
             for extra in ((), (prefilter,)):
                 f, fq = floor.copy(), floor_q.copy()
-                skip = (ref, ref - 1.0, ref + 1.0, lever, gap, near, f, fq) + extra
+                skip = K.Skip(ref, ref - 1.0, ref + 1.0, lever, gap, near, f, fq, *extra)
                 answers.append((K.near_pairs(q, skip, influence), f, fq))
             assert answers[0][0] == answers[1][0]
             np.testing.assert_array_equal(answers[0][1], answers[1][1])
@@ -391,10 +393,10 @@ def test_near_pairs_answers_the_same_with_its_prefilter():
     ref, prefilter = np.zeros(2), np.full(10, -1.0)
     skip = (ref, ref - 1.0, ref + 1.0, np.ones((3, 2)), np.full(3, 0.3), [], np.zeros(3),
             np.zeros(2), prefilter)
-    assert K.near_pairs(ref, skip, np.full(3, 0.05)) == [] and prefilter[0] == 1.0
-    assert K.near_pairs(ref, skip, np.full(3, 1.0)) is None  # other influences: whole test
+    assert K.near_pairs(ref, K.Skip(*skip), np.full(3, 0.05)) == [] and prefilter[0] == 1.0
+    assert K.near_pairs(ref, K.Skip(*skip), np.full(3, 1.0)) is None  # other influences
     with pytest.raises(ValueError, match="do not fit"):
-        K.near_pairs(ref, skip[:8] + (np.zeros(9),), np.full(3, 0.05))
+        K.near_pairs(ref, K.Skip(*skip[:8], np.zeros(9)), np.full(3, 0.05))
 
 
 def test_refresh_pairs_is_the_numpy_bookkeeping():
@@ -543,8 +545,8 @@ def test_the_compiled_witness_rows_are_the_numpy_ones():
         want, want_owners = _witness_reference(flat, rows, found, ref_memory, ref_state, tick,
                                                0.02, 1e-4)
         owners = np.zeros(npairs * W)
-        total = K.witness_rows(None, flat, rows, found.tolist(), memory, state, tick, 0.02,
-                               1e-4, owners)
+        total = K.witness_rows(None, flat, rows, found.astype(int).tolist(), memory, state,
+                               tick, 0.02, 1e-4, owners)
         assert total == len(want)
         np.testing.assert_allclose(rows[:total], want, atol=1e-12)
         assert owners[:total - len(found)].astype(int).tolist() == want_owners

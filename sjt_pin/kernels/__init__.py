@@ -1,6 +1,3 @@
-"""Compiled inner loops: each stage of a step in one call instead of a dozen numpy calls.
-
-On arrays of 6 x n numbers every numpy call costs about 0.3 us whatever it computes, so a step
 would spend more in call overhead than in arithmetic. The kernels are C++17 on Eigen, bound
 with nanobind (``src/``: one file per idea, built by ``pip install`` through CMake; nothing is
 compiled at run time). Every array a kernel takes is checked before it is read
@@ -30,41 +27,51 @@ vector. The numpy references that pin them are in ``tests/``.
 - ``jlog6_inverse(xi, out)`` (``src/lie.cpp``): ``Jlog6(N^-1)`` from ``xi = log6(N)``, the
   exact derivative of a pose error in the rows of its Jacobian (the search's model);
 - ``frame_velocity``, ``position_rows``, ``rotation_defect``, ``unit_defect``
-  (``src/transforms.cpp``): the tasks' small transforms and the door's manifold check of q.
+  (``src/transforms.cpp``): the tasks' small transforms and the door's manifold check of q;
+- the collision limit's kernels (:mod:`sjt_pin.limits.collision`, ``src/collision.hpp``):
+  ``damper_rows``: its velocity-damper rows from its pairs' closest points;
+  ``stoppable_rows``: their bounds cut to closing speeds the acceleration limits can stop, and
+  ``braking_reach``: each pair's influence for an arm with acceleration limits
+  (``src/collision_braking.cpp``); ``witness_rows``: the rows of its pairs' remembered closest
+  points (and their memory); ``near_pairs``: the pairs it must query, or whether its broad
+  phase must run again (its state a :class:`Skip`); ``sphere_gaps``: its broad phase's gaps
+  between the pairs' bounding spheres; ``refresh_pairs``: its candidates and pairs to query
+  after that broad phase, floors aged; ``collision_rows``: a step's exact distance queries
+  (Pinocchio's ``computeDistance``, called back through Python), witness and damper rows in one
+  call (its tables a :class:`CollisionTables`).
 """
 
-# (transition) the C kernels not yet replaced: collision
-from ._core import (  # noqa: E402, F401
+from ._core import (  # noqa: F401
     CONTINUE,
     CONVERGED,
     SEARCH_STALLED,
+    CollisionTables,
     Controller,
     Family,
     MethodParameters,
     SetPointSearch,
+    Skip,
     approach_top,
+    braking_reach,
     check_array,
+    collision_rows,
+    damper_rows,
     frame_velocity,
     jlog6_inverse,
     largest_stoppable,
     mapping_matrix,
+    near_pairs,
     position_rows,
     project,
+    refresh_pairs,
     rotation_defect,
     scaling_factors,
     search_pose,
     search_table,
-    stopping_distance,
-    unit_defect,
-)
-from ._kernels import (  # noqa: F401
-    braking_reach,
-    collision_rows,
-    damper_rows,
-    near_pairs,
-    refresh_pairs,
     sphere_gaps,
     stoppable_rows,
+    stopping_distance,
+    unit_defect,
     witness_rows,
 )
 from .layout import *  # noqa: E402, F401, F403 (the C step kernels' slots, until removed)
@@ -73,7 +80,3 @@ from .layout import *  # noqa: E402, F401, F403 (the C step kernels' slots, unti
 NON_FINITE, STALLED, CONSTRAINED, CONFLICT, ROWS_BROKEN, UNCONVERGED = 1, 2, 4, 8, 16, 32
 #: gain modes (:mod:`sjt_pin.gains`)
 GAIN_FIXED, GAIN_AUTO = 0, 1
-
-distance_queries = None
-#: why :data:`distance_queries` is None
-distance_queries_missing: str | None = "coal's queries are made through Pinocchio's bindings"

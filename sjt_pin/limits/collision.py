@@ -51,16 +51,14 @@ than that from its margin remembers nothing (its row binds nothing); nor does a 
 sphere (or an ellipsoid), whose closest points are unique and move continuously.
 
 Distances and closest points come from coal on the shapes of Pinocchio's ``GeometryModel``:
-coal's ``ComputeDistance`` called from compiled code (``kernels.distance_queries``, C++
-against libcoal, each geometry at its joint's pose times its placement, as Pinocchio places
-it), or, where that module is not built or was built against another coal, Pinocchio's
-``computeDistance`` (the same distances). Only the pairs whose bounding spheres come within
-``influence`` (plus a skin of half the band ``influence - margin`` while the broad phase's
-result is reused, as in a Verlet list) pay for an exact distance query, and a pair whose last
-exact distance was beyond ``influence`` is not queried again until the joints' moves since
-that query can have closed the gap (a bound from the joint offsets and the ranges of the
-prismatic joints between, summed step by step:
-:meth:`CollisionLimit._near`, :meth:`CollisionLimit._aged`).
+Pinocchio's ``computeDistance``, called back from the compiled step of the limit
+(``kernels.collision_rows``) for each pair it must query. Only the pairs whose bounding
+spheres come within ``influence`` (plus a skin of half the band ``influence - margin`` while the
+broad phase's result is reused, as in a Verlet list) pay for an exact distance query, and a pair
+whose last exact distance was beyond ``influence`` is not queried again until the joints' moves
+since that query can have closed the gap (a bound from the joint offsets and the ranges of the
+prismatic joints between, summed step by step: :meth:`CollisionLimit._near`,
+:meth:`CollisionLimit._aged`).
 """
 
 from __future__ import annotations
@@ -79,10 +77,11 @@ except ImportError:  # pragma: no cover - the pin wheel ships coal
 
 from ..exceptions import SJTError
 from ..kernels import (
+    CollisionTables,
+    Skip,
     braking_reach,
     collision_rows,
     damper_rows,
-    distance_queries,
     near_pairs,
     refresh_pairs,
     sphere_gaps,
@@ -412,18 +411,7 @@ class CollisionLimit(Limit):
         self._sphere_stack()
         self._jacobian_support()
         self._skip_state()
-        self._compute = self._compiled_queries() or pin.computeDistance
-
-    def _compiled_queries(self):
-        """``kernels.distance_queries`` of the pairs (coal's queries with each geometry at its
-        joint's pose times its placement, ``_placement``, which :meth:`move` writes; run by
-        ``kernels.collision_rows`` without a Python call), or None where that module is
-        missing."""
-        if distance_queries is None:
-            return None
-        return distance_queries([g.geometry for g in self.geometry.geometryObjects],
-                                self.pairs.tolist(), list(self.geometry_data.distanceRequests),
-                                self._joint.tolist(), self._placement)
+        self._compute = pin.computeDistance  # (kernels.collision_rows calls it for each query)
 
     def _bounding_volumes(self) -> None:
         """Per geometry: its parent joint, coal's local AABB (centre and half extents, in the
@@ -453,9 +441,8 @@ class CollisionLimit(Limit):
         the two joints, the normal, the closest points), one per pair and witness."""
         self._pa, self._pb = self.pairs[:, 0].copy(), self.pairs[:, 1].copy()
         ja, jb = self._joint[self._pa], self._joint[self._pb]
-        self._joint_table = np.column_stack([ja, jb]).astype(float).reshape(-1, 2)
-        self._pair_f = self.pairs.astype(float)  # (kernels.sphere_gaps')
-        self._joint_f = self._joint.astype(float)
+        self._joint_table = np.ascontiguousarray(np.column_stack([ja, jb]).reshape(-1, 2),
+                                                 dtype=np.int64)
         self._pair_rows = np.zeros((max(len(self.pairs), 1) * (1 + self.witnesses), 13))
         self._span = self._radius[self._pa] + self._radius[self._pb]
 
@@ -542,15 +529,16 @@ class CollisionLimit(Limit):
         self._floor_q: np.ndarray | None = None  # where the floors hold (None: nowhere)
         self._influence = np.full(len(self.pairs), self.influence)  # each pair's, m
         self._braking_influence = np.zeros(len(self.pairs))  # kernels.braking_reach's output
-        self._failures = np.zeros(1)  # kernels.collision_rows': queries without closest points
         #: what kernels.collision_rows reads and writes besides the step's (arrays changed in
         #: place only)
-        self._fixed = (self.geometry, self.geometry_data, self._floor, self.margins,
-                       self._joint_table, self._pair_rows, self._failures, self._flat_poses,
-                       self._memory, self._memory_state, 0.5 * (self.influence - self.margin),
-                       WITNESS_APART, self._owners, self._support, pin.updateGeometryPlacements,
-                       self.model, self.witnesses > 0, self._mimic)
-        self._skip: tuple | None = None  # near_pairs' (from _reference and _floor_q)
+        self._tables = CollisionTables(
+            geometry=self.geometry, geometry_data=self.geometry_data, model=self.model,
+            update=pin.updateGeometryPlacements, floor=self._floor, margins=self.margins,
+            joints=self._joint_table, rows=self._pair_rows, memory=self._memory,
+            state=self._memory_state, owners=self._owners, support=self._support,
+            mimic=self._mimic, keep=0.5 * (self.influence - self.margin), apart=WITNESS_APART,
+            witnesses=self.witnesses > 0)
+        self._skip: Skip | None = None  # near_pairs' (from _reference and _floor_q)
         self._views: tuple = (None, None)  # (a data, collision_rows' views onto it)
         # each pair's reach at the solver's speed limits (_reach): (those limits, the reach)
         self._reaches: tuple[object, np.ndarray | None] = (self, None)  # (none yet)
@@ -784,7 +772,7 @@ class CollisionLimit(Limit):
         """The gap (m) between the bounding spheres of each pair (npairs,), from the joint
         poses the ``views`` (:meth:`_data_views`) read in place (``kernels.sphere_gaps``)."""
         gap = np.empty(len(self.pairs))
-        sphere_gaps(views, self._joint_f, self._center_local, self._pair_f, self._span, gap)
+        sphere_gaps(views, self._joint, self._center_local, self.pairs, self._span, gap)
         return gap
 
     def _aged(self, q: np.ndarray | None, near: np.ndarray, influence: np.ndarray) -> np.ndarray:
@@ -1015,8 +1003,10 @@ class CollisionLimit(Limit):
             skip = self._skip
             if skip is None:  # (what near_pairs reads, since the last broad phase)
                 self._prefilter[0] = -1.0  # (near_pairs orders its test for this gap)
-                skip = self._skip = (ref[1], self._lower, self._upper, self._pair_lever, ref[3],
-                                     ref[4], self._floor, self._floor_q, self._prefilter)
+                skip = self._skip = Skip(
+                    reference=ref[1], lower=self._lower, upper=self._upper,
+                    lever=self._pair_lever, gap=ref[3], near=ref[2], floor=self._floor,
+                    floor_q=self._floor_q, prefilter=self._prefilter)
             listed = near_pairs(q, skip, influence)
             stale = listed is None
         else:
@@ -1040,7 +1030,7 @@ class CollisionLimit(Limit):
         around each query and between the parts cost more than the queries); ``views``:
         :attr:`_views`, ``(data, its views or data itself)``."""
         rate = self.gain / dt
-        out = collision_rows(self._fixed, listed, views[1], rate, influence, self._tick + 1.0,
+        out = collision_rows(self._tables, listed, views[1], rate, influence, self._tick + 1.0,
                              reach, self._compute)
         if out is None:
             self.active, self.within, self._witness_count = [], [], 0
@@ -1105,7 +1095,6 @@ class CollisionLimit(Limit):
             overlap = self._radius[self.pairs[k]].sum() - apart
             rows[i, 0] = -max(overlap, 1e-3) if np.isfinite(overlap) else -1e-3
             rows[i, 4:7], rows[i, 7:10], rows[i, 10:13] = normal, centres[0], centres[1]
-        self._failures[0] = 0.0
 
     def _witness_rows(self, data, found: list[int]) -> int:
         """Append to the step's rows (``_pair_rows[:len(found)]``) one per remembered witness

@@ -264,14 +264,4 @@ PyObject *py_project_rows(PyObject *self, PyObject *const *args, Py_ssize_t narg
 PyObject *py_rows_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
 PyObject *py_smooth_rows_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
 
-/* collision.c */
-PyObject *py_damper_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
-PyObject *py_stoppable_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
-PyObject *py_witness_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
-PyObject *py_braking_reach(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
-PyObject *py_near_pairs(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
-PyObject *py_sphere_gaps(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
-PyObject *py_refresh_pairs(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
-PyObject *py_collision_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
-
 #endif

@@ -41,36 +41,10 @@ static PyMethodDef methods[] = {
     {"rows_step", (PyCFunction)(void (*)(void))py_rows_step, METH_FASTCALL,
      "rows_step(J, q, A, b, lower, upper, work, step) -> int: a kernel step against general "
      "rows and bounds: 0 kept, 1 projected in place, -1 outside the bounds."},
-    {"damper_rows", (PyCFunction)(void (*)(void))py_damper_rows, METH_FASTCALL,
-     "damper_rows(J, support, pairs, gain_rate, A, b): the collision limit's velocity-damper "
-     "rows of the pairs (d, margin, joint a, joint b, normal, p_a, p_b) into A and b."},
-    {"stoppable_rows", (PyCFunction)(void (*)(void))py_stoppable_rows, METH_FASTCALL,
-     "stoppable_rows(A, b, dq, ddq, accelerations, jerks, rate, dt, share, slack): the damper rows' "
-     "bounds made (in place) ones the joints' accelerations can keep."},
     {"smooth_rows_step", (PyCFunction)(void (*)(void))py_smooth_rows_step, METH_FASTCALL,
      "smooth_rows_step(J, q, A, b, lower, upper, previous, work, step) -> int: a step of the "
      "compiled acceleration/jerk stage against general rows and bounds: 0 kept, 1 projected "
      "within every box, 2 projected with smoothness yielding, -1 a bound outside the hard box."},
-    {"witness_rows", (PyCFunction)(void (*)(void))py_witness_rows, METH_FASTCALL,
-     "witness_rows(oMi, poses, rows, found, memory, state, tick, keep, apart, owners) -> int: the "
-     "collision limit's rows of its pairs' remembered closest points after their own rows."},
-    {"collision_rows", (PyCFunction)(void (*)(void))py_collision_rows, METH_FASTCALL,
-     "collision_rows(fixed, near, data, rate, influence, tick, reach, compute) -> (within, "
-     "found, A, b, witnesses) | None: the collision limit's queries, witness and damper rows "
-     "of a step in one call."},
-    {"near_pairs", (PyCFunction)(void (*)(void))py_near_pairs, METH_FASTCALL,
-     "near_pairs(q, skip, influence) -> list | None: "
-     "the collision limit's pairs to query, or None when its broad phase must run again."},
-    {"sphere_gaps", (PyCFunction)(void (*)(void))py_sphere_gaps, METH_FASTCALL,
-     "sphere_gaps(views, joints, centres, pairs, span, gap): the gap (m) between the bounding "
-     "spheres of each collision pair, at the joint poses of collision_rows' data views."},
-    {"refresh_pairs", (PyCFunction)(void (*)(void))py_refresh_pairs, METH_FASTCALL,
-     "refresh_pairs(q, lower, upper, gap, influence, skin, floor, kept, floor_q, lever) -> "
-     "(near, listed) | None: the collision limit's candidates and pairs to query after a "
-     "broad phase, its floors aged."},
-    {"braking_reach", (PyCFunction)(void (*)(void))py_braking_reach, METH_FASTCALL,
-     "braking_reach(lever, dq, accelerations, jerks, dt, share, influence, margin, out): each "
-     "collision pair's influence for an arm with acceleration limits (m)."},
     {NULL, NULL, 0, NULL},
 };
 
