@@ -391,7 +391,7 @@ class CollisionLimit(Limit):
         self.geometry.removeAllCollisionPairs()
         for a, b in chosen:
             self.geometry.addCollisionPair(pin.CollisionPair(a, b))
-        self.pairs = np.array(chosen, dtype=int).reshape(-1, 2)
+        self.pairs = np.array(chosen, dtype=np.int64).reshape(-1, 2)
         self.pair_names = [(geoms[a].name, geoms[b].name) for a, b in chosen]
         self.geometry_data = self.geometry.createData()
         for req in self.geometry_data.distanceRequests:

@@ -93,7 +93,6 @@ Checked check(const CollisionTables& t, nb::handle influence, nb::handle reach) 
         << c.support.cols() << "))";
     fail(out.str());
   }
-  c.joints.below(c.njoints, "joint", "njoints");
   if (t.witnesses) {
     c.memory.emplace(t.memory, "memory", 2, Access::write);
     c.state.emplace(t.state, "state", 2, Access::write);
@@ -113,6 +112,14 @@ nb::object collision_rows(const CollisionTables& t, nb::handle near, nb::handle 
                           nb::handle compute) {
   Checked c = check(t, influence_obj, reach);
   std::vector<Index> listed = index_list(near, "near", c.npairs, "pair", "npairs");
+  for (Index k : listed)  // (the joints of the pairs queried: a row names them)
+    for (Index side = 0; side < 2; ++side)
+      if (c.joints(k, side) < 0 || c.joints(k, side) >= c.njoints) {
+        std::ostringstream out;
+        out << "joints[" << k << ", " << side << "] = " << c.joints(k, side)
+            << " is no joint (njoints " << c.njoints << ")";
+        fail(out.str());
+      }
   const Index N = c.rows.rows();
   // (every listed pair may get a row and, with witnesses, W more: room for them all)
   if (t.witnesses)
