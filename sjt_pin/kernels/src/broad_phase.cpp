@@ -20,10 +20,10 @@ namespace {
 constexpr double INF = std::numeric_limits<double>::infinity();
 
 // lever_k . moved, summed in index order
-double lever_sum(const ConstMatrixMap& lever, Index k, const std::vector<double>& moved) {
+double lever_sum(const ConstMatrixMap& lever, Index k, const double* moved) {
   double acc = 0.0;
   const double* l = lever.data() + k * lever.cols();
-  for (Index j = 0; j < lever.cols(); ++j) acc += l[j] * moved[static_cast<std::size_t>(j)];
+  for (Index j = 0; j < lever.cols(); ++j) acc += l[j] * moved[j];
   return acc;
 }
 
@@ -88,14 +88,14 @@ void build_prefilter(const ConstMatrixMap& lever, const double* gap, const doubl
 // Whether every pair's bound lever |q - reference| plus its influence stays under its gap (else
 // the broad phase must run again); with a prefilter (built here first where P[0] < 0) only the
 // pairs whose threshold does not clear |q - reference| are summed, which answers the same.
+// moved: n numbers of scratch.
 bool levers_hold(const Array& q, const Array& reference, const ConstMatrixMap& lever,
-                 const double* gap, const double* influence, double* P) {
+                 const double* gap, const double* influence, double* P, double* moved) {
   const Index n = q.size(), m = lever.rows();
-  std::vector<double> moved(static_cast<std::size_t>(n));
   double norm = 0.0;
   for (Index j = 0; j < n; ++j) {
-    moved[static_cast<std::size_t>(j)] = std::fabs(q.data()[j] - reference.data()[j]);
-    norm += moved[static_cast<std::size_t>(j)] * moved[static_cast<std::size_t>(j)];
+    moved[j] = std::fabs(q.data()[j] - reference.data()[j]);
+    norm += moved[j] * moved[j];
   }
   auto holds = [&](Index k) { return lever_sum(lever, k, moved) + influence[k] < gap[k]; };
   if (P) {
@@ -117,13 +117,9 @@ bool levers_hold(const Array& q, const Array& reference, const ConstMatrixMap& l
   return true;
 }
 
-// The moves |q - from| (n,)
-std::vector<double> moves(const Array& q, const double* from) {
-  std::vector<double> moved(static_cast<std::size_t>(q.size()), 0.0);
-  if (from)
-    for (Index j = 0; j < q.size(); ++j)
-      moved[static_cast<std::size_t>(j)] = std::fabs(q.data()[j] - from[j]);
-  return moved;
+// The moves |q - from| (n,; 0 without `from`) into moved
+void moves(const Array& q, const double* from, double* moved) {
+  for (Index j = 0; j < q.size(); ++j) moved[j] = from ? std::fabs(q.data()[j] - from[j]) : 0.0;
 }
 
 nb::object near_pairs(nb::handle q_obj, const Skip& skip, nb::handle influence_obj) {
@@ -144,17 +140,29 @@ nb::object near_pairs(nb::handle q_obj, const Skip& skip, nb::handle influence_o
       influence.size() != npairs || (prefilter && prefilter->size() != 1 + 3 * npairs))
     do_not_fit("near_pairs: q, reference, lower, upper, floor_q (n,), lever (npairs, n), gap, "
                "floor and influence (npairs,), prefilter (1 + 3 npairs,)", n, npairs);
-  std::vector<Index> near = index_list(skip.near, "near", npairs, "pair", "npairs");
+  // the candidates: an int64 array read in place (the limit's), or a list of ints
+  std::optional<IndexArray> near_array;
+  std::vector<Index> near_list;
+  if (PyList_Check(skip.near.ptr()) || PyTuple_Check(skip.near.ptr())) {
+    near_list = index_list(skip.near, "near", npairs, "pair", "npairs");
+  } else {
+    near_array.emplace(skip.near, "near", 1);
+    near_array->below(npairs, "pair", "npairs");
+  }
+  const Index count = near_array ? near_array->size() : static_cast<Index>(near_list.size());
   const auto L = lever.matrix();
+  std::vector<double> moved(static_cast<std::size_t>(2 * n));  // (from the reference, floor_q)
   if (!inside(q, lower, upper) ||
       !levers_hold(q, reference, L, gap.data(), influence.data(),
-                   prefilter ? prefilter->data() : nullptr))
+                   prefilter ? prefilter->data() : nullptr, moved.data()))
     return nb::none();
   // the pairs of near whose floor, aged from floor_q to q, is not above their influence
-  std::vector<double> moved = moves(q, floor_q.data());
+  double* aged = moved.data() + n;
+  moves(q, floor_q.data(), aged);
   nb::list out;
-  for (Index k : near) {
-    floor.data()[k] -= lever_sum(L, k, moved);
+  for (Index i = 0; i < count; ++i) {
+    Index k = near_array ? (*near_array)[i] : near_list[static_cast<std::size_t>(i)];
+    floor.data()[k] -= lever_sum(L, k, aged);
     if (!(floor.data()[k] > influence.data()[k])) out.append(nb::int_(k));
   }
   floor_q.vector() = q.vector();
@@ -189,13 +197,14 @@ nb::object refresh_pairs(nb::handle q_obj, nb::handle lower_obj, nb::handle uppe
   for (Index k = 0; k < npairs; ++k)
     if (!keep[static_cast<std::size_t>(k)]) f[k] = -INF;  // no bound known
   const auto L = lever.matrix();
-  std::vector<double> moved = moves(q, floor_q ? floor_q->data() : nullptr);
+  std::vector<double> moved(static_cast<std::size_t>(n));
+  moves(q, floor_q ? floor_q->data() : nullptr, moved.data());
   nb::list near, listed;
   for (Index k = 0; k < npairs; ++k) {
     if (!(gap.data()[k] < influence.data()[k] + skin)) continue;
     gap.data()[k] = INF;  // a candidate stays one
     near.append(nb::int_(k));
-    if (floor_q) f[k] -= lever_sum(L, k, moved);
+    if (floor_q) f[k] -= lever_sum(L, k, moved.data());
     if (!floor_q || !(f[k] > influence.data()[k])) listed.append(nb::int_(k));
   }
   if (floor_q) floor_q->vector() = q.vector();

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <utility>
 #include <limits>
+#include <new>
 #include <optional>
 #include <sstream>
 
@@ -34,6 +35,29 @@ constexpr double SEPARATED = 1e-6;
 // coal's answer where it found no closest points (GJK/EPA deep in a penetration): a distance of
 // -DBL_MAX and points near DBL_MAX, or no normal (two closest points that coincide)
 constexpr double UNUSABLE = 1e300;
+
+// coal's result's attribute and method names, interned once (they live as long as the process)
+struct ResultNames {
+  nb::handle distance, normal, point_a, point_b;
+};
+
+const ResultNames& result_names() {
+  static const ResultNames names{PyUnicode_InternFromString("min_distance"),
+                                 PyUnicode_InternFromString("normal"),
+                                 PyUnicode_InternFromString("getNearestPoint1"),
+                                 PyUnicode_InternFromString("getNearestPoint2")};
+  if (!names.distance.ptr() || !names.normal.ptr() || !names.point_a.ptr() ||
+      !names.point_b.ptr())
+    throw std::bad_alloc();
+  return names;
+}
+
+// result.name() (a method without arguments)
+nb::object call_method(nb::handle result, nb::handle name) {
+  PyObject* out = PyObject_CallMethodNoArgs(result.ptr(), name.ptr());
+  if (!out) throw nb::python_error();
+  return nb::steal(out);
+}
 
 double as_double(nb::handle value, const char* name) {
   double v = PyFloat_AsDouble(value.ptr());
@@ -153,8 +177,7 @@ nb::object collision_rows(const CollisionTables& t, nb::handle near, nb::handle 
 
   // 2. the exact distance queries: a floor for each pair, a row for each within influence
   // whose row can bind (reach: the fastest the speed limits close the pair)
-  nb::str s_distance("min_distance"), s_normal("normal"), s_p1("getNearestPoint1"),
-      s_p2("getNearestPoint2");
+  const ResultNames& names = result_names();
   double* floor = c.floor.data();
   const double* margins = c.margins.data();
   const double* influence = c.influence.data();
@@ -165,7 +188,7 @@ nb::object collision_rows(const CollisionTables& t, nb::handle near, nb::handle 
   for (Index k : listed) {
     nb::int_ pair(k);
     nb::object result = compute(t.geometry, t.geometry_data, pair);
-    double d = as_double(result.attr(s_distance), "min_distance");
+    double d = as_double(result.attr(names.distance), "min_distance");
     floor[k] = d > -UNUSABLE ? d : -INF;  // (NaN, or no closest points: queried again)
     if (!(d > -INF && d < influence[k])) continue;
     within.append(pair);
@@ -173,9 +196,9 @@ nb::object collision_rows(const CollisionTables& t, nb::handle near, nb::handle 
     if (count >= N) fail("collision_rows: more pairs within influence than rows");
     double* r = rows + row::size * count;
     const bool apart = d > SEPARATED;
-    if (!apart) read3(result.attr(s_normal), "normal", r + row::normal);
-    read3(result.attr(s_p1)(), "nearest point 1", r + row::point_a);
-    read3(result.attr(s_p2)(), "nearest point 2", r + row::point_b);
+    if (!apart) read3(result.attr(names.normal), "normal", r + row::normal);
+    read3(call_method(result, names.point_a), "nearest point 1", r + row::point_a);
+    read3(call_method(result, names.point_b), "nearest point 2", r + row::point_b);
     if (apart) {
       Vector3 u = Eigen::Map<const Vector3>(r + row::point_b) -
                   Eigen::Map<const Vector3>(r + row::point_a);
