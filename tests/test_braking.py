@@ -1,12 +1,23 @@
 """The braking of a joint toward a position limit: the jerk-limited stopping distance is the
 distance a simulated braking covers, continuous and increasing in the velocity; the braking
-speed is the largest velocity from which that stop still fits in the room left."""
+speed is the largest velocity from which that stop still fits in the room left
+(``sjt_pin/kernels/src/braking.hpp``)."""
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sjt_pin.limits.position import BRAKING_TOL, braking_speed, stopping_distance
+from sjt_pin.kernels import approach_top, largest_stoppable
+from sjt_pin.kernels import stopping_distance as one_stop
+
+#: the root search's relative tolerance on its bracket (braking.hpp: 1e-12 of the bracket)
+BRAKING_TOL = 1e-12
+
+
+def stopping_distance(w, a0, A, J):
+    """The compiled stopping distance, elementwise."""
+    return np.array([one_stop(*args) for args in zip(w, a0, A, J, strict=True)])
 
 
 def simulated_stop(w, a0, A, J, h=1e-6):
@@ -58,11 +69,9 @@ def test_the_overshoot_grows_with_the_velocity(v, A, J, dt):
 def test_the_braking_speed_is_the_largest_that_still_stops(v, A, J, room, dt):
     """Where it bounds, the braking speed x still stops within the room, and a velocity a
     little faster (the search's tolerance) does not: the largest that fits."""
-    args = (np.array([room]), np.array([v]), np.zeros(1), dt, np.array([A]), np.array([J]))
-    x = float(braking_speed(*args)[0])
-    if not np.isfinite(x):
-        return
     low, high = v - 2.0 * A * dt, v + 2.0 * A * dt
+    x = largest_stoppable(low, high, v, room, dt, A, J)
+    assert low <= x <= high
 
     def overshoot(y):
         d = stopping_distance(np.array([y]), np.array([(y - v) / dt]), np.array([A]),
@@ -72,5 +81,20 @@ def test_the_braking_speed_is_the_largest_that_still_stops(v, A, J, room, dt):
     if x == low:  # nothing one step reaches can stop in time
         assert overshoot(low) > 0.0
         return
-    assert overshoot(x) <= 0.0
-    assert overshoot(x + 2.0 * BRAKING_TOL * (high - low) + 1e-15) > 0.0
+    assert overshoot(x) <= 1e-15
+    if x < high:
+        assert overshoot(x + 1e-9 * (high - low) + 1e-15) > 0.0
+
+
+@settings(max_examples=100, deadline=None)
+@given(v=st.floats(-2.0, 2.0), gap=st.floats(0.0, 1.0), J=st.floats(100.0, 20000.0),
+       dt=st.sampled_from([1e-3, 4e-3]))
+def test_the_approach_top_ramps_down_before_passing_its_point(v, gap, J, dt):
+    """The fastest x >= v whose acceleration can still ramp to 0 at the jerk limit before the
+    velocity passes u = v + gap: on the boundary x + ((x - v)/dt)^2 / (2 J) = u."""
+    u = v + gap
+    x = approach_top(v, u, dt, J)
+    assert v - 1e-12 <= x <= u + 1e-12
+    a = (x - v) / dt
+    assert x + a * a / (2.0 * J) == pytest.approx(u, rel=1e-9, abs=1e-12)
+    assert approach_top(v, u, dt, float("inf")) == u

@@ -1,15 +1,16 @@
 """The constraint stage: every limit's bounds and rows hold after any method; saturated joints
-are held and the others take over; an infeasible task is scaled along its direction; the
-stage agrees with a reference QP; acceleration and jerk limits hold on the returned stream."""
+are held and the others take over; the stage's projection is the reference QP's optimum (the
+feasible velocity nearest the method's in its metric); acceleration and jerk limits hold on the
+returned stream."""
 
 import numpy as np
 import pinocchio as pin
 import pytest
-from scipy.optimize import minimize
+from scipy.optimize import nnls
 
 import sjt_pin as sjt
 from sjt_pin.bench.limits import PANDA_ACCELERATION, PANDA_JERK  # Franka's published limits
-from sjt_pin.constraints import project, rest_target, saturate
+from sjt_pin.kernels import project
 from sjt_pin.limits import Limit
 from sjt_pin.methods import Method
 
@@ -50,25 +51,6 @@ class Floor(Limit):
         z = kinematics.placement(self.frame_id).translation[2]
         J_z = kinematics.world_aligned_jacobian(self.frame_id)[2]
         return -J_z[None, :], np.array([self.gain * (z - self.z_min) / motion.dt])
-
-
-def pinv_solve(J, xdot):
-    """The pseudoinverse's re-solve on the free joints, the held ones at their velocities."""
-
-    def solve(free, held):
-        held = np.zeros(J.shape[1]) if held is None else held
-        out = np.zeros(J.shape[1])
-        out[free] = np.linalg.pinv(J[:, free]) @ (xdot - J @ held)
-        return out
-
-    return solve
-
-
-def qp(objective, gradient, x0, lower, upper, **constraint):
-    """scipy's SLSQP on a box and one block of constraints, to tight tolerance."""
-    return minimize(objective, x0, jac=gradient, method="SLSQP",
-                    bounds=list(zip(lower, upper, strict=True)), constraints=[constraint],
-                    options={"ftol": 1e-14, "maxiter": 500})
 
 
 def test_a_method_of_ones_own_keeps_the_urdf_limits(ur5):
@@ -116,77 +98,84 @@ def test_a_general_row_limit_in_step_and_solve(panda):
     assert result.success and panda.fk(result.q).translation[2] >= 0.25 - 1e-9
 
 
-def test_the_stage_equals_a_reference_qp_where_one_joint_saturates():
-    """With the pseudoinverse and one joint over its bound, Saturation in the Null Space gives
-    the minimum-norm joint velocity that meets the task within the box: the QP's solution."""
-    rng = np.random.default_rng(7)
-    checked = 0
-    for _ in range(40):
-        J = rng.normal(size=(3, 7))
-        xdot = rng.normal(size=3)
-        dq0 = np.linalg.pinv(J) @ xdot
-        k = int(np.argmax(np.abs(dq0)))
-        lower, upper = np.full(7, -10.0), np.full(7, 10.0)
-        if dq0[k] > 0:
-            upper[k] = 0.5 * dq0[k]
-        else:
-            lower[k] = 0.5 * dq0[k]
-
-        outcome = saturate(dq0, pinv_solve(J, xdot), lower, upper, np.ones(7, dtype=bool),
-                           lambda J=J: J)
-        reference = qp(lambda x: x @ x, lambda x: 2 * x, dq0, lower, upper, type="eq",
-                       fun=lambda x, J=J, xdot=xdot: J @ x - xdot, jac=lambda x, J=J: J)
-        if not (reference.success and np.all(np.abs(reference.x) < 9.9)):
-            continue  # another bound became active: not the case under test
-        assert outcome.scale == 1.0
-        np.testing.assert_allclose(J @ outcome.dq, xdot, atol=1e-9)  # the task is kept
-        np.testing.assert_allclose(outcome.dq, reference.x, atol=1e-5)
-        checked += 1
-    assert checked >= 20
+def projection_problem(rng, n, rows, equalities, task_rows):
+    """A random projection whose constraints a known point meets: (xb, lam, B, lo, hi, A, b,
+    C, d)."""
+    inside = rng.uniform(-0.5, 0.5, n)
+    lo, hi = inside - rng.uniform(0.1, 1.0, n), inside + rng.uniform(0.1, 1.0, n)
+    A = rng.normal(size=(rows, n))
+    b = A @ inside + rng.uniform(0.0, 0.3, rows)
+    C = rng.normal(size=(equalities, n))
+    d = C @ inside
+    xb = rng.normal(scale=2.0, size=n)
+    lam = rng.uniform(0.01, 2.0, n)
+    B = rng.normal(size=(task_rows, n))
+    return xb, lam, B, lo, hi, A, b, C, d
 
 
-def test_an_infeasible_task_is_scaled_along_its_direction():
-    rng = np.random.default_rng(3)
+@pytest.mark.parametrize("seed", range(6))
+def test_the_projection_is_the_reference_qp_s_optimum(seed):
+    """min 1/2 (x - xb)^T (diag(lam) + B^T B) (x - xb) within the box, A x <= b, C x = d: the
+    stage's projection meets every constraint and the QP's optimality conditions (KKT) hold
+    there, over random sizes, metrics and constraints, with and without equalities."""
+    rng = np.random.default_rng(seed)
+    for _ in range(15):
+        n = int(rng.integers(2, 9))
+        args = projection_problem(rng, n, int(rng.integers(0, 6)),
+                                  int(rng.integers(0, min(3, n))), int(rng.integers(0, 7)))
+        xb, lam, B, lo, hi, A, b, C, d = args
+        x, _, converged = project(*args)
+        assert converged
+        assert np.all(x >= lo - 1e-12) and np.all(x <= hi + 1e-12)
+        assert np.all(A @ x <= b + 1e-9) and np.allclose(C @ x, d, atol=1e-9)
+        assert kkt_residual(x, *args) <= 1e-8 * (1.0 + np.abs(xb).max())
+
+
+def kkt_residual(x, xb, lam, B, lo, hi, A, b, C, d, active=1e-9):
+    """How far x is from the QP's optimality conditions: the least |H (x - xb) + A_W^T nu +
+    C^T eta - mu_lo + mu_hi| over multipliers of the right signs (nu, mu >= 0 on the rows and
+    box sides x touches, eta free) - zero at the optimum of a convex QP, and only there."""
+    n = x.size
+    columns = [A[i] for i in range(len(b)) if A[i] @ x >= b[i] - active]
+    columns += [c for row in C for c in (row, -row)]
+    columns += [-np.eye(n)[j] for j in range(n) if x[j] <= lo[j] + active]
+    columns += [np.eye(n)[j] for j in range(n) if x[j] >= hi[j] - active]
+    gradient = lam * (x - xb) + B.T @ (B @ (x - xb))
+    if not columns:
+        return float(np.linalg.norm(gradient))
+    return float(nnls(np.array(columns).T, -gradient)[1])
+
+
+def test_a_feasible_step_is_returned_as_it_is():
+    """Where the method's step meets every constraint, the projection returns it exactly."""
+    rng = np.random.default_rng(5)
     for _ in range(30):
-        J = rng.normal(size=(3, 5))
-        xdot = rng.normal(size=3) * 10
-        dq0 = np.linalg.pinv(J) @ xdot
-        lower, upper = np.full(5, -1.0), np.full(5, 1.0)
-
-        outcome = saturate(dq0, pinv_solve(J, xdot), lower, upper, np.ones(5, dtype=bool),
-                           lambda J=J: J)
-        assert np.all(outcome.dq >= lower - 1e-12) and np.all(outcome.dq <= upper + 1e-12)
-        made = J @ outcome.dq
-        if outcome.scale < 1:
-            np.testing.assert_allclose(made, outcome.scale * xdot, atol=1e-9)  # not distorted
+        n = int(rng.integers(2, 9))
+        xb, lam, B, lo, hi, A, b, _, _ = projection_problem(rng, n, 3, 0, 4)
+        xb = np.clip(rng.normal(scale=0.05, size=n) + 0.5 * (lo + hi), lo, hi)
+        b = np.maximum(b, A @ xb)
+        x, _, converged = project(xb, lam, B, lo, hi, A, b, np.zeros((0, n)), np.zeros(0))
+        assert converged
+        np.testing.assert_array_equal(x, xb)
 
 
-def test_the_row_projection_meets_every_row_at_least_cost():
-    rng = np.random.default_rng(4)
-    for _ in range(30):
+def test_a_held_joint_stays_at_its_velocity_and_the_others_take_over():
+    """lam = inf holds a joint at the method's velocity (clipped into its box); the task's rows
+    as equalities are then met by the other joints alone."""
+    rng = np.random.default_rng(8)
+    for _ in range(20):
         n = 6
-        Jw = rng.normal(size=(4, n))
-        A, b = rng.normal(size=(3, n)), rng.uniform(0.0, 0.5, 3)
-        dq = rng.normal(size=n)
-        lower, upper = np.full(n, -2.0), np.full(n, 2.0)
-        out = project(dq, Jw, A, b, lower, upper, np.ones(n, dtype=bool))
-        assert np.all(A @ out <= b + 1e-9) and np.all(np.abs(out) <= 2 + 1e-12)
-        H = Jw.T @ Jw
-        H += np.trace(H) / n * np.eye(n)
-
-        def least(start, H=H, A=A, b=b, n=n, lower=lower, upper=upper):
-            return qp(lambda v: (v - start) @ H @ (v - start), lambda v: 2 * H @ (v - start),
-                      np.zeros(n), lower, upper, type="ineq", fun=lambda v: b - A @ v,
-                      jac=lambda v: -A)
-
-        ref = least(dq)
-        # a corrected step starts again from dq with its self-motion scaled (rest_target)
-        target = rest_target(dq, ref.x, Jw, np.ones(n, dtype=bool))
-        if target is not None and not np.all(A @ dq <= b):
-            dq = target
-            ref = least(dq)
-        cost = (out - dq) @ H @ (out - dq)
-        assert cost <= (ref.x - dq) @ H @ (ref.x - dq) + 1e-7
+        J = rng.normal(size=(3, n))
+        xb = rng.normal(size=n)
+        lam = np.ones(n)
+        lam[2] = np.inf
+        lo, hi = np.full(n, -10.0), np.full(n, 10.0)
+        hi[2] = 0.5 * abs(xb[2])
+        x, _, converged = project(xb, lam, np.zeros((0, n)), lo, hi, np.zeros((0, n)),
+                                  np.zeros(0), J, J @ xb)
+        assert converged
+        assert x[2] == min(xb[2], hi[2])
+        np.testing.assert_allclose(J @ x, J @ xb, atol=1e-9)
 
 
 def test_tiago_holds_its_slow_torso_and_the_arm_takes_over():
@@ -239,45 +228,3 @@ def test_franka_conditions_acceleration_and_jerk_limits_hold_on_the_stream(panda
     solver.reset()
     q2 = solver.step(q, targets[0])
     assert np.all(np.abs(q2 - q) / dt <= PANDA_ACCELERATION * dt * 1.0001)  # from rest again
-
-
-def test_the_dual_qp_of_a_degenerate_step_is_finite_and_optimal():
-    """The dual QP of a Panda self-collision step on its meshes (18 rows, Q singular, one row no
-    motion can change, broken) once made y NaN — a 0/0 step ratio — and then stalled on that row, so
-    the correction vanished. Its answer is finite and optimal on every row that motion can
-    change: the KKT conditions of min 1/2 y^T Q y + r^T y over y >= 0 hold there (gradient >= 0,
-    and 0 where y > 0); the inert row keeps y = 0."""
-    from pathlib import Path
-
-    from sjt_pin.constraints import nonnegative_qp
-
-    data = np.load(Path(__file__).parent / "fixtures" / "qp" / "degenerate_panda_meshes.npz")
-    Q, r = data["Q"], data["r"]
-    with np.errstate(all="raise"):
-        y = nonnegative_qp(Q, r)
-    assert np.all(np.isfinite(y)) and np.all(y >= 0)
-    inert = np.diag(Q) <= 1e-14 * np.diag(Q).max()
-    assert np.any(r[inert] < 0) and np.all(y[inert] == 0)  # one broken, nothing to move it
-    gradient = (Q @ y + r)[~inert]
-    scale = 1e-9 * (1.0 + np.abs(r).max())
-    assert np.all(gradient >= -scale)
-    assert np.all(np.abs(gradient[y[~inert] > 1e-12]) <= scale)
-
-
-def test_a_step_whose_task_motion_the_rows_stop_keeps_none_of_its_self_motion():
-    """Rows that forbid every task motion (``Jw x = 0``): the least-cost point from ``dq`` would
-    be ``dq``'s self-motion, on which a blocked arm drifts in its null space; the projection
-    starts again from ``dq`` with its self-motion scaled by the share of task motion kept (none)
-    and returns rest. A step the rows do not cut keeps its self-motion exactly."""
-    rng = np.random.default_rng(21)
-    for _ in range(20):
-        Jw = rng.normal(size=(2, 5))
-        null = np.linalg.svd(Jw)[2][2:].T  # a basis of Jw's null space
-        dq = Jw.T @ rng.normal(size=2) + null @ rng.normal(size=3)
-        A, b = np.vstack([Jw, -Jw]), np.zeros(4)
-        lower, upper = np.full(5, -10.0), np.full(5, 10.0)
-        out = project(dq, Jw, A, b, lower, upper, np.ones(5, dtype=bool))
-        np.testing.assert_allclose(out, 0.0, atol=1e-9)
-        free = null @ rng.normal(size=3)  # self-motion alone meets the rows: untouched
-        np.testing.assert_array_equal(project(free, Jw, A, b, lower, upper,
-                                              np.ones(5, dtype=bool)), free)

@@ -1,5 +1,6 @@
-"""The step pipeline equals the reference formulas of ``tests/reference/mappings.py`` on random chains, for every
-method and task combination; the package's import surface; solver settings after construction."""
+"""The step pipeline equals the reference formulas of ``tests/reference/mappings.py`` on random
+chains, for every method and task combination; the package's import surface; solver settings
+after construction."""
 
 import subprocess
 import sys

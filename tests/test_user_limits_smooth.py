@@ -1,6 +1,7 @@
 """A user's limit beside acceleration and jerk limits: the compiled acceleration/jerk stage runs,
 and the user's limit costs only its own rows — the step is corrected only where it breaks
-them, within the stage's hard and smoothness boxes (``kernels.smooth_rows_step``).
+them, within the stage's hard limits, the acceleration and jerk limits yielding only where the
+rows need it.
 
 On Panda at 1 kHz with Franka's published acceleration and jerk limits, for a general-row limit
 (a floor under the hand, the README's ``Floor`` with a braking distance), a box limit (a joint
@@ -18,11 +19,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import sjt_pin as sjt
-import sjt_pin.kernels as K
-import sjt_pin.solver as solver_module
 from sjt_pin.bench.limits import PANDA_ACCELERATION, PANDA_JERK  # Franka's published limits
+from sjt_pin.kernels import largest_stoppable
 from sjt_pin.limits import Limit
-from sjt_pin.limits.position import braking_speed
 
 from .test_random_urdfs import random_semantic_robot
 
@@ -57,16 +56,18 @@ class BrakingBand(Limit):
         j = robot.model.joints[robot.model.getJointId(joint)]
         self.iq, self.iv, self.nv = j.idx_q, j.idx_v, robot.nv
         self.lower, self.upper = lower, upper
-        self.limits = np.array([acceleration]), np.array([jerk])
+        self.acceleration, self.jerk = acceleration, jerk
 
     def bounds(self, kinematics, motion):
         lo, hi = np.full(self.nv, -np.inf), np.full(self.nv, np.inf)
         x, v, dt = motion.q[self.iq], motion.dq[self.iv], motion.dt
-        up = braking_speed(np.array([self.upper - x]), np.array([v]), None, dt, *self.limits)
-        down = braking_speed(np.array([x - self.lower]), np.array([-v]), None, dt,
-                             *self.limits)
-        hi[self.iv] = min(up[0], (self.upper - x) / dt)
-        lo[self.iv] = -min(down[0], (x - self.lower) / dt)
+        A, J = self.acceleration, self.jerk
+
+        def fastest(room, speed):  # toward the limit, from the speed along it
+            return largest_stoppable(speed - A * dt, speed + A * dt, speed, room, dt, A, J)
+
+        hi[self.iv] = min(fastest(self.upper - x, v), (self.upper - x) / dt)
+        lo[self.iv] = -min(fastest(x - self.lower, -v), (x - self.lower) / dt)
         return lo, hi
 
 
@@ -74,7 +75,6 @@ def run(robot, method, limits, trajectory, steps):
     """The configurations (steps + 1, nq) and the steps' reports of one run from q0."""
     solver = sjt.make_solver(method, robot, dt=DT, acceleration_limits=PANDA_ACCELERATION,
                              jerk_limits=PANDA_JERK, limits=limits)
-    assert solver._compiled_smooth  # noqa: SLF001 (the compiled stage runs beside the limit)
     q = robot.q0.copy()
     qs, infos = [q], []
     for k in range(steps):
@@ -277,56 +277,6 @@ def test_the_smoothness_limits_yield_only_as_far_as_the_rows_need(panda, need):
     assert ratio.max() <= need * 1.01 + 1e-9, ratio
 
 
-def test_a_bound_outside_the_hard_box_takes_the_python_stage_and_keeps_the_state(ur5):
-    """The README's ``JointBand`` narrowed while the elbow is outside the new band: its bound
-    asks for the way back in one period, beyond the speed and braking bounds — nothing of the
-    hard box is left, so that step runs the whole stage in Python, its result the reference's
-    (the band, a hard limit of the user's, wins there, as in the stage). The motion state is
-    what was commanded, step after step."""
-
-    class JointBand(Limit):
-        name = "band"
-
-        def __init__(self, lower, upper):
-            self.lower, self.upper = lower, upper
-
-        def bounds(self, kinematics, motion):
-            lo, hi = np.full(6, -np.inf), np.full(6, np.inf)
-            x = motion.q[2]
-            lo[2], hi[2] = (self.lower - x) / motion.dt, (self.upper - x) / motion.dt
-            return lo, hi
-
-    q = np.array([0.3, -1.2, 1.8, -1.8, -1.5, 0.2])
-    target = ur5.fk(np.array([0.3, -1.2, 1.5, -1.8, -1.5, 0.2]))
-    solvers = []
-    for compiled in (True, False):
-        solver_module.COMPILED_SMOOTH_STAGE = compiled
-        try:
-            solvers.append(sjt.SJTSolver(ur5, dt=DT, acceleration_limits=10.0,
-                                         jerk_limits=5000.0, limits=[JointBand(0.5, 2.0)]))
-        finally:
-            solver_module.COMPILED_SMOOTH_STAGE = True
-    solver, reference = solvers
-    previous = np.zeros(6)
-    for k in range(400):
-        if k == 5:  # the elbow, at about 1.8 rad, is now outside the band
-            for s in solvers:
-                s.stage.limits[-1].upper = 1.53
-        q_ref = reference.step(q, target)
-        q = solver.step(q, target)
-        if k <= 5:  # (later the band's bound is in the reference's box while the compiled
-            # step, smoothed, meets it: two admissible answers)
-            np.testing.assert_allclose(q, q_ref, rtol=0, atol=1e-9, err_msg=f"step {k}")
-        if k >= 5:
-            assert q[2] <= 1.53 + 1e-12
-        dq = solver.displacement / DT
-        state = solver.__reduce__()[2]["motion"]
-        np.testing.assert_allclose(state[0], dq, rtol=0, atol=1e-12)
-        np.testing.assert_allclose(state[1], (dq - previous) / DT, rtol=0, atol=1e-6)
-        previous = dq.copy()
-        reference.__setstate__(dict(reference.__reduce__()[2], motion=state))
-
-
 class SpeedRows(Limit):
     """Constant general rows ``A q_dot <= b`` (a linear bound on joint speeds)."""
 
@@ -396,57 +346,3 @@ def test_random_rows_beside_acceleration_limits_on_random_robots(seed, joints, m
     broken = np.any(plain_dqs @ A.T > b + 1e-9 * (1 + np.abs(b)), axis=1)
     active = ["rows" in info.active_rows or broken[k] for k, info in enumerate(infos)]
     assert_same_until_active(plain, qs, active)
-
-
-def test_a_smoothness_limit_of_ones_own_runs_the_python_stage(panda, down):
-    """A user's limit with ``hard = False`` (a smoothness bound: here the arm's joints held
-    below 5 % of their acceleration limit) is weighed only by the stage in Python: every step
-    runs it, from the motion state the step starts from — the reference's stream (to rounding:
-    the method's own step is solved again there)."""
-
-    class Gentle(Limit):
-        name = "gentle"
-        hard = False
-
-        def bounds(self, kinematics, motion):
-            change = 0.05 * PANDA_ACCELERATION * motion.dt
-            return motion.dq - change, motion.dq + change
-
-    compiled = sjt.SJTSolver(panda, dt=DT, acceleration_limits=PANDA_ACCELERATION,
-                             jerk_limits=PANDA_JERK, limits=[Gentle()])
-    solver_module.COMPILED_SMOOTH_STAGE = False
-    try:
-        reference = sjt.SJTSolver(panda, dt=DT, acceleration_limits=PANDA_ACCELERATION,
-                                  jerk_limits=PANDA_JERK, limits=[Gentle()])
-    finally:
-        solver_module.COMPILED_SMOOTH_STAGE = True
-    q, previous = panda.q0.copy(), np.zeros(panda.nv)
-    for k in range(300):
-        pose, velocity = down.sample(k * DT)
-        qa, qb = compiled.step(q, pose, velocity), reference.step(q, pose, velocity)
-        np.testing.assert_allclose(qa, qb, rtol=1e-9, atol=1e-9, err_msg=f"step {k}")
-        # (which of two equal bounds names a joint depends on rounding: the joints, not names)
-        joints = [{j for _, j in x.last.active_limits} for x in (compiled, reference)]
-        assert joints[0] == joints[1], f"step {k}"
-        q = qa
-        assert np.all(np.abs(compiled.displacement / DT - previous)  # the limit holds
-                      <= 0.05 * PANDA_ACCELERATION * DT * (1 + 1e-9) + 1e-12)
-        previous = compiled.displacement / DT
-    assert np.all(np.abs(compiled.__reduce__()[2]["motion"][0] - previous) <= 1e-12)
-
-
-def test_the_correction_refuses_arguments_that_do_not_fit():
-    """``kernels.smooth_rows_step`` names what does not fit instead of reading past it."""
-    m, n = 6, 7
-    J, q, A, b = np.ones((m, n)), np.zeros(n), np.ones((1, n)), np.zeros(1)
-    step, previous = np.zeros(n), np.zeros(2 * n)
-    plain = K.Layout(m, n, 0).allocate()
-    with pytest.raises(ValueError, match="no acceleration/jerk stage"):
-        K.smooth_rows_step(J, q, A, b, None, None, previous, plain, step)
-    work = K.Layout(m, n, 0, smooth=True).allocate()
-    with pytest.raises(ValueError, match="previous"):
-        K.smooth_rows_step(J, q, A, b, None, None, np.zeros(n), work, step)
-    with pytest.raises(TypeError, match="upper"):
-        K.smooth_rows_step(J, q, A, b, np.zeros(n), None, previous, work, step)
-    work[K.P_DT] = 1e-3
-    assert K.smooth_rows_step(J, q, A, b, None, None, previous, work, step) == 0  # kept
