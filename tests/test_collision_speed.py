@@ -1,135 +1,23 @@
 """The compiled pieces of a step with collision dampers, against their numpy references: the
-stage's projection and its dual QP (kernels.project_rows, nonnegative_qp) also against SciPy,
-the damper rows (kernels.damper_rows), the solver's one-call correction of a kernel step
-(kernels.rows_step) against the whole stage, and the broad phase that CollisionLimit skips
-while nothing can have come within influence."""
+damper rows (kernels.damper_rows), the witness rows, the broad phase that CollisionLimit skips
+while nothing can have come within influence and its bookkeeping; rows no velocity can meet
+leave the step within the speed limits."""
 
-from pathlib import Path
 
 import coal
 import numpy as np
 import pinocchio as pin
 import pytest
-from scipy.optimize import minimize
 
 import sjt_pin as sjt
 from sjt_pin import kernels as K
-from sjt_pin.constraints import nonnegative_qp, project, project_reference, rest_target
 from sjt_pin.kinematics import Kinematics
 from sjt_pin.limits.base import Motion
 from sjt_pin.limits.collision import CollisionLimit, damper_rows_reference
 from sjt_pin.solvers import make_solver
 
-FIXTURE = Path(__file__).parent / "fixtures" / "qp" / "degenerate_panda_meshes.npz"
-
-
-def _instance(rng, degenerate=False):
-    """A random feasible projection (the moving joints at rest meet every row and bound):
-    some joints still, some bounds infinite, rows that may repeat."""
-    n, m, k = int(rng.integers(1, 9)), int(rng.integers(0, 7)), int(rng.integers(0, 8))
-    A = rng.normal(size=(k, n))
-    if degenerate and k > 1:
-        A[1] = A[0]  # a row twice: a singular dual
-    lower = np.where(rng.random(n) < 0.8, -rng.uniform(0.5, 3, n), -np.inf)
-    upper = np.where(rng.random(n) < 0.8, rng.uniform(0.5, 3, n), np.inf)
-    moving = rng.random(n) < 0.85
-    dq = 2 * rng.normal(size=n)
-    b = A[:, ~moving] @ dq[~moving] + rng.uniform(0.0, 1.0, k)
-    return dq, rng.normal(size=(m, n)), A, b, lower, upper, moving
-
-
-def test_the_compiled_projection_is_the_numpy_one():
-    rng = np.random.default_rng(11)
-    for trial in range(400):
-        dq, Jw, A, b, lower, upper, moving = _instance(rng, degenerate=trial % 3 == 0)
-        out = project(dq, Jw, A, b, lower, upper, moving)
-        ref = project_reference(dq, Jw, A, b, lower, upper, moving)
-        np.testing.assert_allclose(out, ref, rtol=0, atol=1e-7 * (1 + np.abs(ref).max()))
-        assert np.all(out[~moving] == dq[~moving])  # the still joints keep theirs
-        assert np.all(A @ out <= b + 1e-9)
-        assert np.all(out[moving] >= lower[moving] - 1e-9)
-        assert np.all(out[moving] <= upper[moving] + 1e-9)
-
-
-def test_the_compiled_projection_is_the_least_cost_feasible_point():
-    """On feasible instances (rows that the zero velocity meets, the box around zero), the
-    answer meets every row and bound and costs no more than SciPy's SLSQP answer, from ``dq``
-    where that meets them, else from rest_target of SLSQP's first answer."""
-    rng = np.random.default_rng(12)
-    compared = 0
-    for _ in range(40):
-        n = int(rng.integers(2, 8))
-        Jw, A = rng.normal(size=(3, n)), rng.normal(size=(int(rng.integers(1, 6)), n))
-        b = rng.uniform(0.0, 0.5, A.shape[0])
-        dq = 3 * rng.normal(size=n)
-        lower, upper = -rng.uniform(0.5, 2, n), rng.uniform(0.5, 2, n)
-        out = project(dq, Jw, A, b, lower, upper, np.ones(n, dtype=bool))
-        assert np.all(A @ out <= b + 1e-9)
-        assert np.all(out >= lower - 1e-9) and np.all(out <= upper + 1e-9)
-        H = Jw.T @ Jw
-        H += np.trace(H) / n * np.eye(n)
-
-        def least(start, H=H, A=A, b=b, lower=lower, upper=upper, n=n):
-            return minimize(lambda v: (v - start) @ H @ (v - start), np.zeros(n),
-                            jac=lambda v: 2 * H @ (v - start), method="SLSQP",
-                            bounds=list(zip(lower, upper, strict=True)),
-                            constraints=[{"type": "ineq", "fun": lambda v: b - A @ v,
-                                          "jac": lambda v: -A}],
-                            options={"ftol": 1e-12, "maxiter": 500}).x
-
-        x = least(dq)
-        if np.all(A @ dq <= b) and np.all(dq >= lower) and np.all(dq <= upper):
-            assert np.array_equal(out, dq)
-            continue
-        target = rest_target(dq, x, Jw, np.ones(n, dtype=bool))
-        if target is not None:
-            dq = target
-            x = least(dq)
-        if np.all(A @ x <= b + 1e-7) and np.all(x >= lower - 1e-9) and np.all(x <= upper + 1e-9):
-            compared += 1
-            assert (out - dq) @ H @ (out - dq) <= (x - dq) @ H @ (x - dq) + 1e-7
-    assert compared >= 30
-
-
-def test_the_compiled_dual_qp_is_the_numpy_one_and_meets_its_kkt_conditions():
-    rng = np.random.default_rng(13)
-    for _ in range(200):
-        k = int(rng.integers(1, 12))
-        C = rng.normal(size=(k, int(rng.integers(1, 8))))
-        # the dual of C z <= h, feasible (at z0): more rows than columns make Q singular
-        Q, r = C @ C.T, C @ rng.normal(size=C.shape[1]) + rng.uniform(0, 1, k)
-        y = np.empty(k)
-        K.nonnegative_qp(Q, r, y)
-        np.testing.assert_allclose(y, nonnegative_qp(Q, r), atol=1e-8 * (1 + np.abs(y).max()))
-        gradient, scale = Q @ y + r, 1e-8 * (1 + np.abs(r).max() + np.abs(Q).max() * y.max())
-        assert np.all(y >= 0) and np.all(gradient >= -scale)
-        assert np.all(np.abs(gradient[y > 1e-12]) <= scale)
-
-
-def test_the_compiled_dual_qp_of_the_degenerate_panda_step():
-    """The fixture's dual (Q singular, one broken row no motion can change): finite, that row
-    at 0, and the KKT conditions on the others, as the numpy reference's."""
-    data = np.load(FIXTURE)
-    Q, r = data["Q"], data["r"]
-    y = np.full(r.size, np.nan)
-    K.nonnegative_qp(Q, r, y)
-    assert np.all(np.isfinite(y)) and np.all(y >= 0)
-    inert = np.diag(Q) <= 1e-14 * np.diag(Q).max()
-    assert np.all(y[inert] == 0)
-    gradient = (Q @ y + r)[~inert]
-    scale = 1e-9 * (1.0 + np.abs(r).max())
-    assert np.all(gradient >= -scale)
-    assert np.all(np.abs(gradient[y[~inert] > 1e-12]) <= scale)
-    reference = nonnegative_qp(Q, r)
-    assert (0.5 * y @ Q @ y + r @ y) <= (0.5 * reference @ Q @ reference + r @ reference) + scale
-
 
 def test_compiled_kernels_name_the_argument_that_does_not_fit():
-    with pytest.raises(ValueError, match="do not fit"):
-        K.project_rows(np.zeros(3), np.zeros((2, 3)), np.zeros((1, 4)), np.zeros(1),
-                       np.zeros(3), np.zeros(3), np.ones(3), np.zeros(3))
-    with pytest.raises(TypeError, match="y must be a writable float64 array"):
-        K.nonnegative_qp(np.eye(2), np.zeros(2), (0.0, 0.0))
     with pytest.raises(ValueError, match="names joint 9"):
         pairs = np.zeros((1, 13))
         pairs[0, 2] = 9
@@ -558,55 +446,6 @@ def test_the_compiled_witness_rows_are_the_numpy_ones():
                                        ref_memory[W * k:W * k + count], atol=1e-12)
     assert extra > 0  # some remembered points became rows
     assert state[4, 0] == -1.0  # (found on some call)
-
-
-def test_the_solvers_one_call_correction_is_the_whole_stage(panda):
-    """Where the collision speed bounds do not cut the kernel's step, rows_step's correction of
-    the kernel's step equals the whole stage's (re-solve, saturation, projection): the Panda
-    passing a ball, every step whose rows were broken."""
-    start = panda.fk(panda.q0)
-    ball = (coal.Sphere(0.04), pin.SE3(np.eye(3), start.translation + [0.0, 0.2, -0.07]))
-    fast = make_solver("sjt", panda, dt=1e-3,
-                       limits=[CollisionLimit(panda, [ball], self_collision=True)])
-    whole = make_solver("sjt", panda, dt=1e-3,
-                        limits=[CollisionLimit(panda, [ball], self_collision=True)])
-    # every step that breaks a row through the method again and ConstraintStage.enforce
-    whole._user_stage.hard_parts = lambda kinematics, motion: None
-    plain = make_solver("sjt", panda, dt=1e-3)  # what the method and the URDF limits give
-    q = panda.q0.copy()
-    corrected = 0
-    for k in range(1500):
-        target = pin.SE3(start.rotation, start.translation + [0.0, 0.4 * min(k / 1000, 1), 0])
-        q_fast, q_whole = fast.step(q, target), whole.step(q, target)
-        corrected += not np.allclose(plain.step(q, target), q_fast, rtol=0.0, atol=1e-12)
-        np.testing.assert_allclose(q_fast, q_whole, atol=1e-9)
-        q = q_fast
-    assert corrected > 50
-
-
-def test_rows_step_leaves_a_step_within_the_rows_and_bounds_alone(ur5):
-    """A step that meets the rows comes back untouched (0), one outside a user's bound is left
-    to the stage (-1), one that breaks a row is projected onto it (1)."""
-    solver = make_solver("sjt", ur5, dt=1e-3)
-    q = np.array([0.0, -1.2, 1.5, -1.9, -1.57, 0.0])
-    target = ur5.fk(q)
-    target = pin.SE3(target.rotation, target.translation + [0.0, 0.0, -0.01])
-    solver.step(q, target)
-    J, step = solver._record[0], solver.displacement  # the kernel's rows and its step
-    work = solver._work
-    n = ur5.nv
-    free = (np.full(n, -np.inf), np.full(n, np.inf))
-    kept = step.copy()
-    A = np.zeros((1, n))
-    A[0, 1] = 1.0
-    assert K.rows_step(J, q, A, np.array([abs(step[1]) / 1e-3 + 1.0]), *free, work, kept) == 0
-    assert np.array_equal(kept, step)
-    tight = (np.full(n, -1e-6), np.full(n, 1e-6))
-    assert K.rows_step(J, q, A, np.array([1e3]), *tight, work, step.copy()) == -1
-    broken = step.copy()
-    b = np.array([step[1] / 1e-3 - 0.5])
-    assert K.rows_step(J, q, A, b, *free, work, broken) == 1
-    assert broken[1] / 1e-3 <= b[0] + 1e-9 * (1 + abs(b[0]))
 
 
 @pytest.mark.parametrize("method", ["sjt", "dls"])

@@ -77,7 +77,6 @@ from ._core import (  # noqa: F401
     unit_defect,
     witness_rows,
 )
-from .layout import *  # noqa: E402, F401, F403 (the C step kernels' slots, until removed)
 
 #: status bits of :meth:`Controller.run` (``src/controller.hpp``)
 NON_FINITE, STALLED, CONSTRAINED, CONFLICT, ROWS_BROKEN, UNCONVERGED = 1, 2, 4, 8, 16, 32

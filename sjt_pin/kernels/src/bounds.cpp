@@ -34,6 +34,7 @@ void JointBox::resize(Index n) {
   lo_by.resize(n);
   hi_by.resize(n);
   torn.resize(n);
+  jerk_apart.resize(n);
   soft_lo_by.resize(n);
   soft_hi_by.resize(n);
 }
@@ -45,15 +46,21 @@ void capability(const BoundsConfig& config, double dt, const Vector& v, const Ve
   for (Index j = 0; j < n; ++j) {
     double sl = -kInf, sh = kInf;
     int8_t sl_by = kNone, sh_by = kNone;
+    out.jerk_apart[j] = 0;
     if (config.smooth && config.moving[j] != 0.0) {
       const double A = config.acceleration[j], J = config.jerk[j];
       sl = v[j] - A * dt, sh = v[j] + A * dt;
       sl_by = sh_by = kAcceleration;
       if (std::isfinite(J)) {
         const double jl = v[j] + a[j] * dt - J * dt * dt, jh = v[j] + a[j] * dt + J * dt * dt;
-        if (jh >= sl && jl <= sh) {  // (else the jerk yields to the acceleration limit)
+        if (jh >= sl && jl <= sh) {
           tighten_lo(jl, kJerk, sl, sl_by);
           tighten_hi(jh, kJerk, sh, sh_by);
+        } else {  // the jerk yields to the acceleration limit (after a step the rows forced):
+          // the acceleration bound nearest the jerk box, the least jerk the limit allows
+          out.jerk_apart[j] = 1;
+          if (jh < sl) sh = sl, sh_by = kJerk;
+          else sl = sh, sl_by = kJerk;
         }
         // the speed limit can still be held once the acceleration ramps down
         const double V = config.speed[j];
@@ -149,8 +156,9 @@ void joint_box(const BoundsConfig& config, double dt, const double* q, const Vec
     int8_t lo_by = out.lo_by[j], hi_by = out.hi_by[j];
     tighten_lo(out.soft_lo[j], soft_lo_by[j], lo, lo_by);
     tighten_hi(out.soft_hi[j], soft_hi_by[j], hi, hi_by);
-    out.torn[j] = lo > hi;
-    if (out.torn[j]) {
+    const bool apart = lo > hi;
+    out.torn[j] = apart || out.jerk_apart[j];
+    if (apart) {
       const double near = std::min(std::max(out.soft_hi[j] < out.hard_lo[j] ? out.soft_hi[j]
                                                                              : out.soft_lo[j],
                                             out.hard_lo[j]),

@@ -59,6 +59,7 @@ struct JointBox {
   Vector cap_lo, cap_hi;                    // the acceleration/jerk box alone (no preference)
   std::vector<int8_t> lo_by, hi_by;         // Reason of each bound
   std::vector<uint8_t> torn;                // the hard box overrode the smooth one
+  std::vector<uint8_t> jerk_apart;          // the jerk box lay outside the acceleration box
   std::vector<int8_t> soft_lo_by, soft_hi_by;
   void resize(Index n);
 };

@@ -227,6 +227,62 @@ void Controller::project(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<
   report.converged = report.converged && r.converged;
 }
 
+bool Controller::rows_hold(const Eigen::Ref<const RowMatrix>& A,
+                           const Eigen::Ref<const Vector>& b) const {
+  for (Index i = 0; i < A.rows(); ++i)
+    if (A.row(i).dot(velocity) > b[i] + 1e-9 * (1.0 + std::abs(b[i]))) return false;
+  return true;
+}
+
+// The projection within the hard box and the acceleration/jerk box widened s times about its
+// centre (s = 1: the limits as given, without the braking's preferences); whether the rows hold.
+bool Controller::rows_hold_within(double s, const Eigen::Ref<const RowMatrix>& A,
+                                  const Eigen::Ref<const Vector>& b) {
+  for (Index j = 0; j < nv; ++j) {
+    const double c = 0.5 * (box.cap_lo[j] + box.cap_hi[j]);
+    const double h = 0.5 * (box.cap_hi[j] - box.cap_lo[j]);
+    double lo = box.hard_lo[j], hi = box.hard_hi[j];
+    if (std::isfinite(c) && std::isfinite(h)) {  // (apart from the hard box: its nearer side)
+      lo = std::max(box.hard_lo[j], std::min(c - s * h, box.hard_hi[j]));
+      hi = std::min(box.hard_hi[j], std::max(c + s * h, box.hard_lo[j]));
+    }
+    wide_lo_[j] = lo;
+    wide_hi_[j] = hi;
+  }
+  project(A, b, wide_lo_, wide_hi_);
+  return rows_hold(A, b);
+}
+
+// Rows that no velocity within the smoothness box meets (a collision row, a user's hard row):
+// the acceleration and jerk limits yield, by the least factor (to 1 %) that lets the rows hold,
+// widened about the box's centre on every joint alike; the hard box alone where even that fails.
+// At most 6 + 2 log2(s) + 7 projections, in the steps that need them.
+void Controller::yield_smoothness(const Eigen::Ref<const RowMatrix>& A,
+                                  const Eigen::Ref<const Vector>& b) {
+  wide_lo_.resize(nv);
+  wide_hi_.resize(nv);
+  if (rows_hold_within(1.0, A, b)) return;
+  double low = 1.0, high = 2.0;
+  bool found = false;
+  for (int k = 0; k < 24 && !found; ++k) {
+    found = rows_hold_within(high, A, b);
+    if (!found) {
+      low = high;
+      high *= 4.0;
+    }
+  }
+  if (!found) {
+    project(A, b, box.hard_lo, box.hard_hi);
+    return;
+  }
+  while (high > 1.01 * low) {
+    const double s = std::sqrt(low * high);
+    if (rows_hold_within(s, A, b)) high = s;
+    else low = s;
+  }
+  rows_hold_within(high, A, b);
+}
+
 int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const Vector>& e,
                     const double* ff_in, const double* q, Eigen::Ref<Vector> step,
                     const double* fb_given, const double* ff_given, const double* user_lo,
@@ -291,10 +347,12 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
     const double K = fb_given ? given_gain
                               : (counted > 0 ? gains.segment(L0.begin, counted).mean() : 0.0) *
                                     top.gain;
-    if (K > 0.0) tmp_ = fb / K;
-    else tmp_.setZero();
+    if (K > 0.0) delta_ = fb / K;
+    else delta_.setZero();
+  } else {
+    delta_.setZero(n);
   }
-  joint_box(bounds, dt_, q, dq, fb, ff, tmp_, user_lo, user_hi, box);
+  joint_box(bounds, dt_, q, dq, fb, ff, delta_, user_lo, user_hi, box);
   bool torn = false;
   for (Index j = 0; j < n; ++j) torn = torn || box.torn[j];
   if (torn) status |= kConflict;
@@ -312,24 +370,32 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
     velocity = desired;
   } else {
     status |= kConstrained;
-    if (feasible(desired, A, b, box.hard_lo, box.hard_hi)) velocity = desired;
-    else project(A, b, box.hard_lo, box.hard_hi);
+    if (feasible(desired, A, b, box.hard_lo, box.hard_hi)) {
+      velocity = desired;
+    } else {
+      project(A, b, box.hard_lo, box.hard_hi);
+      if (bounds.smooth) {
+        // each joint approaches the feasible velocity, not the method's beyond the hard
+        // limits: the approach toward an unreachable velocity held joints that the feasible
+        // motion needs (an arm sliding along an obstacle crept at a few cm/s for seconds)
+        aim_ = velocity - ff;
+        joint_box(bounds, dt_, q, dq, aim_, ff, delta_, user_lo, user_hi, box);
+        for (Index j = 0; j < n; ++j)
+          if (box.torn[j]) status |= kConflict;
+      }
+    }
     for (Index j = 0; j < n; ++j) velocity[j] = std::min(std::max(velocity[j], box.lo[j]), box.hi[j]);
     if (!feasible(velocity, A, b, box.lo, box.hi)) {
       project(A, b, box.lo, box.hi);
-      bool broken = false;
-      for (Index i = 0; i < A.rows(); ++i)
-        broken = broken || A.row(i).dot(velocity) > b[i] + 1e-9 * (1.0 + std::abs(b[i]));
+      bool broken = !rows_hold(A, b);
       if (broken && bounds.smooth) {
-        project(A, b, box.hard_lo, box.hard_hi);
+        yield_smoothness(A, b);
         for (Index j = 0; j < n; ++j)
-          if (velocity[j] < box.soft_lo[j] - kBoundTol || velocity[j] > box.soft_hi[j] + kBoundTol) {
+          if (velocity[j] < box.cap_lo[j] - kBoundTol || velocity[j] > box.cap_hi[j] + kBoundTol) {
             box.torn[j] = 1;
             status |= kConflict;
           }
-        broken = false;
-        for (Index i = 0; i < A.rows(); ++i)
-          broken = broken || A.row(i).dot(velocity) > b[i] + 1e-9 * (1.0 + std::abs(b[i]));
+        broken = !rows_hold(A, b);
       }
       if (broken) status |= kRowsBroken;
     }

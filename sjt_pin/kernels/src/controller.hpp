@@ -84,11 +84,15 @@ class Controller {
   void lower_levels(const double* ffw);
   void project(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b,
                const Vector& lo, const Vector& hi);
+  bool rows_hold(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b) const;
+  bool rows_hold_within(double s, const Eigen::Ref<const RowMatrix>& A,
+                        const Eigen::Ref<const Vector>& b);
+  void yield_smoothness(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b);
 
   double dt_;
   RowMatrix Jw_, high_, Jhat_, Bnone_, Cnone_, B_, along_;
   Vector ew_, ffw_, k_, fb0_, ff0_, t_, tfb_, tff_, x0_, xa_, tstar_, gt_, direction_, tmp_, tmp2_, lam_low_;
-  Vector empty_;
+  Vector empty_, wide_lo_, wide_hi_, delta_, aim_;
   Eigen::MatrixXd gram_;
   Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eigen_;
   Method lower_;
