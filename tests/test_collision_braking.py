@@ -116,8 +116,6 @@ def test_a_solver_with_acceleration_limits_slows_the_rows():
 # within its limits would bring closer), and settles where none does. Each joint approaches the
 # feasible velocity, not the method's beyond the rows (approaching that one crept at 3-7 cm/s for
 # seconds).
-@pytest.mark.xfail(strict=True, reason="a target missed: with jerk limits the contact still "
-                   "bounces at 2e-3 to 2.5e-2 rad/s RMS over the 8th second (aim: 1e-3)")
 @pytest.mark.parametrize("seed", [0, 9])
 @pytest.mark.parametrize("method", ["sjt", "dls"])
 def test_blocked_targets_with_acceleration_limits_come_to_rest(seed, method):
@@ -137,13 +135,15 @@ def test_blocked_targets_with_acceleration_limits_come_to_rest(seed, method):
         errors.append(solver.last.error_norm)
     qs = np.array(qs)
     assert errors[-1] <= errors[-3000] + 1e-9  # no farther from the target than 3 s before
-    assert _rest(qs) < 1e-3, _rest(qs)
     assert _closest(panda, [obstacle], limit, qs) >= MARGIN - 1e-3
     v = np.diff(qs, axis=0) / DT  # (Panda's coordinates are its tangent space)
     a = np.diff(np.vstack([np.zeros((1, n)), v]), axis=0) / DT
     over = np.max(np.abs(a) / accel, axis=1) > 1.001
     for k in np.flatnonzero(over & ~np.concatenate([[False], over[:-1]])):
         assert reported[k], f"step {k} broke the acceleration limit unreported"
+    if _rest(qs) >= 1e-3:
+        pytest.xfail(f"a target missed: with jerk limits the contact still bounces at "
+                     f"{_rest(qs):.1e} rad/s RMS over the 8th second (aim: 1e-3)")
 
 
 @pytest.mark.parametrize("jerk", [False, True])

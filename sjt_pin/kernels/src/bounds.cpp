@@ -12,6 +12,7 @@ namespace sjt {
 namespace {
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
+constexpr double kBoundSlack = 1e-12;  // rad/s: a hard bound this close to the box is on it
 
 inline void tighten_hi(double value, int8_t reason, double& hi, int8_t& by) {
   if (value < hi) {
@@ -157,7 +158,11 @@ void joint_box(const BoundsConfig& config, double dt, const double* q, const Vec
     tighten_lo(out.soft_lo[j], soft_lo_by[j], lo, lo_by);
     tighten_hi(out.soft_hi[j], soft_hi_by[j], hi, hi_by);
     const bool apart = lo > hi;
-    out.torn[j] = apart || out.jerk_apart[j];
+    // torn: the hard box leaves no velocity within the acceleration/jerk limits themselves (a
+    // hard bound apart from the braking's preferences alone breaks no limit)
+    const bool beyond = out.hard_lo[j] > out.cap_hi[j] + kBoundSlack ||
+                        out.hard_hi[j] < out.cap_lo[j] - kBoundSlack;
+    out.torn[j] = beyond || out.jerk_apart[j];
     if (apart) {
       const double near = std::min(std::max(out.soft_hi[j] < out.hard_lo[j] ? out.soft_hi[j]
                                                                              : out.soft_lo[j],
