@@ -55,6 +55,7 @@ from .tasks.pose import tasks_length
 from .validation import period, raise_non_finite_targets
 
 _F64 = np.dtype(np.float64)
+_NOTHING = object()  # (no array is the last returned one yet)
 #: |squared norm - 1| of a configuration's unit blocks taken as exact (rounding of unit norm)
 _UNIT_EXACT = 4e-14
 #: status bits that need Python: an error to raise, a stall for the escape to look at
@@ -87,7 +88,8 @@ class Solver:
         #: the array the last step returned (pin.integrate keeps it there)
         self._unit_blocks = robot.unit_blocks
         self._units = self._unit_blocks.size > 0
-        self._returned: np.ndarray | None = None
+        # the array the last step returned (trusted as it is); none before the first step
+        self._returned: object = _NOTHING
         self._first = True  # the first step checks the targets' distance (units)
         self._dt = period(opts.dt)
         self._gain = as_gain(opts.gain, stack.target_dim)

@@ -12,6 +12,7 @@ import sjt_pin as sjt
     (np.zeros((6, 1)), r"q must have shape \(6,\)"),
     (np.array([0, 0, np.nan, 0, 0, 0]), "q contains NaN"),
     ("zeros", "q must be a vector"),
+    (None, "q must be a vector of numbers, got None"),  # (on a solver's first step too)
 ])
 def test_bad_configuration(ur5, q, match):
     solver = sjt.SJTSolver(ur5)
