@@ -82,6 +82,7 @@ class UserLimits:
                     tighter = lo > lower
                     lower[tighter], self._lower_by[tighter] = lo[tighter], k
                     tighter = hi < upper
+                    assert upper is not None  # (set with lower)
                     upper[tighter], self._upper_by[tighter] = hi[tighter], k
             rows = limit.rows(kinematics, motion)
             if rows is not None:
@@ -163,7 +164,7 @@ def active_limits(controller, joint_names: Sequence[str], user: UserLimits | Non
             if code == _USER:
                 name = user.bound_owner(int(j), is_upper) if user is not None else "limit"
             elif code == 2:
-                name = speed_by[j]
+                name = speed_by[int(j)]
             else:
                 name = REASONS[code]
             pair = (name, joint_names[int(j)])
