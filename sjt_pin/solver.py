@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pinocchio as pin
@@ -50,9 +50,12 @@ from .robot import Robot
 from .stability import StabilityCheck
 from .stack import TaskStack, normalise_tasks
 from .step_info import StepInfo, step_info
-from .tasks import PoseTask
+from .tasks import PoseTask, PostureTask
 from .tasks.pose import tasks_length
 from .validation import period, raise_non_finite_targets
+
+if TYPE_CHECKING:
+    from .joint_move import JointMove
 
 _F64 = np.dtype(np.float64)
 _NOTHING = object()  # (no array is the last returned one yet)
@@ -451,6 +454,51 @@ class Solver:
         from .ik import solve
 
         return solve(self, target, q0, **options)
+
+    def move_to(self, q, target, *, share: float = 0.5, **options) -> JointMove:
+        """The motion from ``q`` to a configuration that reaches ``target``, for targets a
+        step loop alone may not reach (a local minimum against the joint limits): ``solve()``
+        from ``q`` (with ``options``) finds the goal configuration, and the returned
+        :class:`~sjt_pin.joint_move.JointMove` follows the minimum-jerk joint-space path there,
+        timed within ``share`` of this solver's speed, acceleration and jerk limits.
+
+        Step it like a solver, ``q = move.step(q)``, until ``move.done``: each step is a step
+        of a twin of this solver (the same method, options and limits, so every limit holds on
+        every step) tracking the frame's pose along the path, with a posture task pulling the
+        joints along it (a redundant arm would drift in its null space); this solver's motion
+        state follows, so it carries on from the move without a jump. Raises ``ValueError``
+        when ``solve()`` finds no configuration within its tolerance, or when the solver's
+        task is not one frame's (a multi-task solver moves by its own targets)."""
+        from .joint_move import JointMove
+
+        stack = self.stack
+        if not stack.single or stack.task.frame_id < 0:
+            raise ValueError("move_to needs a solver with one frame task (PoseTask, "
+                             "PositionTask, OrientationTask)")
+        q = self.robot.check_q(q)
+        result = self.solve(target, q, **options)
+        if not result.success:
+            raise ValueError(f"move_to: solve() found no configuration that reaches the target "
+                             f"(best error {result.error:.3g} after {result.restarts} restarts)")
+        posture = PostureTask(q, weight=JointMove.POSTURE_WEIGHT)
+        twin = _rebuild(type(self), self.robot, self.method,
+                        self.options.replace(posture=posture, gain=self._gain, dt=self._dt,
+                                             check_stability=False))
+        twin.continue_from(self)
+        speed = None if self.velocity_limit is None else self.velocity_limit.limits
+        return JointMove(self, twin, stack.task.frame_id, q, result.q, speed,
+                         None if self.acceleration_limit is None
+                         else self.acceleration_limit.limits,
+                         None if self.jerk_limit is None else self.jerk_limit.limits, share)
+
+    def continue_from(self, other: Solver) -> None:
+        """Carry on from ``other``'s motion state (the joint velocity and acceleration it
+        commanded last), as when one controller hands the arm to another: this solver's next
+        step starts from there, within its acceleration and jerk limits."""
+        if other.robot.nv != self.robot.nv:
+            raise ValueError("continue_from needs a solver of a robot with the same joints")
+        mine, theirs = self._controller, other._controller
+        mine.dq[:], mine.ddq[:] = theirs.dq, theirs.ddq
 
     def search(self):
         """The set-point IK state of this solver (:class:`~sjt_pin.ik.Search`, created on

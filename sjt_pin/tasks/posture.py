@@ -35,8 +35,8 @@ class PostureTask(Task):
         bound = super().bind(robot)
         bound.frame, bound.frame_id = None, -1
         bound.dim = robot.nv
-        bound.q_ref = robot.q0.copy() if self.q_ref is None else robot.check_q(self.q_ref,
-                                                                                 "q_ref")
+        bound.q_ref = (robot.q0 if self.q_ref is None  # (its own copy, never the caller's)
+                       else robot.check_q(self.q_ref, "q_ref")).copy()
         bound.sqrt_weight = self._sqrt_weight(self.weight, robot.nv)
         bound._J = np.eye(robot.nv)
         return bound
