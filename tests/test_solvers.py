@@ -9,6 +9,7 @@ import pytest
 import sjt_pin as sjt
 
 from .helpers import regulate
+from .reference import mappings
 
 METHODS = ["sjt", "jt", "jp", "dls"]
 
@@ -130,7 +131,7 @@ def test_gain_above_the_stability_bound_warns_once(planar3, feedback):
     solver.step(q, [0.0, 1.0, 0.0])
     Jw = planar3.jacobian(q, reference=pin.LOCAL_WORLD_ALIGNED)[:2]
     if feedback == "transpose":
-        bound = sjt.mappings.stable_gain_bound(Jw, solver.method.matrix(Jw), dt)
+        bound = mappings.stable_gain_bound(Jw, solver.method.matrix(Jw), dt)
         assert 2 / (3 * dt) < bound  # the SJT bound 2 / (n dt) holds everywhere
     else:  # the damped loop's eigenvalues are below 1, so 2 / dt is the bound
         assert solver.method.bound(3) == 1.0
@@ -141,7 +142,7 @@ def test_gain_above_the_stability_bound_warns_once(planar3, feedback):
         solver.step(q, [0.0, 1.0, 0.0])
     if feedback == "damped":  # the bound quoted is the damped loop's: just above 2 / dt
         Jw = planar3.jacobian(q, reference=pin.LOCAL_WORLD_ALIGNED)[:2]
-        bound = sjt.mappings.stable_gain_bound(Jw, solver.method.matrix(Jw), dt)
+        bound = mappings.stable_gain_bound(Jw, solver.method.matrix(Jw), dt)
         assert 2 / dt < bound < 2.01 / dt
     solver.gain = 1.01 * bound
     with pytest.warns(sjt.GainWarning, match=f"{bound:.4g}") as caught:

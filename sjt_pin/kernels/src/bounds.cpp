@@ -126,7 +126,11 @@ void joint_box(const BoundsConfig& config, double dt, const double* q, const Vec
     const double room_up = r.upper - x, room_down = x - r.lower;
     if (room_up < 0.0 || room_down < 0.0) {  // outside: back toward the range, ramped
       const bool above = room_up < 0.0;
-      double back = std::min(r.recovery, std::abs(above ? room_up : room_down) / dt);
+      // without acceleration limits it lands on the range's edge; with them it enters the
+      // range at the speed it has (stopping at the edge in one step broke the acceleration
+      // limit 25x; inside, the range's own braking takes over)
+      double back = config.smooth ? r.recovery
+                                  : std::min(r.recovery, std::abs(above ? room_up : room_down) / dt);
       if (config.smooth) {
         const double toward = std::max(above ? -v[j] : v[j], 0.0);
         const double A = config.acceleration[j], J = config.jerk[j];
