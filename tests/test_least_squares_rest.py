@@ -59,11 +59,13 @@ def test_rests_at_a_target_out_of_reach(robots, name, method, smooth):
     robot = robots[name]
     q = start(robot, name)
     solver = sjt.make_solver(method, robot, dt=DT, **(SMOOTH[name] if smooth else {}))
-    q, qs = run(solver, q, beyond_reach(robot, q), 6.0)
+    # (with Panda's published acceleration and jerk limits each joint's braking toward where
+    # the feedback sends it makes the last centimetres slow: at rest after 7 s (JP), 11 s (DLS))
+    q, qs = run(solver, q, beyond_reach(robot, q), 12.0 if smooth else 6.0)
     assert solver.error_norm > 0.1  # well short of the target ...
     assert rms_speed(qs) < 1e-3  # ... and at rest
-    # says why: a minimum of the error, nothing holds the arm
-    assert solver.last.stalled and solver.last.task_scale == 1.0
+    # says why: a minimum of the error (and, without the braking, nothing holds the arm)
+    assert solver.last.stalled and (smooth or solver.last.task_scale == 1.0)
 
 
 @pytest.mark.parametrize("method", ["dls", "jp"])
