@@ -17,6 +17,8 @@ from sjt_pin.viewer.style import DESIRED_COLOR
 
 from .browser import changed_fraction, color_pixels
 
+pytestmark = pytest.mark.slow  # (Chromium pages: minutes; CI runs them with -m slow)
+
 ROBOTS = ("planar3", "ur5", "panda")
 METHODS = ("sjt", "jt", "dls", "jp")
 RUN = 4.0  # s, each demo run (the scenarios' circles)

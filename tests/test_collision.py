@@ -632,6 +632,7 @@ def test_demo_collision_scene_keeps_the_margin_and_plots_the_distance():
     assert OBSTACLE_LABEL in page and "closest distance (m)" in page
 
 
+@pytest.mark.slow
 # -- sjt-pin bench collision --------------------------------------------------------------
 def test_bench_collision_meets_the_targets():
     """The bench's scenes for SJT and DLS: without the limit each scene collides; with it no

@@ -111,6 +111,7 @@ def test_a_solver_with_acceleration_limits_slows_the_rows():
     assert any(rows[1][1][k] < 0.5 * rows[0][1][k] for k in rows[0][0])
 
 
+@pytest.mark.slow
 # Panda's blocked scenes with 15 rad/s^2 and 7,500 rad/s^3. An arm whose target lies behind an
 # obstacle slides along it while that lowers the error (the stage never stops an arm some motion
 # within its limits would bring closer), and settles where none does. Each joint approaches the

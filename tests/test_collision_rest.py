@@ -14,6 +14,8 @@ from sjt_pin.bench import collision as bench
 from sjt_pin.limits import CollisionLimit
 from sjt_pin.limits.collision import CollisionError
 
+pytestmark = pytest.mark.slow  # (seconds of simulated contact per scene; CI runs them)
+
 DT = 1e-3
 MARGIN = 0.01
 

@@ -34,6 +34,7 @@ def assert_within_limits(robot, qs, dt, acceleration, jerk):
     assert np.max(np.abs(j) / jerk) <= 1.01
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["panda", "ur5"])
 def test_move_to_reaches_what_solve_reaches_within_every_limit(name):
     robot = sjt.Robot.from_example(name)

@@ -41,6 +41,8 @@ import json as _json, os as _os, sys as _sys
 import matplotlib as _mpl
 import sjt_pin as _sjt_pin
 
+pytestmark = pytest.mark.slow  # (the notebooks executed: minutes; CI runs them with -m slow)
+
 def _leftovers():
     found = []
     for entry in _sys.path:

@@ -5,9 +5,12 @@ import sys
 import zipfile
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
+@pytest.mark.slow
 def test_wheel_ships_planar3_urdf_and_generator(tmp_path):
     build = subprocess.run(
         [sys.executable, "-m", "pip", "wheel", ".", "--no-deps", "-q", "-w", str(tmp_path)],
@@ -65,6 +68,8 @@ import sys
 for name in ["meshcat", "trimesh", "fast_simplification", "collada", "matplotlib", "yourdfpy"]:
     sys.modules[name] = None  # import fails as if not installed
 import numpy as np
+
+import pytest
 import sjt_pin as sjt
 robot = sjt.Robot.from_example("ur5")
 target = robot.fk(robot.q0 + 0.2)

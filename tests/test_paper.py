@@ -84,6 +84,7 @@ def test_jp_cannot_follow_task_2_out_of_the_workspace():
     assert not paper.stability(log)[0]
 
 
+@pytest.mark.slow
 def test_reproduce_writes_figures_and_results(tmp_path, capsys):
     assert main(["reproduce", "--out", str(tmp_path), "--grid", "3", "--processes", "2"]) == 0
     # not on a terminal (captured): progress comes as plain lines, the last of each stage full
