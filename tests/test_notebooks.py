@@ -33,6 +33,9 @@ TIME_LIMIT = 120
 #: code that draws a matplotlib figure: a cell with it must show an image
 FIGURE_CALL = re.compile(r"\bplt\.(subplots|figure|plot|loglog|semilogy)\(|"
                          r"\bfigures\.\w+_figure\(")
+
+pytestmark = pytest.mark.slow  # the notebooks executed: minutes (CI runs them with -m slow)
+
 INLINE = "module://matplotlib_inline.backend_inline"
 MARK = "SJT_PIN_PROBE "
 #: reports where sjt_pin was imported from (run last in each notebook, and by the script)
@@ -41,14 +44,16 @@ import json as _json, os as _os, sys as _sys
 import matplotlib as _mpl
 import sjt_pin as _sjt_pin
 
-pytestmark = pytest.mark.slow  # (the notebooks executed: minutes; CI runs them with -m slow)
-
 def _leftovers():
+    # (an editable install's compiled part, sjt_pin/kernels/_core*.so beside no .py file, is
+    # the install itself: its finder maps the package to the checkout)
     found = []
     for entry in _sys.path:
         folder = _os.path.join(entry or _os.getcwd(), "sjt_pin")
         if _os.path.isdir(folder) and not _os.path.isfile(_os.path.join(folder, "__init__.py")):
-            found.append(folder)
+            files = [f for _, _, names in _os.walk(folder) for f in names]
+            if not files or any(not f.endswith((".so", ".pyd")) for f in files):
+                found.append(folder)
     return found
 
 print({MARK!r} + _json.dumps({{
