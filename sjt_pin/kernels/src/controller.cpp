@@ -27,6 +27,7 @@ Controller::Controller(const MethodParameters& method_, Index rows, Index nv_, I
     : m(rows), nv(nv_), nq(nq_), error_rows(error_rows_), sqrt_weight(sqrt_weight_),
       gains(gains_), moving(moving_), levels(levels_), bounds(bounds_),
       stall_ratio(stall_ratio_), stall_floor(stall_floor_), dt_(dt) {
+  eigen_.compute(Eigen::MatrixXd::Identity(1, 1));  // (its info set: see Method's constructor)
   method.p = method_;
   lower_.p = method_;
   lower_.p.damped_feedback = true;  // lower levels solve for their task velocity

@@ -32,6 +32,13 @@ double Method::loop_bound(const Eigen::Ref<const Eigen::MatrixXd>& A) {
   return std::exp((2.0 * log_scale + std::log(frob)) / std::pow(2.0, kBoundProducts + 1));
 }
 
+Method::Method() {
+  const Eigen::MatrixXd one = Eigen::MatrixXd::Identity(1, 1);
+  llt_.compute(one);
+  eigen_.compute(one);
+  metric_llt_.compute(one);
+}
+
 void Method::prepare(const Eigen::Ref<const RowMatrix>& Jw, const Eigen::Ref<const Vector>& ew,
                      const Eigen::Ref<const Vector>& k, Index error_rows, double dt,
                      MethodStep& out) {

@@ -57,6 +57,11 @@ class Method {
  public:
   MethodParameters p;
 
+  // (each decomposition computed once on a 1 x 1 identity: Eigen leaves a decomposition's info
+  // unset until its first compute, and moving an unset one - nanobind moves the Controller that
+  // holds this - reads it: undefined behaviour, UBSan's invalid enum load)
+  Method();
+
   // Analyse the weighted, masked rows Jw (m x n) at this step: scales, gain, damping, metric.
   // ew: the weighted error (m), error_rows: how many of the rows are the tasks' error (their
   // |e|^2 is reported), k: the rows' gains, dt: the period.

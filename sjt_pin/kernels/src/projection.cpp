@@ -117,6 +117,12 @@ void Projection::polish(const Eigen::Ref<const RowMatrix>& C, const Eigen::Ref<c
   }
 }
 
+Projection::Projection() {
+  const Eigen::MatrixXd one = Eigen::MatrixXd::Identity(1, 1);
+  cod_.compute(one);
+  llt_.compute(one);
+}
+
 ProjectionReport Projection::solve(
     const Eigen::Ref<const Vector>& xb, const Eigen::Ref<const Vector>& lam,
     const Eigen::Ref<const RowMatrix>& B, const Eigen::Ref<const Vector>& lo,

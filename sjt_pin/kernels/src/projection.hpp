@@ -37,6 +37,8 @@ struct ProjectionReport {
 
 class Projection {
  public:
+  Projection();  // (its decompositions computed once: see Method's constructor)
+
   // Solve; x is written (n). B, C, A may have zero rows. warm: start from the last dual point
   // where the problem has the same shape.
   ProjectionReport solve(const Eigen::Ref<const Vector>& xb, const Eigen::Ref<const Vector>& lam,
