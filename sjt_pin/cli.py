@@ -20,6 +20,7 @@ import webbrowser
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
+from .exceptions import FrameNotFound
 from .paper import scenarios
 from .solvers import SOLVERS, make_solver
 from .tracking import TrackingLog, track
@@ -45,8 +46,7 @@ def demo(args: argparse.Namespace) -> int:
     rows, runs = [], {}
     total = len(args.robot) * len(args.method)
     print(f"Tracking {len(args.robot)} robot(s) x {len(args.method)} method(s), dt = "
-          f"{DEMO_DT:g} s\n(the first time on a machine, the solvers' kernels are compiled "
-          "first: about half a minute on 2 cores)", flush=True)
+          f"{DEMO_DT:g} s (a few seconds: the kernels were compiled at install)", flush=True)
     for name in args.robot:
         print(f"  {name}: loading the robot, finding its start on the path ...", end=" ",
               flush=True)
@@ -355,7 +355,7 @@ def reach(args: argparse.Namespace) -> int:
         reach_command(args.robot, args.step, args.orientations, out=args.out, page=args.html,
                       processes=args.processes, scheduler=args.scheduler, budget=args.budget,
                       seed=args.seed, quiet=args.quiet, frame=args.frame)
-    except ValueError as exc:  # an unknown robot or frame, a partial map of other settings
+    except (ValueError, FrameNotFound) as exc:  # an unknown robot or frame, a partial map
         print(f"sjt-pin reach: error: {exc}", file=sys.stderr)
         return 2
     return 0
