@@ -14,7 +14,10 @@ takes the list ``rows`` of ``docs/bench/ik.json`` and makes one table row per en
 of the body is a column, its header before ``|`` and after it a ``str.format`` template filled
 from the entry (a dotted key such as ``step.median`` reads a nested value: write it as
 ``{step[median]}``). ``:where:`` keeps the entries for which a Python expression over the
-entry's keys is true. The caption names the machine and the versions the file records.
+entry's keys is true. ``:pivot: KEY`` with ``:value: TEMPLATE`` makes a wide table: a column
+per distinct value of ``KEY`` (a method, say), one row per distinct row of the body's columns.
+A section that is a record (``cold_start``) gives one entry per key, as ``{key}`` and
+``{value}``. The caption names the machine and the versions the file records.
 """
 
 from __future__ import annotations
@@ -41,6 +44,8 @@ def load(path: Path, section: str) -> tuple[list[dict], dict]:
     entries = data
     for key in section.split("."):
         entries = entries[key]
+    if isinstance(entries, dict):  # a record: one entry per key
+        return [{"key": k, "value": v} for k, v in entries.items()], data.get("machine", {})
     return list(entries), data.get("machine", {})
 
 
@@ -67,6 +72,21 @@ def cells(entries: list[dict], spec: list[tuple[str, str]], where: str | None) -
     return rows
 
 
+def pivot(entries: list[dict], spec: list[tuple[str, str]], where: str | None, by: str,
+          value: str) -> tuple[list[str], list[list[str]]]:
+    """A wide table: one row per distinct value of the ``spec`` columns, one column per
+    distinct ``entry[by]`` (in the order they first appear), cells from ``value``."""
+    kept = [e for e in entries
+            if not where or eval(where, {"__builtins__": {}}, dict(e))]  # noqa: S307
+    headers = list(dict.fromkeys(str(e[by]) for e in kept))
+    rows: dict[tuple, dict[str, str]] = {}
+    for e in kept:
+        key = tuple(t.format_map(_Missing(e)) for _, t in spec)
+        rows.setdefault(key, {})[str(e[by])] = value.format_map(_Missing(e))
+    body = [[*key, *(cells.get(h, "–") for h in headers)] for key, cells in rows.items()]
+    return headers, body
+
+
 def caption(machine: dict, filename: str) -> str:
     parts = [machine.get("cpu") or machine.get("machine", "")]
     for key, label in (("python", "Python"), ("pinocchio", "Pinocchio"), ("numpy", "NumPy")):
@@ -78,7 +98,8 @@ def caption(machine: dict, filename: str) -> str:
 class BenchTable(Directive):
     required_arguments = 2
     has_content = True
-    option_spec = {"where": directives.unchanged, "caption": directives.unchanged}
+    option_spec = {"where": directives.unchanged, "caption": directives.unchanged,
+                   "pivot": directives.unchanged, "value": directives.unchanged}
 
     def run(self):
         env = self.state.document.settings.env
@@ -88,7 +109,13 @@ class BenchTable(Directive):
         try:
             entries, machine = load(path, section)
             spec = columns(list(self.content))
-            body = cells(entries, spec, self.options.get("where"))
+            headers = [h for h, _ in spec]
+            if "pivot" in self.options:
+                extra, body = pivot(entries, spec, self.options.get("where"),
+                                    self.options["pivot"], self.options.get("value", "{value}"))
+                headers += extra
+            else:
+                body = cells(entries, spec, self.options.get("where"))
         except (OSError, KeyError, ValueError, SyntaxError, TypeError) as exc:
             raise self.error(f"bench-table {filename} {section}: {exc!r}") from exc
         if not body:
@@ -97,13 +124,13 @@ class BenchTable(Directive):
         title = self.options.get("caption")
         text = (title + " " if title else "") + caption(machine, filename)
         table += nodes.title(text=text)
-        group = nodes.tgroup(cols=len(spec))
+        group = nodes.tgroup(cols=len(headers))
         table += group
-        for _ in spec:
+        for _ in headers:
             group += nodes.colspec(colwidth=1)
         head = nodes.thead()
         group += head
-        head += self._row([h for h, _ in spec])
+        head += self._row(headers)
         tbody = nodes.tbody()
         group += tbody
         for row in body:
