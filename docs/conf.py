@@ -50,6 +50,8 @@ nitpick_ignore_regex = [
     (r"py:.*", r"(ndarray|NDArray|ArrayLike|SE3|Motion|Model|Data|GeometryModel|FrameType)"),
     (r"py:.*", r"(concurrent\.futures\..*|collections\.abc\..*|typing\..*|pathlib\..*)"),
     (r"py:.*", r"(Executor|Future|Path|Callable|Iterable|Iterator|Sequence|Mapping|Any)"),
+    # an instance attribute (set in __init__, so no import finds it) that has no page
+    (r"py:attr", r"pairs"),
 ]
 
 autodoc_default_options = {"members": True, "show-inheritance": True}

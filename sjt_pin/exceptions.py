@@ -28,7 +28,7 @@ class FrameNotFound(SJTError, KeyError):
         hint = f"close names: {close[:8]}; " if close else ""
         self.name = name
         #: every frame name of the model, in its order (the message lists them all up to
-        #: :data:`FRAMES_SHOWN`)
+        #: :data:`~sjt_pin.exceptions.FRAMES_SHOWN`)
         self.available = available
         if len(available) <= FRAMES_SHOWN:
             listed = f"its {len(available)} frames: {available}"
