@@ -136,8 +136,8 @@ def _write_json(path: str | None, payload) -> None:
 
 
 def bench(args: argparse.Namespace) -> int:
-    """``sjt-pin bench speed|accuracy|ik|collision``: the tables of the README's Benchmarks
-    section (collision: its Collision avoidance section)."""
+    """``sjt-pin bench speed|accuracy|ik|collision``: the tables of the documentation's Benchmarks
+    page (docs/benchmarks.md)."""
     from dataclasses import asdict
 
     from .bench import speed as speed_bench
@@ -435,8 +435,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=reproduce)
     p = sub.add_parser("bench", help="benchmarks: step speed, accuracy, solve to a pose",
-                       description="The benchmarks of the README: speed (every step path "
-                       "against its Pinocchio floor), accuracy (tracking near singularities, "
+                       description="The benchmarks of docs/benchmarks.md: speed (every step "
+                       "path against its Pinocchio floor), accuracy (tracking near singularities, "
                        "rest at unreachable targets, exits from saddles), ik (TRAC-IK's "
                        "protocol on five arms), collision (three scenes with and without "
                        "CollisionLimit, and pink's barrier).")
