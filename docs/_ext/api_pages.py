@@ -43,7 +43,8 @@ def page(package: str, name: str) -> str:
     if inspect.isclass(obj) and issubclass(obj, BaseException):
         body = f".. autoexception:: {title}\n   :members:\n   :show-inheritance:\n"
     elif inspect.isclass(obj) and obj.__name__ != name:  # an alias
-        body = f".. autoclass:: {title}\n   :no-members:\n"
+        body = (f".. autoclass:: {title}\n   :no-members:\n\n"
+                f"   An alias of :class:`{package}.{obj.__name__}`.\n")
     elif inspect.isclass(obj):
         body = (f".. autoclass:: {title}\n   :members:\n   :show-inheritance:\n"
                 "   :special-members: __call__\n")
