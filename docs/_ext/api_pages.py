@@ -1,5 +1,6 @@
 """One API page per public name: ``sjt_pin.__all__`` and the public names of the packages a user
-extends or draws with (``sjt_pin.limits``, ``sjt_pin.methods``, ``sjt_pin.viewer``).
+extends or draws with (``sjt_pin.limits``, ``sjt_pin.methods``, ``sjt_pin.viewer``), and the
+classes a public method returns without their module exporting them (``RETURNED``).
 
 The pages are written into ``docs/api/generated/`` when the build starts (not committed); the
 hand-grouped index ``docs/api/index.md`` links them, and ``tests/test_docs.py`` checks that it
@@ -17,6 +18,8 @@ from sphinx.util.nodes import make_refnode
 
 #: the packages whose ``__all__`` gets pages, in the order of the index
 PACKAGES = ("sjt_pin", "sjt_pin.limits", "sjt_pin.methods", "sjt_pin.viewer")
+#: ``(module, name)`` of the classes a public API returns without exporting them
+RETURNED = (("sjt_pin.joint_move", "JointMove"),)  # Solver.move_to's
 
 
 def public_names() -> list[tuple[str, str]]:
@@ -33,6 +36,7 @@ def public_names() -> list[tuple[str, str]]:
             if name != "DifferentialIKSolver":  # an alias: its page says of what
                 seen.add(id(obj))
             names.append((package, name))
+    names.extend(RETURNED)
     return names
 
 
