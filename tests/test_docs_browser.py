@@ -11,6 +11,8 @@ import pytest
 
 from .test_docs import TOPICS, site  # noqa: F401  (the built site, a fixture)
 
+pytestmark = pytest.mark.slow  # (Chromium pages: minutes; CI runs them with -m slow)
+
 LOOKED_FOR = {  # query -> the page the first results must include
     "CollisionLimit": "api/generated/sjt_pin.CollisionLimit.html",
     "StepInfo.stalled": "api/generated/sjt_pin.StepInfo.html",
