@@ -20,6 +20,7 @@ import webbrowser
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
+from .exceptions import FrameNotFound
 from .paper import scenarios
 from .solvers import SOLVERS, make_solver
 from .tracking import TrackingLog, track
@@ -45,8 +46,7 @@ def demo(args: argparse.Namespace) -> int:
     rows, runs = [], {}
     total = len(args.robot) * len(args.method)
     print(f"Tracking {len(args.robot)} robot(s) x {len(args.method)} method(s), dt = "
-          f"{DEMO_DT:g} s\n(the first time on a machine, the solvers' kernels are compiled "
-          "first: about half a minute on 2 cores)", flush=True)
+          f"{DEMO_DT:g} s (a few seconds: the kernels were compiled at install)", flush=True)
     for name in args.robot:
         print(f"  {name}: loading the robot, finding its start on the path ...", end=" ",
               flush=True)
@@ -136,8 +136,8 @@ def _write_json(path: str | None, payload) -> None:
 
 
 def bench(args: argparse.Namespace) -> int:
-    """``sjt-pin bench speed|accuracy|ik|collision``: the tables of the README's Benchmarks
-    section (collision: its Collision avoidance section)."""
+    """``sjt-pin bench speed|accuracy|ik|collision``: the tables of the documentation's Benchmarks
+    page (docs/benchmarks.md)."""
     from dataclasses import asdict
 
     from .bench import speed as speed_bench
@@ -355,7 +355,7 @@ def reach(args: argparse.Namespace) -> int:
         reach_command(args.robot, args.step, args.orientations, out=args.out, page=args.html,
                       processes=args.processes, scheduler=args.scheduler, budget=args.budget,
                       seed=args.seed, quiet=args.quiet, frame=args.frame)
-    except ValueError as exc:  # an unknown robot or frame, a partial map of other settings
+    except (ValueError, FrameNotFound) as exc:  # an unknown robot or frame, a partial map
         print(f"sjt-pin reach: error: {exc}", file=sys.stderr)
         return 2
     return 0
@@ -435,8 +435,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=reproduce)
     p = sub.add_parser("bench", help="benchmarks: step speed, accuracy, solve to a pose",
-                       description="The benchmarks of the README: speed (every step path "
-                       "against its Pinocchio floor), accuracy (tracking near singularities, "
+                       description="The benchmarks of docs/benchmarks.md: speed (every step "
+                       "path against its Pinocchio floor), accuracy (tracking near singularities, "
                        "rest at unreachable targets, exits from saddles), ik (TRAC-IK's "
                        "protocol on five arms), collision (three scenes with and without "
                        "CollisionLimit, and pink's barrier).")

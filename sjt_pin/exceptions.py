@@ -5,6 +5,10 @@ from __future__ import annotations
 import difflib
 from collections.abc import Iterable
 
+#: :class:`FrameNotFound` lists every frame of a model with at most this many (TIAGo has 156),
+#: the first tenth of them otherwise
+FRAMES_SHOWN = 300
+
 
 class SJTError(Exception):
     """Base class of the errors this package raises on its own."""
@@ -21,13 +25,20 @@ class FrameNotFound(SJTError, KeyError):
         lowered = name.lower()
         close = difflib.get_close_matches(name, available, n=5, cutoff=0.6)
         close += [a for a in available if lowered and lowered in a.lower() and a not in close]
-        shown = available if len(available) <= 30 else [*available[:30], "..."]
         hint = f"close names: {close[:8]}; " if close else ""
         self.name = name
+        #: every frame name of the model, in its order (the message lists them all up to
+        #: :data:`~sjt_pin.exceptions.FRAMES_SHOWN`)
         self.available = available
+        if len(available) <= FRAMES_SHOWN:
+            listed = f"its {len(available)} frames: {available}"
+        else:
+            listed = (f"its {len(available)} frames, the first {FRAMES_SHOWN // 10}: "
+                      f"{available[:FRAMES_SHOWN // 10]}, ... (this error's .available holds "
+                      "them all)")
         super().__init__(message or (
-            f"frame {name!r} not found in {robot}; {hint}its {len(available)} frames: {shown} "
-            "(robot.frames() lists them with type and parent joint)"))
+            f"frame {name!r} not found in {robot}; {hint}{listed}; robot.frames() lists them, "
+            "robot.frames('text') those whose name holds 'text', with type and parent joint"))
 
     def __str__(self) -> str:  # KeyError would quote the message
         return self.args[0]

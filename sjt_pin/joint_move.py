@@ -37,8 +37,10 @@ class JointMove(Trajectory):
     made by :meth:`sjt_pin.Solver.move_to`, stepped by :meth:`step`.
 
     Attributes:
-        duration: the path's duration (s); ``q_goal``: where it ends; ``time``: the time of
-        the next step (s); ``last``: the last step's :class:`~sjt_pin.StepInfo`.
+        duration: the path's duration (s).
+        q_goal: where it ends (nq,).
+        time: the time of the next step (s).
+        last: the last step's :class:`~sjt_pin.StepInfo` (``None`` before the first).
     """
 
     #: the posture task's weight during a move: a time constant of dt / weight (5 ms at 1 kHz)

@@ -38,7 +38,7 @@ class SolverOptions:
             per velocity coordinate, ``inf`` for none; default ``None``: URDFs have none).
         jerk_limits: joint jerk limits (rad/s^3 or m/s^3; needs ``acceleration_limits``).
         limits: further :class:`~sjt_pin.limits.Limit` objects for the constraint stage (see
-            the README's "Extend it").
+            docs/extending.md).
         escape: add a smooth escape velocity at the saddles of exactly singular
             configurations (JT and SJT; default True; see :mod:`sjt_pin.escape`).
         check_stability: warn once (:class:`~sjt_pin.GainWarning`) when a fixed gain exceeds

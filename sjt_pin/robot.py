@@ -214,18 +214,20 @@ class Robot:
             hint = f"did you mean {' or '.join(map(repr, close))}? " if close else ""
             raise ValueError(f"name {name!r} is not an example-robot-data robot; {hint}"
                              f"known: {sorted(ROBOTS)}")
-        if ee_frame is None:
-            ee_frame = DEFAULT_EE_FRAMES.get(name)
-            if ee_frame is None:
-                raise ValueError(
-                    f"no default ee_frame for {name!r}; pass ee_frame= (defaults exist for "
-                    f"{sorted(DEFAULT_EE_FRAMES)}; robot.frames() lists a robot's frames)"
-                )
-        wrapper = erd.load(name)
+        wrapper = _load_example(erd, name)
         urdf = getattr(wrapper, "urdf", None)
         model, q0, mimics = _with_mimics(wrapper.model, wrapper.q0, urdf)
         locked = [j for j in DEFAULT_LOCKED_JOINTS.get(name, ()) if model.existJointName(j)] \
             if locked_joints is None else list(_names_arg(locked_joints, "locked_joints"))
+        guessed = ee_frame is None and name not in DEFAULT_EE_FRAMES
+        if ee_frame is None:
+            ee_frame = DEFAULT_EE_FRAMES.get(name) or chain_tip(model, locked)
+        if guessed:
+            warnings.warn(
+                f"{name}: no end effector given and none known for it; ee_frame={ee_frame!r}, "
+                f"the tip of its longest kinematic chain. Pass ee_frame= to choose another "
+                f"(robot.frames('hand') lists the frames whose name holds 'hand')",
+                UserWarning, stacklevel=2)
         # the full model's frame named by ee_frame, found again (by name) in the reduced one
         collision = _capsules_as_long_as_their_cylinders(wrapper.collision_model,
                                                          wrapper.model, urdf)
@@ -233,7 +235,9 @@ class Robot:
                    visual_model=wrapper.visual_model, collision_model=collision,
                    urdf=urdf, package_dirs=_example_dirs(urdf), mimic_joints=mimics)
         full._unmimicked = wrapper.model if mimics else None
-        return full.reduced(locked) if locked else full
+        robot = full.reduced(locked) if locked else full
+        robot._warn_q0_on_limits()
+        return robot
 
     @classmethod
     def from_urdf(
@@ -370,12 +374,46 @@ class Robot:
             raise FrameNotFound(name, [f.name for f in frames], self.name)
         return min(matches, key=lambda i: FRAME_PREFERENCE.index(frames[i].type))
 
-    def frames(self) -> list[FrameInfo]:
+    def frames(self, pattern: str | None = None) -> list[FrameInfo]:
         """Every frame of the model: id, name, type (``"BODY"`` for a link, ``"JOINT"``,
-        ``"FIXED_JOINT"``, ``"OP_FRAME"``, ``"SENSOR"``) and the joint that moves it."""
+        ``"FIXED_JOINT"``, ``"OP_FRAME"``, ``"SENSOR"``) and the joint that moves it.
+
+        ``pattern`` keeps the frames whose name contains it, ignoring case
+        (``robot.frames("hand")``: the candidates for a hand's end effector).
+        """
+        if pattern is not None and not isinstance(pattern, str):
+            raise TypeError(f"pattern must be a str (part of a frame name), got {pattern!r}")
         model = self.model
+        wanted = None if pattern is None else pattern.lower()
         return [FrameInfo(i, f.name, _type_name(f.type), model.names[f.parentJoint])
-                for i, f in enumerate(model.frames)]
+                for i, f in enumerate(model.frames)
+                if wanted is None or wanted in f.name.lower()]
+
+    def _warn_q0_on_limits(self) -> None:
+        """Warn when the reference configuration puts a joint that moves the end effector
+        exactly on a limit of its range (TIAGo's torso lift and first arm joint): a task that
+        needs it to move further that way cannot, and a ``PostureTask`` pulls it there."""
+        model = self.model
+        chain = model.supports[model.frames[self.ee_frame_id].parentJoint]
+        at = []
+        for j in chain[1:]:
+            joint = model.joints[j]
+            if joint.nq != 1:
+                continue
+            i = joint.idx_q
+            lower, upper = self._lower[i], self._upper[i]
+            if not lower < upper:
+                continue
+            if abs(self.q0[i] - lower) <= 1e-9 * max(1.0, abs(lower)):
+                at.append(f"{model.names[j]} (lower)")
+            elif abs(self.q0[i] - upper) <= 1e-9 * max(1.0, abs(upper)):
+                at.append(f"{model.names[j]} (upper)")
+        if at:
+            warnings.warn(
+                f"{self.name}: the reference configuration q0 puts {name_list(at)} at a limit "
+                f"of their URDF range, on the chain to {self.ee_frame!r}: they can move only "
+                "away from it, and a PostureTask pulls them back onto it",
+                UserWarning, stacklevel=3)
 
     def reduced(self, locked_joints: Sequence[str], q=None) -> Robot:
         """A copy without ``locked_joints`` (joint names): each is fixed at its value in ``q``
@@ -570,6 +608,53 @@ def _unmimicked_lock(model: pin.Model, base: pin.Model, mimics: Sequence[MimicJo
             q_base[joint.idx_q] = values[base.names[j]]
     ids = [base.getJointId(name) for name in sorted(locked, key=base.getJointId)]
     return q_base, ids, [m for m in mimics if m.joint not in locked and m.mimicked not in locked]
+
+def _load_example(erd, name: str):
+    """example-robot-data's robot ``name``; a clear error for an SDF model (Cassie) where
+    this Pinocchio has no SDF parser (``pinocchio.WITH_SDFORMAT``)."""
+    try:
+        return erd.load(name)
+    except ImportError as exc:
+        if "SDF" in str(exc) and not getattr(pin, "WITH_SDFORMAT", False):
+            raise URDFError(
+                f"{name} is an SDF model, and this Pinocchio was built without an SDF parser "
+                f"(pinocchio.WITH_SDFORMAT is False; the PyPI wheels are): a Pinocchio built "
+                "with sdformat loads it") from exc
+        raise
+
+
+def chain_tip(model: pin.Model, locked: Sequence[str] = ()) -> str:
+    """The name of the frame at the tip of ``model``'s longest kinematic chain (most moving
+    joints from the root, ``locked`` joints not counted): the deepest link (or operational
+    frame) carried by the last joint of that chain; the default end effector of a robot
+    that names none. Ties go to the chain reaching farthest from its root, then to the first
+    in the model."""
+    if model.njoints <= 1:
+        return model.frames[len(model.frames) - 1].name
+    locked_ids = {model.getJointId(n) for n in locked if model.existJointName(n)}
+    depth = np.zeros(model.njoints, dtype=int)
+    reach = np.zeros(model.njoints)
+    for j in range(1, model.njoints):
+        moving = model.joints[j].nv > 0 and j not in locked_ids
+        depth[j] = depth[model.parents[j]] + int(moving)
+        reach[j] = reach[model.parents[j]] + float(
+            np.linalg.norm(model.jointPlacements[j].translation))
+    frame_depth = np.zeros(len(model.frames), dtype=int)
+    for i, f in enumerate(model.frames):
+        if i:
+            frame_depth[i] = frame_depth[f.parentFrame] + 1 if f.parentFrame < i else 1
+
+    def key(i: int) -> tuple:
+        f = model.frames[i]
+        j = f.parentJoint
+        if j in locked_ids:  # a locked joint's frames belong to the joint before it
+            j = model.parents[j]
+        kind = f.type in (pin.FrameType.BODY, pin.FrameType.OP_FRAME)
+        return (int(depth[j]), kind, float(reach[j]) + float(np.linalg.norm(
+            f.placement.translation)), int(frame_depth[i]), -i)
+
+    return model.frames[max(range(1, len(model.frames)), key=key)].name
+
 
 def _with_mimics(model: pin.Model, q0: np.ndarray, urdf: str | None
                  ) -> tuple[pin.Model, np.ndarray, list[MimicJoint]]:

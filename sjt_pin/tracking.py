@@ -8,6 +8,7 @@ x_d(t_k) and velocity x_dot_d(t_k), as in the paper's eq. (5): the logged error
 from __future__ import annotations
 
 import itertools
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -112,6 +113,7 @@ def track(
         frame = solver.stack.task.frame_id
         trajectory = trajectory.holding(solver.robot.fk(q, frame if frame >= 0 else None).rotation)
     times = trajectory.times(solver.dt, duration)
+    _warn_if_it_jumps(solver, trajectory, q)
     run = _Run(solver, times.size)
     end, reason = run.go(q, times, *trajectory.samples(times), feedforward, max_error)
     # a step above max_step ends the run there (tested once, after the loop)
@@ -123,12 +125,41 @@ def track(
     return run.log(times, end, reason)
 
 
+#: a path whose first target is farther than this from the task frame (m) gets a warning
+JUMP_WARNING = 1e-3
+
+
+def _warn_if_it_jumps(solver: Solver, trajectory: Trajectory, q: np.ndarray) -> None:
+    """Warn when the trajectory's first target position lies away from the task frame at
+    ``q`` (along the axes a position task tracks): the target then jumps at t = 0, a circle
+    centred on the wrong side of the hand by its diameter."""
+    task = solver.stack.task
+    if isinstance(task, PositionTask):
+        rows = task._rows
+    elif isinstance(task, PoseTask):
+        rows = np.arange(3)
+    else:
+        return
+    frame = task.frame_id if task.frame_id >= 0 else None
+    first = trajectory.sample(0.0)[0].translation
+    here = solver.robot.fk(q, frame).translation
+    gap = float(np.linalg.norm((first - here)[rows]))
+    if gap > JUMP_WARNING:
+        name = solver.robot.model.frames[solver.robot.frame_id(frame or
+                                                              solver.robot.ee_frame)].name
+        warnings.warn(
+            f"the trajectory starts {gap:.3g} m from frame {name!r} at q0, so the target jumps "
+            "there at t = 0 (a Circle starts at center + radius along its plane's first axis, "
+            "or at start_angle; a Line at start)", UserWarning, stacklevel=3)
+
+
 def _check(solver, trajectory, max_step, max_error) -> tuple[float, float]:
     """The arguments of :func:`track`, checked once at the door."""
     if not isinstance(solver, Solver):
         raise TypeError(f"solver must be a sjt_pin Solver, got {type(solver).__name__}")
     if len(solver.stack.targeted) != 1:
-        raise TypeError("track drives one task frame; step() takes several (see the README)")
+        raise TypeError("track drives one task frame; step() takes several (docs/tasks.md, "
+                        "'Several frames')")
     if not isinstance(trajectory, Trajectory):
         raise TypeError(f"trajectory must be a Trajectory, got {type(trajectory).__name__}")
     return (positive(max_step, "max_step", "rad"),

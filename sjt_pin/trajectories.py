@@ -122,9 +122,12 @@ def _held(rotation: np.ndarray | None) -> np.ndarray:
 class Line(Trajectory):
     """Straight line from ``start`` to ``end`` (3-vectors, m) in ``duration`` s.
 
-    The orientation is held at ``rotation`` (3x3); without it the line is position-only (see
-    the module: ``track`` holds the start orientation). ``timing`` is ``"linear"`` (constant
-    speed, as in the paper's tasks) or ``"min_jerk"`` (rest to rest).
+    It starts at ``start``, not where the robot is: give the frame's own position
+    (``robot.fk(q0).translation``) to start without a jump; :func:`~sjt_pin.track` warns when
+    the first target is away from the frame. The orientation is held at ``rotation`` (3x3);
+    without it the line is position-only (see the module: ``track`` holds the start
+    orientation). ``timing`` is ``"linear"`` (constant speed, as in the paper's tasks) or
+    ``"min_jerk"`` (rest to rest).
     """
 
     def __init__(self, start, end, duration: float, rotation=None, timing: str = "linear"):
@@ -154,9 +157,14 @@ class Circle(Trajectory):
     """Circle of ``radius`` (m) about ``center`` in the plane normal to ``normal``.
 
     Starts at angle ``start_angle`` (rad, measured from the plane's first axis: world x for the
-    default normal +z) and runs ``turns`` times counter-clockwise about ``normal`` at constant
-    speed over ``duration`` s, with the orientation held at ``rotation`` (3x3; without it the
-    circle is position-only, see the module).
+    default normal +z), that is at ``center + radius * x`` by default, and runs ``turns`` times
+    counter-clockwise about ``normal`` at constant speed over ``duration`` s, with the
+    orientation held at ``rotation`` (3x3; without it the circle is position-only, see the
+    module). To start where the frame is, centre the circle ``radius`` before it along that
+    axis (``Circle(p - [r, 0, 0], r, ...)`` for the default normal) or choose ``start_angle``;
+    :func:`~sjt_pin.track` warns when the first target is away from the frame (a circle
+    centred on the other side of it jumps the target by its diameter at t = 0). ``start``
+    (m) is where it starts.
     """
 
     def __init__(self, center, radius: float, duration: float, normal=(0.0, 0.0, 1.0),
@@ -177,6 +185,12 @@ class Circle(Trajectory):
         self.turns = float(as_vector([turns], "turns", 1)[0])
         self.rotation = _rotation(rotation)
         self.position_only = rotation is None
+
+    @property
+    def start(self) -> np.ndarray:
+        """Where the circle starts (3, m, world)."""
+        return self.center + self.radius * (np.cos(self.start_angle) * self._u
+                                            + np.sin(self.start_angle) * self._w)
 
     def sample(self, t):
         positions, _, velocities = self.samples(np.array([t], dtype=float))

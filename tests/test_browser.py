@@ -210,11 +210,12 @@ with Viewer(robot, live=False, label="UR5") as viewer:  # live=True: also a mesh
 """
 
 
-def test_readme_viewer_snippet_is_the_readmes():
+def test_readme_viewer_snippet_is_the_docs():
+    """The viewer page of the site shows this snippet (it was the README's)."""
     from pathlib import Path
 
-    readme = (Path(__file__).parents[1] / "README.md").read_text(encoding="utf-8")
-    assert README_VIEWER.strip() in readme
+    page = (Path(__file__).parents[1] / "docs" / "viewer.md").read_text(encoding="utf-8")
+    assert README_VIEWER.strip() in page
 
 
 @pytest.mark.parametrize("source, size", [("readme", (1400, 900)), ("readme", (800, 600)),

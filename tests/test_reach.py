@@ -146,10 +146,12 @@ def test_the_command_and_its_page(chromium, tmp_path, capsys):
         page.close()
 
 
-def test_the_command_names_a_missing_end_effector(tmp_path, capsys):
-    """Baxter has no default end effector: one line and exit code 2, before any work."""
+def test_the_command_names_an_unknown_frame(tmp_path, capsys):
+    """A frame the robot does not have: one line and exit code 2, before any work (Baxter,
+    which names no end effector, now gets the tip of its longest chain by default)."""
     out = tmp_path / "baxter.npz"
-    assert main(["reach", "baxter", "--step", "0.4", "--orientations", "1", "--quiet",
-                 "--out", str(out)]) == 2
-    assert "no default ee_frame for 'baxter'" in capsys.readouterr().err
+    assert main(["reach", "baxter", "--frame", "left_hnad", "--step", "0.4", "--orientations",
+                 "1", "--quiet", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "frame 'left_hnad' not found in baxter" in err and "'left_hand_link'" in err
     assert not out.exists()

@@ -1,27 +1,34 @@
-"""The README runs as written: every Python snippet, and the quick start is what CI runs."""
+"""The README runs as written: its example prints what it shows, and the quick start is what CI
+runs; the site's extending page's task has the rows of its error's derivative."""
 
 import re
-import subprocess
-import sys
 from pathlib import Path
 
-import pytest
+from .doc_examples import examples, outputs_match, run_page
 
 ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text()
-SNIPPETS = re.findall(r"```python\n(.*?)```", README, re.S)
+EXAMPLES = examples(README)
 
 
-def test_the_readme_has_snippets():
-    assert len(SNIPPETS) >= 5
+def test_the_readme_is_short_and_has_an_example_with_its_output():
+    assert len(README.splitlines()) <= 200
+    assert EXAMPLES and all(e.shown for e in EXAMPLES)
 
 
-@pytest.mark.parametrize("index", range(len(SNIPPETS)))
-def test_snippet_runs_as_written(index, tmp_path):
-    """Each snippet on its own, in an empty folder: nothing it needs is left undefined."""
-    result = subprocess.run([sys.executable, "-c", SNIPPETS[index]], capture_output=True,
-                            text=True, timeout=600, cwd=tmp_path)
-    assert result.returncode == 0, f"snippet {index}:\n{SNIPPETS[index]}\n{result.stderr}"
+def test_the_readme_examples_print_what_they_show(tmp_path):
+    printed = run_page(EXAMPLES, tmp_path)
+    assert len(printed) == len(EXAMPLES)
+    for example, result in zip(EXAMPLES, printed, strict=True):
+        assert result["error"] is None, result["error"]
+        assert outputs_match(example.shown, result["out"]), (
+            f"README line {example.line} shows\n{example.shown}\nbut printed\n{result['out']}")
+
+
+def test_the_readme_links_into_every_page_of_the_site():
+    pages = sorted(p.name for p in (ROOT / "docs").glob("*.md") if p.name != "index.md")
+    for name in pages:
+        assert f"(docs/{name})" in README, name
 
 
 def test_ci_runs_the_readme_quick_start_in_order():
@@ -44,7 +51,8 @@ def test_the_extend_it_task_rows_are_the_derivative_of_its_error(rng):
 
     import sjt_pin as sjt
 
-    snippet = next(s for s in SNIPPETS if "class AxisTask" in s)
+    page = (ROOT / "docs" / "extending.md").read_text()
+    snippet = next(e.code for e in examples(page) if "class AxisTask" in e.code)
     namespace: dict = {}
     exec(snippet.split("\nur5 = ")[0], namespace)
     ur5 = sjt.Robot.from_example("ur5")
@@ -69,44 +77,3 @@ def test_the_extend_it_task_rows_are_the_derivative_of_its_error(rng):
             minus = rows(pin.integrate(ur5.model, q, -dv), target)[1]
             finite[:, i] = (plus - minus) / 2e-6
         np.testing.assert_allclose(finite, -J, atol=1e-6)
-
-
-def test_the_extend_it_two_frame_task_rows_and_joints(rng):
-    """The README's HandOffset: its rows are -de/dq (finite differences on q), and the joints
-    it leaves out (legs, head) have zero columns."""
-    import numpy as np
-    import pinocchio as pin
-
-    import sjt_pin as sjt
-
-    snippet = next(s for s in SNIPPETS if "class HandOffset" in s)
-    namespace: dict = {}
-    exec(snippet.split("\ntalos = ")[0], namespace)
-    talos = sjt.Robot.from_example("talos")
-    task = namespace["HandOffset"]("gripper_left_joint", "gripper_right_joint").bind(talos)
-    kinematics = sjt.Kinematics(talos.model)
-    moved = np.zeros(talos.nv, dtype=bool)
-    for j in task.joints(talos.model):
-        joint = talos.model.joints[j]
-        moved[joint.idx_v:joint.idx_v + joint.nv] = True
-    names = {talos.model.names[j] for j in task.joints(talos.model)}
-    assert {"arm_left_1_joint", "arm_right_1_joint", "torso_1_joint"} <= names
-    assert not any("leg" in n or "head" in n for n in names), names
-
-    def error(q, target):
-        kinematics.update(q)
-        J, e, _ = task.compute(kinematics, target, None)
-        return J.copy(), e.copy()
-
-    q = talos.q0.copy()
-    q[7:] += rng.uniform(-0.3, 0.3, talos.nq - 7)
-    J, _ = error(q, np.zeros(3))
-    finite = np.empty((3, talos.nv))
-    for i in range(talos.nv):
-        dv = np.zeros(talos.nv)
-        dv[i] = 1e-6
-        plus = error(pin.integrate(talos.model, q, dv), np.zeros(3))[1]
-        minus = error(pin.integrate(talos.model, q, -dv), np.zeros(3))[1]
-        finite[:, i] = (plus - minus) / 2e-6
-    np.testing.assert_allclose(finite, -J, atol=1e-6)
-    assert np.abs(J[:, ~moved]).max() < 1e-12

@@ -51,3 +51,30 @@ def test_shapes_of_paths():
     times = line.times(0.1)
     assert times[0] == 0.0 and times[-1] == pytest.approx(2.0) and times.size == 21
     assert line.times(0.1, duration=3.0).size == 31
+
+
+def test_a_circle_says_where_it_starts_and_track_warns_when_that_is_away_from_the_hand(ur5):
+    """A circle starts at center + radius along its plane's first axis (or at start_angle):
+    centred on the wrong side of the hand, its target jumps by the diameter at t = 0, and
+    track() says so; one that starts at the hand, or a position task's free axes, does not."""
+    import warnings
+
+    q = np.array([0.3, -1.2, 1.5, -1.8, -1.5, 0.2])
+    hand = ur5.fk(q).translation
+    wrong = sjt.Circle(hand + [0.1, 0.0, 0.0], 0.1, duration=0.2)
+    np.testing.assert_allclose(wrong.start, hand + [0.2, 0.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(wrong.sample(0.0)[0].translation, wrong.start, atol=1e-12)
+    with pytest.warns(UserWarning, match=r"starts 0\.2 m from frame 'tool0'.*jumps"):
+        sjt.track(sjt.SJTSolver(ur5), wrong, q)
+    quarter = sjt.Circle(hand - [0.0, 0.1, 0.0], 0.1, duration=0.2, start_angle=np.pi / 2)
+    np.testing.assert_allclose(quarter.start, hand, atol=1e-12)
+    right = sjt.Circle(hand - [0.1, 0.0, 0.0], 0.1, duration=0.2)
+    along_z = sjt.Line(hand + [0.3, 0.0, 0.0], hand + [0.3, 0.0, 0.1], duration=0.2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        sjt.track(sjt.SJTSolver(ur5), right, q)
+        sjt.track(sjt.SJTSolver(ur5), quarter, q)
+        # x is not tracked by a z-only position task: the line's x offset is no jump
+        sjt.track(sjt.SJTSolver(ur5, task=sjt.PositionTask("z")), along_z, q)
+    with pytest.warns(UserWarning, match="jumps"):
+        sjt.track(sjt.SJTSolver(ur5, task=sjt.PositionTask("x")), along_z, q)

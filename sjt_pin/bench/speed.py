@@ -33,8 +33,8 @@ ACCELERATION_PATHS = (("SJT pose, acceleration limits", {"acceleration_limits": 
                       ("SJT pose, acceleration and jerk limits",
                        {"acceleration_limits": 10.0, "jerk_limits": 5000.0}))
 #: a user's general-row limit beside acceleration and jerk limits: a floor under the end
-#: effector (:class:`Floor`, the README's), 1 m below its start (never acts) or 1 mm above it
-#: (acts on every step: the task pulls the frame down onto it, the row holds it up)
+#: effector (:class:`Floor`, the one of docs/extending.md), 1 m below its start (never acts) or
+#: 1 mm above it (acts on every step: the task pulls the frame down onto it, the row holds it up)
 USER_LIMIT_PATHS = (("SJT pose, acceleration + jerk limits + a user limit (inactive)", -1.0),
                     ("SJT pose, acceleration + jerk limits + a user limit (active)", 1e-3))
 #: serial chains (random axes, seeded) timed with a pose task plus a posture task
@@ -171,7 +171,7 @@ def _circle(robot: Robot, q: np.ndarray, frame: str, duration: float,
 
 class Floor(Limit):
     """A frame's origin stays above ``z_min`` (m): ``z_dot >= -gain (z - z_min) / dt`` (one
-    general row; the README's example)."""
+    general row; the example of docs/extending.md)."""
 
     name = "floor"
     uses_motion = False

@@ -3,7 +3,7 @@
 The paper gives the arm (links 0.3, 0.4, 0.28 m, gripper 0.2 m), the three desired paths of
 Fig. 5 and the largest stable gains of JT (36 / 25 / 33) and SJT (680 / 500 / 660). It gives no
 control period, durations, start configuration or circle centre; the choices made here
-(:class:`PaperSettings`) are documented in ``results.md`` and the README:
+(:class:`PaperSettings`) are documented in ``results.md`` and docs/paper.md:
 
 - dt = 1 ms: with it the linear SJT bound ``2 / (dt lambda_max(J D J^T))`` is 667 1/s wherever the
   arm is stretched (``J D J^T`` tends to the rank-one matrix of eigenvalue n = 3), next to the

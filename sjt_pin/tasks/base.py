@@ -5,7 +5,7 @@ desired target into the three pieces of the CLIK law ``q_dot = M(J) (x_dot_d + K
 eq. 5, 10, 21): its error ``e = x_d - x`` (dim,), its Jacobian rows ``J = dx/dq`` (dim, nv), so
 that ``e_dot = x_dot_d - J q_dot``, and the desired velocity ``x_dot_d`` in its own rows. The
 solver stacks the rows of all its tasks. A new task is one subclass with ``compute`` (and
-``target``/``velocity`` when its targets are not poses); see the README's "Extend it".
+``target``/``velocity`` when its targets are not poses); see docs/extending.md.
 """
 
 from __future__ import annotations

@@ -24,7 +24,7 @@ LABELS = {"planar3": "Planar 3R arm", "ur5": "UR5", "panda": "Franka Panda"}
 TASKS = {"planar3": "x-y position", "ur5": "pose", "panda": "pose"}
 #: The planar arm stood up: its x axis along world y, its y axis up (world z).
 STAND_UP = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
-#: Why SJT is the default though JP tracks these circles best (the README's benchmarks).
+#: Why SJT is the default though JP tracks these circles best (docs/benchmarks.md).
 WHY_SJT = ("JP tracks these circles best; SJT is the default because its stable gain does not "
            "depend on the robot's size or unit, it rests at targets out of reach and it leaves "
            "saddles.")
@@ -50,7 +50,7 @@ OBSTACLE_NODE, OBSTACLE_LABEL = "panda_ball", "Franka Panda around a ball"
 
 def obstacle_scene(dt: float) -> ObstacleScene:
     """Panda's hand on a 40 cm line (2 s) past an 8 cm ball, with a
-    :class:`~sjt_pin.CollisionLimit` (10 mm margin, self-collision on), as in the README."""
+    :class:`~sjt_pin.CollisionLimit` (10 mm margin, self-collision on), as in docs/collision.md."""
     import coal
 
     from ..limits.collision import CollisionLimit
