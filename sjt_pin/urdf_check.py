@@ -3,34 +3,34 @@
 Pinocchio's URDF parser (urdfdom) answers every broken file with "The XML stream does not
 contain a valid URDF model." and prints the reason to stderr; it also accepts some broken robots
 silently (a zero-length joint axis, lower > upper limits, a cycle cut off from the root). Here
-:func:`read_urdf` turns ``Robot.from_urdf``'s argument into a :class:`URDFSource`,
-:func:`check_urdf` rejects what is not a URDF tree with sane numbers, and :func:`build_model`
-runs Pinocchio and puts whatever it prints to stderr into the error. Every error is a
-:class:`URDFError` whose message starts with the file (or ``<URDF string>``) and names the
-offending joint or link.
+:func:`read_urdf` turns ``Robot.from_urdf``'s argument into a :class:`URDFSource`
+(:mod:`sjt_pin.urdf_source`), :func:`check_urdf` rejects what is not a URDF tree with sane
+numbers, and :func:`build_model` runs Pinocchio and puts whatever it prints to stderr into the
+error (:mod:`sjt_pin.urdf_build`). Every error is a :class:`URDFError` whose message starts
+with the file (or ``<URDF string>``) and names the offending joint or link.
 """
 
 from __future__ import annotations
 
-import contextlib
 import difflib
-import io
 import math
-import os
-import sys
-import tempfile
-import threading
-from collections.abc import Iterator
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 from lxml import etree
 
-from .exceptions import URDFError
+from .exceptions import URDFError  # noqa: F401 (the docstrings' URDFError)
 from .mimic import MimicJoint, apply_mimics, read_mimics
 from .planar import orient_planar_joints
+from .urdf_build import build_model, captured_stderr  # noqa: F401 (re-exported: the old path)
+from .urdf_source import (  # noqa: F401 (STRING_LABEL, read_urdf re-exported: the old path)
+    STRING_LABEL,
+    URDFSource,
+    preview,
+    read_urdf,
+    starts_xml,
+)
 from .validation import name_list
 
 #: An ``<axis xyz>`` shorter than this (it is normalised) is refused: no CAD tool means a
@@ -45,95 +45,6 @@ JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", "plan
 _AXIS_TYPES = {"revolute", "continuous", "prismatic", "planar"}
 #: Joint types whose ``<limit lower upper>`` bound the position.
 _LIMITED_TYPES = {"revolute", "prismatic"}
-STRING_LABEL = "<URDF string>"
-
-
-@dataclass(frozen=True)
-class URDFSource:
-    """A URDF document to parse: XML text given in the call, or a file."""
-
-    label: str  #: the file path, or ``<URDF string>``: every error message starts with it
-    data: bytes  #: the document's bytes
-    path: Path | None = None  #: the file; None for XML text
-
-    @property
-    def text(self) -> str:
-        """The document as text (XML text sources are UTF-8 encoded in ``data``)."""
-        return self.data.decode("utf-8", errors="replace")
-
-    def error(self, problem: str) -> URDFError:
-        """A :class:`URDFError` naming this source."""
-        return URDFError(f"invalid URDF {self.label}: {problem}")
-
-
-# -- the argument ------------------------------------------------------------------------------
-def read_urdf(path_or_xml: str | bytes | os.PathLike) -> URDFSource:
-    """``path_or_xml`` as a :class:`URDFSource`: a file path (``str`` or ``os.PathLike``), or
-    URDF XML text (a ``str``, or UTF-8 ``bytes``, starting with ``<``).
-
-    Raises ``TypeError`` for other types and for bytes that are not XML text, and
-    :class:`URDFError` for an empty string, text that is neither XML nor a file name, a missing
-    file, a directory, or an unreadable or empty file.
-    """
-    if isinstance(path_or_xml, (bytes, bytearray)):
-        return _xml_text(_decoded(bytes(path_or_xml)))
-    if isinstance(path_or_xml, str):
-        if not path_or_xml.strip():
-            raise URDFError(f"empty URDF: path_or_xml is {path_or_xml!r}; pass a URDF file path "
-                            "or URDF XML text")
-        if path_or_xml.lstrip().startswith("<"):
-            return _xml_text(path_or_xml)
-        if not path_or_xml.isprintable():
-            raise URDFError("path_or_xml is neither a URDF file path nor URDF XML text (XML "
-                            f"starts with '<'): got {_preview(path_or_xml)}")
-    elif not isinstance(path_or_xml, os.PathLike):
-        raise TypeError("path_or_xml must be a URDF file path (str or os.PathLike) or URDF XML "
-                        f"text (str or bytes starting with '<'), got {type(path_or_xml).__name__}")
-    return _file(Path(path_or_xml))
-
-
-def _decoded(data: bytes) -> str:
-    """UTF-8 ``bytes`` of XML text as ``str``; ``TypeError`` if they do not start with ``<``."""
-    if not _starts_xml(data):
-        raise TypeError("path_or_xml as bytes must be URDF XML text starting with '<', got "
-                        f"{_preview(data)}; pass a file path as str or pathlib.Path")
-    try:
-        return data.decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
-        raise URDFError(f"path_or_xml: the URDF bytes are not UTF-8 text: {exc}") from exc
-
-
-def _starts_xml(data: bytes) -> bool:
-    """Whether ``data`` starts with ``<`` after white space and a UTF-8 byte order mark."""
-    return data.lstrip().removeprefix(b"\xef\xbb\xbf").lstrip().startswith(b"<")
-
-
-def _xml_text(text: str) -> URDFSource:
-    return URDFSource(STRING_LABEL, text.encode("utf-8"))
-
-
-def _file(path: Path) -> URDFSource:
-    """The URDF file at ``path``, read; :class:`URDFError` if it is missing, a directory,
-    unreadable or empty."""
-    try:
-        data = path.read_bytes()
-    except FileNotFoundError:
-        raise URDFError(f"URDF file not found: {path}") from None
-    except IsADirectoryError:
-        urdfs = sorted(p.name for p in path.glob("*.urdf"))
-        hint = f" (URDF files in it: {urdfs})" if urdfs else ""
-        raise URDFError(f"URDF path {path} is a directory, not a file{hint}") from None
-    except OSError as exc:
-        raise URDFError(f"cannot read URDF file {_preview(str(path))}: {exc.strerror}; "
-                        "path_or_xml must be a URDF file path or URDF XML text") from exc
-    if not data.strip():
-        raise URDFError(f"empty URDF: the file {path} is empty")
-    return URDFSource(str(path), data, path)
-
-
-def _preview(value: str | bytes, size: int = 60) -> str:
-    """``repr`` of the start of ``value``, for messages."""
-    return repr(value[:size]) + ("..." if len(value) > size else "")
 
 
 @dataclass
@@ -210,8 +121,8 @@ def urdf_mimics(source: URDFSource) -> list[MimicJoint]:
 
 def _parse(source: URDFSource) -> etree._Element:
     """The root element of ``source``; no entities resolved, no network."""
-    if not _starts_xml(source.data):
-        raise source.error(f"not XML text: it starts with {_preview(source.data, 20)}, not '<'")
+    if not starts_xml(source.data):
+        raise source.error(f"not XML text: it starts with {preview(source.data, 20)}, not '<'")
     parser = etree.XMLParser(resolve_entities=False, no_network=True,
                              encoding=None if source.path else "utf-8")
     try:
@@ -395,55 +306,3 @@ def _check_depth(links: list[str], parents: dict[str, etree._Element],
                     f"link {name!r} is {depth[name]} links below the root: deeper than "
                     f"{MAX_DEPTH}, beyond which Pinocchio's recursive parser may overflow the "
                     "stack and kill the interpreter")
-
-
-# -- Pinocchio ---------------------------------------------------------------------------------
-def build_model(source: URDFSource) -> pin.Model:
-    """Pinocchio's model of ``source``. If Pinocchio fails, or its parser prints an error and
-    carries on without the part it could not read, the :class:`URDFError` carries what the
-    parser printed to stderr (the real reason); other output (warnings) is passed on."""
-    try:
-        with captured_stderr() as printed:
-            if source.path is None:
-                model = pin.buildModelFromXML(source.text)
-            else:
-                model = pin.buildModelFromUrdf(str(source.path))
-    except (ValueError, RuntimeError) as exc:
-        reason = _parser_messages(printed.getvalue()) or str(exc)
-        raise source.error(f"Pinocchio cannot parse it: {reason}") from exc
-    if any(line.startswith("Error:") for line in printed.getvalue().splitlines()):
-        # urdfdom skips what it cannot read (a <visual>, say) and only prints why
-        raise source.error(f"Pinocchio's parser reports: {_parser_messages(printed.getvalue())}")
-    sys.stderr.write(printed.getvalue())
-    return model
-
-
-#: one capture of fd 2 at a time: two threads that swapped fd 2 in turn would each restore the
-#: other's temporary file, and the process would lose its stderr for good
-_FD2 = threading.Lock()
-
-
-@contextlib.contextmanager
-def captured_stderr() -> Iterator[io.StringIO]:
-    """Redirect file descriptor 2, where C++ libraries print, into the yielded buffer (filled
-    on exit). Process-wide while it lasts (other threads' stderr lands there too), and one
-    capture at a time (a module lock): fd 2 is always given back as it was."""
-    printed = io.StringIO()
-    with _FD2, tempfile.TemporaryFile() as log:
-        sys.stderr.flush()
-        saved = os.dup(2)
-        os.dup2(log.fileno(), 2)
-        try:
-            yield printed
-        finally:
-            os.dup2(saved, 2)
-            os.close(saved)
-            log.seek(0)
-            printed.write(log.read().decode("utf-8", errors="replace"))
-
-
-def _parser_messages(printed: str) -> str:
-    """urdfdom's error lines, without its "Error:" tags and source locations ("at line 586 in
-    joint.cpp")."""
-    lines = (" ".join(line.split()).removeprefix("Error: ") for line in printed.splitlines())
-    return "; ".join(line for line in lines if line and not line.startswith("at line "))
