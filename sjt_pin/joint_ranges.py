@@ -12,6 +12,8 @@ fixed here once:
 
 from __future__ import annotations
 
+import threading
+import warnings
 from collections.abc import Sequence
 
 import numpy as np
@@ -57,3 +59,54 @@ def outside(model: pin.Model, q: np.ndarray, lower: np.ndarray, upper: np.ndarra
             if not mimic.lower <= value <= mimic.upper:
                 names.append(mimic.joint)
     return tuple(names)
+
+
+def at_limits(model: pin.Model, frame_id: int, q: np.ndarray, lower_limits: np.ndarray,
+              upper_limits: np.ndarray) -> list[str]:
+    """The 1-DoF joints on the chain that moves frame ``frame_id`` which ``q`` puts exactly on a
+    limit of their range (``lower_limits``, ``upper_limits``; a single value is no range), each
+    as ``"name (lower)"`` or ``"name (upper)"``."""
+    chain = model.supports[model.frames[frame_id].parentJoint]
+    at = []
+    for j in chain[1:]:
+        joint = model.joints[j]
+        if joint.nq != 1:
+            continue
+        i = joint.idx_q
+        lower, upper = lower_limits[i], upper_limits[i]
+        if not lower < upper:
+            continue
+        if abs(q[i] - lower) <= 1e-9 * max(1.0, abs(lower)):
+            at.append(f"{model.names[j]} (lower)")
+        elif abs(q[i] - upper) <= 1e-9 * max(1.0, abs(upper)):
+            at.append(f"{model.names[j]} (upper)")
+    return at
+
+
+def clipped_q0(model: pin.Model, q0: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+               robot_name: str) -> np.ndarray:
+    """``q0`` clipped into the position limits, with a warning naming the joints moved."""
+    outside = (q0 < lower) | (q0 > upper)
+    if not outside.any():
+        return q0.copy()
+    names = [model.names[j] for j in range(1, model.njoints)
+             if model.joints[j].nq == 1 and outside[model.joints[j].idx_q]]
+    warnings.warn(f"{robot_name}: the reference configuration q0 puts {names} outside their "
+                  f"URDF limits; q0 is clipped into range", UserWarning, stacklevel=4)
+    return np.clip(q0, lower, upper)
+
+
+#: guards Pinocchio's global random generator (seeded and drawn by random_within)
+_PINOCCHIO_RNG = threading.Lock()
+
+
+def random_within(model: pin.Model, lower_limits: np.ndarray, upper_limits: np.ndarray,
+                  rng: np.random.Generator | None) -> np.ndarray:
+    """A configuration drawn uniformly within the position limits (``[-pi, pi]`` if none),
+    reproducibly from ``rng`` (it reseeds Pinocchio's global generator, under a lock)."""
+    rng = np.random.default_rng() if rng is None else rng
+    lower = np.where(np.isfinite(lower_limits), lower_limits, -np.pi)
+    upper = np.where(np.isfinite(upper_limits), upper_limits, np.pi)
+    with _PINOCCHIO_RNG:  # Pinocchio draws from one global generator, seeded from rng
+        pin.seed(int(rng.integers(2**31 - 1)))
+        return pin.randomConfiguration(model, lower, upper)

@@ -168,3 +168,18 @@ def check_geometry(geometry_model, folders: Sequence[Path] | None, label: str) -
                 check_file(geometry.meshPath, folders)
             except URDFError as exc:
                 raise URDFError(f"{label}: geometry {geometry.name!r}: {exc}") from None
+
+
+def geometry_roots(urdf: str | None, package_dirs: Sequence[str], geometries: Iterable,
+                   label: str) -> tuple[Path, ...] | None:
+    """The folders a robot's meshes may be read from (the ``package_dirs`` and the folder of
+    its ``urdf`` file), each of its ``geometries`` checked against them; ``None`` when there
+    are none (geometry the caller built, naming no URDF file or folder, is the caller's)."""
+    urdf_dir = (Path(urdf).resolve().parent if urdf is not None and
+                not urdf.lstrip().startswith("<") else None)
+    # geometry the caller built, naming no URDF file or folder, is theirs: None
+    mesh_roots = roots(urdf_dir, package_dirs) or None
+    if mesh_roots is not None:
+        for geometry in geometries:
+            check_geometry(geometry, mesh_roots, label)
+    return mesh_roots

@@ -256,3 +256,16 @@ def integer(value, name: str, minimum: int = 1) -> int:
     if int(value) < minimum:
         raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
     return int(value)
+
+
+def names_arg(value, name: str) -> tuple[str, ...]:
+    """``value`` as a tuple of names (one str is one name)."""
+    if isinstance(value, str):
+        return (value,)
+    try:
+        names = tuple(value)
+    except TypeError:
+        raise TypeError(f"{name} must be joint names (a sequence of str), got {value!r}") from None
+    if not all(isinstance(n, str) for n in names):
+        raise TypeError(f"{name} must be joint names (a sequence of str), got {value!r}")
+    return names
