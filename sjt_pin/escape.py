@@ -342,3 +342,28 @@ class SaddleEscape:
             self.speed = min(self.speed + accel * dt, self._top)
         self._travel += self.speed * dt
         return self.speed * self.direction
+
+    def follow(self, controller, stalled: bool, q: np.ndarray, dt: float,
+               rows: Callable[[], Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]]
+               ) -> None:
+        """One step of a solver's compiled ``controller`` (``sjt_pin.kernels.Controller``)
+        seen by the escape: a stall run (``stalled``) observed, and tested on the task rows
+        ``rows()`` (see :meth:`test`); then the escape's velocity for the next step written into
+        the controller, or its end cleared."""
+        c = controller
+        if stalled and not self.active:
+            run = c.stall_run
+            if self.observe(run, c.ew_sq):
+                self.test(q, rows())
+            if run > 1.0:  # a window ended: the kernel counts the next one
+                c.stall_run = 0.0
+            c.stall_wait = self.wait
+        velocity = None if not self.active else self.velocity(c.regular, dt, c.ew_sq)
+        if velocity is None:
+            if c.escaping:  # an escape ended: a stall after it is a new run
+                c.stall_run = -1.0
+                c.escaping = False
+                c.escape_velocity[:] = 0.0
+        else:  # the kernel adds it, within the limits, from the next step on
+            c.escaping = True
+            c.escape_velocity[:] = velocity

@@ -21,6 +21,7 @@ limits) whose posture task is pulled along ``q(t)``: every limit the solver was 
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -108,3 +109,29 @@ class JointMove(Trajectory):
         at rest to 1e-9 rad/s)."""
         return (self.time >= self.duration and self.last is not None
                 and self.last.error_norm < 1e-9 and float(np.abs(self.last.dq).max()) < 1e-9)
+
+
+def move_goal(solver, q, target, options: dict) -> tuple[np.ndarray, Any]:
+    """``q`` checked, and the result of ``solver.solve()`` from it (with ``options``) for
+    ``Solver.move_to``: ``ValueError`` when the solver's task is not one frame's, or when
+    ``solve()`` finds no configuration within its tolerance."""
+    stack = solver.stack
+    if not stack.single or stack.task.frame_id < 0:
+        raise ValueError("move_to needs a solver with one frame task (PoseTask, "
+                         "PositionTask, OrientationTask)")
+    q = solver.robot.check_q(q)
+    result = solver.solve(target, q, **options)
+    if not result.success:
+        raise ValueError(f"move_to: solve() found no configuration that reaches the target "
+                         f"(best error {result.error:.3g} after {result.restarts} restarts)")
+    return q, result
+
+
+def solver_move(solver, twin, q: np.ndarray, goal: np.ndarray, share: float) -> JointMove:
+    """``Solver.move_to``'s motion of ``solver`` from ``q`` to ``goal``, stepped by its
+    ``twin``, timed within ``share`` of the solver's speed, acceleration and jerk limits."""
+    speed = None if solver.velocity_limit is None else solver.velocity_limit.limits
+    return JointMove(solver, twin, solver.stack.task.frame_id, q, goal, speed,
+                     None if solver.acceleration_limit is None
+                     else solver.acceleration_limit.limits,
+                     None if solver.jerk_limit is None else solver.jerk_limit.limits, share)

@@ -31,31 +31,25 @@ by flags.
 from __future__ import annotations
 
 import math
-import warnings
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
 
-from . import kernels
+from . import kernels, solver_parts, step_checks
 from .constraints import UserLimits
 from .escape import SaddleEscape
-from .exceptions import ConcurrentStepError
 from .gains import FixedGain, Gain, as_gain
-from .joint_ranges import outside
-from .limits import AccelerationLimit, JerkLimit, Motion, PositionLimit, VelocityLimit
+from .joint_move import JointMove, move_goal, solver_move
 from .methods import Method
 from .options import SolverOptions
 from .robot import Robot
 from .stability import StabilityCheck
 from .stack import TaskStack, normalise_tasks
 from .step_info import StepInfo, step_info
-from .tasks import PoseTask, PostureTask
+from .tasks import PostureTask
 from .tasks.pose import tasks_length
-from .validation import period, raise_non_finite_targets
-
-if TYPE_CHECKING:
-    from .joint_move import JointMove
+from .validation import period
 
 _F64 = np.dtype(np.float64)
 _NOTHING = object()  # (no array is the last returned one yet)
@@ -83,9 +77,10 @@ class Solver:
     def __init__(self, robot: Robot, method: Method, **options: Any):
         #: the options it was made with (a copy is made anew from them, see __reduce__)
         self.options = opts = SolverOptions.of(type(self).__name__, options)
-        _check_parts(robot, method)
+        solver_parts.check_parts(robot, method)
         self.robot, self.method = robot, method
-        self.stack = stack = TaskStack(robot, normalise_tasks(_task(opts), opts.posture))
+        tasks = normalise_tasks(solver_parts.options_task(opts), opts.posture)
+        self.stack = stack = TaskStack(robot, tasks)
         self._model, self._q_shape = robot.model, (robot.nq,)
         #: a q with quaternions or (cos, sin) pairs is checked on its manifold, unless it is
         #: the array the last step returned (pin.integrate keeps it there)
@@ -97,11 +92,14 @@ class Solver:
         self._dt = period(opts.dt)
         self._gain = as_gain(opts.gain, stack.target_dim)
         method.adapt(stack.targeted, tasks_length(robot, stack.tasks))
-        self._build_limits(opts)
+        (self.acceleration_limit, self.jerk_limit, self.position_limit, self.velocity_limit,
+         self._user, self._motion) = solver_parts.solver_limits(robot, stack, opts, self._dt)
         self.escape = (SaddleEscape(robot.model, stack.chain, robot.velocity_limits,
                                     self.position_limit) if opts.escape and method.stalls
                        else None)
-        self._controller = self._make_controller()
+        self._controller, self._matrix_method = solver_parts.make_controller(
+            robot, stack, method, self._dt, self.position_limit, self.acceleration_limit,
+            self.jerk_limit, self.escape, self._motion)
         self._stability = StabilityCheck(method, stack.n_chain, opts.check_stability)
         self._step = np.zeros(robot.nv)
         self._escaped = (-1, False)  # (step count, whether that step added the escape)
@@ -115,90 +113,18 @@ class Solver:
         self._configure()
 
     # -- construction --------------------------------------------------------------------------
-    def _build_limits(self, opts: SolverOptions) -> None:
-        """The built-in limits (position, speed, acceleration, jerk) and the user's."""
-        robot, stack, n = self.robot, self.stack, self.robot.nv
-        moving = stack.chain > 0
-        urdf = robot.velocity_limits
-        self.acceleration_limit = (None if opts.acceleration_limits is None
-                                   else AccelerationLimit(opts.acceleration_limits, n))
-        self.jerk_limit = None if opts.jerk_limits is None else JerkLimit(opts.jerk_limits, n)
-        if self.jerk_limit is not None and self.acceleration_limit is None:
-            raise ValueError("jerk_limits need acceleration_limits (the braking distance of a "
-                             "jerk-limited stop depends on both)")
-        position = PositionLimit(robot, moving, np.where(np.isfinite(urdf), urdf,
-                                                         SaddleEscape.DEFAULT_SPEED))
-        use = position.active if opts.position_limits is None else (
-            bool(opts.position_limits) and position.active)
-        self.position_limit = position if use else None
-        speeds = _speed_limits(opts.velocity_limits, urdf, n)
-        self.velocity_limit = VelocityLimit(speeds) if np.isfinite(speeds).any() else None
-        self._user = UserLimits(opts.limits, n) if opts.limits else None
-        self._motion = Motion(robot.q0.copy(), np.zeros(n), np.zeros(n), self._dt,
-                              None if self.acceleration_limit is None
-                              else self.acceleration_limit.limits,
-                              None if self.jerk_limit is None else self.jerk_limit.limits)
-
-    def _make_controller(self):
-        robot, stack, method = self.robot, self.stack, self.method
-        params = method.parameters()
-        self._matrix_method = params is None  # a method of your own: mapped here
-        if params is None:
-            params = kernels.MethodParameters()  # the stage's metric of JT
-            params.scaled, params.damped_feedback, params.damped_feedforward = False, False, True
-        position = self.position_limit
-        empty = np.zeros(0)
-        accel, jerk = self.acceleration_limit, self.jerk_limit
-        controller = kernels.Controller(
-            params, stack.dim, robot.nv, robot.nq, self._dt, stack.sqrt_weight,
-            np.ones(stack.dim), stack.chain, stack.target_dim, stack.levels,
-            np.full(robot.nv, np.inf),
-            empty.astype(np.int64) if position is None else position.q_index,
-            empty.astype(np.int64) if position is None else position.v_index,
-            empty if position is None else position.lower,
-            empty if position is None else position.upper,
-            empty if position is None else position.recovery_speeds,
-            None if accel is None else accel.limits, None if jerk is None else jerk.limits,
-            -1.0 if self.escape is None else SaddleEscape.STALL_RATIO,
-            # converged, not stalled: |e_w| below ERROR_FLOOR times the tasks' length
-            (SaddleEscape.ERROR_FLOOR * tasks_length(robot, stack.tasks)) ** 2)
-        #: the motion state a user's limits read is the controller's own
-        self._motion.dq, self._motion.ddq = controller.dq, controller.ddq
-        return controller
-
     def _configure(self) -> None:
         """Write what depends on the gain and dt into the controller: the rows' gains, the
         period, the speed limits (with the user's limits' caps at this period)."""
         stack, gain, c = self.stack, self._gain, self._controller
-        rows = gain.rows(stack.target_dim, stack.posture_dim)
-        gains = np.empty(stack.dim)
-        other = np.ones(stack.dim, dtype=bool)
-        other[stack.error_rows] = False
-        gains[stack.error_rows] = rows[:stack.target_dim]
-        gains[other] = rows[stack.target_dim:]
-        c.set_gains(gains, gain.mode != kernels.GAIN_FIXED, gain.factor)
+        c.set_gains(solver_parts.row_gains(stack, gain), gain.mode != kernels.GAIN_FIXED,
+                    gain.factor)
         c.set_dt(self._dt)
         self._motion.dt = self._dt
         self._stability.arm(gain.mode == kernels.GAIN_FIXED, gain.largest * self._dt)
         moving = stack.chain > 0
-        speeds = np.where(moving, np.inf if self.velocity_limit is None
-                          else self.velocity_limit.limits, 0.0)
-        by = np.full(speeds.size, "velocity", dtype=object)
-        if self._user is not None:
-            self._user.capped = set()
-            for k, limit in enumerate(self._user.limits):
-                caps = limit.speed_caps(self._dt)
-                if caps is None:
-                    continue
-                caps = np.asarray(caps, dtype=float)
-                if caps.shape != speeds.shape or np.isnan(caps).any() or (caps <= 0).any():
-                    raise ValueError(f"{limit!r}.speed_caps() must return ({speeds.size},) "
-                                     f"speeds > 0 (rad/s or m/s; inf for none), got {caps!r}")
-                self._user.capped.add(k)  # (its bounds never go below its caps)
-                tighter = moving & (caps < speeds)
-                speeds = np.where(tighter, caps, speeds)
-                by[tighter] = limit.name
-        self._speed_by = by
+        speeds, self._speed_by = solver_parts.capped_speeds(self._user, self._dt, moving,
+                                                            self.velocity_limit)
         c.set_speed(np.where(moving, speeds, 0.0))
         self._motion.velocity_limits = np.where(moving, speeds, 0.0)
         self._busy = self._first or self._stability.armed or (
@@ -259,7 +185,7 @@ class Solver:
         :class:`~sjt_pin.exceptions.ConcurrentStepError`: a solver's buffers are one thread's.
         """
         if self._stepping:
-            self._refuse_concurrent()
+            step_checks.refuse_concurrent(type(self).__name__)
         self._stepping = True  # (the body is here, not in a call: a call per step costs)
         try:
             if q is not self._returned and (
@@ -290,7 +216,8 @@ class Solver:
             # 3. method and stage, compiled
             fb = ff_given = None
             if self._matrix_method:
-                fb, ff_given = self._matrix_step(J, e, ff)
+                fb, ff_given = step_checks.matrix_step(self.method, stack, self._gain,
+                                                       self._dt, self._controller, J, e, ff)
             status = self._controller.run(J, e, ff, q, self._step, fb, ff_given, lower, upper,
                                           A, b)
             self._count += 1
@@ -303,46 +230,19 @@ class Solver:
         finally:
             self._stepping = False
 
-    def _refuse_concurrent(self) -> None:
-        raise ConcurrentStepError(
-            f"{type(self).__name__} is being stepped by another thread: a solver's buffers "
-            "and pin.Data are one thread's; give each thread its own solver "
-            "(copy.deepcopy(solver) makes one in the same state)")
-
-    def _matrix_step(self, J, e, ff):
-        """A method of your own: its matrix M on the first level's weighted rows, the gain
-        (``"auto"``: ``c / (dt lambda_max(J M))``), and the feedback and feed-forward velocities
-        it asks for (the compiled stage takes them from there)."""
-        stack = self.stack
-        begin, end, _, targets = stack.levels[0]
-        sw = stack.sqrt_weight[begin:end]
-        Jw = sw[:, None] * J[begin:end] * stack.chain
-        M = np.asarray(self.method.matrix(Jw), dtype=float)
-        gain = self._gain
-        k = gain.rows(stack.target_dim, stack.posture_dim)[:end - begin]
-        if gain.mode == kernels.GAIN_FIXED:
-            scale = 1.0
-        else:
-            loop = float(np.max(np.linalg.eigvals(Jw @ M).real, initial=0.0))
-            scale = gain.factor / (self._dt * loop) if loop > 0.0 else 0.0
-        fb = M @ (scale * k * sw * e[begin:end])
-        self._controller.given_gain = scale * float(np.mean(k[:max(targets, 1)]))
-        ff_given = None if ff is None else M @ (sw * ff[begin:end])
-        return fb, ff_given
-
     def _slow(self, status, q, J, targets) -> None:
         """What the fast path skips: errors, the first step's checks, the stability check, the
         escape's state (its velocity for the next step)."""
         c = self._controller
         if status & kernels.NON_FINITE:
-            self._raise_non_finite(q, targets)
+            step_checks.raise_non_finite(self.robot, c.e_sq, q, targets)
         if self._first:
             self._first = False
             for target in targets:
                 position = target.translation if isinstance(target, pin.SE3) else target
                 if isinstance(position, np.ndarray) and position.shape == (3,):
                     self.robot.check_reach(position, q)
-            self._warn_idle_outside(q)
+            step_checks.warn_idle_outside(self.robot, self.stack.chain, q)
         if self._stability.armed:
             stack = self.stack
             self._stability.check(stack.sqrt_weight[:, None] * J * stack.chain, c.trace,
@@ -350,58 +250,16 @@ class Solver:
         escape = self.escape
         self._escaped = (self._count, escape is not None and escape.active)
         if escape is not None:
-            if status & kernels.STALLED and not escape.active:
-                run = c.stall_run
-                if escape.observe(run, c.ew_sq):
-                    escape.test(q, self._weighted_rows(targets))
-                if run > 1.0:  # a window ended: the kernel counts the next one
-                    c.stall_run = 0.0
-                c.stall_wait = escape.wait
-            velocity = None if not escape.active else escape.velocity(c.regular, self._dt,
-                                                                      c.ew_sq)
-            if velocity is None:
-                if c.escaping:  # an escape ended: a stall after it is a new run
-                    c.stall_run = -1.0
-                    c.escaping = False
-                    c.escape_velocity[:] = 0.0
-            else:  # the kernel adds it, within the limits, from the next step on
-                c.escaping = True
-                c.escape_velocity[:] = velocity
+            escape.follow(c, bool(status & kernels.STALLED), q, self._dt,
+                          lambda: self._weighted_rows(targets))
         self._busy = self._stability.armed or (escape is not None and escape.active)
 
-    def _warn_idle_outside(self, q: np.ndarray) -> None:
-        """Warn (first step) about joints outside their range that no task moves: the step
-        brings a joint back only if a task moves it, so these stay where they are (a gripper's
-        finger and the mimic joint that follows it, for instance); ``StepInfo.outside_limits``
-        names them on every step."""
-        robot, model = self.robot, self._model
-        names = outside(model, q, robot.lower_limits, robot.upper_limits, robot.mimic_joints)
-        idle = [name for name in names
-                if not self.stack.chain[model.joints[model.getJointId(name)].idx_v]]
-        if idle:
-            warnings.warn(f"joints {idle} start outside their URDF position range and no task "
-                          "moves them: they stay there (stack a PostureTask within the range "
-                          "to bring them back)", UserWarning, stacklevel=4)
-
     def _weighted_rows(self, targets):
-        """``q -> (J_w, e_w)``: the weighted, masked task rows for ``targets``, evaluated on a
-        stack of their own (the step's buffers stay as they are)."""
+        """The escape's test rows for ``targets`` (:func:`~sjt_pin.step_checks.weighted_rows`),
+        on a stack of their own, made on first use."""
         if self._probe is None:
             self._probe = self.stack.copy()
-        probe, sw, mask = self._probe, self.stack.sqrt_weight, self.stack.chain
-        targets = list(targets)
-
-        def rows(q):
-            J, e, _ = probe.evaluate(q, targets, None)
-            return sw[:, None] * J * mask, sw * e
-
-        return rows
-
-    def _raise_non_finite(self, q: np.ndarray, targets) -> None:
-        self.robot.check_q(q)  # names q if it holds NaN or inf
-        if not math.isfinite(self._controller.e_sq):
-            raise_non_finite_targets(targets)
-        raise ValueError("target_velocity contains NaN or inf (the feed-forward is not finite)")
+        return step_checks.weighted_rows(self._probe, self.stack, targets)
 
     # -- what the step did ----------------------------------------------------------------------
     @property
@@ -469,27 +327,13 @@ class Solver:
         state follows, so it carries on from the move without a jump. Raises ``ValueError``
         when ``solve()`` finds no configuration within its tolerance, or when the solver's
         task is not one frame's (a multi-task solver moves by its own targets)."""
-        from .joint_move import JointMove
-
-        stack = self.stack
-        if not stack.single or stack.task.frame_id < 0:
-            raise ValueError("move_to needs a solver with one frame task (PoseTask, "
-                             "PositionTask, OrientationTask)")
-        q = self.robot.check_q(q)
-        result = self.solve(target, q, **options)
-        if not result.success:
-            raise ValueError(f"move_to: solve() found no configuration that reaches the target "
-                             f"(best error {result.error:.3g} after {result.restarts} restarts)")
+        q, result = move_goal(self, q, target, options)
         posture = PostureTask(q, weight=JointMove.POSTURE_WEIGHT)
         twin = _rebuild(type(self), self.robot, self.method,
                         self.options.replace(posture=posture, gain=self._gain, dt=self._dt,
                                              check_stability=False))
         twin.continue_from(self)
-        speed = None if self.velocity_limit is None else self.velocity_limit.limits
-        return JointMove(self, twin, stack.task.frame_id, q, result.q, speed,
-                         None if self.acceleration_limit is None
-                         else self.acceleration_limit.limits,
-                         None if self.jerk_limit is None else self.jerk_limit.limits, share)
+        return solver_move(self, twin, q, result.q, share)
 
     def continue_from(self, other: Solver) -> None:
         """Carry on from ``other``'s motion state (the joint velocity and acceleration it
@@ -553,40 +397,3 @@ def _rebuild(cls, robot: Robot, method: Method, options: SolverOptions) -> Solve
     solver = Solver.__new__(cls)
     Solver.__init__(solver, robot, method, **options.keywords())
     return solver
-
-
-def _check_parts(robot, method) -> None:
-    """A solver's robot and method, checked at the door."""
-    if not isinstance(robot, Robot):
-        raise TypeError(f"robot must be a sjt_pin.Robot, got {type(robot).__name__}")
-    if not isinstance(method, Method):
-        raise TypeError(f"method must be a sjt_pin Method, got {type(method).__name__}")
-    if robot.nv == 0:
-        raise ValueError(f"robot {robot.name!r} has no moving joint: there is nothing to "
-                         "solve for")
-
-
-def _task(options: SolverOptions):
-    """The task(s) of ``options``: ``task``, or the pose task of length ``pose_length``."""
-    if options.pose_length is None:
-        return options.task
-    if options.task is not None:
-        raise ValueError("pose_length sets the length of the pose task made when task is "
-                         "None; with a task of your own pass PoseTask(length=...)")
-    return PoseTask(length=options.pose_length)
-
-
-def _speed_limits(velocity_limits, urdf: np.ndarray, nv: int) -> np.ndarray:
-    """The speed limits a solver enforces (rad/s, m/s; inf for none)."""
-    if velocity_limits is None or velocity_limits is True:
-        return urdf.copy()
-    if velocity_limits is False:
-        return np.full(nv, np.inf)
-    if isinstance(velocity_limits, (str, bytes)) or np.iscomplexobj(velocity_limits):
-        raise ValueError(f"velocity_limits must be True, False or an array, "
-                         f"got {velocity_limits!r}")
-    vmax = np.asarray(velocity_limits, dtype=float)
-    if vmax.shape != (nv,) or np.any(np.isnan(vmax)) or np.any(vmax <= 0):
-        raise ValueError(f"velocity_limits must have shape ({nv},) with entries > 0 "
-                         f"(rad/s or m/s; inf for none), got {velocity_limits!r}")
-    return vmax

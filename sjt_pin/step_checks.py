@@ -1,0 +1,86 @@
+"""What a :class:`~sjt_pin.solver.Solver`'s step does in Python, off its compiled path: the
+matrix of a method of the user's mapped (:func:`matrix_step`), the first step's warning about
+joints outside their range that no task moves, the error for a non-finite step, and the task
+rows the saddle escape's curvature test evaluates."""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+
+from . import kernels
+from .exceptions import ConcurrentStepError
+from .gains import Gain
+from .joint_ranges import outside
+from .methods import Method
+from .robot import Robot
+from .stack import TaskStack
+from .validation import raise_non_finite_targets
+
+
+def matrix_step(method: Method, stack: TaskStack, gain: Gain, dt: float,
+                controller: kernels.Controller, J, e, ff):
+    """A method of your own: its matrix M on the first level's weighted rows, the gain
+    (``"auto"``: ``c / (dt lambda_max(J M))``), and the feedback and feed-forward velocities
+    it asks for (the compiled stage takes them from there)."""
+    begin, end, _, targets = stack.levels[0]
+    sw = stack.sqrt_weight[begin:end]
+    Jw = sw[:, None] * J[begin:end] * stack.chain
+    M = np.asarray(method.matrix(Jw), dtype=float)
+    k = gain.rows(stack.target_dim, stack.posture_dim)[:end - begin]
+    if gain.mode == kernels.GAIN_FIXED:
+        scale = 1.0
+    else:
+        loop = float(np.max(np.linalg.eigvals(Jw @ M).real, initial=0.0))
+        scale = gain.factor / (dt * loop) if loop > 0.0 else 0.0
+    fb = M @ (scale * k * sw * e[begin:end])
+    controller.given_gain = scale * float(np.mean(k[:max(targets, 1)]))
+    ff_given = None if ff is None else M @ (sw * ff[begin:end])
+    return fb, ff_given
+
+
+def warn_idle_outside(robot: Robot, chain: np.ndarray, q: np.ndarray) -> None:
+    """Warn (first step) about joints outside their range that no task moves (``chain``: the
+    velocities the tasks move): the step brings a joint back only if a task moves it, so these
+    stay where they are (a gripper's finger and the mimic joint that follows it, for
+    instance); ``StepInfo.outside_limits`` names them on every step."""
+    model = robot.model
+    names = outside(model, q, robot.lower_limits, robot.upper_limits, robot.mimic_joints)
+    idle = [name for name in names
+            if not chain[model.joints[model.getJointId(name)].idx_v]]
+    if idle:
+        warnings.warn(f"joints {idle} start outside their URDF position range and no task "
+                      "moves them: they stay there (stack a PostureTask within the range "
+                      "to bring them back)", UserWarning, stacklevel=4)
+
+
+def weighted_rows(probe: TaskStack, stack: TaskStack, targets):
+    """``q -> (J_w, e_w)``: the weighted, masked task rows of ``stack`` for ``targets``,
+    evaluated on ``probe``, a copy of it (the step's buffers stay as they are)."""
+    sw, mask = stack.sqrt_weight, stack.chain
+    targets = list(targets)
+
+    def rows(q):
+        J, e, _ = probe.evaluate(q, targets, None)
+        return sw[:, None] * J * mask, sw * e
+
+    return rows
+
+
+def raise_non_finite(robot: Robot, e_sq: float, q: np.ndarray, targets) -> None:
+    """The error for a step whose result is not finite (``e_sq``: its squared error): ``q``,
+    the targets or the feed-forward holds NaN or inf."""
+    robot.check_q(q)  # names q if it holds NaN or inf
+    if not math.isfinite(e_sq):
+        raise_non_finite_targets(targets)
+    raise ValueError("target_velocity contains NaN or inf (the feed-forward is not finite)")
+
+
+def refuse_concurrent(name: str) -> None:
+    """The error for a second thread that steps a solver (of class ``name``) while a step runs."""
+    raise ConcurrentStepError(
+        f"{name} is being stepped by another thread: a solver's buffers "
+        "and pin.Data are one thread's; give each thread its own solver "
+        "(copy.deepcopy(solver) makes one in the same state)")
