@@ -37,8 +37,8 @@ def test_ci_runs_the_readme_quick_start_in_order():
     assert len(commands) == 2
     ci = [line.split("#")[0].strip() for line in (ROOT / ".ci" / "run").read_text().splitlines()]
     ci = [line for line in ci if line]
-    # both, one after the other, in one environment (then the slow tests, the type check and
-    # the other environments' jobs)
+    # both, one after the other, in one environment (then the site, the type check and the
+    # other environments' jobs: the wheel job, .ci/wheel.sh, runs the slow tests)
     first = ci.index(commands[0])
     assert ci[first:first + 2] == commands
     assert "python -m mypy" in ci[first + 2:]
