@@ -179,10 +179,20 @@ def bench(args: argparse.Namespace) -> int:
         stream = collision_stream.stream()
         print("\nxArm7 with self-collision beside 10 rad/s^2 and 5,000 rad/s^3, targets jumping "
               "every 0.5 s:\n" + collision_stream.stream_table(stream))
+        from .bench import collision_mesh, collision_moving
+
+        moving = collision_moving.moving()
+        print("\nA 5 cm ball driven at the hand (margin 10 mm; distances on the meshes):\n"
+              + collision_moving.moving_table(moving))
+        mesh = [collision_mesh.pull(convex) for convex in (True, False)]
+        print("\nPanda's hand pulled over a plate of bumps (a mesh) with Franka-like limits:\n"
+              + collision_mesh.mesh_table(mesh))
         _write_json(args.json, {"machine": machine, "rows": [asdict(r) for r in rows],
                                 "idle_us": {"plain": plain, "limit": idle},
                                 "crowded": asdict(crowd),
-                                "stream": [asdict(r) for r in stream]})
+                                "stream": [asdict(r) for r in stream],
+                                "moving": [asdict(r) for r in moving],
+                                "mesh": [asdict(r) for r in mesh]})
     elif args.kind == "accuracy":
         from .bench import accuracy
 

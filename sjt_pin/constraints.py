@@ -61,6 +61,8 @@ class UserLimits:
         self._upper_by = np.full(nv, -1, dtype=np.int64)
         #: the limits whose bounds are only their speed caps (held with the speed limits)
         self.capped: set[int] = set()
+        #: the last evaluation's rows ``(A, b, owners)`` (None without rows)
+        self.last_rows: tuple[np.ndarray, np.ndarray, list[str]] | None = None
 
     def evaluate(self, kinematics, motion: Motion):
         """``(lower, upper, A, b, owners)`` at this step: the intersection of the limits'
@@ -100,7 +102,23 @@ class UserLimits:
                 A, b = blocks[0]
             else:
                 A, b = np.vstack([a for a, _ in blocks]), np.concatenate([c for _, c in blocks])
+        self.last_rows = None if A is None else (A, b, owners)
         return lower, upper, A, b, owners
+
+    def exceeded(self, dq: np.ndarray, tol: float = 1e-9) -> tuple[tuple[str, float], ...]:
+        """The limits whose rows of the last evaluation ``dq`` does not keep, each with the
+        largest excess ``A_i dq - b_i`` of its rows (their units: m/s for the collision
+        limit's), in the order of the limits; ``()`` where every row holds (to ``tol`` times
+        the row's scale)."""
+        if self.last_rows is None:
+            return ()
+        A, b, owners = self.last_rows
+        excess = A @ dq - b
+        scale = 1.0 + np.abs(A) @ np.abs(dq) + np.abs(b)
+        out: dict[str, float] = {}
+        for i in np.flatnonzero(excess > tol * scale):
+            out[owners[i]] = max(out.get(owners[i], 0.0), float(excess[i]))
+        return tuple(out.items())
 
     def bound_owner(self, joint: int, upper: bool) -> str:
         """The name of the user's limit whose bound of ``joint`` the last evaluation kept."""

@@ -74,6 +74,11 @@ class StepInfo:
         active_rows: names of the limits whose general rows (``A q_dot <= b``) are active.
         limit_conflicts: joints whose acceleration or jerk limit had to yield to a position or
             speed limit (a start outside the range, limits changed between steps).
+        rows_exceeded: ``(limit, excess)`` for each limit whose general rows the step could
+            not keep within the joints' position and speed limits, ``excess`` the largest
+            ``A_i q_dot - b_i`` of its rows (m/s for a :class:`~sjt_pin.CollisionLimit`:
+            times ``dt``, how much more a pair closed in this step than its damper allows -
+            an obstacle coming faster than the arm can give way); ``()`` when every row held.
         outside_limits: joints whose position in the ``q`` given to this step lay outside
             their URDF range (a seed out of range): the step moves each back toward its range
             at its recovery speed, ramped within the acceleration and jerk limits — never a
@@ -110,6 +115,7 @@ class StepInfo:
     active_limits: tuple[tuple[str, str], ...] = ()
     active_rows: tuple[str, ...] = ()
     limit_conflicts: tuple[str, ...] = ()
+    rows_exceeded: tuple[tuple[str, float], ...] = ()
     outside_limits: tuple[str, ...] = ()
     stalled: bool = False
     levels: tuple[LevelInfo, ...] = ()
@@ -166,6 +172,7 @@ def step_info(controller, stack, robot, J: np.ndarray, e: np.ndarray, q: np.ndar
         clamped_joints=joints, task_scale=c.task_scale, active_limits=active,
         active_rows=tuple(sorted({owners[i] for i in c.rows_active})) if owners else (),
         limit_conflicts=tuple(names[j] for j in np.flatnonzero(c.torn)),
+        rows_exceeded=user.exceeded(dq) if user is not None and owners else (),
         outside_limits=outside(robot.model, q, robot.lower_limits, robot.upper_limits,
                                robot.mimic_joints),
         stalled=stalled, levels=tuple(levels))

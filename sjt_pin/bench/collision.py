@@ -132,6 +132,12 @@ class Checker:
             for req in data.distanceRequests:
                 req.enable_signed_distance = True
         self.names = [(names[p.first], names[p.second]) for p in self.mesh.collisionPairs]
+        self._obstacles = [names.index(f"obstacle_{i}") for i in range(len(obstacles))]
+
+    def move(self, i: int, pose: pin.SE3) -> None:
+        """Move obstacle ``i`` to ``pose`` (a moving obstacle's scene)."""
+        for geometry in (self.mesh, self.hull):
+            geometry.geometryObjects[self._obstacles[i]].placement = pose
 
     def closest(self, q: np.ndarray) -> tuple[float, str]:
         """(distance in m, pair) of the closest pair at ``q``."""

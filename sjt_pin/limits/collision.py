@@ -50,6 +50,34 @@ the band ``influence - margin`` or when the pair leaves ``influence``, and a pai
 than that from its margin remembers nothing (its row binds nothing); nor does a pair with a
 sphere (or an ellipsoid), whose closest points are unique and move continuously.
 
+Moving obstacles. An obstacle moved with its velocity (:meth:`CollisionLimit.move`, twist
+``(v, w)`` in world axes) makes each of its pairs' rows bound the relative closing speed:
+
+    n^T (J_a(p_a) q_dot - v_b(p_b)) <= gain (d - margin) / dt,    v_b(p) = v + w x (p - o)
+
+(``o`` the obstacle's origin; the bound of ``A q_dot <= b`` rises by ``n^T v_b(p_b)``, falls
+where the obstacle comes closer). With ``u = -n^T v_b(p_b)`` the obstacle's approach speed
+and ``r = sum_j |A_ij| v_j`` the fastest the arm's speed limits ``v`` let the row's point
+retreat, the guarantee is:
+
+- without acceleration limits, where ``u <= r``: the step keeps its row, so per period the
+  excess ``d - margin`` shrinks by at most the fraction ``gain`` to first order in ``dt``, as
+  beside a still obstacle; without the velocity the row lags the obstacle by a period and
+  the pair settles about ``u dt / gain`` inside the margin;
+- with acceleration limits (``a = sum_j |A_ij| a_j`` along the row, ``BRAKING_SHARE`` of it
+  counted on), the row starts giving way while its excess still covers the retreat's ramp,
+  ``h >= (u + s) tau + (u + s)^2 / (2 share a)`` for a closing speed ``s`` and ``tau = dt +
+  a / j``: each pair with a moving obstacle is watched ``u (2 dt + T)`` farther out (``T``
+  the longest time a joint takes to reach its speed limit, at most 1 s, plus the jerk's
+  ramp: :meth:`CollisionLimit._lookahead`), and where the obstacle comes faster than the
+  limits can answer the acceleration and jerk limits yield to the row (``limit_conflicts``);
+- where ``u > r`` no motion within the speed limits keeps the row: the step breaks it by
+  the least the stage can, and ``StepInfo.rows_exceeded`` gives ``A q_dot - b`` (m/s; times
+  ``dt``, how much of the margin the step gave up).
+
+A moving obstacle is moved every step (its velocity holds until the next :meth:`move`); each
+move starts the broad phase again.
+
 Distances and closest points come from coal on the shapes of Pinocchio's ``GeometryModel``:
 Pinocchio's ``computeDistance``, called back from the compiled step of the limit
 (``kernels.collision_rows``) for each pair it must query. Only the pairs whose bounding
@@ -63,6 +91,7 @@ prismatic joints between, summed step by step: :meth:`CollisionLimit._near`,
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
@@ -233,7 +262,8 @@ class CollisionLimit(Limit):
             geometry of ``robot.urdf`` with ``robot.package_dirs``).
         obstacles: ``(coal shape, pin.SE3)`` pairs fixed in the world: ``coal.Sphere``, ``Box``,
             ``Capsule``, ``Cylinder``, ``Halfspace``, ``Plane``, ``Convex`` or a mesh
-            (``BVHModel``). Move them with :meth:`move`.
+            (``BVHModel``; its convex hull with ``convex=True``). Move them with :meth:`move`,
+            with their velocity when they move (module docstring, "Moving obstacles").
         self_collision: also check the robot's link pairs, except adjacent links (geometries on
             the same joint or on a joint and its parent) and the pairs the SRDF disables.
         margin: distance to keep, m.
@@ -247,11 +277,15 @@ class CollisionLimit(Limit):
             to check.
         srdf: an SRDF path whose ``disable_collisions`` apply; by default the SRDF of an
             example-robot-data robot.
-        convex: replace the robot's collision meshes by their convex hulls (qhull, through
-            coal). A hull contains its mesh, so the distance to it never exceeds the mesh's and
-            the margin still holds for the mesh; GJK on hulls takes about a microsecond where
-            a mesh-to-mesh distance takes from 10 us to several ms (Panda). Obstacles stay as
-            given.
+        convex: replace the robot's collision meshes and the mesh obstacles by their convex
+            hulls (qhull, through coal). A hull contains its mesh, so the distance to it never
+            exceeds the mesh's and the margin still holds for the mesh; GJK on hulls takes
+            about a microsecond where a mesh-to-mesh distance takes from 10 us to several ms
+            (Panda), and a hull's closest points move continuously where a mesh's jump from
+            triangle to triangle (beside a mesh obstacle those jumps broke the acceleration
+            limit 30x). A non-convex obstacle is filled in: the arm keeps off its hull
+            (give its convex parts as obstacles of their own to reach into it). ``False``
+            keeps every mesh as given.
         witnesses: how many recent closest points of each pair within ``influence`` to keep as
             rows beside its own (module docstring, "Witnesses"); 0 keeps none.
     """
@@ -290,10 +324,17 @@ class CollisionLimit(Limit):
         self._source = self.geometry.copy()  # the robot's own geometry (meshes), for copies
         if convex:
             _to_hulls(self.geometry)
+        self._convex = bool(convex)
         self.n_robot = self.geometry.ngeoms
         self._obstacle_ids: list[int] = []
+        self._obstacle_shapes: list = []  # (as given: a mesh obstacle's hull is the limit's)
         for i, item in enumerate(obstacles):
             self._add_obstacle(i, item)
+        #: each obstacle's velocity (m/s and rad/s, world axes: its origin's linear velocity,
+        #: then its angular velocity), set by :meth:`move`
+        self._velocity = np.zeros((len(self._obstacle_ids), 6))
+        self._obstacle_of = np.full(self.geometry.ngeoms, -1, dtype=np.int64)  # (-1: robot's)
+        self._obstacle_of[self._obstacle_ids] = np.arange(len(self._obstacle_ids))
         self._choose_pairs(self_collision, list(pairs), list(ignore),
                            srdf if srdf is not None else (_srdf_of(robot) if self_collision
                                                           else None))
@@ -313,11 +354,13 @@ class CollisionLimit(Limit):
         collision geometry (the robot pickles without it; coal's hulls do not pickle, they
         are built again)."""
         return {"args": {**self._args, "obstacles": self.obstacles},
-                "geometry": self._source.copy()}
+                "geometry": self._source.copy(), "velocity": self._velocity.copy()}
 
     def __setstate__(self, state: dict) -> None:
         self._restored_geometry = state["geometry"]
         self.__init__(**state["args"])  # type: ignore[misc]
+        self._velocity[:] = state.get("velocity", 0.0)
+        self._moving_speeds()
 
     # -- construction ------------------------------------------------------------------------
     def _add_obstacle(self, i: int, item) -> None:
@@ -329,8 +372,12 @@ class CollisionLimit(Limit):
         if not _supported(shape):
             raise CollisionError(f"obstacle {i}: unknown shape {type(shape).__name__}; use a "
                                  "coal Sphere, Box, Capsule, Cylinder, Convex or BVHModel")
-        if not isinstance(pose, pin.SE3):
-            raise TypeError(f"obstacle {i}: pose must be a pin.SE3, got {type(pose).__name__}")
+        _check_pose(pose, f"pose of obstacle {i}")
+        _check_extent(shape, f"obstacle {i}")
+        self._obstacle_shapes.append(shape)
+        if self._convex and isinstance(shape, coal.BVHModelBase) and not isinstance(
+                shape, coal.ConvexBase):  # a mesh: its hull, as the robot's own meshes
+            shape = _hull(shape, f"obstacle {i}")
         obj = pin.GeometryObject(f"obstacle_{i}", 0, 0, pose, shape)
         self._obstacle_ids.append(self.geometry.addGeometryObject(obj))
 
@@ -412,6 +459,7 @@ class CollisionLimit(Limit):
         self._jacobian_support()
         self._skip_state()
         self._compute = pin.computeDistance  # (kernels.collision_rows calls it for each query)
+        self._moving_speeds()
 
     def _bounding_volumes(self) -> None:
         """Per geometry: its parent joint, coal's local AABB (centre and half extents, in the
@@ -445,6 +493,12 @@ class CollisionLimit(Limit):
                                                  dtype=np.int64)
         self._pair_rows = np.zeros((max(len(self.pairs), 1) * (1 + self.witnesses), 13))
         self._span = self._radius[self._pa] + self._radius[self._pb]
+        # each pair's obstacles (-1: the robot's geometry) and how far their sphere reaches
+        # from their origin (m), for the speed of a moving one (_moving_speeds)
+        self._pair_obstacle = self._obstacle_of[self.pairs].reshape(-1, 2)
+        with np.errstate(invalid="ignore"):
+            self._pair_far = (np.linalg.norm(self._box_center[self.pairs], axis=-1)
+                              + self._radius[self.pairs]).reshape(-1, 2)
 
     def _witness_memory(self) -> None:
         """Per pair: its recent closest points, each in its joint's frame (``witnesses`` rows
@@ -658,27 +712,121 @@ class CollisionLimit(Limit):
         return cap
 
     # -- obstacles ---------------------------------------------------------------------------
-    def move(self, i: int, pose: pin.SE3) -> None:
-        """Move obstacle ``i`` (its index in ``obstacles``) to ``pose`` before the next step."""
+    def move(self, i: int, pose: pin.SE3, velocity=None) -> None:
+        """Move obstacle ``i`` (its index in ``obstacles``) to ``pose`` before the next step.
+
+        ``velocity``: the obstacle's velocity at ``pose`` (6,): the linear velocity of its
+        origin (m/s) then its angular velocity (rad/s), both in world axes (Pinocchio's
+        ``LOCAL_WORLD_ALIGNED`` twist; a ``pin.Motion`` is read the same way); None for an
+        obstacle at rest. It holds until the next ``move`` - move a moving obstacle every
+        step. Each row of a pair with a moving obstacle then bounds the relative normal
+        velocity of its closest points (module docstring, "Moving obstacles"): the arm gives
+        way as its limits allow."""
+        if isinstance(i, bool) or not isinstance(i, (int, np.integer)):
+            raise TypeError(f"obstacle index must be an int, got {type(i).__name__}")
         if not 0 <= i < len(self._obstacle_ids):
             raise IndexError(f"obstacle {i} does not exist ({len(self._obstacle_ids)} obstacles)")
-        if not isinstance(pose, pin.SE3):
-            raise TypeError(f"pose must be a pin.SE3, got {type(pose).__name__}")
+        _check_pose(pose, f"pose of obstacle {i}")
+        twist = _twist(velocity, f"velocity of obstacle {i}")
         g = self._obstacle_ids[i]
+        changed = bool(np.any(twist != self._velocity[i]))
         obj = self.geometry.geometryObjects[g]
         obj.placement = pose
-        self._placement[g] = pose.homogeneous
-        self._center_local[g] = self._centers_in[:, g] = (self._placement[g]
-                                                          @ np.append(self._box_center[g], 1.0))
+        H = self._placement[g] = pose.homogeneous
+        self._center_local[g, :3] = self._centers_in[:3, g] = (H[:3, :3] @ self._box_center[g]
+                                                              + H[:3, 3])
+        if changed:
+            self._velocity[i] = twist
+            self._moving_speeds()
         self._version += 1
         self._skip = None  # (its broad phase is of the old scene)
         self._tick += 2.0  # the remembered points on the obstacle moved: forget every one
+
+    def _moving_speeds(self) -> None:
+        """Each pair's bound on its obstacle's speed (m/s) at any point of the obstacle's
+        bounding sphere, ``|v| + |w| (|c| + r)`` (``c`` the sphere's centre in the obstacle's
+        frame, ``r`` its radius; inf for a turning Halfspace or Plane), 0 for a pair of the
+        robot's own links: ``_pair_speed``; ``_moving``: whether any is above 0."""
+        if not len(self._obstacle_ids):
+            self._pair_speed, self._moving = np.zeros(len(self.pairs)), False
+            return
+        linear = np.linalg.norm(self._velocity[:, :3], axis=1)
+        turn = np.linalg.norm(self._velocity[:, 3:], axis=1)
+        index = self._pair_obstacle
+        mine = index >= 0
+        pick = np.where(mine, index, 0)
+        with np.errstate(invalid="ignore"):
+            spin = np.where(turn[pick] > 0, turn[pick] * self._pair_far, 0.0)
+        self._pair_speed = np.where(mine, linear[pick] + spin, 0.0).sum(axis=1)
+        self._moving = bool(np.any(self._pair_speed > 0))
+
+    @staticmethod
+    def _lookahead(motion: Motion) -> float:
+        """How long (s) a pair with a moving obstacle is watched ahead: the obstacle's
+        travel in this time widens the pair's influence. Two periods (the obstacle may close
+        a period's travel before the row sees it and another while the step runs); with
+        acceleration limits also the longest time a joint takes to reach its speed limit
+        (at most 1 s), and with jerk limits the longest ramp to its acceleration limit: the
+        arm may need that long to match the obstacle's speed."""
+        time = 2.0 * motion.dt
+        accelerations = motion.acceleration_limits
+        if accelerations is None:
+            return time
+        speeds = motion.velocity_limits
+        with np.errstate(divide="ignore", invalid="ignore"):
+            if speeds is not None:
+                reach = speeds / accelerations
+                reach = reach[np.isfinite(reach)]
+                time += min(float(reach.max()), 1.0) if reach.size else 1.0
+            else:
+                time += 1.0
+            if motion.jerk_limits is not None:
+                ramp = accelerations / motion.jerk_limits
+                ramp = ramp[np.isfinite(ramp)]
+                time += float(ramp.max()) if ramp.size else 0.0
+        return time
+
+    def _carried(self, out: tuple[np.ndarray, np.ndarray] | None
+                 ) -> tuple[np.ndarray, np.ndarray] | None:
+        """``out``, the rows of this step, with each bound raised by the normal velocity of the
+        moving obstacle's closest point away from the robot (lowered where it comes closer):
+        ``b_i + n^T (v_b(p_b) - v_a(p_a))`` with ``v_x(p) = v + w x (p - o)`` for an obstacle
+        with twist ``(v, w)`` and origin ``o`` (0 for a link of the robot), so that the row
+        bounds the pair's relative closing speed (module docstring, "Moving obstacles")."""
+        if out is None or not self._moving:
+            return out
+        A, b = out
+        count = len(self.active)
+        owners = np.concatenate([np.asarray(self.active, dtype=np.int64),
+                                 self._owners[:self._witness_count].astype(np.int64)])
+        rows = self._pair_rows[:count + self._witness_count]
+        normal = rows[:, 4:7]
+        shift = np.zeros(len(owners))
+        for side, sign, points in ((1, 1.0, rows[:, 10:13]), (0, -1.0, rows[:, 7:10])):
+            index = self._obstacle_of[self.pairs[owners, side]]
+            mine = np.flatnonzero(index >= 0)
+            if mine.size == 0:
+                continue
+            twist = self._velocity[index[mine]]
+            origin = self._placement[self.pairs[owners[mine], side], :3, 3]
+            velocity = twist[:, :3] + np.cross(twist[:, 3:], points[mine] - origin)
+            shift[mine] += sign * np.einsum("ij,ij->i", normal[mine], velocity)
+        carried = b + shift
+        carried.setflags(write=False)
+        return A, carried
 
     @property
     def obstacles(self) -> list[tuple]:
         """The obstacles as ``(coal shape, pin.SE3)`` pairs, at their current poses."""
         geoms = self.geometry.geometryObjects
-        return [(geoms[g].geometry, pin.SE3(geoms[g].placement)) for g in self._obstacle_ids]
+        return [(shape, pin.SE3(geoms[g].placement))
+                for shape, g in zip(self._obstacle_shapes, self._obstacle_ids, strict=True)]
+
+    @property
+    def velocities(self) -> np.ndarray:
+        """The obstacles' velocities (nobstacles, 6) as :meth:`move` set them: linear (m/s)
+        then angular (rad/s), world axes (a copy)."""
+        return self._velocity.copy()
 
     # -- queries -----------------------------------------------------------------------------
     def _broad_phase(self, data, influence: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -842,9 +990,18 @@ class CollisionLimit(Limit):
             self._set_pairs([(int(a), int(b)) for a, b in self.pairs[keep]])
             self._prepare_broad_phase()
             pin.updateGeometryPlacements(model, data, self.geometry, self.geometry_data)
-        close = (self.pairs[:, 0] < self.n_robot) & (self.pairs[:, 1] < self.n_robot) & (
-            start < self.margin)
+        own = (self.pairs[:, 0] < self.n_robot) & (self.pairs[:, 1] < self.n_robot)
+        close = own & (start < self.margin)
         self.margins[close] = start[close]
+        inside = np.flatnonzero(~own & (start < self.margin))
+        if inside.size:
+            import warnings
+
+            said = ", ".join(f"{self.pair_names[k][0]} / {self.pair_names[k][1]} at "
+                             f"{start[k] * 1e3:.1f} mm" for k in inside)
+            warnings.warn(f"CollisionLimit: the robot starts inside the {self.margin * 1e3:g} mm "
+                          f"margin of an obstacle ({said}); its rows move it out, within the "
+                          "solver's limits", UserWarning, stacklevel=4)
         self._checked = True
 
     def distances(self, q: np.ndarray) -> list[PairDistance]:
@@ -902,7 +1059,7 @@ class CollisionLimit(Limit):
         returns the same (read-only) arrays."""
         skip, q, listed = self._skip, kinematics.q, False
         if skip is not None and q is not None and motion.acceleration_limits is None \
-                and motion.dt > 0:  # (most steps: nothing to query, as near_pairs finds)
+                and motion.dt > 0 and not self._moving:  # (most steps: nothing to query, as near_pairs finds)
             listed = near_pairs(q, skip, self._influence)
             if listed == []:
                 if self.active or self.within:
@@ -943,6 +1100,10 @@ class CollisionLimit(Limit):
             reach = reaches[1] if reaches[0] is speeds else self._reach(speeds)
         else:
             reach = None  # (the stoppable rows below are tighter than the damper's)
+        if self._moving:  # (the rows of a pair bound its relative speed: _carried)
+            influence = influence + self._pair_speed * self._lookahead(motion)
+            if reach is not None:
+                reach = reach + self._pair_speed
         out = self._rows(data, dt, q, influence, reach, listed)
         if out is not None and accelerations is not None:
             b = out[1]
@@ -950,6 +1111,7 @@ class CollisionLimit(Limit):
             stoppable_rows(out[0], b, motion.dq, motion.ddq, accelerations, jerks,
                            self.gain / dt, dt, BRAKING_SHARE, EASING_SLACK)
             b.setflags(write=False)
+        out = self._carried(out)
         self._cache = (data, key, (self.active, self.within, self._witness_count), out)
         return out
 
@@ -1175,6 +1337,61 @@ def _extents(model: pin.Model, mimics: Sequence = ()
             # a free-flying base outside its position box keeps the bounds)
             lower[start:start + count], upper[start:start + count] = lo, hi
     return kinds, extent, lower, upper
+
+
+def _check_pose(pose, name: str) -> None:
+    """TypeError unless ``pose`` is a ``pin.SE3``, ValueError unless it is finite and rigid
+    (its rotation orthonormal, of determinant 1, to 1e-6). (Plain floats: a move a step.)"""
+    if not isinstance(pose, pin.SE3):
+        raise TypeError(f"{name} must be a pin.SE3, got {type(pose).__name__}")
+    H = pose.homogeneous
+    (a, b, c, _), (d, e, f, _), (g, h, i, _), _ = H.tolist()
+    if not math.isfinite(sum(H.ravel().tolist())):
+        raise ValueError(f"{name} is not finite:\n{H}")
+    columns = ((a, d, g), (b, e, h), (c, f, i))
+    gram = [x[0] * y[0] + x[1] * y[1] + x[2] * y[2] for x in columns for y in columns]
+    determinant = a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
+    if max(abs(v - (k % 4 == 0)) for k, v in enumerate(gram)) > 1e-6 or determinant <= 0.0:
+        raise ValueError(f"{name} is not a rigid motion (its rotation is not orthonormal with "
+                         f"determinant 1):\n{H[:3, :3]}")
+
+
+def _check_extent(shape, name: str) -> None:
+    """CollisionError unless ``shape`` has a finite extent above zero (a Halfspace or a
+    Plane, unbounded, passes)."""
+    if isinstance(shape, (coal.Halfspace, coal.Plane)):
+        return
+    shape.computeLocalAABB()
+    box = shape.aabb_local
+    lo, hi = np.array(box.min_), np.array(box.max_)
+    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))
+            and float(np.max(hi - lo)) > 0.0):
+        raise CollisionError(f"{name}: a {type(shape).__name__} of zero or non-finite size "
+                             f"(its box runs from {lo} to {hi})")
+
+
+def _twist(velocity, name: str) -> np.ndarray:
+    """An obstacle's twist (6,), linear (m/s) then angular (rad/s), from ``velocity``: None
+    (at rest), a ``pin.Motion`` or 6 numbers; ``name`` names it in the errors."""
+    if velocity is None:
+        return np.zeros(6)
+    if isinstance(velocity, np.ndarray) and velocity.shape == (6,) and velocity.dtype == float:
+        if not math.isfinite(sum(velocity.tolist())):
+            raise ValueError(f"{name} is not finite: {velocity}")
+        return velocity.copy()
+    if isinstance(velocity, pin.Motion):
+        return np.concatenate([velocity.linear, velocity.angular])
+    try:
+        twist = np.array(velocity, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        raise TypeError(f"{name} must be 6 numbers (linear m/s, angular rad/s) or a "
+                        f"pin.Motion, got {type(velocity).__name__}") from None
+    if twist.shape != (6,):
+        raise ValueError(f"{name} must hold 6 numbers (linear m/s, angular rad/s), got "
+                         f"{twist.size}")
+    if not np.all(np.isfinite(twist)):
+        raise ValueError(f"{name} is not finite: {twist}")
+    return twist
 
 
 def _mimic_map(model: pin.Model, mimic_joints) -> np.ndarray | None:

@@ -79,6 +79,9 @@ void register_collision_braking(nb::module_& m) {
           bound[i] = h >= 0.0 ? std::min(bound[i], v) : std::max(bound[i], v);
           bound[i] = std::max(bound[i],
                               std::min(s + r * dt, stoppable_speed(h + slack, a, dt + ramp)));
+          // inside the margin (a start there): the pair separates as fast as the share of the
+          // limits lets its closing speed drop, not at once
+          if (h < 0.0) bound[i] = std::max(bound[i], s + r * dt);
         }
       },
       nb::arg("A"), nb::arg("b"), nb::arg("dq"), nb::arg("ddq"), nb::arg("accelerations"),
@@ -97,7 +100,9 @@ void register_collision_braking(nb::module_& m) {
       "    - j dt) from the previous step's velocity dq and acceleration ddq, V as v at the\n"
       "    whole a_i: a row whose closing speed jumps asks it to drop no faster than its share\n"
       "    of the limits allows, while its pair, braking at a_i, stays at least margin - slack\n"
-      "    apart.\n"
+      "    apart;\n"
+      "  - b_i = max(b_i, s_i + r dt) inside the margin (h < 0): the pair separates as fast as\n"
+      "    that share lets its closing speed drop.\n"
       "A (k, N), b (k,), dq, ddq, accelerations and jerks (N,).");
 
   m.def(

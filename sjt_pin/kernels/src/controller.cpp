@@ -217,15 +217,26 @@ void Controller::project(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<
   }
   if (!lower) {
     velocity = x0_;
-    return;
+  } else {
+    // the lower levels: nearest (Euclidean) to their step, with level 0's task motion held
+    tmp_ = x0_ + (desired - desired_top);
+    Vector d = J0 * x0_;
+    RowMatrix C = J0;
+    ProjectionReport r = projection_.solve(tmp_, lam_low_, Bnone_, lo, hi, A, b, C, d, velocity);
+    report.iterations += r.iterations;
+    report.converged = report.converged && r.converged;
   }
-  // the lower levels: nearest (Euclidean) to their step, with level 0's task motion held
-  tmp_ = x0_ + (desired - desired_top);
-  Vector d = J0 * x0_;
-  RowMatrix C = J0;
-  ProjectionReport r = projection_.solve(tmp_, lam_low_, Bnone_, lo, hi, A, b, C, d, velocity);
-  report.iterations += r.iterations;
-  report.converged = report.converged && r.converged;
+  if (!rows_hold(A, b)) {
+    // the task's metric can leave the dual degenerate (fewer joints inside their box than
+    // task rows and rows to meet), and its solve stop short of a row: the nearest velocity
+    // within the box and the rows (Euclidean, over the moving joints), whose dual has the
+    // rows only
+    tmp_ = velocity;
+    ProjectionReport r = projection_.solve(tmp_, lam_low_, Bnone_, lo, hi, A, b, Cnone_, empty_,
+                                           velocity);
+    report.iterations += r.iterations;
+    report.converged = report.converged && r.converged;
+  }
 }
 
 bool Controller::rows_hold(const Eigen::Ref<const RowMatrix>& A,
@@ -357,6 +368,21 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
   bool torn = false;
   for (Index j = 0; j < n; ++j) torn = torn || box.torn[j];
   if (torn) status |= kConflict;
+  // a row that no velocity within the hard box keeps (a link its joints cannot move away from
+  // an obstacle, an obstacle faster than the speed limits) asks what the box allows at best:
+  // kept alone, it does not tear the others apart (StepInfo.rows_exceeded reports the row as
+  // given)
+  const Index k = A.rows();
+  bk_.resize(k);
+  for (Index i = 0; i < k; ++i) {
+    double best = 0.0;
+    for (Index j = 0; j < n; ++j) {
+      const double a = A(i, j);
+      if (a != 0.0) best += a * (a > 0.0 ? box.hard_lo[j] : box.hard_hi[j]);
+    }
+    bk_[i] = std::max(b[i], best);
+  }
+  const Vector& bk = bk_;
   // 5. the method's step where it is within every limit; else first the hard limits (position,
   // speed, a user's bounds and rows) by the projection, where joints held at a bound leave the
   // task to the others; then each joint's smoothness box (acceleration, jerk, braking) on its
@@ -366,15 +392,15 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
   // that breaks a row, the projection within the whole box, or the hard box alone (the
   // smoothness yields to a collision row).
   report = ProjectionReport{};
-  kept = feasible(desired, A, b, box.lo, box.hi);
+  kept = feasible(desired, A, bk, box.lo, box.hi);
   if (kept) {
     velocity = desired;
   } else {
     status |= kConstrained;
-    if (feasible(desired, A, b, box.hard_lo, box.hard_hi)) {
+    if (feasible(desired, A, bk, box.hard_lo, box.hard_hi)) {
       velocity = desired;
     } else {
-      project(A, b, box.hard_lo, box.hard_hi);
+      project(A, bk, box.hard_lo, box.hard_hi);
       if (bounds.smooth) {
         // each joint approaches the feasible velocity, not the method's beyond the hard
         // limits: the approach toward an unreachable velocity held joints that the feasible
@@ -386,17 +412,17 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
       }
     }
     for (Index j = 0; j < n; ++j) velocity[j] = std::min(std::max(velocity[j], box.lo[j]), box.hi[j]);
-    if (!feasible(velocity, A, b, box.lo, box.hi)) {
-      project(A, b, box.lo, box.hi);
-      bool broken = !rows_hold(A, b);
+    if (!feasible(velocity, A, bk, box.lo, box.hi)) {
+      project(A, bk, box.lo, box.hi);
+      bool broken = !rows_hold(A, bk);
       if (broken && bounds.smooth) {
-        yield_smoothness(A, b);
+        yield_smoothness(A, bk);
         for (Index j = 0; j < n; ++j)
           if (velocity[j] < box.cap_lo[j] - kBoundTol || velocity[j] > box.cap_hi[j] + kBoundTol) {
             box.torn[j] = 1;
             status |= kConflict;
           }
-        broken = !rows_hold(A, b);
+        broken = !rows_hold(A, bk);
       }
       if (broken) status |= kRowsBroken;
     }
@@ -404,7 +430,7 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
   }
   rows_active.clear();
   for (Index i = 0; i < A.rows(); ++i)
-    if (A.row(i).dot(velocity) >= b[i] - 1e-9 * (1.0 + std::abs(b[i]))) rows_active.push_back(static_cast<int>(i));
+    if (A.row(i).dot(velocity) >= bk[i] - 1e-9 * (1.0 + std::abs(bk[i]))) rows_active.push_back(static_cast<int>(i));
   // the share of level 0's task motion kept
   if (kept) {
     task_scale = 1.0;

@@ -92,7 +92,7 @@ class Controller {
   double dt_;
   RowMatrix Jw_, high_, Jhat_, Bnone_, Cnone_, B_, along_;
   Vector ew_, ffw_, k_, fb0_, ff0_, t_, tfb_, tff_, x0_, xa_, tstar_, gt_, direction_, tmp_, tmp2_, lam_low_;
-  Vector empty_, wide_lo_, wide_hi_, delta_, aim_;
+  Vector empty_, wide_lo_, wide_hi_, delta_, aim_, bk_;
   Eigen::MatrixXd gram_;
   Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eigen_;
   Method lower_;

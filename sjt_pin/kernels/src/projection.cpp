@@ -39,6 +39,14 @@ int Projection::inner(const Eigen::Ref<const Vector>& xb, const Eigen::Ref<const
         M_.topLeftCorner(m, m).selfadjointView<Eigen::Lower>().rankUpdate(G.col(j), inv_[j]);
     M_.topLeftCorner(m, m).diagonal() += ridge;
     llt_.compute(M_.topLeftCorner(m, m));
+    if (llt_.info() != Eigen::Success) {
+      // (rounding left M indefinite where the ridge is tiny beside its largest entries: a
+      // ridge of 1e-12 of its diagonal's largest, else the iterate stands)
+      const double bump = 1e-12 * M_.topLeftCorner(m, m).diagonal().cwiseAbs().maxCoeff();
+      M_.topLeftCorner(m, m).diagonal().array() += bump > 0.0 ? bump : 1e-300;
+      llt_.compute(M_.topLeftCorner(m, m));
+      if (llt_.info() != Eigen::Success) return kInnerIterations;
+    }
     step_.head(m) = llt_.solve(grad_.head(m));
     auto s = step_.head(m);
     // exact line search: phi'(t) = x(t) . G^T s - off . s - (ridge (y + t s)) . s, with
@@ -175,6 +183,7 @@ ProjectionReport Projection::solve(
   if (k) scale = std::max(scale, b.cwiseAbs().maxCoeff());
   if (!(scale > 0.0)) scale = 1.0;
   ProjectionReport report;
+  bool settled = false;
   for (int outer = 0; outer < 3 * k + 10; ++outer) {
     const Index m = r + c + static_cast<Index>(working_.size());
     off_.segment(r, c) = d;
@@ -201,14 +210,19 @@ ProjectionReport Projection::solve(
         for (Index a = r + c + worst; a + 1 < m; ++a) y_[a] = y_[a + 1];
         continue;
       }
-      // the most violated row outside joins
+      // the most violated row outside joins: broken by more than rounding, measured in the
+      // row's own units (a measure in the metric would hide a row that a joint of tiny
+      // curvature dominates - one its box pins, such as a joint no task moves)
       Index join = -1;
-      double violation = kTolerance * scale;
+      double violation = 0.0;
+      const double size = gx_.cwiseAbs().maxCoeff();
       for (Index i = 0; i < k; ++i) {
         if (std::find(working_.begin(), working_.end(), static_cast<int>(i)) != working_.end())
           continue;
-        const double norm = std::sqrt(A.row(i).cwiseAbs2().cwiseProduct(inv_.transpose()).sum());
-        const double v = (A.row(i).dot(gx_) - b[i]) / (norm + 1e-300);
+        const double norm = A.row(i).norm();
+        const double broken = A.row(i).dot(gx_) - b[i];
+        if (!(broken > kRowTolerance * (std::abs(b[i]) + norm * size))) continue;
+        const double v = broken / (norm + 1e-300);
         if (v > violation) {
           violation = v;
           join = i;
@@ -225,8 +239,10 @@ ProjectionReport Projection::solve(
     // joints strictly inside their box in the metric diag(lam) meets them exactly (a polish of
     // the size of that breach)
     polish(C, d, A, b, lo, hi);
+    settled = true;
     break;
   }
+  if (!settled) report.converged = false;
   x = gx_;
   report.rows_active = static_cast<int>(working_.size());
   return report;

@@ -54,6 +54,8 @@ class Projection {
   static constexpr int kInnerIterations = 60;
   static constexpr double kTolerance = 1e-14;
   static constexpr double kRidge = 1e-12;
+  // a row broken by more than this share of its scale (|b| + |A_i| |x|) joins the working set
+  static constexpr double kRowTolerance = 1e-13;
 
  private:
   void polish(const Eigen::Ref<const RowMatrix>& C, const Eigen::Ref<const Vector>& d,
