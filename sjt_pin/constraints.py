@@ -102,7 +102,7 @@ class UserLimits:
                 A, b = blocks[0]
             else:
                 A, b = np.vstack([a for a, _ in blocks]), np.concatenate([c for _, c in blocks])
-        self.last_rows = None if A is None else (A, b, owners)
+        self.last_rows = None if A is None or b is None else (A, b, owners)
         return lower, upper, A, b, owners
 
     def exceeded(self, dq: np.ndarray, tol: float = 1e-9) -> tuple[tuple[str, float], ...]:

@@ -1058,8 +1058,9 @@ class CollisionLimit(Limit):
         row. A second call at the same configuration, period, obstacle poses and motion
         returns the same (read-only) arrays."""
         skip, q, listed = self._skip, kinematics.q, False
+        # (most steps: nothing to query, as near_pairs finds; a moving obstacle queries)
         if skip is not None and q is not None and motion.acceleration_limits is None \
-                and motion.dt > 0 and not self._moving:  # (most steps: nothing to query, as near_pairs finds)
+                and motion.dt > 0 and not self._moving:
             listed = near_pairs(q, skip, self._influence)
             if listed == []:
                 if self.active or self.within:
