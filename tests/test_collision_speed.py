@@ -216,8 +216,8 @@ def test_the_compiled_refresh_lists_what_the_numpy_broad_phase_lists(
         limit._checked = True  # every pair stays, the ball wherever the walk takes the arm
     kin = Kinematics(robot.model)
     motion = Motion(q, np.zeros(robot.nv), np.zeros(robot.nv), 1e-3)
-    import sjt_pin.limits.collision as collision
-    refresh = collision.refresh_pairs
+    import sjt_pin.limits.collision_broad_phase as broad_phase
+    refresh = broad_phase.refresh_pairs
     refreshed, rows_seen = [0], 0
 
     def counted(*args):
@@ -227,9 +227,9 @@ def test_the_compiled_refresh_lists_what_the_numpy_broad_phase_lists(
     for step in range(300):
         q = _walk_step(robot, q, drift, 0.3 if step % 50 == 0 else 0.003, rng)
         kin.update(q)
-        monkeypatch.setattr(collision, "refresh_pairs", counted)
+        monkeypatch.setattr(broad_phase, "refresh_pairs", counted)
         a = compiled.rows(kin, motion)
-        monkeypatch.setattr(collision, "refresh_pairs", lambda *args: None)
+        monkeypatch.setattr(broad_phase, "refresh_pairs", lambda *args: None)
         b = numpy_path.rows(kin, motion)
         assert (a is None) == (b is None), step
         assert compiled.active == numpy_path.active and compiled.within == numpy_path.within

@@ -1,0 +1,91 @@
+"""Moving obstacles of :class:`sjt_pin.limits.collision.CollisionLimit`: each pair's bound on
+its obstacle's speed, how long a pair with a moving obstacle is watched ahead, and the rows'
+bounds carried by the obstacles' velocities (module docstring of
+:mod:`sjt_pin.limits.collision`, "Moving obstacles").
+
+A part of the CollisionLimit (a mixin it inherits from), operating on its state."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .base import Motion
+from .collision_state import CollisionState
+
+
+class MovingMixin(CollisionState):
+    """The moving obstacles of a :class:`~sjt_pin.limits.collision.CollisionLimit`."""
+
+    def _moving_speeds(self) -> None:
+        """Each pair's bound on its obstacle's speed (m/s) at any point of the obstacle's
+        bounding sphere, ``|v| + |w| (|c| + r)`` (``c`` the sphere's centre in the obstacle's
+        frame, ``r`` its radius; inf for a turning Halfspace or Plane), 0 for a pair of the
+        robot's own links: ``_pair_speed``; ``_moving``: whether any is above 0."""
+        if not len(self._obstacle_ids):
+            self._pair_speed, self._moving = np.zeros(len(self.pairs)), False
+            return
+        linear = np.linalg.norm(self._velocity[:, :3], axis=1)
+        turn = np.linalg.norm(self._velocity[:, 3:], axis=1)
+        index = self._pair_obstacle
+        mine = index >= 0
+        pick = np.where(mine, index, 0)
+        with np.errstate(invalid="ignore"):
+            spin = np.where(turn[pick] > 0, turn[pick] * self._pair_far, 0.0)
+        self._pair_speed = np.where(mine, linear[pick] + spin, 0.0).sum(axis=1)
+        self._moving = bool(np.any(self._pair_speed > 0))
+
+    @staticmethod
+    def _lookahead(motion: Motion) -> float:
+        """How long (s) a pair with a moving obstacle is watched ahead: the obstacle's
+        travel in this time widens the pair's influence. Two periods (the obstacle may close
+        a period's travel before the row sees it and another while the step runs); with
+        acceleration limits also the longest time a joint takes to reach its speed limit
+        (at most 1 s), and with jerk limits the longest ramp to its acceleration limit: the
+        arm may need that long to match the obstacle's speed."""
+        time = 2.0 * motion.dt
+        accelerations = motion.acceleration_limits
+        if accelerations is None:
+            return time
+        speeds = motion.velocity_limits
+        with np.errstate(divide="ignore", invalid="ignore"):
+            if speeds is not None:
+                reach = speeds / accelerations
+                reach = reach[np.isfinite(reach)]
+                time += min(float(reach.max()), 1.0) if reach.size else 1.0
+            else:
+                time += 1.0
+            if motion.jerk_limits is not None:
+                ramp = accelerations / motion.jerk_limits
+                ramp = ramp[np.isfinite(ramp)]
+                time += float(ramp.max()) if ramp.size else 0.0
+        return time
+
+    def _carried(self, out: tuple[np.ndarray, np.ndarray] | None
+                 ) -> tuple[np.ndarray, np.ndarray] | None:
+        """``out``, the rows of this step, with each bound raised by the normal velocity of the
+        moving obstacle's closest point away from the robot (lowered where it comes closer):
+        ``b_i + n^T (v_b(p_b) - v_a(p_a))`` with ``v_x(p) = v + w x (p - o)`` for an obstacle
+        with twist ``(v, w)`` and origin ``o`` (0 for a link of the robot), so that the row
+        bounds the pair's relative closing speed (:mod:`sjt_pin.limits.collision`'s
+        docstring, "Moving obstacles")."""
+        if out is None or not self._moving:
+            return out
+        A, b = out
+        count = len(self.active)
+        owners = np.concatenate([np.asarray(self.active, dtype=np.int64),
+                                 self._owners[:self._witness_count].astype(np.int64)])
+        rows = self._pair_rows[:count + self._witness_count]
+        normal = rows[:, 4:7]
+        shift = np.zeros(len(owners))
+        for side, sign, points in ((1, 1.0, rows[:, 10:13]), (0, -1.0, rows[:, 7:10])):
+            index = self._obstacle_of[self.pairs[owners, side]]
+            mine = np.flatnonzero(index >= 0)
+            if mine.size == 0:
+                continue
+            twist = self._velocity[index[mine]]
+            origin = self._placement[self.pairs[owners[mine], side], :3, 3]
+            velocity = twist[:, :3] + np.cross(twist[:, 3:], points[mine] - origin)
+            shift[mine] += sign * np.einsum("ij,ij->i", normal[mine], velocity)
+        carried = b + shift
+        carried.setflags(write=False)
+        return A, carried
