@@ -116,3 +116,19 @@ def test_a_start_inside_the_margin_is_said_and_left_within_the_limits(panda, smo
         j = np.diff(np.vstack([np.zeros((1, panda.nv)), a]), axis=0) / 1e-3
         assert np.max(np.abs(a) / options["acceleration_limits"]) <= 1.01
         assert np.max(np.abs(j) / options["jerk_limits"]) <= 1.01
+
+
+@pytest.mark.parametrize("options, error, match", [
+    ({"margin": "1cm"}, TypeError, "margin must be a number"),
+    ({"gain": None}, TypeError, "gain must be a number"),
+    ({"influence": True}, TypeError, "influence must be a number"),
+    ({"margin": -0.01}, ValueError, "margin must be a finite distance"),
+    ({"margin": np.nan}, ValueError, "margin must be a finite distance"),
+    ({"influence": np.inf}, ValueError, "influence must be finite"),
+    ({"gain": 0.0}, ValueError, r"gain must be in \(0, 1\]"),
+    ({"witnesses": -1}, ValueError, "witnesses must be an int in"),
+    ({"witnesses": 10**9}, ValueError, "witnesses must be an int in"),
+    ({"witnesses": 2.0}, ValueError, "witnesses must be an int in")])
+def test_options_are_checked_by_name(panda, options, error, match):
+    with pytest.raises(error, match=match):
+        CollisionLimit(panda, **options)

@@ -122,6 +122,9 @@ __all__ = ["ClosestPoints", "CollisionLimit", "CollisionError", "PairDistance"]
 #: the share of each joint's acceleration (and jerk) limit a damper row counts on to stop its
 #: pair's closing speed (``kernels.stoppable_rows``); the rest is the task's and the other rows'
 BRAKING_SHARE = 0.5
+#: the most recent closest points a pair may keep as rows of their own (``witnesses``): a
+#: contact manifold has a few; each one costs a row on every step the pair is near
+MAX_WITNESSES = 16
 #: with acceleration limits a row that turns or appears eases in at what they allow as long as
 #: its pair stays at least ``margin`` minus this (m) apart (``kernels.stoppable_rows``)
 EASING_SLACK = 5e-4
@@ -175,6 +178,10 @@ class CollisionLimit(PairsMixin, TablesMixin, BroadPhaseMixin, MovingMixin, Rows
                  srdf: str | None = None, convex: bool = True, witnesses: int = 3):
         if coal is None:  # pragma: no cover
             raise CollisionError("CollisionLimit needs coal (shipped with the pin wheel)")
+        for name, value in (("margin", margin), ("influence", influence), ("gain", gain)):
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.integer,
+                                                                 np.floating)):
+                raise TypeError(f"{name} must be a number, got {type(value).__name__}")
         if not (np.isfinite(margin) and margin >= 0):
             raise ValueError(f"margin must be a finite distance >= 0 (m), got {margin!r}")
         if not (np.isfinite(influence) and influence > margin):
@@ -182,9 +189,10 @@ class CollisionLimit(PairsMixin, TablesMixin, BroadPhaseMixin, MovingMixin, Rows
                              f"got {influence!r}")
         if not (0 < gain <= 1):
             raise ValueError(f"gain must be in (0, 1], got {gain!r}")
-        if isinstance(witnesses, bool) or not isinstance(witnesses, (int, np.integer)) or (
-                witnesses < 0):
-            raise ValueError(f"witnesses must be an int >= 0, got {witnesses!r}")
+        if isinstance(witnesses, bool) or not isinstance(witnesses, (int, np.integer)) or not (
+                0 <= witnesses <= MAX_WITNESSES):
+            raise ValueError(f"witnesses must be an int in [0, {MAX_WITNESSES}], got "
+                             f"{witnesses!r}")
         self.margin, self.influence, self.gain = float(margin), float(influence), float(gain)
         self.witnesses = int(witnesses)
         # what a copy in another process is rebuilt from (coal's hulls do not pickle)
