@@ -139,7 +139,9 @@ def test_blocked_targets_with_acceleration_limits_come_to_rest(seed, method):
         reported.append(bool(solver.last.limit_conflicts))
         errors.append(solver.last.error_norm)
     qs = np.array(qs)
-    assert errors[-1] <= errors[-3000] + 1e-9  # no farther from the target than 3 s before
+    # no farther from the target than 3 s before (means over a second: the contact's bounce,
+    # the expected failure below, moves the error by some 1e-5 from step to step)
+    assert np.mean(errors[-1000:]) <= np.mean(errors[-4000:-3000]) + 1e-9
     assert _closest(panda, [obstacle], limit, qs) >= MARGIN - 1e-3
     v = np.diff(qs, axis=0) / DT  # (Panda's coordinates are its tangent space)
     a = np.diff(np.vstack([np.zeros((1, n)), v]), axis=0) / DT
