@@ -78,7 +78,7 @@ class MovingMixin(CollisionState):
         normal = rows[:, 4:7]
         shift = np.zeros(len(owners))
         for side, sign, points in ((1, 1.0, rows[:, 10:13]), (0, -1.0, rows[:, 7:10])):
-            index = self._obstacle_of[self.pairs[owners, side]]
+            index = self._pair_obstacle[owners, side]
             mine = np.flatnonzero(index >= 0)
             if mine.size == 0:
                 continue
