@@ -111,6 +111,16 @@ def scenes() -> list[Scene]:
     ]
 
 
+def rates(model: pin.Model, qs, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The joint velocities, accelerations and jerks (N, nv) of the configurations ``qs``
+    (N + 1, nq) a solver returned at period ``dt``: finite differences on the model's tangent
+    space (``pin.difference``), from rest before the first step."""
+    v = np.array([pin.difference(model, a, b) for a, b in zip(qs[:-1], qs[1:], strict=True)]) / dt
+    a = np.diff(np.vstack([np.zeros((1, model.nv)), v]), axis=0) / dt
+    j = np.diff(np.vstack([np.zeros((1, model.nv)), a]), axis=0) / dt
+    return v, a, j
+
+
 class Checker:
     """The least distance of the pairs a limit checks, computed independently (module
     docstring): meshes where the robot has them, obstacles as given."""

@@ -22,7 +22,7 @@ import pinocchio as pin
 from ..limits import CollisionLimit
 from ..robot import Robot
 from ..solvers import make_solver
-from .collision import Checker, _line
+from .collision import Checker, _line, rates
 from .collision_moving import franka_like
 
 DT = 1e-3
@@ -83,9 +83,7 @@ def pull(convex: bool, robot: Robot | None = None) -> MeshRow:
         reported.append(bool(solver.last.limit_conflicts))
         if k % 5 == 0:
             closest = min(closest, checker.closest(q)[0])
-    v = np.diff(np.array(qs), axis=0) / DT  # (Panda's coordinates are its tangent space)
-    a = np.diff(np.vstack([np.zeros((1, n)), v]), axis=0) / DT
-    j = np.diff(np.vstack([np.zeros((1, n)), a]), axis=0) / DT
+    _, a, j = rates(robot.model, qs, DT)
     above = (np.max(np.abs(a) / accelerations, axis=1) > 1.001) | (
         np.max(np.abs(j) / jerks, axis=1) > 1.001)
     return MeshRow(convex, float(closest), float(np.max(np.abs(a) / accelerations)),

@@ -24,7 +24,7 @@ import pinocchio as pin
 from ..limits import CollisionLimit
 from ..robot import Robot
 from ..solvers import make_solver
-from .collision import Checker
+from .collision import Checker, rates
 
 MARGIN = 0.01
 TRAVEL = 0.45  # m the ball comes from
@@ -89,13 +89,10 @@ def drive(robot: Robot, speed: float, dt: float, smooth: bool = False, told: boo
         spent += time.process_time() - t0
         qs.append(q)
         exceeded += bool(solver.last.rows_exceeded)
-    # (the robots of this bench have their tangent space as coordinates)
-    v = np.diff(np.array(qs), axis=0) / dt
+    v, a, j = rates(robot.model, qs, dt)
     speed_ratio = float(np.max(np.abs(v) / robot.velocity_limits))
     acceleration_ratio = jerk_ratio = float("nan")
     if smooth:
-        a = np.diff(np.vstack([np.zeros((1, n)), v]), axis=0) / dt
-        j = np.diff(np.vstack([np.zeros((1, n)), a]), axis=0) / dt
         acceleration_ratio = float(np.max(np.abs(a) / options["acceleration_limits"]))
         jerk_ratio = float(np.max(np.abs(j) / options["jerk_limits"]))
     return MovingRow(robot.name, speed, 1.0 / dt, smooth, told, float(closest), int(below),

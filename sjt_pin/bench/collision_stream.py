@@ -22,7 +22,7 @@ import pinocchio as pin
 from ..limits import CollisionLimit
 from ..robot import Robot
 from ..solvers import make_solver
-from .collision import Checker
+from .collision import Checker, rates
 
 DT = 1e-3
 ACCELERATION, JERK = 10.0, 5000.0  # rad/s^2, rad/s^3 on every joint
@@ -81,12 +81,9 @@ def stream(methods=("sjt", "dls"), seeds=range(6), influence: float = 0.05, prog
             worst, jerk_worst, closest = 0.0, 0.0, np.inf
             for seed in seeds:
                 qs, reported, limit, obstacles = _run(robot, method, ball, seed, influence)
-                v = np.array([pin.difference(robot.model, a, b)
-                              for a, b in zip(qs[:-1], qs[1:], strict=True)]) / DT
-                a = np.diff(np.vstack([np.zeros((1, robot.nv)), v]), axis=0) / DT
+                _, a, j = rates(robot.model, qs, DT)
                 ratio = np.max(np.abs(a), axis=1) / ACCELERATION
-                jerk = np.max(np.abs(np.diff(np.vstack([np.zeros((1, robot.nv)), a]), axis=0)),
-                              axis=1) / DT / JERK
+                jerk = np.max(np.abs(j), axis=1) / JERK
                 above = (ratio > 1.001) | (jerk > 1.001)
                 steps += len(ratio)
                 over += int((ratio > 1.001).sum())
