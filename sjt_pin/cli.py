@@ -136,8 +136,8 @@ def _write_json(path: str | None, payload) -> None:
 
 
 def bench(args: argparse.Namespace) -> int:
-    """``sjt-pin bench speed|accuracy|ik|collision``: the tables of the documentation's Benchmarks
-    page (docs/benchmarks.md)."""
+    """``sjt-pin bench speed|accuracy|reach|ik|collision``: the tables of the documentation's
+    Benchmarks page (docs/benchmarks.md)."""
     from dataclasses import asdict
 
     from .bench import speed as speed_bench
@@ -230,6 +230,22 @@ def bench(args: argparse.Namespace) -> int:
                                 "units": [asdict(r) for r in units],
                                 "saturating": [asdict(r) for r in saturating],
                                 "franka": [asdict(r) for r in franka]})
+    elif args.kind == "reach":
+        from .bench import reach
+
+        def told(row):
+            print(f"  {row.robot}, {getattr(row, 'method', 'SJT')}", flush=True)
+
+        random_rows = reach.random_reaches(pairs=args.pairs, peers=not args.no_peers,
+                                           progress=told)
+        print(f"\nRandom full-range reaches ({args.pairs} pairs a robot, 5 s at 1 kHz):\n"
+              + reach.reach_table(random_rows))
+        jerk_rows = reach.jerk_grid(trials=args.trials, progress=told)
+        print("\nThe jerk grid (SJT; at rest on the target, beside Ruckig's time-optimal "
+              "duration):\n" + reach.jerk_table(jerk_rows))
+        _write_json(args.json, {"machine": machine,
+                                "random": [asdict(r) for r in random_rows],
+                                "jerk": [asdict(r) for r in jerk_rows]})
     else:
         from .bench.ik import ik_benchmark, ik_table, many_line, many_throughput
 
@@ -447,10 +463,12 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("bench", help="benchmarks: step speed, accuracy, solve to a pose",
                        description="The benchmarks of docs/benchmarks.md: speed (every step "
                        "path against its Pinocchio floor), accuracy (tracking near singularities, "
-                       "rest at unreachable targets, exits from saddles), ik (TRAC-IK's "
+                       "rest at unreachable targets, exits from saddles), reach (random "
+                       "full-range reaches beside pink, settling under jerk limits beside "
+                       "Ruckig), ik (TRAC-IK's "
                        "protocol on five arms), collision (three scenes with and without "
                        "CollisionLimit, and pink's barrier).")
-    p.add_argument("kind", choices=["speed", "accuracy", "ik", "collision"],
+    p.add_argument("kind", choices=["speed", "accuracy", "reach", "ik", "collision"],
                    help="which benchmark")
     p.add_argument("--peers", action="store_true",
                    help="speed: add pink's solve_ik (pip install -e '.[bench]')")
@@ -459,7 +477,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--poses", type=positive_int, default=1000, help="ik: random poses per robot "
                    "(default: 1000)")
     p.add_argument("--no-peers", action="store_true",
-                   help="ik: skip TRAC-IK and robotics-toolbox's ik_LM; collision: skip pink")
+                   help="ik: skip TRAC-IK and robotics-toolbox's ik_LM; collision, reach: skip "
+                   "pink")
+    p.add_argument("--pairs", type=positive_int, default=50, help="reach: random (start, "
+                   "target) pairs per robot (default: 50)")
+    p.add_argument("--trials", type=positive_int, default=30, help="reach: runs of the jerk "
+                   "grid (default: 30)")
     p.add_argument("--json", default=None, metavar="PATH", type=output_file(parents=False),
                    help="also write the results as JSON (its folder must exist)")
     p.set_defaults(func=bench)

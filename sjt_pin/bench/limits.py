@@ -6,9 +6,10 @@ Franka's conditions, for every method (and pink, with its own limits, when insta
   error, and the largest joint speed over its URDF limit.
 - **franka** (:func:`franka`): Panda at 1 kHz with its published acceleration and jerk limits,
   targets jumping every 0.5 s (every third one out of reach), then a reachable target held for
-  3 s. The largest finite-difference velocity, acceleration and jerk of the returned ``q`` over
-  their limits, whether ``q`` left the URDF range, the final error, and the RMS joint speed
-  over the last second.
+  8 s; then the same stream on arms the tests do not use (xArm7, Kinova Gen3, UR10), with
+  acceleration and jerk limits of their class. The largest finite-difference velocity,
+  acceleration and jerk of the returned ``q`` over their limits, whether ``q`` left the URDF
+  range, the final error, and the RMS joint speed over the last second.
 """
 
 from __future__ import annotations
@@ -110,47 +111,66 @@ def _pink_circle(robot: Robot, q0: np.ndarray, circle: Circle, path: str) -> Lim
     return LimitRow(path, "pink", worst, speed)
 
 
-def franka(methods=METHODS, seconds: float = 20.0, progress=None) -> list[LimitRow]:
-    """Every method under Franka's conditions (module docstring)."""
-    panda = Robot.from_example("panda")
-    dt = 1e-3
+#: the arms the stream also runs on, with limits of their class (rad/s^2, rad/s^3)
+HELD_OUT = {"xarm7": (10.0, 5000.0), "kinova": (10.0, 5000.0), "ur10": (8.0, 2000.0)}
+
+
+def franka(methods=METHODS, seconds: float = 20.0, arms=HELD_OUT, progress=None
+           ) -> list[LimitRow]:
+    """Every method under Franka's conditions (module docstring), then the same stream on
+    ``arms`` (name: acceleration and jerk limit of every joint)."""
     rows = []
-    for method in methods:
-        rng = np.random.default_rng(0)
-        solver = make_solver(method, panda, dt=dt, acceleration_limits=PANDA_ACCELERATION,
-                             jerk_limits=PANDA_JERK)
-        q = panda.q0.copy()
-        qs = [q]
-        for jump in range(int(seconds / 0.5)):
-            if jump % 3 == 2:  # out of reach: 1.5-2 m from the base
-                direction = rng.normal(size=3)
-                target = pin.SE3(pin.exp3(rng.normal(size=3)),
-                                 rng.uniform(1.5, 2.0) * direction / np.linalg.norm(direction))
-            else:
-                target = panda.fk(panda.random_configuration(rng))
-            for _ in range(500):
-                q = solver.step(q, target)
-                qs.append(q)
-        near = np.clip(q + np.r_[rng.uniform(-0.3, 0.3, 7), 0], panda.lower_limits,
-                       panda.upper_limits)
-        held = panda.fk(near)
-        for _ in range(3000):
-            q = solver.step(q, held)
-            qs.append(q)
-        qs = np.array(qs)
-        v = np.diff(qs, axis=0) / dt
-        a = np.diff(v, axis=0) / dt
-        j = np.diff(a, axis=0) / dt
-        row = LimitRow(
-            "Panda, targets jumping (Franka's limits)", method.upper(), float("nan"),
-            float(np.max(np.abs(v) / panda.velocity_limits)),
-            float(np.max(np.abs(a) / PANDA_ACCELERATION)), float(np.max(np.abs(j) / PANDA_JERK)),
-            bool(np.all(qs >= panda.lower_limits) and np.all(qs <= panda.upper_limits)),
-            float(solver.error_norm), float(np.sqrt(np.mean(v[-1000:] ** 2))))
-        rows.append(row)
-        if progress:
-            progress(row)
+    runs = [("panda", PANDA_ACCELERATION, PANDA_JERK, "Franka's limits")]
+    runs += [(name, acc, jerk, f"{acc:g} rad/s², {jerk:g} rad/s³")
+             for name, (acc, jerk) in arms.items()]
+    for name, acceleration, jerk, what in runs:
+        robot = Robot.from_example(name)
+        for method in methods:
+            rows.append(_stream(robot, method, acceleration, jerk, seconds,
+                                f"{name}, targets jumping ({what})"))
+            if progress:
+                progress(rows[-1])
     return rows
+
+
+def _stream(robot: Robot, method: str, acceleration, jerk, seconds: float, path: str
+            ) -> LimitRow:
+    """Targets jumping every 0.5 s (every third 1.5-2 m from the base, out of reach), then a
+    reachable target near the last configuration held for 8 s."""
+    dt, nv = 1e-3, robot.nv
+    acceleration = np.broadcast_to(np.asarray(acceleration, float), (nv,))
+    jerk = np.broadcast_to(np.asarray(jerk, float), (nv,))
+    rng = np.random.default_rng(0)
+    solver = make_solver(method, robot, dt=dt, acceleration_limits=acceleration,
+                         jerk_limits=jerk)
+    q = robot.q0.copy()
+    qs = [q]
+    for jump in range(int(seconds / 0.5)):
+        if jump % 3 == 2:  # out of reach: 1.5-2 m from the base
+            direction = rng.normal(size=3)
+            target = pin.SE3(pin.exp3(rng.normal(size=3)),
+                             rng.uniform(1.5, 2.0) * direction / np.linalg.norm(direction))
+        else:
+            target = robot.fk(robot.random_configuration(rng))
+        for _ in range(500):
+            q = solver.step(q, target)
+            qs.append(q)
+    arm = 7 if robot.name == "panda" else nv  # not the Panda's fingers
+    near = pin.integrate(robot.model, q, np.r_[rng.uniform(-0.3, 0.3, arm), np.zeros(nv - arm)])
+    held = robot.fk(np.clip(near, robot.lower_limits, robot.upper_limits))
+    for _ in range(8000):
+        q = solver.step(q, held)
+        qs.append(q)
+    steps = zip(qs[:-1], qs[1:], strict=True)
+    v = np.array([pin.difference(robot.model, a, b) for a, b in steps]) / dt
+    a = np.diff(v, axis=0) / dt
+    j = np.diff(a, axis=0) / dt
+    qs = np.array(qs)
+    return LimitRow(
+        path, method.upper(), float("nan"), float(np.max(np.abs(v) / robot.velocity_limits)),
+        float(np.max(np.abs(a) / acceleration)), float(np.max(np.abs(j) / jerk)),
+        bool(np.all(qs >= robot.lower_limits) and np.all(qs <= robot.upper_limits)),
+        float(solver.error_norm), float(np.sqrt(np.mean(v[-1000:] ** 2))))
 
 
 def saturating_table(rows: list[LimitRow]) -> str:
@@ -160,10 +180,10 @@ def saturating_table(rows: list[LimitRow]) -> str:
 
 
 def franka_table(rows: list[LimitRow]) -> str:
-    out = ["| method | max speed / limit | max acceleration / limit | max jerk / limit | "
+    out = ["| path | method | max speed / limit | max acceleration / limit | max jerk / limit | "
            "within range | final error | RMS speed, last 1 s [rad/s] |",
-           "|---|---|---|---|---|---|---|"]
-    out += [f"| {r.method} | {r.speed:.3f} | {r.acceleration:.3f} | {r.jerk:.3f} | "
+           "|---|---|---|---|---|---|---|---|"]
+    out += [f"| {r.path} | {r.method} | {r.speed:.3f} | {r.acceleration:.3f} | {r.jerk:.3f} | "
             f"{'yes' if r.in_range else 'NO'} | {r.final_error:.2g} | {r.rest:.2g} |"
             for r in rows]
     return "\n".join(out)
