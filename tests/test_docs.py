@@ -222,6 +222,8 @@ def test_the_benchmark_tables_are_made_from_the_json_files(site):
     assert f"{ik['rows'][0]['median_ms']:.3f}" in page
     collision = json.loads((DOCS / "bench" / "collision.json").read_text())
     assert f"{collision['rows'][0]['us_per_step']:.1f}" in page
+    for section, digits in (("stream", 4), ("moving", 5), ("mesh", 5)):  # every section shown
+        assert f"{collision[section][-1]['closest']:.{digits}f}" in page, section
     assert "From docs/bench/speed.json" in page
 
 
