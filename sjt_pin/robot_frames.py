@@ -23,11 +23,15 @@ FRAME_PREFERENCE: tuple[pin.FrameType, ...] = (
 class FrameInfo(NamedTuple):
     """One frame of a robot, as :meth:`Robot.frames` lists it."""
 
-    id: int  #: index in ``model.frames``
+    #: index in ``model.frames`` (what :meth:`Robot.frame_id` returns)
+    id: int
+    #: the frame's name (a link's, a joint's, an operational frame's)
     name: str
-    type: str  #: Pinocchio's frame type: ``"BODY"`` (a link), ``"JOINT"``, ``"FIXED_JOINT"``,
+    #: Pinocchio's frame type: ``"BODY"`` (a link), ``"JOINT"``, ``"FIXED_JOINT"``,
     #: ``"OP_FRAME"`` or ``"SENSOR"``
-    parent_joint: str  #: the joint that moves it (``"universe"``: fixed to the world)
+    type: str
+    #: the joint that moves it (``"universe"``: fixed to the world)
+    parent_joint: str
 
 
 

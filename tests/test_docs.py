@@ -99,6 +99,61 @@ def test_every_public_name_has_an_api_page_that_the_index_links(site):
     assert "StepInfo" in genindex and "add_obstacle" in genindex
 
 
+#: classes a public signature names that are no part of the API a user holds: the solver's
+#: internal table of its user limits (``Solver.user_limits``, what ``solve()`` reads) and the
+#: compiled kernels' parameter records
+NOT_IN_THE_REFERENCE = {"sjt_pin.constraints.UserLimits"}
+
+
+def _classes_in(annotation) -> set[type]:
+    import inspect
+    import typing
+
+    found = set()
+    if inspect.isclass(annotation) and annotation.__module__.startswith("sjt_pin"):
+        found.add(annotation)
+    for argument in typing.get_args(annotation):
+        found |= _classes_in(argument)
+    return found
+
+
+def test_every_class_a_public_signature_names_has_an_api_page():
+    """What a public method returns or takes (``Robot.frames``' ``FrameInfo``,
+    ``CollisionLimit.distances``' ``PairDistance``, ``StepInfo.levels``' ``LevelInfo``, ...) has
+    its page too, not only the names of ``__all__``."""
+    import importlib
+    import inspect
+    import typing
+
+    documented = {id(getattr(importlib.import_module(package), name))
+                  for package, name in public_names()}
+    missing: dict[str, set[str]] = {}
+    for package, name in public_names():
+        obj = getattr(importlib.import_module(package), name)
+        members = [(name, obj)]
+        if inspect.isclass(obj):
+            for m in dir(obj):  # its own members and those of its bases
+                if m.startswith("_") and m not in ("__init__", "__call__"):
+                    continue
+                value = inspect.getattr_static(obj, m)
+                value = getattr(value, "fget", None) or getattr(value, "__func__", value)
+                members.append((f"{name}.{m}", value))
+        for where, member in members:
+            if not callable(member):
+                continue
+            try:
+                hints = typing.get_type_hints(member)
+            except (NameError, TypeError):
+                continue
+            for hint in hints.values():
+                for cls in _classes_in(hint):
+                    full = f"{cls.__module__}.{cls.__qualname__}"
+                    if (id(cls) not in documented and full not in NOT_IN_THE_REFERENCE
+                            and not cls.__module__.startswith("sjt_pin.kernels")):
+                        missing.setdefault(full, set()).add(where)
+    assert not missing, missing
+
+
 def test_each_topic_is_one_click_from_the_front_page(site):
     """The front page's own content links every topic page (and the API reference)."""
     front = parse(site / "index.html")
@@ -167,6 +222,8 @@ def test_the_benchmark_tables_are_made_from_the_json_files(site):
     assert f"{ik['rows'][0]['median_ms']:.3f}" in page
     collision = json.loads((DOCS / "bench" / "collision.json").read_text())
     assert f"{collision['rows'][0]['us_per_step']:.1f}" in page
+    for section, digits in (("stream", 4), ("moving", 5), ("mesh", 5)):  # every section shown
+        assert f"{collision[section][-1]['closest']:.{digits}f}" in page, section
     assert "From docs/bench/speed.json" in page
 
 

@@ -96,3 +96,32 @@ def test_reproduce_writes_figures_and_results(tmp_path, capsys):
             "fig6c_task3.png", "fig7_task3_errors.png"} <= names
     text = (tmp_path / "results.md").read_text()
     assert "| SJT |" in text and "680.0" in text and "## Length units" in text
+    _the_paper_page_shows_this_run(text)
+
+
+def _the_paper_page_shows_this_run(results: str) -> None:
+    """docs/paper.md's table of largest stable gains is the run's: simulated gains within the
+    bisection's 0.5 % (``--grid`` moves where it ends), k_lin as rounded, the paper's as given."""
+    from pathlib import Path
+
+    page = (Path(__file__).resolve().parents[1] / "docs" / "paper.md").read_text()
+    shown = {}
+    for label, cells in re.findall(r"^\| ((?:SJT|JT), [^|]+?) \|(.*)\|$", page, re.M):
+        shown[label] = [float(c.strip(" *")) for c in cells.split("|")]
+    run: dict[str, list[float]] = {}
+    for task in re.split(r"^### Task ", results, flags=re.M)[1:4]:
+        for method in ("SJT", "JT"):
+            row = re.search(rf"^\| {method} \| ([^|]+) \| ([^|]+) \|.*\| ([^|]+) \|$", task, re.M)
+            simulated, k_lin, theirs = (float(x) for x in row.groups())
+            run.setdefault(f"{method}, simulated", []).append(simulated)
+            run.setdefault(f"{method}, k_lin", []).append(k_lin)
+            run.setdefault(f"{method}, paper", []).append(theirs)
+    label = {"JT, simulated (metres)": "JT, simulated"}
+    assert set(shown) == {"SJT, simulated", "SJT, k_lin", "SJT, paper", "JT, simulated (metres)",
+                          "JT, paper"}
+    for row, values in shown.items():
+        expected = run[label.get(row, row)]
+        if row.endswith("simulated") or row.endswith("(metres)"):
+            assert values == pytest.approx(expected, rel=0.006), row
+        else:
+            assert values == [round(v) for v in expected], row

@@ -1,6 +1,7 @@
 """One API page per public name: ``sjt_pin.__all__`` and the public names of the packages a user
-extends or draws with (``sjt_pin.limits``, ``sjt_pin.methods``, ``sjt_pin.viewer``), and the
-classes a public method returns without their module exporting them (``RETURNED``).
+extends or draws with (``sjt_pin.limits``, ``sjt_pin.limits.collision``, ``sjt_pin.methods``,
+``sjt_pin.viewer``), and the classes a public method or attribute returns without their module
+exporting them (``RETURNED``).
 
 The pages are written into ``docs/api/generated/`` when the build starts (not committed); the
 hand-grouped index ``docs/api/index.md`` links them, and ``tests/test_docs.py`` checks that it
@@ -17,9 +18,15 @@ from pathlib import Path
 from sphinx.util.nodes import make_refnode
 
 #: the packages whose ``__all__`` gets pages, in the order of the index
-PACKAGES = ("sjt_pin", "sjt_pin.limits", "sjt_pin.methods", "sjt_pin.viewer")
+PACKAGES = ("sjt_pin", "sjt_pin.limits", "sjt_pin.limits.collision", "sjt_pin.methods",
+            "sjt_pin.viewer")
 #: ``(module, name)`` of the classes a public API returns without exporting them
-RETURNED = (("sjt_pin.joint_move", "JointMove"),)  # Solver.move_to's
+RETURNED = (
+    ("sjt_pin.joint_move", "JointMove"),  # Solver.move_to's
+    ("sjt_pin.robot_frames", "FrameInfo"),  # Robot.frames'
+    ("sjt_pin.mimic", "MimicJoint"),  # Robot.mimic_joints'
+    ("sjt_pin.step_info", "LevelInfo"),  # StepInfo.levels'
+)
 
 
 def public_names() -> list[tuple[str, str]]:
