@@ -16,6 +16,9 @@ constexpr double kBoundTol = 1e-12;  // rad/s: a velocity this close to a bound 
 constexpr double kUseful = 0.1;
 // beta of the first projection: a task motion off the method's direction costs this much more
 constexpr double kKeepDirection = 1e4;
+// the projection keeps at least this share of the progress of the Cauchy point (the steepest
+// feasible progress within a ball of the method's own step size)
+constexpr double kSufficient = 0.25;
 
 }  // namespace
 
@@ -169,10 +172,22 @@ void Controller::lower_levels(const double* ffw) {
 // replace). Then the lower levels, nearest their own step with the first level's
 // task motion held.
 void Controller::project(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b,
-                         const Vector& lo, const Vector& hi) {
+                         const Vector& box_lo, const Vector& box_hi) {
   const Level& top_level = levels[0];
   const auto J0 = Jw_.middleRows(top_level.begin, top_level.end - top_level.begin);
   const bool lower = levels.size() > 1;
+  // a joint without a speed limit moves no faster than the method's whole step: beyond it the
+  // step's linearisation means nothing (a continuous joint asked for 14,000 rad/s to make up
+  // for the others' limits turned 14 rad in a step, and the error grew)
+  const double radius = std::max(desired_top.norm(), desired.norm());
+  plo_ = box_lo;
+  phi_ = box_hi;
+  for (Index j = 0; j < nv; ++j) {
+    if (std::isinf(plo_[j])) plo_[j] = -radius;
+    if (std::isinf(phi_[j])) phi_[j] = radius;
+  }
+  const Vector& lo = plo_;
+  const Vector& hi = phi_;
   x0_ = desired_top;
   bool inside = true;
   for (Index j = 0; j < nv && inside; ++j)
@@ -214,6 +229,7 @@ void Controller::project(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<
                            : 1.0;
       x0_ = w * xa_ + (1.0 - w) * x0_;
     }
+    sufficient_decrease(J0, A, b, desired_top.norm());
   }
   if (!lower) {
     velocity = x0_;
@@ -236,6 +252,80 @@ void Controller::project(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<
                                            velocity);
     report.iterations += r.iterations;
     report.converged = report.converged && r.converged;
+  }
+}
+
+// The sufficient decrease of trust-region methods. The model is the linearised error after the
+// step, m(v) = |a - J0 v|^2 dt^2 with a = e_w / dt and the feed-forward. Its Cauchy point (cauchy_point) is the
+// model's first minimum along the projected steepest descent within a ball of the method's own
+// step size. Where x0_ lowers the model by less than kSufficient of what that point does (the
+// metric of the projection can weigh the joints that could carry the task heavily: a joint at
+// its limit then froze the step), x0_ is blended toward it: the model is convex, so the step
+// then lowers it by at least that share. A Cauchy point that breaks a row is not taken (the
+// projection's own rows stand), nor is one where the box does not hold 0 (a joint returning
+// into its range).
+void Controller::sufficient_decrease(const Eigen::Ref<const RowMatrix>& J0,
+                                     const Eigen::Ref<const RowMatrix>& A,
+                                     const Eigen::Ref<const Vector>& b, double radius) {
+  if (!(radius > 0.0)) return;
+  for (Index j = 0; j < nv; ++j)
+    if (plo_[j] > 0.0 || phi_[j] < 0.0) return;
+  cauchy_point(J0, radius);
+  const double aa = asked_.squaredNorm();
+  const double best = aa - (asked_ - J0 * cauchy_).squaredNorm();
+  const double progress = aa - (asked_ - J0 * x0_).squaredNorm();
+  if (!(best > 0.0) || progress >= kSufficient * best) return;
+  if (!feasible(cauchy_, A, b, plo_, phi_)) return;
+  const double w = progress > 0.0 ? progress / (kSufficient * best) : 0.0;
+  x0_ = w * x0_ + (1.0 - w) * cauchy_;
+}
+
+// The generalized Cauchy point (Byrd, Lu, Nocedal and Zhu 1995, section 4) of m within the box
+// (plo_, phi_, which holds 0) and |v| <= radius: along v(s) = clip(s d, lo, hi), d = J0^T a,
+// segment by segment between the joints' breakpoints (where each reaches its bound), the first
+// minimum of the quadratic m(v(s)), or where v(s) leaves the ball. Into cauchy_.
+void Controller::cauchy_point(const Eigen::Ref<const RowMatrix>& J0, double radius) {
+  descent_.noalias() = J0.transpose() * asked_;
+  const Vector& d = descent_;
+  breaks_.clear();
+  free_ = d;
+  for (Index j = 0; j < nv; ++j) {
+    const double bound = d[j] > 0.0 ? phi_[j] : plo_[j];
+    const double t = d[j] != 0.0 ? bound / d[j] : kInf;
+    if (!(t > 0.0)) free_[j] = 0.0;  // at its bound already (or not moved by the descent)
+    else if (std::isfinite(t)) breaks_.emplace_back(t, j);
+  }
+  std::sort(breaks_.begin(), breaks_.end());
+  cauchy_.setZero(nv);
+  res_ = asked_;                    // a - J0 v
+  jd_.noalias() = J0 * free_;       // J0 d_F
+  double vv = 0.0, vd = 0.0, dd = free_.squaredNorm(), s = 0.0;
+  const double rr = radius * radius;
+  std::size_t k = 0;
+  while (dd > 0.0) {
+    const double next = k < breaks_.size() ? breaks_[k].first : kInf;
+    const double jj = jd_.squaredNorm(), slope = res_.dot(jd_);
+    if (!(slope > 0.0)) break;                      // the model no longer falls along the path
+    double tau = jj > 0.0 ? slope / jj : kInf;      // the segment's minimum
+    const double disc = vd * vd - dd * (vv - rr);   // where |v + tau d_F| = radius
+    tau = std::min(tau, disc > 0.0 ? (std::sqrt(disc) - vd) / dd : 0.0);
+    if (tau <= next - s) {
+      cauchy_ += tau * free_;
+      return;
+    }
+    const double step = next - s;                   // on to the breakpoint: its joint stops
+    cauchy_ += step * free_;
+    res_ -= step * jd_;
+    s = next;
+    for (; k < breaks_.size() && breaks_[k].first <= s; ++k) {
+      const Index j = breaks_[k].second;
+      cauchy_[j] = d[j] > 0.0 ? phi_[j] : plo_[j];
+      jd_ -= free_[j] * J0.col(j);
+      dd -= free_[j] * free_[j];
+      free_[j] = 0.0;
+    }
+    vv = cauchy_.squaredNorm();
+    vd = cauchy_.dot(free_);
   }
 }
 
@@ -329,6 +419,11 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
     if (ff_in) method.feedforward(J0, ffw_.segment(L0.begin, r0), top, ff0_); else ff0_.setZero();
   }
   if (!fb0_.allFinite() || !ff0_.allFinite()) return kNonFinite;
+  // the task velocity that removes level 0's error in this step (and follows the target's
+  // motion): the model of the stage's sufficient decrease, |asked - J0 v|^2 dt^2, is then the
+  // linearised error after the step, whatever the method's gain
+  asked_ = ew_.segment(L0.begin, r0) / dt_;
+  if (ff_in) asked_ += ffw_.segment(L0.begin, r0);
   regular = (fb0_ + ff0_).norm();
   int status = 0;
   // the stall the escape watches (transpose methods): the loop gain along the command below

@@ -82,6 +82,10 @@ class Controller {
   bool feasible(const Vector& x, const Eigen::Ref<const RowMatrix>& A,
                 const Eigen::Ref<const Vector>& b, const Vector& lo, const Vector& hi) const;
   void lower_levels(const double* ffw);
+  void sufficient_decrease(const Eigen::Ref<const RowMatrix>& J0,
+                           const Eigen::Ref<const RowMatrix>& A,
+                           const Eigen::Ref<const Vector>& b, double radius);
+  void cauchy_point(const Eigen::Ref<const RowMatrix>& J0, double radius);
   void project(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b,
                const Vector& lo, const Vector& hi);
   bool rows_hold(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b) const;
@@ -92,6 +96,11 @@ class Controller {
   double dt_;
   RowMatrix Jw_, high_, Jhat_, Bnone_, Cnone_, B_, along_;
   Vector ew_, ffw_, k_, fb0_, ff0_, t_, tfb_, tff_, x0_, xa_, tstar_, gt_, direction_, tmp_, tmp2_, lam_low_;
+  // project(): the box with unbounded joints capped; the task velocity that removes level 0's
+  // error in a step (e_w / dt, and the feed-forward); J0^T of it, the error's steepest
+  // descent; the Cauchy point and its path's state
+  Vector plo_, phi_, asked_, descent_, cauchy_, free_, jd_, res_;
+  std::vector<std::pair<double, Index>> breaks_;  // the Cauchy path's breakpoints
   Vector empty_, wide_lo_, wide_hi_, delta_, aim_, bk_;
   Eigen::MatrixXd gram_;
   Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eigen_;
