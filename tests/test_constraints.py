@@ -228,3 +228,40 @@ def test_franka_conditions_acceleration_and_jerk_limits_hold_on_the_stream(panda
     solver.reset()
     q2 = solver.step(q, targets[0])
     assert np.all(np.abs(q2 - q) / dt <= PANDA_ACCELERATION * dt * 1.0001)  # from rest again
+
+
+class Push(Limit):
+    """A row ``-q_dot_0 <= -speed`` (an obstacle pushing joint 0), or the same as a bound."""
+
+    name = "push"
+
+    def __init__(self, nv: int, speed: float, as_bound: bool):
+        self.nv, self.speed, self.as_bound = nv, speed, as_bound
+
+    def rows(self, kinematics, motion):
+        if self.as_bound:
+            return None
+        A = np.zeros((1, self.nv))
+        A[0, 0] = -1.0
+        return A, np.array([-self.speed])
+
+    def bounds(self, kinematics, motion):
+        if not self.as_bound:
+            return None
+        lo, hi = np.full(self.nv, -np.inf), np.full(self.nv, np.inf)
+        lo[0] = self.speed
+        return lo, hi
+
+
+@pytest.mark.parametrize("as_bound", [False, True])
+@pytest.mark.parametrize("speed_limits", [True, False])
+def test_a_row_needs_a_joint_without_a_speed_limit_faster_than_the_methods_step(
+        ur5, as_bound, speed_limits):
+    """At the target the method asks for nothing: the stage caps joints without a speed limit
+    at the method's step while it projects, but a row (or a bound) of 0.5 rad/s still holds."""
+    q = ur5.q0 + 0.3
+    solver = sjt.SJTSolver(ur5, position_limits=False, velocity_limits=speed_limits,
+                           limits=[Push(ur5.nv, 0.5, as_bound)])
+    q_next = solver.step(q, ur5.fk(q))
+    assert (q_next - q)[0] / solver.dt == pytest.approx(0.5, abs=1e-9)
+    assert solver.last.rows_exceeded == ()

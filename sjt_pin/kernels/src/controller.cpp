@@ -169,8 +169,10 @@ void Controller::lower_levels(const double* ffw) {
 // where that keeps less than kUseful of the progress the nearest feasible velocity without that
 // constraint makes (which lowers the error whenever any feasible velocity does), blended toward
 // it, fully where keeping the direction makes none (a joint at its limit that the others cannot
-// replace). Then the lower levels, nearest their own step with the first level's
-// task motion held.
+// replace); then the sufficient decrease (sufficient_decrease). A joint without a speed limit
+// is held within the norm of the method's whole step meanwhile. Then the lower levels, nearest
+// their own step with the first level's task motion held; last, where a row is still broken,
+// the nearest velocity within the whole box and the rows.
 void Controller::project(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b,
                          const Vector& box_lo, const Vector& box_hi) {
   const Level& top_level = levels[0];
@@ -179,12 +181,12 @@ void Controller::project(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<
   // a joint without a speed limit moves no faster than the method's whole step: beyond it the
   // step's linearisation means nothing (a continuous joint asked for 14,000 rad/s to make up
   // for the others' limits turned 14 rad in a step, and the error grew)
-  const double radius = std::max(desired_top.norm(), desired.norm());
+  const double cap = std::max(desired_top.norm(), desired.norm());
   plo_ = box_lo;
   phi_ = box_hi;
-  for (Index j = 0; j < nv; ++j) {
-    if (std::isinf(plo_[j])) plo_[j] = -radius;
-    if (std::isinf(phi_[j])) phi_[j] = radius;
+  for (Index j = 0; j < nv; ++j) {  // (a finite bound beyond the cap stays, and wins)
+    if (std::isinf(phi_[j])) phi_[j] = std::max(cap, plo_[j]);
+    if (std::isinf(plo_[j])) plo_[j] = std::min(-cap, phi_[j]);
   }
   const Vector& lo = plo_;
   const Vector& hi = phi_;
@@ -206,7 +208,8 @@ void Controller::project(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<
     const Eigen::MatrixXd& G = method.task_metric();
     gt_.noalias() = G * tstar_;
     const double tgt = tstar_.dot(gt_);
-    const double scale_direction = tgt > 0.0 ? (J0 * xa_).dot(gt_) / tgt : 1.0;
+    tmp2_.noalias() = J0 * xa_;
+    const double scale_direction = tgt > 0.0 ? tmp2_.dot(gt_) / tgt : 1.0;
     x0_ = xa_;
     // an upper bound of the unconstrained projection's progress: the box's best along G t*
     double reach = 0.0;
@@ -223,7 +226,8 @@ void Controller::project(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<
       r = projection_.solve(desired_top, top.lam, B_, lo, hi, A, b, Cnone_, empty_, x0_);
       report.iterations += r.iterations;
       report.converged = report.converged && r.converged;
-      const double scale_free = (J0 * x0_).dot(gt_) / tgt;
+      tmp2_.noalias() = J0 * x0_;
+      const double scale_free = tmp2_.dot(gt_) / tgt;
       const double w = scale_free > 0.0
                            ? std::clamp(scale_direction / (kUseful * scale_free), 0.0, 1.0)
                            : 1.0;
@@ -246,34 +250,39 @@ void Controller::project(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<
     // the task's metric can leave the dual degenerate (fewer joints inside their box than
     // task rows and rows to meet), and its solve stop short of a row: the nearest velocity
     // within the box and the rows (Euclidean, over the moving joints), whose dual has the
-    // rows only
+    // rows only; within the whole box (a row may need a joint without a speed limit faster
+    // than the cap)
     tmp_ = velocity;
-    ProjectionReport r = projection_.solve(tmp_, lam_low_, Bnone_, lo, hi, A, b, Cnone_, empty_,
-                                           velocity);
+    ProjectionReport r = projection_.solve(tmp_, lam_low_, Bnone_, box_lo, box_hi, A, b, Cnone_,
+                                           empty_, velocity);
     report.iterations += r.iterations;
     report.converged = report.converged && r.converged;
   }
 }
 
 // The sufficient decrease of trust-region methods. The model is the linearised error after the
-// step, m(v) = |a - J0 v|^2 dt^2 with a = e_w / dt and the feed-forward. Its Cauchy point (cauchy_point) is the
-// model's first minimum along the projected steepest descent within a ball of the method's own
-// step size. Where x0_ lowers the model by less than kSufficient of what that point does (the
-// metric of the projection can weigh the joints that could carry the task heavily: a joint at
-// its limit then froze the step), x0_ is blended toward it: the model is convex, so the step
-// then lowers it by at least that share. A Cauchy point that breaks a row is not taken (the
-// projection's own rows stand), nor is one where the box does not hold 0 (a joint returning
-// into its range).
+// step, m(v) = |a - J0 v|^2 dt^2, a = e_w / dt and the feed-forward (whatever the gains). Its
+// Cauchy point (cauchy_point) is the model's first minimum along the projected steepest
+// descent within a ball of the method's own step size. Where x0_ lowers the model by less than
+// kSufficient of what that point does (the metric of the projection can weigh the joints that
+// could carry the task heavily: a joint at its limit then froze the step), x0_ is blended
+// toward it: the model is convex, so the step then lowers it by at least that share. A Cauchy
+// point that breaks a row is not taken (the projection's own rows stand), nor is one where the
+// box does not hold 0 (a joint returning into its range).
 void Controller::sufficient_decrease(const Eigen::Ref<const RowMatrix>& J0,
                                      const Eigen::Ref<const RowMatrix>& A,
-                                     const Eigen::Ref<const Vector>& b, double radius) {
-  if (!(radius > 0.0)) return;
+                                     const Eigen::Ref<const Vector>& b, double ball) {
+  if (!(ball > 0.0)) return;
   for (Index j = 0; j < nv; ++j)
     if (plo_[j] > 0.0 || phi_[j] < 0.0) return;
-  cauchy_point(J0, radius);
-  const double aa = asked_.squaredNorm();
-  const double best = aa - (asked_ - J0 * cauchy_).squaredNorm();
-  const double progress = aa - (asked_ - J0 * x0_).squaredNorm();
+  cauchy_point(J0, ball);
+  const double aa = wanted_.squaredNorm();
+  res_ = wanted_;
+  res_.noalias() -= J0 * cauchy_;
+  const double best = aa - res_.squaredNorm();
+  res_ = wanted_;
+  res_.noalias() -= J0 * x0_;
+  const double progress = aa - res_.squaredNorm();
   if (!(best > 0.0) || progress >= kSufficient * best) return;
   if (!feasible(cauchy_, A, b, plo_, phi_)) return;
   const double w = progress > 0.0 ? progress / (kSufficient * best) : 0.0;
@@ -281,33 +290,33 @@ void Controller::sufficient_decrease(const Eigen::Ref<const RowMatrix>& J0,
 }
 
 // The generalized Cauchy point (Byrd, Lu, Nocedal and Zhu 1995, section 4) of m within the box
-// (plo_, phi_, which holds 0) and |v| <= radius: along v(s) = clip(s d, lo, hi), d = J0^T a,
+// (plo_, phi_, which holds 0) and |v| <= ball: along v(s) = clip(s d, lo, hi), d = J0^T a,
 // segment by segment between the joints' breakpoints (where each reaches its bound), the first
 // minimum of the quadratic m(v(s)), or where v(s) leaves the ball. Into cauchy_.
-void Controller::cauchy_point(const Eigen::Ref<const RowMatrix>& J0, double radius) {
-  descent_.noalias() = J0.transpose() * asked_;
+void Controller::cauchy_point(const Eigen::Ref<const RowMatrix>& J0, double ball) {
+  descent_.noalias() = J0.transpose() * wanted_;
   const Vector& d = descent_;
   breaks_.clear();
   free_ = d;
   for (Index j = 0; j < nv; ++j) {
     const double bound = d[j] > 0.0 ? phi_[j] : plo_[j];
     const double t = d[j] != 0.0 ? bound / d[j] : kInf;
-    if (!(t > 0.0)) free_[j] = 0.0;  // at its bound already (or not moved by the descent)
+    if (!(t > 0.0)) free_[j] = 0.0;  // at its bound already (d_j = 0: t is inf, free_j is 0)
     else if (std::isfinite(t)) breaks_.emplace_back(t, j);
   }
   std::sort(breaks_.begin(), breaks_.end());
   cauchy_.setZero(nv);
-  res_ = asked_;                    // a - J0 v
+  res_ = wanted_;                   // a - J0 v
   jd_.noalias() = J0 * free_;       // J0 d_F
   double vv = 0.0, vd = 0.0, dd = free_.squaredNorm(), s = 0.0;
-  const double rr = radius * radius;
+  const double rr = ball * ball;
   std::size_t k = 0;
   while (dd > 0.0) {
     const double next = k < breaks_.size() ? breaks_[k].first : kInf;
     const double jj = jd_.squaredNorm(), slope = res_.dot(jd_);
     if (!(slope > 0.0)) break;                      // the model no longer falls along the path
     double tau = jj > 0.0 ? slope / jj : kInf;      // the segment's minimum
-    const double disc = vd * vd - dd * (vv - rr);   // where |v + tau d_F| = radius
+    const double disc = vd * vd - dd * (vv - rr);   // where |v + tau d_F| = ball
     tau = std::min(tau, disc > 0.0 ? (std::sqrt(disc) - vd) / dd : 0.0);
     if (tau <= next - s) {
       cauchy_ += tau * free_;
@@ -324,6 +333,7 @@ void Controller::cauchy_point(const Eigen::Ref<const RowMatrix>& J0, double radi
       dd -= free_[j] * free_[j];
       free_[j] = 0.0;
     }
+    if (k == breaks_.size()) return;  // every joint at its bound (the box is finite: capped)
     vv = cauchy_.squaredNorm();
     vd = cauchy_.dot(free_);
   }
@@ -422,8 +432,8 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
   // the task velocity that removes level 0's error in this step (and follows the target's
   // motion): the model of the stage's sufficient decrease, |asked - J0 v|^2 dt^2, is then the
   // linearised error after the step, whatever the method's gain
-  asked_ = ew_.segment(L0.begin, r0) / dt_;
-  if (ff_in) asked_ += ffw_.segment(L0.begin, r0);
+  wanted_ = ew_.segment(L0.begin, r0) / dt_;
+  if (ff_in) wanted_ += ffw_.segment(L0.begin, r0);
   regular = (fb0_ + ff0_).norm();
   int status = 0;
   // the stall the escape watches (transpose methods): the loop gain along the command below

@@ -84,10 +84,10 @@ class Controller {
   void lower_levels(const double* ffw);
   void sufficient_decrease(const Eigen::Ref<const RowMatrix>& J0,
                            const Eigen::Ref<const RowMatrix>& A,
-                           const Eigen::Ref<const Vector>& b, double radius);
-  void cauchy_point(const Eigen::Ref<const RowMatrix>& J0, double radius);
+                           const Eigen::Ref<const Vector>& b, double ball);
+  void cauchy_point(const Eigen::Ref<const RowMatrix>& J0, double ball);
   void project(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b,
-               const Vector& lo, const Vector& hi);
+               const Vector& box_lo, const Vector& box_hi);
   bool rows_hold(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b) const;
   bool rows_hold_within(double s, const Eigen::Ref<const RowMatrix>& A,
                         const Eigen::Ref<const Vector>& b);
@@ -99,7 +99,7 @@ class Controller {
   // project(): the box with unbounded joints capped; the task velocity that removes level 0's
   // error in a step (e_w / dt, and the feed-forward); J0^T of it, the error's steepest
   // descent; the Cauchy point and its path's state
-  Vector plo_, phi_, asked_, descent_, cauchy_, free_, jd_, res_;
+  Vector plo_, phi_, wanted_, descent_, cauchy_, free_, jd_, res_;
   std::vector<std::pair<double, Index>> breaks_;  // the Cauchy path's breakpoints
   Vector empty_, wide_lo_, wide_hi_, delta_, aim_, bk_;
   Eigen::MatrixXd gram_;
