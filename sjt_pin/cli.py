@@ -221,8 +221,9 @@ def bench(args: argparse.Namespace) -> int:
         franka = limits.franka(progress=shown)
         print("\nOne joint saturates (TIAGo's torso lift, 0.07 m/s), every limit on:\n"
               + limits.saturating_table(saturating))
-        print("\nFranka's conditions (Panda, 1 kHz, its acceleration and jerk limits, targets "
-              "jumping every 0.5 s, then held):\n" + limits.franka_table(franka))
+        print("\nTargets jumping every 0.5 s for 20 s, then one held 8 s, at 1 kHz: Panda with "
+              "Franka's acceleration and jerk limits, three more arms with limits of their "
+              "class:\n" + limits.franka_table(franka))
         _write_json(args.json, {"machine": machine,
                                 "tracking": [asdict(r) for r in tracking],
                                 "rest": [asdict(r) for r in rest],

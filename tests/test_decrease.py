@@ -239,7 +239,7 @@ def measure(name: str, method: str, q: np.ndarray, target: pin.SE3, pose: bool) 
         g_fd = central_rate(model, f, q)
         assert np.allclose(g, g_fd, rtol=1e-5, atol=1e-6 * (np.abs(g).max() + 1e-300))
     lo, hi = velocity_box(robot, solver, q)
-    assert np.all(dq >= lo - 1e-9 * (1 + np.abs(lo))) and np.all(dq <= hi + 1e-9 * (1 + hi))
+    assert np.all(dq >= lo - 1e-9 * (1 + np.abs(lo))) and np.all(dq <= hi + 1e-9 * (1 + np.abs(hi)))
     radius = float(np.linalg.norm(dq_free))
     M = (sw[:, None] * task_rows(robot, q, pose) * chain) * dt
     ew = sw * e
@@ -310,6 +310,7 @@ RANDOM_SEEDS = (0, 2, 3, 5, 14, 17, 24, 27, 31, 38)
 FINITE_SEEDS = (41, 58, 60, 63, 76, 87, 98, 105)
 FAST_ROBOTS = (ARMS + tuple(f"random-{s}" for s in RANDOM_SEEDS)
                + tuple(f"finite-{s}" for s in FINITE_SEEDS))
+
 
 @pytest.mark.parametrize("method", METHODS)
 @pytest.mark.parametrize("name", FAST_ROBOTS)

@@ -6,7 +6,7 @@ Franka's conditions, for every method (and pink, with its own limits, when insta
   error, and the largest joint speed over its URDF limit.
 - **franka** (:func:`franka`): Panda at 1 kHz with its published acceleration and jerk limits,
   targets jumping every 0.5 s (every third one out of reach), then a reachable target held for
-  8 s; then the same stream on arms the tests do not use (xArm7, Kinova Gen3, UR10), with
+  8 s; then the same stream on three more arms (xArm7, Kinova's Jaco² j2s6s200, UR10), with
   acceleration and jerk limits of their class. The largest finite-difference velocity,
   acceleration and jerk of the returned ``q`` over their limits, whether ``q`` left the URDF
   range, the final error, and the RMS joint speed over the last second.
@@ -111,11 +111,12 @@ def _pink_circle(robot: Robot, q0: np.ndarray, circle: Circle, path: str) -> Lim
     return LimitRow(path, "pink", worst, speed)
 
 
-#: the arms the stream also runs on, with limits of their class (rad/s^2, rad/s^3)
-HELD_OUT = {"xarm7": (10.0, 5000.0), "kinova": (10.0, 5000.0), "ur10": (8.0, 2000.0)}
+#: the arms the stream also runs on (xArm7, Kinova's Jaco² j2s6s200, UR10), with acceleration
+#: and jerk limits of their class (rad/s^2, rad/s^3)
+OTHER_ARMS = {"xarm7": (10.0, 5000.0), "kinova": (10.0, 5000.0), "ur10": (8.0, 2000.0)}
 
 
-def franka(methods=METHODS, seconds: float = 20.0, arms=HELD_OUT, progress=None
+def franka(methods=METHODS, seconds: float = 20.0, arms=OTHER_ARMS, progress=None
            ) -> list[LimitRow]:
     """Every method under Franka's conditions (module docstring), then the same stream on
     ``arms`` (name: acceleration and jerk limit of every joint)."""
