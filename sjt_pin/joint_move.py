@@ -14,8 +14,10 @@ moving ``d``, so the duration
 keeps every joint within the share ``r`` of its speed, acceleration and jerk limits. It is
 sampled as the frame's pose ``fk(q(t))`` and velocity ``J(q(t)) q_dot(t)`` (world-aligned),
 and :meth:`JointMove.step` follows it with a twin of the solver (its method, options and
-limits) whose posture task is pulled along ``q(t)``: every limit the solver was given
-(collision rows included) still holds on every step, whatever the path asks.
+limits) whose posture task, stacked with the pose task, is pulled along ``q(t)``: the joints
+stay on the path (a posture in the pose task's null space alone let a UR5 change branch at a
+singularity on the path and never arrive), and every limit the solver was given (collision
+rows included) still holds on every step, whatever the path asks.
 """
 
 from __future__ import annotations
@@ -44,7 +46,8 @@ class JointMove(Trajectory):
         last: the last step's :class:`~sjt_pin.StepInfo` (``None`` before the first).
     """
 
-    #: the posture task's weight during a move: a time constant of dt / weight (5 ms at 1 kHz)
+    #: the posture task's weight during a move, in the pose task's level (its rows in rad against
+    #: the pose's in m and rad)
     POSTURE_WEIGHT = 0.2
 
     def __init__(self, owner, twin, frame_id: int, q_start: np.ndarray, q_goal: np.ndarray,

@@ -323,12 +323,14 @@ class Solver:
         Step it like a solver, ``q = move.step(q)``, until ``move.done``: each step is a step
         of a twin of this solver (the same method, options and limits, so every limit holds on
         every step) tracking the frame's pose along the path, with a posture task pulling the
-        joints along it (a redundant arm would drift in its null space); this solver's motion
+        joints along it, stacked with the pose task (in a null space alone it would leave a
+        non-redundant arm free to change branch at a singularity on the path, and a redundant
+        one to drift); this solver's motion
         state follows, so it carries on from the move without a jump. Raises ``ValueError``
         when ``solve()`` finds no configuration within its tolerance, or when the solver's
         task is not one frame's (a multi-task solver moves by its own targets)."""
         q, result = move_goal(self, q, target, options)
-        posture = PostureTask(q, weight=JointMove.POSTURE_WEIGHT)
+        posture = PostureTask(q, weight=JointMove.POSTURE_WEIGHT, priority=0)
         twin = _rebuild(type(self), self.robot, self.method,
                         self.options.replace(posture=posture, gain=self._gain, dt=self._dt,
                                              check_stability=False))
