@@ -23,6 +23,7 @@ from ..robot import Robot
 from ..solvers import make_solver
 from ..tracking import track
 from ..trajectories import Circle
+from .collision import rates
 
 #: Franka Panda's published joint limits (its control interface's "necessary conditions"),
 #: and small ones for the fingers
@@ -162,10 +163,7 @@ def _stream(robot: Robot, method: str, acceleration, jerk, seconds: float, path:
     for _ in range(8000):
         q = solver.step(q, held)
         qs.append(q)
-    steps = zip(qs[:-1], qs[1:], strict=True)
-    v = np.array([pin.difference(robot.model, a, b) for a, b in steps]) / dt
-    a = np.diff(v, axis=0) / dt
-    j = np.diff(a, axis=0) / dt
+    v, a, j = rates(robot.model, qs, dt)
     qs = np.array(qs)
     return LimitRow(
         path, method.upper(), float("nan"), float(np.max(np.abs(v) / robot.velocity_limits)),

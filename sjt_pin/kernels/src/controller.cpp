@@ -430,7 +430,7 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
   }
   if (!fb0_.allFinite() || !ff0_.allFinite()) return kNonFinite;
   // the task velocity that removes level 0's error in this step (and follows the target's
-  // motion): the model of the stage's sufficient decrease, |asked - J0 v|^2 dt^2, is then the
+  // motion): the model of the stage's sufficient decrease, |wanted - J0 v|^2 dt^2, is then the
   // linearised error after the step, whatever the method's gain
   wanted_ = ew_.segment(L0.begin, r0) / dt_;
   if (ff_in) wanted_ += ffw_.segment(L0.begin, r0);
