@@ -19,6 +19,8 @@ constexpr double kKeepDirection = 1e4;
 // the projection keeps at least this share of the progress of the Cauchy point (the steepest
 // feasible progress within a ball of the method's own step size)
 constexpr double kSufficient = 0.25;
+// lower_line_search's penalty on motion, as a share of the lower rows' mean squared column norm
+constexpr double kInvisible = 1e-2;
 
 }  // namespace
 
@@ -245,6 +247,7 @@ void Controller::project(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<
     ProjectionReport r = projection_.solve(tmp_, lam_low_, Bnone_, lo, hi, A, b, C, d, velocity);
     report.iterations += r.iterations;
     report.converged = report.converged && r.converged;
+    lower_line_search(tmp_);
   }
   if (!rows_hold(A, b)) {
     // the task's metric can leave the dual degenerate (fewer joints inside their box than
@@ -258,6 +261,34 @@ void Controller::project(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<
     report.iterations += r.iterations;
     report.converged = report.converged && r.converged;
   }
+}
+
+// The lower levels' share of a constrained step. The projection above is the feasible velocity
+// nearest (Euclidean) to the lower levels' step: where a row or a bound blocks a lower task
+// (a centre of mass at the edge of its support, a posture against a joint limit), that nearest
+// velocity keeps the step's motions that no lower task sees (a leg's self-motion under its
+// held foot) and the arm never comes to rest. So the lower part u = velocity - x0_ is scaled by
+// the w in [0, 1] that minimises the lower levels' linearised error after the step with a
+// penalty on motion, |r - w B u|^2 + mu w^2 |u|^2 (r = e_w / dt + feed-forward - B x0_, B their
+// weighted rows, mu kInvisible of B's mean squared column norm): a motion they see is kept
+// whole (w near 1), one they do not see is dropped. x0_ and velocity are feasible, so is the
+// blend. Only where the projection changed the step: a feasible step is returned unchanged.
+void Controller::lower_line_search(const Vector& unconstrained) {
+  const Index begin = levels[1].begin, rows = Jw_.rows() - begin;
+  low_move_ = velocity - unconstrained;
+  if (rows == 0 || low_move_.norm() <= kBoundTol * (1.0 + unconstrained.norm())) return;
+  const auto B = Jw_.bottomRows(rows);
+  low_move_ = velocity - x0_;
+  const double uu = low_move_.squaredNorm();
+  if (!(uu > 0.0)) return;
+  low_res_ = ew_.tail(rows) / dt_;
+  if (ff_in_) low_res_ += ffw_.tail(rows);
+  low_res_.noalias() -= B * x0_;
+  tmp2_.noalias() = B * low_move_;
+  const double moving_joints = std::max(moving.sum(), 1.0);
+  const double mu = kInvisible * B.squaredNorm() / moving_joints;
+  const double w = std::clamp(low_res_.dot(tmp2_) / (tmp2_.squaredNorm() + mu * uu), 0.0, 1.0);
+  velocity = x0_ + w * low_move_;
 }
 
 // The sufficient decrease of trust-region methods. The model is the linearised error after the
@@ -416,6 +447,7 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
     }
   }
   if (!std::isfinite(e_sq + ff_sq)) return kNonFinite;
+  ff_in_ = ff_in != nullptr;
   // 2. the first level's method
   const Level& L0 = levels[0];
   const Index r0 = L0.end - L0.begin;

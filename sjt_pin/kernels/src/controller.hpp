@@ -86,6 +86,7 @@ class Controller {
                            const Eigen::Ref<const RowMatrix>& A,
                            const Eigen::Ref<const Vector>& b, double ball);
   void cauchy_point(const Eigen::Ref<const RowMatrix>& J0, double ball);
+  void lower_line_search(const Vector& unconstrained);
   void project(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b,
                const Vector& box_lo, const Vector& box_hi);
   bool rows_hold(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b) const;
@@ -100,6 +101,8 @@ class Controller {
   // error in a step (e_w / dt, and the feed-forward); J0^T of it, the error's steepest
   // descent; the Cauchy point and its path's state
   Vector plo_, phi_, wanted_, descent_, cauchy_, free_, jd_, res_;
+  Vector low_move_, low_res_;  // lower_line_search's step and its levels' residual
+  bool ff_in_ = false;         // whether this step has a feed-forward (ffw_ holds it)
   std::vector<std::pair<double, Index>> breaks_;  // the Cauchy path's breakpoints
   Vector empty_, wide_lo_, wide_hi_, delta_, aim_, bk_;
   Eigen::MatrixXd gram_;
