@@ -10,7 +10,7 @@ from .exceptions import ConcurrentStepError, FrameNotFound, GainWarning, URDFErr
 from .gains import AutoGain, FixedGain, Gain
 from .ik import IKResult
 from .kinematics import Kinematics
-from .limits import CollisionLimit
+from .limits import CollisionLimit, SupportLimit
 from .options import SolverOptions
 from .reach import ReachMap, reachability
 from .robot import Robot
@@ -18,6 +18,8 @@ from .solver import Solver
 from .solvers import DLSSolver, JPSolver, JTSolver, SJTSolver, make_solver
 from .step_info import StepInfo
 from .tasks import (
+    CoMTask,
+    ContactTask,
     OrientationTask,
     PoseTask,
     PositionTask,
@@ -36,7 +38,9 @@ __all__ = [
     "BatchError",
     "BatchPart",
     "Circle",
+    "CoMTask",
     "CollisionLimit",
+    "ContactTask",
     "DLSSolver",
     "DifferentialIKSolver",
     "FixedGain",
@@ -60,6 +64,7 @@ __all__ = [
     "SJTSolver",
     "Solver",
     "SolverOptions",
+    "SupportLimit",
     "StepInfo",
     "Task",
     "Trajectory",

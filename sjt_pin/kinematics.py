@@ -20,12 +20,13 @@ class Kinematics:
     :meth:`update` (each solver has one, so solvers never share scratch space). Jacobians are
     always 2-D, (6, nv), also for a robot with one joint (Pinocchio returns a vector there)."""
 
-    __slots__ = ("model", "data", "q", "jacobian", "world_aligned_jacobian")
+    __slots__ = ("model", "data", "q", "jacobian", "world_aligned_jacobian", "_com_fresh")
 
     def __init__(self, model: pin.Model):
         self.model = model
         self.data = model.createData()
         self.q: np.ndarray | None = None
+        self._com_fresh = False
         if model.nv == 1:
             self.jacobian = self._column(pin.LOCAL)
             self.world_aligned_jacobian = self._column(pin.LOCAL_WORLD_ALIGNED)
@@ -37,6 +38,17 @@ class Kinematics:
         """Forward kinematics and joint Jacobians at ``q`` (nq,), validated by the caller."""
         pin.computeJointJacobians(self.model, self.data, q)
         self.q = q
+        self._com_fresh = False
+
+    def center_of_mass(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(c, J_c)``: the robot's centre of mass (3,; m, world axes) and its Jacobian
+        ``dc/dq`` (3, nv), Pinocchio's ``data.com[0]`` and ``data.Jcom``, computed once per
+        configuration from the joint Jacobians of :meth:`update` (views, overwritten by the
+        next configuration's)."""
+        if not self._com_fresh:
+            pin.jacobianCenterOfMass(self.model, self.data, False)
+            self._com_fresh = True
+        return self.data.com[0], self.data.Jcom
 
     def placement(self, frame_id: int) -> pin.SE3:
         """World pose ``oMf`` of frame ``frame_id`` (a copy)."""

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Mapping, Sequence
 
 import numpy as np
@@ -16,7 +17,8 @@ _NOT_MAPPINGS = (pin.SE3, np.ndarray, list, tuple)
 
 def normalise_tasks(task, posture) -> list[Task]:
     """The task argument of a solver (a task, a list, a ``{frame: task}`` mapping or ``None``
-    for a pose task on the end effector), with ``posture`` appended."""
+    for a pose task on the end effector), with ``posture`` appended. In a mapping a task
+    without a frame (centre of mass, posture, ...) sits under any key, which keys its targets."""
     tasks: list[Task]
     if task is None:
         tasks = [PoseTask()]
@@ -27,13 +29,12 @@ def normalise_tasks(task, posture) -> list[Task]:
         for frame, t in task.items():
             if not isinstance(t, Task):
                 raise TypeError(f"task[{frame!r}] must be a sjt_pin Task, got {type(t).__name__}")
-            if not t.takes_target:
-                raise TypeError(f"task[{frame!r}] is a {type(t).__name__}, which has no frame; "
-                                "pass it as posture=")
-            if t.frame not in (None, frame):
+            if not isinstance(frame, str):
+                raise TypeError(f"the keys of a {{frame: task}} mapping are frame names (str), "
+                                f"got {frame!r}")
+            if t.has_frame and t.frame not in (None, frame):
                 raise ValueError(f"task[{frame!r}] is on frame {t.frame!r}")
-            t = _on_frame(t, frame)
-            tasks.append(t)
+            tasks.append(_keyed(t, frame))
     elif (isinstance(task, Sequence) and not isinstance(task, str) and task
           and all(isinstance(t, Task) for t in task)):
         tasks = list(task)
@@ -59,11 +60,14 @@ def ordered_by_level(tasks: list[Task]) -> tuple[list[Task], list[int]]:
     return [tasks[i] for i in order], [levels[i] for i in order]
 
 
-def _on_frame(task: Task, frame: str) -> Task:
-    import copy
-
+def _keyed(task: Task, key: str) -> Task:
+    """A copy of ``task`` on frame ``key``, or for a task without a frame, labelled ``key``
+    (its targets' key)."""
     task = copy.copy(task)
-    task.frame = frame
+    if task.has_frame:
+        task.frame = key
+    else:
+        task.label = key
     return task
 
 

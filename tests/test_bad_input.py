@@ -93,9 +93,9 @@ def test_bad_solver_settings(ur5, kwargs, match):
 
 def test_bad_task_and_trajectory_arguments():
     with pytest.raises(ValueError, match="axes must be a non-empty subset of 'xyz'"):
-        sjt.PositionTask("xw")
+        sjt.PositionTask(axes="xw")
     with pytest.raises(ValueError, match="axes must be"):
-        sjt.PositionTask("xx")
+        sjt.PositionTask(axes="xx")
     with pytest.raises(ValueError, match="weight must be positive"):
         sjt.PoseTask(weight=[1, 1, 1, 1, 1, 0])
     with pytest.raises(ValueError, match=r"weight must have shape \(3,\)"):

@@ -291,7 +291,7 @@ def test_page_of_names_that_open_comments_and_scripts_still_shows_its_view(chrom
     assert robot.name == EVIL
     start = robot.fk(np.zeros(1)).translation
     circle = sjt.Circle(start - [0.1, 0, 0], 0.1, duration=1.0)
-    log = sjt.track(sjt.SJTSolver(robot, task=sjt.PositionTask("xy")), circle, np.zeros(1))
+    log = sjt.track(sjt.SJTSolver(robot, task=sjt.PositionTask(axes="xy")), circle, np.zeros(1))
     with Viewer(robot, live=False, name=EVIL, label=EVIL + "</script>") as viewer:
         viewer.compare({EVIL + '"</script>': log})
         path = viewer.save_html(tmp_path / "evil.html", title=EVIL, description=EVIL)

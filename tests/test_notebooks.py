@@ -70,7 +70,7 @@ from sjt_pin.paper import experiments
 
 robot = sjt.Robot.planar3()  # the URDF ships as package data (sjt_pin.robots)
 task = experiments.paper_task(3)
-log = sjt.track(sjt.SJTSolver(robot, task=sjt.PositionTask("xy")), task.trajectory, task.q0)
+log = sjt.track(sjt.SJTSolver(robot, task=sjt.PositionTask(axes="xy")), task.trajectory, task.q0)
 assert log.max_error < 1e-3, log.max_error
 print("ok", log.max_error)
 """

@@ -81,7 +81,7 @@ def reference_step(method, options, J, e, ff, sw, k, mask, target_rows, floor, l
 
 COMBINATIONS = {
     "pose": lambda: [sjt.PoseTask()],
-    "position xz": lambda: [sjt.PositionTask("xz", weight=[2.0, 0.5])],
+    "position xz": lambda: [sjt.PositionTask(axes="xz", weight=[2.0, 0.5])],
     "orientation": lambda: [sjt.OrientationTask()],
     "pose + posture": lambda: [sjt.PoseTask(weight=[1, 1, 1, 0.5, 0.5, 0.5]),
                                sjt.PostureTask(weight=0.03)],

@@ -113,7 +113,7 @@ def test_step_does_not_mutate_and_accepts_matrix_targets(ur5):
 def test_sjt_alpha_uses_the_weighted_task_rows(planar3, rng):
     weight = np.array([4.0, 0.25])
     solver = sjt.SJTSolver(planar3, gain=10.0, dt=1e-3,
-                           task=sjt.PositionTask("xy", weight=weight))
+                           task=sjt.PositionTask(axes="xy", weight=weight))
     q = rng.uniform(-1, 1, 3)
     solver.step(q, [0.5, 0.5, 0.0])
     J = pin.computeFrameJacobian(planar3.model, planar3.data, q, planar3.ee_frame_id,
@@ -126,7 +126,7 @@ def test_sjt_alpha_uses_the_weighted_task_rows(planar3, rng):
 def test_gain_above_the_stability_bound_warns_once(planar3, feedback):
     q = np.deg2rad([60.0, 45.0, 30.0])
     dt = 1e-3
-    solver = sjt.SJTSolver(planar3, gain=1.0, dt=dt, task=sjt.PositionTask("xy"),
+    solver = sjt.SJTSolver(planar3, gain=1.0, dt=dt, task=sjt.PositionTask(axes="xy"),
                            feedback=feedback)
     solver.step(q, [0.0, 1.0, 0.0])
     Jw = planar3.jacobian(q, reference=pin.LOCAL_WORLD_ALIGNED)[:2]
@@ -173,7 +173,7 @@ def test_per_row_gains_set_per_row_rates(planar3):
     """With JP the loop is e_dot = -K e: each row decays at its own gain (the textbook J^+:
     the error's Levenberg-Marquardt damping would slow the rows while the error is large)."""
     gains = np.array([5.0, 50.0])
-    solver = sjt.JPSolver(planar3, gain=gains, dt=1e-3, task=sjt.PositionTask("xy"),
+    solver = sjt.JPSolver(planar3, gain=gains, dt=1e-3, task=sjt.PositionTask(axes="xy"),
                           error_damping=0.0)
     q = np.deg2rad([60.0, 45.0, 30.0])
     target = [-0.25, 0.95, 0.0]
@@ -187,7 +187,7 @@ def test_per_row_gains_set_per_row_rates(planar3):
 @pytest.mark.parametrize("method", METHODS)
 def test_per_row_gains_converge(method, planar3):
     solver = sjt.make_solver(method, planar3, gain=[5.0, 50.0], dt=1e-2,
-                             task=sjt.PositionTask("xy"))
+                             task=sjt.PositionTask(axes="xy"))
     regulate(solver, np.deg2rad([60.0, 45.0, 30.0]), [-0.2, 0.9, 0.0], 5000)
     assert solver.last.error_norm < 1e-6
 

@@ -138,7 +138,7 @@ def test_an_arm_held_by_a_position_limit_says_it_stalled_and_which_limit(options
     the limit that holds it."""
     arm = sjt.Robot.from_urdf(str(FIXTURES / "one_joint.urdf"), load_visuals=False)
     target = arm.fk(np.array([2.6]))
-    solver = sjt.SJTSolver(arm, task=sjt.PositionTask("xy"), dt=1e-3, **options)
+    solver = sjt.SJTSolver(arm, task=sjt.PositionTask(axes="xy"), dt=1e-3, **options)
     q = np.array([1.0])
     for _ in range(3000):
         q = solver.step(q, target.translation)

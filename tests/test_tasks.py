@@ -20,7 +20,7 @@ def robots():
 TASKS = {
     "pose": lambda: sjt.PoseTask(weight=[1, 2, 1, 0.5, 1, 3]),
     "position": lambda: sjt.PositionTask(),
-    "position yz": lambda: sjt.PositionTask("yz"),
+    "position yz": lambda: sjt.PositionTask(axes="yz"),
     "orientation": lambda: sjt.OrientationTask(),
     "posture": lambda: sjt.PostureTask(weight=0.3),
 }

@@ -6,7 +6,7 @@ import sjt_pin as sjt
 
 
 def test_log_arrays_and_metrics(planar3):
-    solver = sjt.SJTSolver(planar3, gain=300.0, dt=1e-3, task=sjt.PositionTask("xy"))
+    solver = sjt.SJTSolver(planar3, gain=300.0, dt=1e-3, task=sjt.PositionTask(axes="xy"))
     line = sjt.Line([-0.293, 0.986, 0.0], [0.507, 0.986, 0.0], duration=1.0)
     q0 = np.deg2rad([60.0, 45.0, 30.0])
     log = sjt.track(solver, line, q0)
@@ -22,7 +22,7 @@ def test_log_arrays_and_metrics(planar3):
 
 
 def test_divergence_is_reported_not_raised(planar3):
-    solver = sjt.JTSolver(planar3, gain=1e5, dt=1e-3, task=sjt.PositionTask("xy"),
+    solver = sjt.JTSolver(planar3, gain=1e5, dt=1e-3, task=sjt.PositionTask(axes="xy"),
                           check_stability=False, velocity_limits=False)
     line = sjt.Line([-0.293, 0.986, 0.0], [0.507, 0.986, 0.0], duration=1.0)
     log = sjt.track(solver, line, np.deg2rad([60.0, 45.0, 30.0]))

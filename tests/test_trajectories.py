@@ -75,6 +75,6 @@ def test_a_circle_says_where_it_starts_and_track_warns_when_that_is_away_from_th
         sjt.track(sjt.SJTSolver(ur5), right, q)
         sjt.track(sjt.SJTSolver(ur5), quarter, q)
         # x is not tracked by a z-only position task: the line's x offset is no jump
-        sjt.track(sjt.SJTSolver(ur5, task=sjt.PositionTask("z")), along_z, q)
+        sjt.track(sjt.SJTSolver(ur5, task=sjt.PositionTask(axes="z")), along_z, q)
     with pytest.warns(UserWarning, match="jumps"):
-        sjt.track(sjt.SJTSolver(ur5, task=sjt.PositionTask("x")), along_z, q)
+        sjt.track(sjt.SJTSolver(ur5, task=sjt.PositionTask(axes="x")), along_z, q)

@@ -19,7 +19,7 @@ def test_the_characteristic_length_is_the_mean_reach_of_the_chain(planar3):
     # links of 0.3, 0.4 and 0.28 m and a 0.2 m gripper: 1.18, 0.88 and 0.48 m from each joint
     assert characteristic_length(planar3, planar3.ee_frame_id) == pytest.approx(
         np.mean([1.18, 0.88, 0.48]), rel=1e-12)
-    task = sjt.SJTSolver(planar3, task=sjt.PositionTask("xy")).stack.task
+    task = sjt.SJTSolver(planar3, task=sjt.PositionTask(axes="xy")).stack.task
     assert characteristic_length(planar3, task.frame_id) == pytest.approx(0.8466666666666667)
 
 

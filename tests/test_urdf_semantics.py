@@ -110,7 +110,7 @@ def test_lower_equal_to_upper_locks_the_joint():
     assert robot.lower_limits[0] == robot.upper_limits[0] == 0.5
     assert robot.q0[0] == 0.5  # the neutral configuration, clipped into the limits
     target = robot.fk(np.array([0.5, 0.7, -0.4])).translation
-    solver = sjt.SJTSolver(robot, task=sjt.PositionTask("xy"), dt=1e-2)
+    solver = sjt.SJTSolver(robot, task=sjt.PositionTask(axes="xy"), dt=1e-2)
     q = np.array([0.0, 0.3, 0.6])  # a seed outside: brought to 0.5, then held
     for _ in range(1000):
         q = solver.step(q, target)

@@ -272,7 +272,7 @@ def test_compare_labels_runs_by_their_keys_in_distinct_colours(tmp_path):
     q0 = np.deg2rad([60.0, 45.0, 30.0])
     start = robot.fk(q0).translation
     line = sjt.Line(start, start + [0.1, 0.0, 0.0], 0.2)
-    logs = {name: sjt.track(sjt.SJTSolver(robot, task=sjt.PositionTask("xy"), **options), line,
+    logs = {name: sjt.track(sjt.SJTSolver(robot, task=sjt.PositionTask(axes="xy"), **options), line,
                             q0)
             for name, options in (("paper", {"feedback": "transpose",
                                              "feedforward": "transpose"}), ("sjt", {}))}

@@ -5,7 +5,8 @@ from .base import Limit, Motion
 from .collision import CollisionLimit
 from .jerk import JerkLimit
 from .position import PositionLimit
+from .support import SupportLimit
 from .velocity import VelocityLimit
 
 __all__ = ["AccelerationLimit", "CollisionLimit", "JerkLimit", "Limit", "Motion", "PositionLimit",
-           "VelocityLimit"]
+           "SupportLimit", "VelocityLimit"]

@@ -118,7 +118,7 @@ def paper_task(number: int, settings: PaperSettings = PaperSettings()) -> PaperT
         x_exit = -np.sqrt(reach**2 - start[1] ** 2)
         reachable_until = (np.inf if number == 1 else
                            settings.line_duration * (start[0] - x_exit) / (start[0] - end[0]))
-    q0 = settle(robot, PositionTask("xy"), PLANAR3_START, trajectory.sample(0.0)[0])
+    q0 = settle(robot, PositionTask(axes="xy"), PLANAR3_START, trajectory.sample(0.0)[0])
     return PaperTask(number, robot, trajectory, q0, trajectory.duration + settings.hold,
                      reachable_until)
 
@@ -128,7 +128,7 @@ def _solver(method: str, gain: float, settings: PaperSettings, robot: Robot):
     if method in PAPER_FORM:
         options.update(PAPER_FORM[method])
     # the paper's methods have no joint limits: the URDF's +-pi and 10 rad/s stay unused
-    return make_solver(method, robot, gain=gain, dt=settings.dt, task=PositionTask("xy"),
+    return make_solver(method, robot, gain=gain, dt=settings.dt, task=PositionTask(axes="xy"),
                        check_stability=False, position_limits=False, velocity_limits=False,
                        **options)
 

@@ -55,8 +55,8 @@ def scenario(name: str, robot: Robot | None = None) -> Scenario:
         radius = 0.194
         # start on the circle's lowest point, (0, 0.792), from the elbow-up posture
         circle = Circle(center, radius, duration=4.0, start_angle=-np.pi / 2)
-        q0 = settle(robot, PositionTask("xy"), PLANAR3_START, circle.sample(0.0)[0])
-        return Scenario(name, robot, PositionTask("xy"), q0, circle)
+        q0 = settle(robot, PositionTask(axes="xy"), PLANAR3_START, circle.sample(0.0)[0])
+        return Scenario(name, robot, PositionTask(axes="xy"), q0, circle)
     q0 = UR5_START if name == "ur5" else robot.q0
     pose = robot.fk(q0)
     radius = 0.15 if name == "ur5" else 0.2

@@ -77,12 +77,17 @@ class Task(ABC):
     takes_target: ClassVar[bool] = True
     #: whether the Jacobian rows never change (the stack then copies them once)
     constant_jacobian: ClassVar[bool] = False
+    #: whether the task is on a frame (a centre-of-mass or posture task is not: ``frame`` is
+    #: then ``None``, and the task's key is its ``label``)
+    has_frame: ClassVar[bool] = True
 
     def __init__(self, frame: str | None = None, weight=None, priority: int | None = 0):
         if frame is not None and not isinstance(frame, str):
             raise TypeError(f"frame must be a frame name (str) or None, got {frame!r}")
         self.priority = checked_priority(priority)
         self.frame = frame
+        #: a frameless task's key (the key it sits under in a ``{key: task}`` mapping)
+        self.label: str | None = None
         self._weight = weight
         self.sqrt_weight: np.ndarray | None = None
         if weight is not None and getattr(self, "dim", None) is not None:
@@ -101,6 +106,9 @@ class Task(ABC):
     def bind(self, robot) -> Task:
         """A copy of this task for ``robot``: its frame resolved (``FrameNotFound`` if absent)."""
         bound = copy.copy(self)
+        if not self.has_frame:
+            bound.frame, bound.frame_id = None, -1
+            return bound
         bound.frame_id = robot.ee_frame_id if self.frame is None else robot.frame_id(self.frame)
         bound.frame = robot.model.frames[bound.frame_id].name
         return bound
@@ -109,8 +117,9 @@ class Task(ABC):
     def key(self) -> str | None:
         """The key of this task's target in a ``{key: target}`` mapping: its frame's name.
         Tasks on the same frame share it (and so their target, e.g. a position task and an
-        orientation task with different weights); a task over several frames names its own."""
-        return self.frame
+        orientation task with different weights); a task over several frames names its own,
+        a task without a frame its ``label``."""
+        return self.frame if self.has_frame else self.label
 
     def joints(self, model: pin.Model) -> list[int]:
         """The ids of the Pinocchio joints whose motion changes this task's rows (the columns

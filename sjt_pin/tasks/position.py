@@ -5,16 +5,17 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
+from ..exceptions import FrameNotFound
 from ..kernels import position_rows
 from ..validation import as_pose, as_vector
 from .base import _NO_VELOCITY, Task
-
-_AXES = {"x": 0, "y": 1, "z": 2}
+from .com import _AXES, checked_axes
 
 
 class PositionTask(Task):
     """Position of the frame origin along a subset of the world axes (m).
 
+    ``frame`` is the task frame (``None``: the robot's end effector), first as in every task;
     ``axes`` is any non-empty subset of ``"xyz"`` in any order, e.g. ``"xy"`` for a planar arm.
     ``e = p_d - p`` in world axes, with the linear rows of the LOCAL_WORLD_ALIGNED Jacobian.
     Targets are 3-vectors (m) or poses (``pin.SE3``, 4x4: only the translation is used);
@@ -26,18 +27,22 @@ class PositionTask(Task):
     ``alpha_i = 1 / max(|J_i|^2, l^2)``, so ``|q_dot_i| <= k |e| / l``.
     """
 
-    def __init__(self, axes: str = "xyz", frame: str | None = None, weight=None,
+    def __init__(self, frame: str | None = None, axes: str = "xyz", weight=None,
                  priority: int | None = 0):
-        if (not isinstance(axes, str) or not axes or set(axes) - set(_AXES)
-                or len(set(axes)) != len(axes)):
-            raise ValueError(f"axes must be a non-empty subset of 'xyz', got {axes!r}")
-        self.axes = axes
+        self.axes = checked_axes(axes)
         self.dim = len(axes)
         self._rows = np.array([_AXES[a] for a in axes], dtype=np.int64)
         super().__init__(frame, weight, priority)
 
     def bind(self, robot):
-        bound = super().bind(robot)
+        try:
+            bound = super().bind(robot)
+        except FrameNotFound as error:
+            if self.frame and not set(self.frame) - set(_AXES):  # PositionTask("xy"): axes
+                raise FrameNotFound(error.name, error.available, robot.name, message=(
+                    f"{error}; the frame is PositionTask's first argument, as in every "
+                    f"task: for the axes write PositionTask(axes={self.frame!r})")) from None
+            raise
         d, n = self.dim, robot.nv
         bound._J, bound._e, bound._ff = np.zeros((d, n)), np.zeros(d), np.zeros(d)
         return bound
@@ -71,5 +76,5 @@ class PositionTask(Task):
         return self._J, self._e, None if velocity is None else self._ff
 
     def __repr__(self) -> str:
-        frame = f", frame={self.frame!r}" if self.frame else ""
-        return f"PositionTask(axes={self.axes!r}{frame})"
+        frame = f"frame={self.frame!r}, " if self.frame else ""
+        return f"PositionTask({frame}axes={self.axes!r})"

@@ -25,6 +25,7 @@ class PostureTask(Task):
 
     takes_target = False
     constant_jacobian = True
+    has_frame = False
 
     def __init__(self, q_ref=None, weight=1e-2, priority: int | None = None):
         self.q_ref = None if q_ref is None else as_vector(q_ref, "q_ref")
@@ -33,7 +34,6 @@ class PostureTask(Task):
 
     def bind(self, robot):
         bound = super().bind(robot)
-        bound.frame, bound.frame_id = None, -1
         bound.dim = robot.nv
         bound.q_ref = (robot.q0 if self.q_ref is None  # (its own copy, never the caller's)
                        else robot.check_q(self.q_ref, "q_ref")).copy()

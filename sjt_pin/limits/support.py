@@ -1,0 +1,156 @@
+"""The centre of mass kept over the feet: its ground projection inside the support polygon.
+
+The support polygon is the convex hull of the contacts' sole corners projected on the ground
+(the world's xy plane, z up): a quadruped's point feet (``sole=0``) span a quadrilateral, a
+humanoid's two soles a hexagon. Each edge k of the hull, with inward unit normal ``n_k`` and
+offset ``h_k``, gives the signed distance ``d_k = n_k^T c_xy - h_k`` of the centre of mass's
+projection (positive inside), and one velocity-damper row, as the collision limit's
+(:mod:`.collision`, after Kanoun, Lamiraux and Wieber, IEEE T-RO 2011, eq. 14):
+
+    d_k_dot >= -gain (d_k - margin) / dt,   d_k_dot = n_k^T J_c,xy q_dot
+
+(``J_c`` Pinocchio's centre-of-mass Jacobian): per period the projection's excess over the
+margin shrinks by at most the fraction ``gain``, so it never crosses the margin, and from
+outside it the rows pull it back in. Beside acceleration limits the closing speed toward each
+edge is also cut to what half of them can brake within the excess (``stoppable_rows``, as for
+collisions). This is the static-balance criterion (the centre of mass over the support): it
+holds for slow motions, not for dynamic gaits (a ZMP or centroidal criterion).
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Sequence
+
+import numpy as np
+
+from ..kernels import stoppable_rows
+from ..validation import real_number
+from .base import Limit, Motion
+from .collision import BRAKING_SHARE, EASING_SLACK
+
+
+def convex_hull(points: np.ndarray) -> np.ndarray:
+    """The vertices (k, 2) of the convex hull of ``points`` (n, 2), counter-clockwise, without
+    collinear ones (Andrew's monotone chain)."""
+    pts = sorted(map(tuple, np.round(points, 12)))
+
+    def half(sequence):
+        chain: list[tuple[float, float]] = []
+        for p in sequence:
+            while len(chain) >= 2 and ((chain[-1][0] - chain[-2][0]) * (p[1] - chain[-2][1])
+                                       - (chain[-1][1] - chain[-2][1]) * (p[0] - chain[-2][0])
+                                       ) <= 0.0:
+                chain.pop()
+            chain.append(p)
+        return chain
+
+    lower, upper = half(pts), half(reversed(pts))
+    return np.array(lower[:-1] + upper[:-1], dtype=float).reshape(-1, 2)
+
+
+class SupportLimit(Limit):
+    """The centre of mass's ground projection held ``margin`` inside the support polygon.
+
+    Args:
+        contacts: the contact frames (feet, or hands on a support), at least one.
+        sole: half the sole's length and width (m) in each contact frame's x and y axes: a
+            number (a square sole), a pair ``(hx, hy)``, or 0 for point feet (the default;
+            three or more contacts then span the polygon).
+        margin: how far inside the polygon (m, >= 0) the projection stays.
+        gain: the damper's gain in (0, 1]: per period the excess ``d - margin`` may shrink by
+            at most that fraction.
+
+    The polygon is taken from the contacts' poses at the first step and kept (contacts that
+    hold do not move); :meth:`update` takes it again after the feet moved. ``polygon`` holds
+    its vertices (k, 2; m, world x and y, counter-clockwise) after the first step, and
+    ``distance`` the projection's least distance to its edges (m, negative outside).
+    """
+
+    name = "support"
+
+    def __init__(self, contacts: Sequence[str], sole=0.0, margin: float = 0.02,
+                 gain: float = 0.5):
+        if isinstance(contacts, str):
+            contacts = [contacts]
+        contacts = list(contacts)
+        if not contacts or not all(isinstance(c, str) for c in contacts):
+            raise TypeError(f"contacts must be one or more frame names, got {contacts!r}")
+        sole = np.broadcast_to(np.asarray(sole, dtype=float), (2,)) if np.ndim(sole) == 0 \
+            else np.asarray(sole, dtype=float)
+        if sole.shape != (2,) or not np.all(np.isfinite(sole)) or np.any(sole < 0):
+            raise ValueError(f"sole must be a half-size >= 0 (m) or a pair (hx, hy), got {sole!r}")
+        self.margin = real_number(margin, "margin", "m")
+        self.gain = real_number(gain, "gain")
+        if not 0.0 <= self.margin < np.inf:
+            raise ValueError(f"margin must be a finite distance >= 0 (m), got {margin!r}")
+        if not 0.0 < self.gain <= 1.0:
+            raise ValueError(f"gain must be in (0, 1], got {gain!r}")
+        self.contacts = contacts
+        hx, hy = sole
+        #: the sole's corners in the contact frame (4, 3), or its origin for point feet
+        self._corners = (np.array([[hx, hy, 0.0], [hx, -hy, 0.0], [-hx, -hy, 0.0],
+                                   [-hx, hy, 0.0]]) if hx > 0 or hy > 0 else np.zeros((1, 3)))
+        self._frames: list[int] | None = None
+        self.polygon: np.ndarray | None = None
+        self.distance = np.nan
+        self._normals = self._offsets = self._A = self._b = None
+
+    def update(self) -> None:
+        """Take the polygon again from the contacts' poses at the next step."""
+        self.polygon = None
+
+    def _polygon(self, kinematics) -> None:
+        model = kinematics.model
+        if self._frames is None:
+            names = [f.name for f in model.frames]
+            missing = [c for c in self.contacts if c not in names]
+            if missing:
+                from ..exceptions import FrameNotFound
+                raise FrameNotFound(missing[0], names, "the robot")
+            self._frames = [names.index(c) for c in self.contacts]
+        poses = [kinematics.placement(f) for f in self._frames]
+        points = np.concatenate([self._corners @ M.rotation.T + M.translation for M in poses])
+        hull = convex_hull(points[:, :2])
+        edges = np.roll(hull, -1, axis=0) - hull
+        lengths = np.linalg.norm(edges, axis=1)
+        if len(hull) < 3 or lengths.min() <= 1e-9 or _area(hull) <= 1e-9:
+            raise ValueError(f"the contacts {self.contacts} span no area on the ground (a point "
+                             "or a segment): give sole= their size, or more contacts")
+        normals = np.column_stack([-edges[:, 1], edges[:, 0]]) / lengths[:, None]  # inward
+        self.polygon, self._normals = hull, normals
+        self._offsets = np.einsum("ij,ij->i", normals, hull)
+        self._A = np.zeros((len(hull), model.nv))
+        self._b = np.zeros(len(hull))
+
+    def rows(self, kinematics, motion: Motion):
+        """Rows ``A q_dot <= b`` (A: (k, nv) in m per unit of q_dot, b: (k,) in m/s), one per
+        edge of the support polygon: ``-n_k^T J_c,xy q_dot <= gain (d_k - margin) / dt``."""
+        first = self.polygon is None
+        if first:
+            self._polygon(kinematics)
+        c, Jc = kinematics.center_of_mass()
+        normals = self._normals
+        d = normals @ c[:2] - self._offsets
+        self.distance = float(d.min())
+        if first and self.distance < self.margin:
+            warnings.warn(f"the centre of mass starts {self.distance:.4g} m inside the support "
+                          f"polygon of {self.contacts}, less than the margin {self.margin:g} m: "
+                          "the support limit moves it in", stacklevel=2)
+        A, b = self._A, self._b
+        np.matmul(normals, Jc[:2], out=A)
+        np.negative(A, out=A)
+        rate = self.gain / motion.dt
+        np.multiply(d - self.margin, rate, out=b)
+        if motion.acceleration_limits is not None:
+            stoppable_rows(A, b, motion.dq, motion.ddq, motion.acceleration_limits,
+                           motion.jerk_limits, rate, motion.dt, BRAKING_SHARE, EASING_SLACK)
+        return A, b
+
+    def __repr__(self) -> str:
+        return f"SupportLimit({self.contacts!r}, margin={self.margin:g})"
+
+
+def _area(polygon: np.ndarray) -> float:
+    x, y = polygon[:, 0], polygon[:, 1]
+    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
