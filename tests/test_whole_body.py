@@ -1,0 +1,235 @@
+"""Whole-body tasks: the centre of mass, contacts, the support polygon, and strict priorities.
+
+Real robots from example-robot-data: Solo-12 (a quadruped, free-flyer base, point feet) moves
+its body over its four held feet; TALOS (a 30-joint humanoid) reaches with both hands while its
+soles hold and its centre of mass stays over them.
+"""
+
+import warnings
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+import sjt_pin as sjt
+from sjt_pin.kinematics import Kinematics
+from sjt_pin.limits.support import convex_hull
+
+from .test_pipeline import random_chain
+
+DT = 1e-3
+FEET = ["FL_FOOT", "FR_FOOT", "HL_FOOT", "HR_FOOT"]
+SOLES = ["left_sole_link", "right_sole_link"]
+HANDS = ["gripper_left_base_link", "gripper_right_base_link"]
+#: Solo-12's URDF gives 1,000 rad/s; a real Solo's joints and a body moved by hand are slower
+SOLO_SPEEDS = np.r_[np.full(6, 2.0), np.full(12, 10.0)]
+
+
+@pytest.fixture(scope="module")
+def solo():
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # (no end effector known: the tasks name their frames)
+        return sjt.Robot.from_example("solo12")
+
+
+@pytest.fixture(scope="module")
+def talos():
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return sjt.Robot.from_example("talos")
+
+
+def smooth(t: float) -> float:
+    """Minimum-jerk 0 -> 1 over t in [0, 1]."""
+    t = min(max(t, 0.0), 1.0)
+    return t * t * t * (10.0 - 15.0 * t + 6.0 * t * t)
+
+
+def com(robot, q):
+    kinematics = Kinematics(robot.model)
+    kinematics.update(q)
+    return kinematics.center_of_mass()[0].copy()
+
+
+def test_com_jacobian_is_the_derivative_of_pinocchios_centre_of_mass(solo, rng):
+    """J_c by central differences along random tangent directions, free flyer included."""
+    task = sjt.CoMTask().bind(solo)
+    kinematics = Kinematics(solo.model)
+    for _ in range(5):
+        q = pin.randomConfiguration(solo.model, -np.ones(solo.nq), np.ones(solo.nq))
+        q[3:7] /= np.linalg.norm(q[3:7])
+        kinematics.update(q)
+        J, e, _ = task.compute(kinematics, np.zeros(3), None)
+        J = J.copy()
+        np.testing.assert_allclose(-e, pin.centerOfMass(solo.model, solo.model.createData(), q),
+                                   atol=1e-12)
+        v, h = rng.normal(size=solo.nv), 1e-6
+        plus = com(solo, pin.integrate(solo.model, q, h * v))
+        minus = com(solo, pin.integrate(solo.model, q, -h * v))
+        np.testing.assert_allclose(J @ v, (plus - minus) / (2 * h), atol=1e-7)
+    xz = sjt.CoMTask(axes="zx").bind(solo)
+    J2, e2, _ = xz.compute(kinematics, np.array([1.0, 2.0, 3.0]), None)
+    c, Jc = kinematics.center_of_mass()
+    np.testing.assert_allclose(J2, Jc[[2, 0]])
+    np.testing.assert_allclose(e2, np.array([3.0, 1.0]) - c[[2, 0]])
+
+
+def test_frameless_tasks_sit_in_a_mapping_under_any_key(solo):
+    tasks = {f: sjt.ContactTask(f, point=True) for f in FEET}
+    tasks["body"] = sjt.CoMTask(priority=1)
+    tasks["rest"] = sjt.PostureTask()
+    solver = sjt.SJTSolver(solo, task=tasks, dt=DT)
+    assert solver.stack.frames == ["body"]  # contacts and posture take no target
+    q = solver.step(solo.q0, {"body": com(solo, solo.q0) + [0.01, 0.0, 0.0]})
+    assert np.all(np.isfinite(q))
+    with pytest.raises(ValueError, match=r"exactly the frames \['body'\]"):
+        solver.step(solo.q0, {"com": np.zeros(3)})
+    alone = sjt.SJTSolver(solo, task=[sjt.CoMTask()], dt=DT)
+    assert alone.stack.frames == ["com"]
+
+
+@pytest.mark.parametrize("Solver", [sjt.SJTSolver, sjt.DLSSolver, sjt.JPSolver])
+def test_quadruped_moves_its_body_over_held_feet_and_rests_at_the_support_edge(solo, Solver):
+    q = solo.q0.copy()
+    feet = {f: solo.fk(q, f).translation.copy() for f in FEET}
+    support = sjt.SupportLimit(FEET, margin=0.02)
+    solver = Solver(solo, task=[sjt.ContactTask(f, point=True) for f in FEET]
+                    + [sjt.CoMTask(priority=1)], dt=DT, limits=[support],
+                    velocity_limits=SOLO_SPEEDS)
+    c0 = com(solo, q)
+    move = np.array([0.05, 0.04, -0.04])
+    slip, closest = 0.0, np.inf
+    for i in range(1500):  # 1 s of a smooth move, then 0.5 s held
+        q = solver.step(q, c0 + smooth(i * DT) * move)
+        slip = max(slip, max(np.linalg.norm(solo.fk(q, f).translation - p)
+                             for f, p in feet.items()))
+        closest = min(closest, support.distance)
+    assert np.linalg.norm(com(solo, q) - c0 - move) < 1e-9
+    assert slip < 5e-6
+    assert closest > 0.02
+    # a target far outside the feet: the body stops at the margin, feet held, and rests (a
+    # jump at the speed limits: each step's second-order slip, taken back at the next, is
+    # larger)
+    far, slip = c0 + move + [0.3, 0.0, 0.0], 0.0
+    for _ in range(3000):
+        q = solver.step(q, far)
+        slip = max(slip, max(np.linalg.norm(solo.fk(q, f).translation - p)
+                             for f, p in feet.items()))
+        closest = min(closest, support.distance)
+    assert slip < 5e-5
+    assert closest > 0.02 - 1e-4
+    assert support.distance < 0.021  # it went as far as the margin lets it
+    assert np.abs(solver.last.dq).max() < 1e-6
+
+
+def test_humanoid_reaches_with_both_hands_over_its_held_soles(talos):
+    q = talos.q0.copy()
+    soles = {f: talos.fk(q, f) for f in SOLES}
+    hands = {h: talos.fk(q, h).translation.copy() for h in HANDS}
+    moves = {HANDS[0]: np.array([0.1, 0.05, 0.05]), HANDS[1]: np.array([0.08, -0.05, -0.05])}
+    tasks = {f: sjt.ContactTask(f) for f in SOLES}
+    tasks.update({h: sjt.PositionTask(h, priority=1) for h in HANDS})
+    tasks["com"] = sjt.CoMTask(axes="xy", priority=1)
+    support = sjt.SupportLimit(SOLES, sole=(0.1, 0.05), margin=0.02)
+    solver = sjt.SJTSolver(talos, task=tasks, dt=DT, limits=[support],
+                           posture=sjt.PostureTask())
+    c0 = com(talos, q)
+    slip, closest = 0.0, np.inf
+    for i in range(2500):  # 1.5 s of a smooth reach, then 1 s held
+        s = smooth(i * DT / 1.5)
+        target = {h: hands[h] + s * moves[h] for h in HANDS}
+        target["com"] = c0
+        q = solver.step(q, target)
+        slip = max(slip, max(float(np.linalg.norm(pin.log6(talos.fk(q, f).actInv(M)).vector))
+                             for f, M in soles.items()))
+        closest = min(closest, support.distance)
+        lo, hi = talos.model.lowerPositionLimit[7:], talos.model.upperPositionLimit[7:]
+        assert np.all(q[7:] >= lo - 1e-9) and np.all(q[7:] <= hi + 1e-9)
+    for h in HANDS:
+        assert np.linalg.norm(talos.fk(q, h).translation - hands[h] - moves[h]) < 1e-4
+    assert np.linalg.norm((com(talos, q) - c0)[:2]) < 1e-4
+    assert slip < 1e-6
+    assert closest > 0.02
+
+
+def test_support_polygon_and_its_rows(solo):
+    support = sjt.SupportLimit(FEET, margin=0.0, gain=1.0)
+    kinematics = Kinematics(solo.model)
+    kinematics.update(solo.q0)
+    motion = sjt.limits.Motion(solo.q0, np.zeros(solo.nv), np.zeros(solo.nv), DT)
+    A, b = support.rows(kinematics, motion)
+    feet = np.array([solo.fk(solo.q0, f).translation[:2] for f in FEET])
+    np.testing.assert_allclose(np.sort(support.polygon, axis=0), np.sort(feet, axis=0))
+    # gain 1, margin 0: b dt is each edge's distance, A the rate of its decrease
+    c, Jc = kinematics.center_of_mass()
+    polygon = support.polygon
+    for k in range(len(polygon)):
+        p, r = polygon[k], polygon[(k + 1) % len(polygon)]
+        edge = (r - p) / np.linalg.norm(r - p)
+        inward = np.array([-edge[1], edge[0]])
+        assert b[k] * DT == pytest.approx(inward @ (c[:2] - p), abs=1e-12)
+        np.testing.assert_allclose(A[k], -inward @ Jc[:2], atol=1e-12)
+    hull = convex_hull(np.array([[0, 0], [1, 0], [1, 1], [0, 1], [0.5, 0.5], [0.5, 0]]))
+    (ax, ay), (bx, by) = hull[1] - hull[0], hull[2] - hull[1]
+    assert len(hull) == 4 and ax * by - ay * bx > 0  # counter-clockwise
+
+
+def test_whole_body_bad_input(solo):
+    with pytest.raises(TypeError, match="contacts must be one or more frame names"):
+        sjt.SupportLimit([])
+    with pytest.raises(ValueError, match="margin must be a finite distance"):
+        sjt.SupportLimit(FEET, margin=-0.01)
+    with pytest.raises(ValueError, match="sole must be"):
+        sjt.SupportLimit(FEET, sole=(0.1, -0.1))
+    with pytest.raises(ValueError, match="gain must be in"):
+        sjt.SupportLimit(FEET, gain=0.0)
+    with pytest.raises(TypeError, match="a contact needs its frame"):
+        sjt.ContactTask(None)
+    with pytest.raises(ValueError, match="axes must be a non-empty subset"):
+        sjt.CoMTask(axes="xw")
+    two = sjt.SupportLimit(FEET[:2])  # two point feet: a segment
+    solver = sjt.SJTSolver(solo, task=[sjt.CoMTask()], dt=DT, limits=[two])
+    with pytest.raises(ValueError, match="span no area"):
+        solver.step(solo.q0, com(solo, solo.q0))
+    missing = sjt.SJTSolver(solo, task=[sjt.CoMTask()], dt=DT,
+                            limits=[sjt.SupportLimit(["FL_FOOT", "no_such_foot", "HL_FOOT"])])
+    with pytest.raises(sjt.FrameNotFound, match="no_such_foot"):
+        missing.step(solo.q0, com(solo, solo.q0))
+    with pytest.raises(sjt.FrameNotFound, match=r"PositionTask\(axes='xy'\)"):
+        sjt.SJTSolver(solo, task=sjt.PositionTask("xy"))
+
+
+def test_a_start_outside_the_margin_is_said_and_moved_in(solo):
+    q = solo.q0.copy()
+    support = sjt.SupportLimit(FEET, margin=0.2)  # wider than the feet: the start is outside
+    solver = sjt.DLSSolver(solo, task=[sjt.ContactTask(f, point=True) for f in FEET]
+                           + [sjt.CoMTask(axes="z", priority=1)], dt=DT, limits=[support],
+                           velocity_limits=SOLO_SPEEDS)
+    with pytest.warns(UserWarning, match="centre of mass starts .* less than the margin"):
+        q = solver.step(q, com(solo, q))
+    assert np.all(np.isfinite(q))
+
+
+@pytest.mark.parametrize("Solver", [sjt.SJTSolver, sjt.DLSSolver, sjt.JPSolver, sjt.JTSolver])
+@pytest.mark.parametrize("seed", range(6))
+def test_a_lower_level_costs_the_top_level_nothing(Solver, seed):
+    """Strict priorities on random redundant chains: the top level's task motion J0 q_dot is
+    the same with and without the levels below it (where no limit binds)."""
+    robot = random_chain(seed, 9)
+    rng = np.random.default_rng(seed)
+    q = rng.uniform(-1.0, 1.0, robot.nq)
+    target = robot.fk(q).translation + rng.normal(scale=0.02, size=3)
+    free = dict(dt=DT, position_limits=False, velocity_limits=False)
+    top = Solver(robot, task=sjt.PositionTask(), **free)
+    below = Solver(robot, task=[sjt.PositionTask(), sjt.OrientationTask(priority=1)],
+                   posture=sjt.PostureTask(q_ref=rng.uniform(-1, 1, robot.nq), weight=0.1),
+                   **free)
+    top.step(q, target)
+    # one target for both tasks on the end effector: its translation the position task's
+    turned = pin.SE3(robot.fk(q).rotation @ pin.exp3(rng.normal(scale=0.2, size=3)), target)
+    below.step(q, turned)
+    J0 = robot.jacobian(q, reference=pin.LOCAL_WORLD_ALIGNED)[:3]
+    scale = np.linalg.norm(J0 @ top.last.dq)
+    np.testing.assert_allclose(J0 @ below.last.dq, J0 @ top.last.dq, atol=1e-9 * scale)
+    assert np.linalg.norm(below.last.dq - top.last.dq) > 1e-6 * np.linalg.norm(top.last.dq)
+
