@@ -241,13 +241,20 @@ void Controller::project(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<
     velocity = x0_;
   } else {
     // the lower levels: nearest (Euclidean) to their step, with level 0's task motion held
+    // (their step is in the null space of level 0's rows: where it is feasible, it is the
+    // answer, and the projection is not run)
     tmp_ = x0_ + (desired - desired_top);
-    Vector d = J0 * x0_;
-    RowMatrix C = J0;
-    ProjectionReport r = projection_.solve(tmp_, lam_low_, Bnone_, lo, hi, A, b, C, d, velocity);
-    report.iterations += r.iterations;
-    report.converged = report.converged && r.converged;
-    lower_line_search(tmp_);
+    if (feasible(tmp_, A, b, lo, hi)) {
+      velocity = tmp_;
+    } else {
+      Vector d = J0 * x0_;
+      RowMatrix C = J0;
+      ProjectionReport r =
+          projection_.solve(tmp_, lam_low_, Bnone_, lo, hi, A, b, C, d, velocity);
+      report.iterations += r.iterations;
+      report.converged = report.converged && r.converged;
+      lower_line_search(tmp_);
+    }
   }
   if (!rows_hold(A, b)) {
     // the task's metric can leave the dual degenerate (fewer joints inside their box than
