@@ -58,7 +58,7 @@ class Search:
             length=getattr(method, "length", 0.0),
             scaled=bool(getattr(method, "scaled", False)),
             identity_rows=stack.identity_rows)
-        core.error_rows = stack.target_dim
+        core.error_rows = stack.search_dim
         core.max_step, core.nu_start = MAX_STEP, NU_START
         core.stale_iters, core.progress = STALE_ITERS, PROGRESS
         core.held_iters, core.held_progress = HELD_ITERS, HELD_PROGRESS

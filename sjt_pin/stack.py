@@ -116,6 +116,11 @@ class TaskStack:
         #: search solves the stacked system as diagonal plus low rank, linear in nv
         self.identity_rows = (nv if self.tasks and isinstance(self.tasks[-1], PostureTask)
                               and len(self.tasks) > len(self.targeted) else 0)
+        #: the rows the set-point search must bring to zero: every task's before the first
+        #: posture task (the targets' and a contact's), a prefix of the stacked rows
+        first_posture = next((k for k, t in enumerate(self.tasks) if isinstance(t, PostureTask)),
+                             len(self.tasks))
+        self.search_dim = int(bounds[first_posture])
         #: the rows of the tasks that take targets (the error a step reports), in order
         self.error_rows = np.concatenate(
             [np.arange(s.start, s.stop) for t, s in zip(self.tasks, self.slices, strict=True)

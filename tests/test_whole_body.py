@@ -233,3 +233,17 @@ def test_a_lower_level_costs_the_top_level_nothing(Solver, seed):
     np.testing.assert_allclose(J0 @ below.last.dq, J0 @ top.last.dq, atol=1e-9 * scale)
     assert np.linalg.norm(below.last.dq - top.last.dq) > 1e-6 * np.linalg.norm(top.last.dq)
 
+
+
+def test_solve_brings_the_centre_of_mass_to_its_target_with_the_feet_held(solo):
+    """solve()'s success counts the contacts' rows too, not only the rows that take targets
+    (it counted the first rows, the contacts': success at the start, the body not moved)."""
+    solver = sjt.DLSSolver(solo, task=[sjt.ContactTask(f, point=True) for f in FEET]
+                           + [sjt.CoMTask(priority=1)])
+    goal = com(solo, solo.q0) + [0.03, -0.02, -0.03]
+    result = solver.solve(goal, solo.q0)
+    assert result.success and result.iterations > 1
+    assert np.linalg.norm(com(solo, result.q) - goal) < 1e-6
+    for f in FEET:
+        np.testing.assert_allclose(solo.fk(result.q, f).translation,
+                                   solo.fk(solo.q0, f).translation, atol=1e-6)
