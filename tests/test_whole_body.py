@@ -247,3 +247,24 @@ def test_solve_brings_the_centre_of_mass_to_its_target_with_the_feet_held(solo):
     for f in FEET:
         np.testing.assert_allclose(solo.fk(result.q, f).translation,
                                    solo.fk(solo.q0, f).translation, atol=1e-6)
+
+
+def test_a_posture_below_does_not_stop_the_hands_after_a_fast_reach(talos):
+    """A 0.1 s reach (joints at their speed limits), then held: the posture at the lowest level
+    must not veto level 1's motion (one step share for all lower levels stopped the hands
+    5.8 cm short, at rest, no limit active)."""
+    q = talos.q0.copy()
+    start = {h: talos.fk(q, h).translation.copy() for h in HANDS}
+    reach = {HANDS[0]: np.array([0.1, 0.05, 0.05]), HANDS[1]: np.array([0.08, -0.05, -0.05])}
+    tasks = {f: sjt.ContactTask(f) for f in SOLES}
+    tasks.update({h: sjt.PositionTask(h, priority=1) for h in HANDS})
+    tasks["com"] = sjt.CoMTask(axes="xy", priority=1)
+    solver = sjt.SJTSolver(talos, task=tasks, dt=DT, posture=sjt.PostureTask())
+    c0 = com(talos, q)
+    for i in range(1100):
+        s = smooth(i / 100)
+        target = {h: start[h] + s * reach[h] for h in HANDS}
+        target["com"] = c0
+        q = solver.step(q, target)
+    for h in HANDS:
+        assert np.linalg.norm(talos.fk(q, h).translation - start[h] - reach[h]) < 1e-6

@@ -275,26 +275,33 @@ void Controller::project(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<
 // (a centre of mass at the edge of its support, a posture against a joint limit), that nearest
 // velocity keeps the step's motions that no lower task sees (a leg's self-motion under its
 // held foot) and the arm never comes to rest. So the lower part u = velocity - x0_ is scaled by
-// the w in [0, 1] that minimises the lower levels' linearised error after the step with a
-// penalty on motion, |r - w B u|^2 + mu w^2 |u|^2 (r = e_w / dt + feed-forward - B x0_, B their
-// weighted rows, mu kInvisible of B's mean squared column norm): a motion they see is kept
-// whole (w near 1), one they do not see is dropped. x0_ and velocity are feasible, so is the
-// blend. Only where the projection changed the step: a feasible step is returned unchanged.
+// w in [0, 1]: for each lower level k, w_k minimises its linearised error after the step with a
+// penalty on motion, |r_k - w B_k u|^2 + mu_k w^2 |u|^2 (r_k = e_w / dt + feed-forward - B_k x0_,
+// B_k its weighted rows, mu_k kInvisible of their mean squared column norm), and w is the
+// largest w_k: a motion some lower level sees as progress is kept (near whole), one that none
+// does is dropped, and no level vetoes another's progress (a posture pulled away from its
+// reference by the hands above it). x0_ and velocity are feasible, so is the blend. Only where
+// the projection changed the step: a feasible step is returned unchanged.
 void Controller::lower_line_search(const Vector& unconstrained) {
-  const Index begin = levels[1].begin, rows = Jw_.rows() - begin;
   low_move_ = velocity - unconstrained;
-  if (rows == 0 || low_move_.norm() <= kBoundTol * (1.0 + unconstrained.norm())) return;
-  const auto B = Jw_.bottomRows(rows);
+  if (low_move_.norm() <= kBoundTol * (1.0 + unconstrained.norm())) return;
   low_move_ = velocity - x0_;
   const double uu = low_move_.squaredNorm();
   if (!(uu > 0.0)) return;
-  low_res_ = ew_.tail(rows) / dt_;
-  if (ff_in_) low_res_ += ffw_.tail(rows);
-  low_res_.noalias() -= B * x0_;
-  tmp2_.noalias() = B * low_move_;
   const double moving_joints = std::max(moving.sum(), 1.0);
-  const double mu = kInvisible * B.squaredNorm() / moving_joints;
-  const double w = std::clamp(low_res_.dot(tmp2_) / (tmp2_.squaredNorm() + mu * uu), 0.0, 1.0);
+  double w = 0.0;
+  for (size_t index = 1; index < levels.size() && w < 1.0; ++index) {
+    const Level& level = levels[index];
+    const Index rows = level.end - level.begin;
+    if (rows == 0) continue;
+    const auto B = Jw_.middleRows(level.begin, rows);
+    low_res_ = ew_.segment(level.begin, rows) / dt_;
+    if (ff_in_) low_res_ += ffw_.segment(level.begin, rows);
+    low_res_.noalias() -= B * x0_;
+    tmp2_.noalias() = B * low_move_;
+    const double mu = kInvisible * B.squaredNorm() / moving_joints;
+    w = std::max(w, std::clamp(low_res_.dot(tmp2_) / (tmp2_.squaredNorm() + mu * uu), 0.0, 1.0));
+  }
   velocity = x0_ + w * low_move_;
 }
 
