@@ -124,11 +124,11 @@ def circle_errors(robot: Robot, q0: np.ndarray, method: str) -> tuple[float, flo
 def drift(robot: Robot, q0: np.ndarray, method: str, posture: bool,
           seconds: float = 60.0) -> tuple[float, float, float]:
     """A periodic 15 cm circle tracked with a position task at Δt = 10 ms for ``seconds`` (at
-    least two turns): the largest joint change (rad) from the start of the first turn to the
+    least three turns): the largest joint change (rad) from the start of the first turn to the
     start of the last one, the same from the start of the second turn, and the run's max
     position error (m)."""
     p0 = robot.fk(q0).translation
-    turns = max(round(seconds / DRIFT_TURN), 2)
+    turns = max(round(seconds / DRIFT_TURN), 3)
     circle = Circle(p0 - [0.0, DRIFT_RADIUS, 0.0], DRIFT_RADIUS, duration=turns * DRIFT_TURN,
                     normal=[1.0, 0.0, 0.0], turns=turns)
     solver = make_solver(method, robot, dt=DRIFT_DT, task=PositionTask(),
@@ -156,7 +156,7 @@ def posture_rows(robots=POSTURE_ROBOTS, methods=POSTURE_METHODS, seconds: float 
             rows.append(PostureRow(name, method.upper(), plain, below, weighted,
                                    below / plain, free, held, free_settled, held_settled,
                                    max(free_error, held_error),
-                                   max(round(seconds / DRIFT_TURN), 2) * DRIFT_TURN))
+                                   max(round(seconds / DRIFT_TURN), 3) * DRIFT_TURN))
             if progress:
                 progress(rows[-1])
     return rows
