@@ -224,13 +224,26 @@ def bench(args: argparse.Namespace) -> int:
         print("\nTargets jumping every 0.5 s for 20 s, then one held 8 s, at 1 kHz: Panda with "
               "Franka's acceleration and jerk limits, three more arms with limits of their "
               "class:\n" + limits.franka_table(franka))
+        from .bench import whole_body
+
+        posture = whole_body.posture_rows(progress=lambda r: print(
+            f"  {r.robot}, {r.method}, posture", flush=True))
+        body = whole_body.whole_body_rows(peers=not args.no_peers, progress=lambda r: print(
+            f"  TALOS, {r.solver}", flush=True))
+        print("\nPosture at the lowest level: max error on an 8 cm pose circle (m and rad), and "
+              "the joints' drift over 60 s of a periodic circle (rad):\n"
+              + whole_body.posture_table(posture))
+        print("\nTALOS reaching with both hands over its held soles, beside pink's weighted "
+              "solution of the same tasks:\n" + whole_body.whole_body_table(body))
         _write_json(args.json, {"machine": machine,
                                 "tracking": [asdict(r) for r in tracking],
                                 "rest": [asdict(r) for r in rest],
                                 "saddles": [asdict(r) for r in saddles],
                                 "units": [asdict(r) for r in units],
                                 "saturating": [asdict(r) for r in saturating],
-                                "franka": [asdict(r) for r in franka]})
+                                "franka": [asdict(r) for r in franka],
+                                "posture": [asdict(r) for r in posture],
+                                "whole_body": [asdict(r) for r in body]})
     elif args.kind == "reach":
         from .bench import reach
 
@@ -478,8 +491,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--poses", type=positive_int, default=1000, help="ik: random poses per robot "
                    "(default: 1000)")
     p.add_argument("--no-peers", action="store_true",
-                   help="ik: skip TRAC-IK and robotics-toolbox's ik_LM; collision, reach: skip "
-                   "pink")
+                   help="ik: skip TRAC-IK and robotics-toolbox's ik_LM; collision, reach, "
+                   "accuracy: skip pink")
     p.add_argument("--pairs", type=positive_int, default=50, help="reach: random (start, "
                    "target) pairs per robot (default: 50)")
     p.add_argument("--trials", type=positive_int, default=30, help="reach: runs of the jerk "
