@@ -94,7 +94,7 @@ class SupportLimit(Limit):
         self._frames: list[int] | None = None
         self.polygon: np.ndarray | None = None
         self.distance = np.nan
-        self._normals = self._offsets = self._A = self._b = None
+        self._normals = self._outward = self._offsets = self._A = self._b = self._d = None
 
     def update(self) -> None:
         """Take the polygon again from the contacts' poses at the next step."""
@@ -118,10 +118,10 @@ class SupportLimit(Limit):
             raise ValueError(f"the contacts {self.contacts} span no area on the ground (a point "
                              "or a segment): give sole= their size, or more contacts")
         normals = np.column_stack([-edges[:, 1], edges[:, 0]]) / lengths[:, None]  # inward
-        self.polygon, self._normals = hull, normals
+        self.polygon, self._normals, self._outward = hull, normals, -normals
         self._offsets = np.einsum("ij,ij->i", normals, hull)
         self._A = np.zeros((len(hull), model.nv))
-        self._b = np.zeros(len(hull))
+        self._b, self._d = np.zeros(len(hull)), np.zeros(len(hull))
 
     def rows(self, kinematics, motion: Motion):
         """Rows ``A q_dot <= b`` (A: (k, nv) in m per unit of q_dot, b: (k,) in m/s), one per
@@ -130,18 +130,17 @@ class SupportLimit(Limit):
         if first:
             self._polygon(kinematics)
         c, Jc = kinematics.center_of_mass()
-        normals = self._normals
-        d = normals @ c[:2] - self._offsets
-        self.distance = float(d.min())
+        d = np.matmul(self._normals, c[:2], out=self._d)
+        d -= self._offsets
+        self.distance = d.min()
         if first and self.distance < self.margin:
             warnings.warn(f"the centre of mass starts {self.distance:.4g} m inside the support "
                           f"polygon of {self.contacts}, less than the margin {self.margin:g} m: "
                           "the support limit moves it in", stacklevel=2)
-        A, b = self._A, self._b
-        np.matmul(normals, Jc[:2], out=A)
-        np.negative(A, out=A)
+        A = np.matmul(self._outward, Jc[:2], out=self._A)
         rate = self.gain / motion.dt
-        np.multiply(d - self.margin, rate, out=b)
+        b = np.subtract(d, self.margin, out=self._b)
+        b *= rate
         if motion.acceleration_limits is not None:
             stoppable_rows(A, b, motion.dq, motion.ddq, motion.acceleration_limits,
                            motion.jerk_limits, rate, motion.dt, BRAKING_SHARE, EASING_SLACK)
