@@ -94,7 +94,10 @@ class SupportLimit(Limit):
         self._frames: list[int] | None = None
         self.polygon: np.ndarray | None = None
         self.distance = np.nan
-        self._normals = self._outward = self._offsets = self._A = self._b = self._d = None
+        # the edges' inward and outward unit normals (k, 2) and offsets, the rows' buffers
+        self._normals = self._outward = np.zeros((0, 2))
+        self._offsets = self._b = self._d = np.zeros(0)
+        self._A = np.zeros((0, 0))
 
     def update(self) -> None:
         """Take the polygon again from the contacts' poses at the next step."""
