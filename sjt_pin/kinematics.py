@@ -18,7 +18,18 @@ _WORLD_ALIGNED = pin.LOCAL_WORLD_ALIGNED
 class Kinematics:
     """Pinocchio's model and a ``data`` of its own, at the configuration ``q`` of the last
     :meth:`update` (each solver has one, so solvers never share scratch space). Jacobians are
-    always 2-D, (6, nv), also for a robot with one joint (Pinocchio returns a vector there)."""
+    always 2-D, (6, nv), also for a robot with one joint (Pinocchio returns a vector there).
+
+    What a task's ``compute`` (or a limit's ``bounds``/``rows``) may read:
+
+    - ``model``, ``data``: Pinocchio's, after ``computeJointJacobians`` at ``q``: the joint
+      placements ``data.oMi`` and the joint Jacobians ``data.J`` (world axes) are current, so
+      Pinocchio's frame functions (``getFrameJacobian``, ``updateFramePlacement``, ...) and
+      ``jacobianCenterOfMass(model, data)`` need no other kinematics call;
+    - ``q`` (nq,): the configuration;
+    - :meth:`placement`, :meth:`jacobian` (LOCAL), :meth:`world_aligned_jacobian`,
+      :meth:`center_of_mass` (computed once per configuration, shared) and :meth:`difference`.
+    """
 
     __slots__ = ("model", "data", "q", "jacobian", "world_aligned_jacobian", "_com_fresh")
 
