@@ -23,9 +23,8 @@ limits — runs the same stages:
 5. ``pinocchio.integrate`` moves ``q`` on its manifold (continuous joints, free flyers);
 6. :attr:`Solver.last` builds a :class:`~sjt_pin.step_info.StepInfo` on first access.
 
-Arguments are validated at the door (``step``, ``solve``, the setters); inside, nothing is
-validated twice. Which stages run is decided by the data (the limits given, the levels), not
-by flags.
+Arguments are validated at the door (``step``, ``solve``, the setters), never twice. Which
+stages run is decided by the data (the limits given, the levels), not by flags.
 """
 
 from __future__ import annotations

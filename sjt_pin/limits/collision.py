@@ -75,18 +75,16 @@ retreat, the guarantee is:
   the least the stage can, and ``StepInfo.rows_exceeded`` gives ``A q_dot - b`` (m/s; times
   ``dt``, how much of the margin the step gave up).
 
-A moving obstacle is moved every step (its velocity holds until the next :meth:`move`); each
-move starts the broad phase again.
+A moving obstacle is moved every step (its velocity holds until the next :meth:`move`).
 
 Distances and closest points come from coal on the shapes of Pinocchio's ``GeometryModel``:
 Pinocchio's ``computeDistance``, called back from the compiled step of the limit
 (``kernels.collision_rows``) for each pair it must query. Only the pairs whose bounding
 spheres come within ``influence`` (plus a skin of half the band ``influence - margin`` while the
 broad phase's result is reused, as in a Verlet list) pay for an exact distance query, and a pair
-whose last exact distance was beyond ``influence`` is not queried again until the joints' moves
-since that query can have closed the gap (a bound from the joint offsets and the ranges of the
-prismatic joints between, summed step by step: :meth:`CollisionLimit._near`,
-:meth:`CollisionLimit._aged`).
+whose last exact distance was beyond ``influence`` is not queried again until the joints'
+moves since can have closed the gap (the joint offsets and prismatic ranges between, summed
+step by step: :meth:`CollisionLimit._near`, :meth:`CollisionLimit._aged`).
 """
 
 from __future__ import annotations
@@ -288,10 +286,9 @@ class CollisionLimit(PairsMixin, TablesMixin, BroadPhaseMixin, MovingMixin, Rows
         ``velocity``: the obstacle's velocity at ``pose`` (6,): the linear velocity of its
         origin (m/s) then its angular velocity (rad/s), both in world axes (Pinocchio's
         ``LOCAL_WORLD_ALIGNED`` twist; a ``pin.Motion`` is read the same way); None for an
-        obstacle at rest. It holds until the next ``move`` - move a moving obstacle every
-        step. Each row of a pair with a moving obstacle then bounds the relative normal
-        velocity of its closest points (module docstring, "Moving obstacles"): the arm gives
-        way as its limits allow."""
+        obstacle at rest. It holds until the next ``move`` (move a moving obstacle every
+        step); each row of its pairs then bounds the relative normal velocity of their closest
+        points (module docstring, "Moving obstacles")."""
         if isinstance(i, bool) or not isinstance(i, (int, np.integer)):
             raise TypeError(f"obstacle index must be an int, got {type(i).__name__}")
         if not 0 <= i < len(self._obstacle_ids):
