@@ -50,13 +50,15 @@ def normalise_tasks(task, posture) -> list[Task]:
 
 def ordered_by_level(tasks: list[Task]) -> tuple[list[Task], list[int]]:
     """``tasks`` in the order of their priority levels (0 first; ``None``: after every other
-    level), and within a level those that take targets first (their rows are the error a step
-    reports); and each task's level index (0, 1, ...)."""
+    level), and within a level those that take targets first, then those that do not (a
+    contact), a posture last (the rows before it are the level's error); and each task's level
+    index (0, 1, ...)."""
     given = sorted({t.priority for t in tasks if t.priority is not None})
     rank = {p: k for k, p in enumerate(given)}
     lowest = len(given)
     levels = [lowest if t.priority is None else rank[t.priority] for t in tasks]
-    order = sorted(range(len(tasks)), key=lambda i: (levels[i], not tasks[i].takes_target))
+    order = sorted(range(len(tasks)), key=lambda i: (
+        levels[i], 2 if isinstance(tasks[i], PostureTask) else int(not tasks[i].takes_target)))
     return [tasks[i] for i in order], [levels[i] for i in order]
 
 
@@ -77,7 +79,8 @@ class TaskStack:
     ``J`` (m, nv), ``e`` (m,) and ``ff`` (m,) hold every task's rows, level by level
     (:func:`ordered_by_level`); ``levels`` says which rows each priority level has:
     ``(begin, end, identity, targets)`` — ``identity`` for a level that is a posture task's
-    rows alone, ``targets`` the level's leading rows of tasks that take targets.
+    rows alone, ``targets`` the level's leading rows that are an error to report (every task's
+    but a posture's: a contact's slip counts).
     ``sqrt_weight`` (m,) holds the weights' square roots; ``chain`` (nv,) is 1 for the joints
     that move at least one task (``Task.joints``; a posture task moves all). With a single
     task, :meth:`evaluate` returns that task's own arrays without copying.
@@ -108,7 +111,8 @@ class TaskStack:
         for level in sorted(set(task_levels)):
             members = [k for k, lv in enumerate(task_levels) if lv == level]
             begin, end = self.slices[members[0]].start, self.slices[members[-1]].stop
-            targets = sum(self.tasks[k].dim for k in members if self.tasks[k].takes_target)
+            targets = sum(self.tasks[k].dim for k in members
+                          if not isinstance(self.tasks[k], PostureTask))
             identity = (level > 0 and len(members) == 1
                         and isinstance(self.tasks[members[0]], PostureTask))
             self.levels.append((begin, end, identity, targets))

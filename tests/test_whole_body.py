@@ -268,3 +268,49 @@ def test_a_posture_below_does_not_stop_the_hands_after_a_fast_reach(talos):
         q = solver.step(q, target)
     for h in HANDS:
         assert np.linalg.norm(talos.fk(q, h).translation - start[h] - reach[h]) < 1e-6
+
+
+@pytest.mark.parametrize("method", [sjt.SJTSolver, sjt.DLSSolver])
+def test_g1_reaches_with_its_knees_at_their_limits_and_rests(method):
+    """Unitree G1 (a robot the other tests do not use): the reach drives both knees onto their
+    limits; the other joints must take over level 1's task motion, with the posture below them,
+    and the robot must come to rest (the nearest velocity in joint space, and then one share of
+    the step for all lower levels, rested 2.7e-4 m short)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        g1 = sjt.Robot.from_example("g1")
+    soles = ["left_ankle_roll_link", "right_ankle_roll_link"]
+    hands = ["left_rubber_hand", "right_rubber_hand"]
+    reach = {hands[0]: np.array([0.08, 0.03, 0.04]), hands[1]: np.array([0.06, -0.03, -0.06])}
+    tasks = {f: sjt.ContactTask(f) for f in soles}
+    tasks.update({h: sjt.PositionTask(h, priority=1) for h in hands})
+    tasks["com"] = sjt.CoMTask(axes="xy", priority=1)
+    support = sjt.SupportLimit(soles, sole=(0.08, 0.04), margin=0.02)
+    solver = method(g1, task=tasks, dt=DT, limits=[support], posture=sjt.PostureTask())
+    q = g1.q0.copy()
+    start = {h: g1.fk(q, h).translation.copy() for h in hands}
+    c0 = com(g1, q)
+    knees = []
+    for i in range(3000):
+        s = smooth(i / 1500)
+        target = {h: start[h] + s * reach[h] for h in hands}
+        target["com"] = c0
+        q = solver.step(q, target)
+        knees += [j for kind, j in solver.last.active_limits if "knee" in j]
+    assert knees  # the knees did reach their limits
+    for h in hands:
+        assert np.linalg.norm(g1.fk(q, h).translation - start[h] - reach[h]) < 1e-6
+    assert np.abs(solver.last.dq).max() < 1e-6
+    assert support.distance > 0.02
+
+
+def test_a_slipping_contact_is_the_level_error_a_step_reports(solo):
+    """A contact takes no target, but its slip is its level's error in StepInfo."""
+    held = {f: solo.fk(solo.q0, f) for f in FEET}
+    moved = {f: pin.SE3(M.rotation, M.translation + [0.0, 0.0, 0.05]) for f, M in held.items()}
+    solver = sjt.DLSSolver(solo, task=[sjt.ContactTask(f, pose=moved[f], point=True)
+                                       for f in FEET] + [sjt.CoMTask(priority=1)],
+                           posture=sjt.PostureTask(), dt=DT)
+    solver.step(solo.q0, com(solo, solo.q0))
+    assert solver.last.levels[0].error_norm == pytest.approx(0.05 * 2, rel=1e-9)  # 4 feet
+    assert solver.last.levels[1].error_norm == pytest.approx(0.0, abs=1e-12)
