@@ -283,3 +283,13 @@ def test_compare_labels_runs_by_their_keys_in_distinct_colours(tmp_path):
     assert "PAPER" in html and "SJT" in html
     with pytest.raises(ValueError, match="already has a run labelled 'sjt'"):
         viewer.animate(logs["sjt"])
+
+
+def test_animate_refuses_a_support_without_polygon_and_targets_of_another_length(two_runs):
+    robot, logs, _ = two_runs
+    viewer = Viewer(robot, live=False)
+    with pytest.raises(ValueError, match="support has no polygon"):
+        viewer.animate(logs["sjt"], support=sjt.SupportLimit(["ee"]))
+    with pytest.raises(ValueError, match=r"targets\['ee'\] must have one row per row"):
+        viewer.animate(logs["sjt"], targets={"ee": np.zeros((3, 3))})
+    viewer.animate(logs["sjt"])  # nothing was half added
