@@ -66,11 +66,12 @@ def demo(args: argparse.Namespace) -> int:
     print(f"\nErrors in m/rad, joint speeds in rad/s (gain = auto)\n{_table(rows)}", flush=True)
     if args.no_viewer:
         return 0
-    from .viewer.demo import demo_viewer, describe, obstacle_scene
+    from .viewer.demo import demo_viewer, describe, humanoid_scene, obstacle_scene, quadruped_scene
 
     print("\nWriting the page ...", flush=True)
     methods = ", ".join(m.upper() for m in args.method)
-    viewer = demo_viewer(runs, live=args.keep > 0, obstacle=obstacle_scene(DEMO_DT))
+    viewer = demo_viewer(runs, live=args.keep > 0, obstacle=obstacle_scene(DEMO_DT),
+                         whole_body=[humanoid_scene(DEMO_DT), quadruped_scene(DEMO_DT)])
     try:
         Path(args.out).parent.mkdir(parents=True, exist_ok=True)
         path = viewer.save_html(args.out, f"sjt-pin demo: {methods} on a circle",

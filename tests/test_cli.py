@@ -61,6 +61,10 @@ def test_demo_writes_the_page_where_asked_and_prints_its_size(tmp_path, capsys):
     size = re.search(rf"Wrote {re.escape(str(out.resolve()))} \((\d+\.\d) MB", printed)
     assert size and float(size.group(1)) == pytest.approx(out.stat().st_size / 1e6, abs=0.05)
     assert "http://" not in printed  # no live viewer without --keep, so no link to it
+    page = out.read_text()  # and the scenes beside the runs: the ball, the whole-body ones
+    for label in ("Franka Panda around a ball", "TALOS reaching over its soles",
+                  "Solo-12 moving its body"):
+        assert f"<h2>{label}</h2>" in page
 
 
 def test_demo_writes_demo_html_in_the_working_folder_by_default(tmp_path, monkeypatch):
