@@ -402,8 +402,8 @@ def test_demo_page_draws_each_support_polygon_and_the_centre_of_mass_over_it(hum
         assert np.ptp(points[:, 2]) == 0 and 0 < points[0, 2] - min(contacts) < 0.005
         assert f"{node}/paths/support_area" in objects
         # the disc: one key per frame (30 fps, 4 s) plus the track's end, on the ground
-        assert f"{node}/runs/sjt/com" in objects
-        track = next(t for t in clips[f"{node}/runs/sjt/com"]["tracks"]
+        assert f"{node}/markers/com" in objects
+        track = next(t for t in clips[f"{node}/markers/com"]["tracks"]
                      if t["name"] == ".position")
         keyed = np.array([k["value"] for k in track["keys"]])
         assert len(keyed) == 122 and np.allclose(keyed[:, 2], points[0, 2])

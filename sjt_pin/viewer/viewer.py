@@ -374,7 +374,8 @@ class Viewer:
     def _add_support(self, log: TrackingLog, fps: float, robot: str | None, start: float,
                      support) -> None:
         """Draw ``support``'s polygon on the ground and key the last run's centre of mass's
-        ground projection (a disc under its run node, shown only while it plays)."""
+        ground projection (a disc, the robot's as its target is: it stays where the run left
+        it)."""
         rig, polygon = self._rig(robot), support.polygon
         model, data = rig.robot.model, rig.data
         pin.framesForwardKinematics(model, data, log.q[0])
@@ -390,7 +391,7 @@ class Viewer:
         self.meshcat[f"{rig.name}/paths/support_area"].set_object(  # (a line is 1 pixel wide)
             mg.TriangularMeshGeometry(loop.astype(np.float32), fan),
             mg.MeshBasicMaterial(color=SUPPORT_COLOR, opacity=0.2, transparent=True))
-        node = f"{rig.name}/runs/{_safe(rig.runs[-1].label)}/com"
+        node = f"{rig.name}/markers/com"
         radius, thickness = COM_DISC
         self.meshcat[node].set_object(mg.Cylinder(thickness, radius),
                                       mg.MeshLambertMaterial(color=SUPPORT_COLOR))
