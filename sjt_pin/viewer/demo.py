@@ -198,6 +198,11 @@ def quadruped_scene(dt: float) -> WholeBodyScene:
     return WholeBodyScene(solo, log, support, QUADRUPED_NODE, QUADRUPED_LABEL, "ahead")
 
 
+#: The whole-body scenes by the names ``sjt-pin demo --robot`` takes (``sjt_pin.cli.WHOLE_BODY``).
+WHOLE_BODY_SCENES: dict[str, Callable[[float], WholeBodyScene]] = {
+    HUMANOID_NODE: humanoid_scene, QUADRUPED_NODE: quadruped_scene}
+
+
 def obstacle_scene(dt: float) -> ObstacleScene:
     """Panda's hand on a 40 cm line (2 s) past an 8 cm ball, with a
     :class:`~sjt_pin.CollisionLimit` (10 mm margin, self-collision on), as in docs/collision.md."""
@@ -291,15 +296,17 @@ def demo_viewer(runs: Mapping[str, tuple[Robot, Mapping[str, TrackingLog]]],
 
 
 def describe(names: Sequence[str], dt: float, obstacle: bool = False) -> str:
-    """The page's description of the demo's runs on the robots ``names``, period ``dt`` (s),
-    and of the collision scene if ``obstacle``."""
-    tasks = "; ".join(f"{LABELS.get(n, n)}: {TASKS.get(n, 'its task')}" for n in names)
-    text = f"Each robot tracks a circle with each method in turn ({1e3 * dt:g} ms; {tasks}). "
-    text += WHY_SJT
+    """The page's description of the demo's runs on the robots ``names`` (none: the page has
+    no circles), period ``dt`` (s), and of the collision scene if ``obstacle``."""
+    text = ""
+    if names:
+        tasks = "; ".join(f"{LABELS.get(n, n)}: {TASKS.get(n, 'its task')}" for n in names)
+        text = f"Each robot tracks a circle with each method in turn ({1e3 * dt:g} ms; {tasks}). "
+        text += WHY_SJT
     if obstacle:
         text += (" Behind: a Panda passes a ball, 10 mm margin (47 mm deep without the limit); "
                  "crimson: the closest points.")
-    return text
+    return text.strip()
 
 
 def _span(robot: Robot, logs: Iterable[TrackingLog],
