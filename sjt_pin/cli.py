@@ -26,6 +26,10 @@ from .solvers import SOLVERS, make_solver
 from .tracking import TrackingLog, track
 
 DEMO_DT = 1e-3
+#: The names ``demo --robot`` takes for the page's whole-body scenes (one SJT run each, with
+#: task priorities; :data:`sjt_pin.viewer.demo.WHOLE_BODY_SCENES`): TALOS reaching with both
+#: hands over its held soles, Solo-12 moving its body over its held feet.
+WHOLE_BODY = ("talos", "solo12")
 
 
 def _table(rows: list[tuple[str, str, TrackingLog, float]]) -> str:
@@ -42,12 +46,16 @@ def _table(rows: list[tuple[str, str, TrackingLog, float]]) -> str:
 
 
 def demo(args: argparse.Namespace) -> int:
-    """Track each robot's demo trajectory with each method, print the table, write the page."""
+    """Track each robot's demo trajectory with each method, print the table, write the page
+    (with the whole-body scenes asked for)."""
+    circles = [name for name in args.robot if name not in WHOLE_BODY]
+    whole = [name for name in args.robot if name in WHOLE_BODY]
     rows, runs = [], {}
-    total = len(args.robot) * len(args.method)
-    print(f"Tracking {len(args.robot)} robot(s) x {len(args.method)} method(s), dt = "
-          f"{DEMO_DT:g} s (a few seconds: the kernels were compiled at install)", flush=True)
-    for name in args.robot:
+    total = len(circles) * len(args.method)
+    if circles:
+        print(f"Tracking {len(circles)} robot(s) x {len(args.method)} method(s), dt = "
+              f"{DEMO_DT:g} s (a few seconds: the kernels were compiled at install)", flush=True)
+    for name in circles:
         print(f"  {name}: loading the robot, finding its start on the path ...", end=" ",
               flush=True)
         start = time.perf_counter()
@@ -63,18 +71,33 @@ def demo(args: argparse.Namespace) -> int:
             runs[name][1][method] = log
             print(f"  [{len(rows)}/{total}] {name} {method}: {len(log)} steps in "
                   f"{seconds:.2f} s, max error {log.max_error:.2g}", flush=True)
-    print(f"\nErrors in m/rad, joint speeds in rad/s (gain = auto)\n{_table(rows)}", flush=True)
+    if circles:
+        print(f"\nErrors in m/rad, joint speeds in rad/s (gain = auto)\n{_table(rows)}",
+              flush=True)
     if args.no_viewer:
+        if whole:
+            print(f"{', '.join(whole)}: drawn on the page only (whole-body scenes), not run "
+                  "with --no-viewer", flush=True)
         return 0
-    from .viewer.demo import demo_viewer, describe, obstacle_scene
+    from .viewer.demo import WHOLE_BODY_SCENES, demo_viewer, describe, obstacle_scene
 
+    scenes = []
+    for name in whole:
+        print(f"  {name}: loading the robot, running its whole-body scene (SJT) ...", end=" ",
+              flush=True)
+        start = time.perf_counter()
+        scenes.append(WHOLE_BODY_SCENES[name](DEMO_DT))
+        log = scenes[-1].log
+        print(f"{len(log)} steps, {time.perf_counter() - start:.1f} s, max error "
+              f"{log.max_error:.2g}", flush=True)
     print("\nWriting the page ...", flush=True)
     methods = ", ".join(m.upper() for m in args.method)
-    viewer = demo_viewer(runs, live=args.keep > 0, obstacle=obstacle_scene(DEMO_DT))
+    viewer = demo_viewer(runs, live=args.keep > 0, obstacle=obstacle_scene(DEMO_DT),
+                         whole_body=scenes)
     try:
         Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-        path = viewer.save_html(args.out, f"sjt-pin demo: {methods} on a circle",
-                                describe(args.robot, DEMO_DT, obstacle=True))
+        title = f"sjt-pin demo: {methods} on a circle" if circles else "sjt-pin demo"
+        path = viewer.save_html(args.out, title, describe(circles, DEMO_DT, obstacle=True))
         print(f"Wrote {path.resolve()} ({path.stat().st_size / 1e6:.1f} MB, self-contained, "
               "works offline): open it in a web browser", flush=True)
         if args.open:
@@ -445,10 +468,13 @@ def build_parser() -> argparse.ArgumentParser:
                     "Run 'sjt-pin COMMAND --help' for a command's options.")
     sub = parser.add_subparsers(dest="command", required=True)
     about = ("track a circle on the planar arm, UR5 and Panda with each method; print a table "
-             "and write a self-contained animated page")
+             "and write a self-contained animated page, with TALOS and Solo-12 balancing on "
+             "their feet")
     p = sub.add_parser("demo", help=about, description=about[0].upper() + about[1:] + ".")
-    p.add_argument("--robot", nargs="+", choices=scenarios.ROBOTS, default=list(scenarios.ROBOTS),
-                   help="robots to track (default: all)")
+    shown = (*scenarios.ROBOTS, *WHOLE_BODY)
+    p.add_argument("--robot", nargs="+", choices=shown, default=list(shown),
+                   help="robots to track (default: all); talos and solo12 are the page's "
+                   "whole-body scenes (SJT with task priorities, whatever --method)")
     p.add_argument("--method", nargs="+", choices=sorted(SOLVERS),
                    default=["sjt", "jt", "dls", "jp"], help="methods to compare "
                    "(default: sjt jt dls jp)")

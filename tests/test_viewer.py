@@ -283,3 +283,151 @@ def test_compare_labels_runs_by_their_keys_in_distinct_colours(tmp_path):
     assert "PAPER" in html and "SJT" in html
     with pytest.raises(ValueError, match="already has a run labelled 'sjt'"):
         viewer.animate(logs["sjt"])
+
+
+# -- the demo's whole-body scenes ---------------------------------------------------------
+@pytest.fixture(scope="module")
+def humanoid():
+    from sjt_pin.viewer.demo import humanoid_scene
+
+    return humanoid_scene(1e-3)
+
+
+@pytest.fixture(scope="module")
+def quadruped():
+    from sjt_pin.viewer.demo import quadruped_scene
+
+    return quadruped_scene(1e-3)
+
+
+def inside(point, polygon) -> float:
+    """Least signed distance (m, positive inside) of ``point`` (2,) to the edges of the
+    counter-clockwise convex ``polygon`` (k, 2)."""
+    edges = np.roll(polygon, -1, axis=0) - polygon
+    normals = np.column_stack([-edges[:, 1], edges[:, 0]]) / np.linalg.norm(edges, axis=1)[:, None]
+    return float(np.min(np.einsum("ij,ij->i", normals, np.asarray(point)[:2] - polygon)))
+
+
+def ground_points(robot, qs) -> np.ndarray:
+    """The centre of mass's ground projection (N, 2) at each of ``qs``."""
+    data = robot.model.createData()
+    return np.array([pin.centerOfMass(robot.model, data, q)[:2] for q in qs])
+
+
+def test_demo_humanoid_reaches_out_and_back_on_held_soles_over_its_support(humanoid):
+    """TALOS' soles do not move (pose, 1e-6) over the whole recording, its centre of mass's
+    projection stays the margin inside the soles' polygon at every step, and both hands follow
+    their targets, 10 cm out and back."""
+    from sjt_pin.viewer.demo import HANDS, REACH, SOLES
+
+    robot, log, support = humanoid.robot, humanoid.log, humanoid.support
+    assert log.t[-1] == pytest.approx(4.0) and not log.diverged
+    for sole in SOLES:
+        held = robot.fk(log.q[0], sole)
+        slip = max(np.linalg.norm(pin.log6(robot.fk(q, sole).actInv(held)).vector)
+                   for q in log.q)
+        assert slip < 1e-6, (sole, slip)
+    # the polygon: the two 20 x 10 cm soles' outline (they stand side by side, axis-aligned)
+    soles = np.array([robot.fk(log.q[0], s).translation[:2] for s in SOLES])
+    np.testing.assert_allclose(support.polygon.min(axis=0), soles.min(axis=0) - [0.1, 0.05],
+                               atol=1e-6)
+    np.testing.assert_allclose(support.polygon.max(axis=0), soles.max(axis=0) + [0.1, 0.05],
+                               atol=1e-6)
+    distances = [inside(c, support.polygon) for c in ground_points(robot, log.q)]
+    assert min(distances) >= support.margin
+    # both hands 10 cm out and back, followed within 10 um (their velocities fed forward)
+    right = humanoid.targets[HANDS[1]]
+    for hand, targets in ((HANDS[0], log.target), (HANDS[1], right)):
+        np.testing.assert_allclose(targets[len(log) // 2] - targets[0], REACH[hand], atol=1e-9)
+        np.testing.assert_allclose(targets[-1], targets[0], atol=1e-9)
+        reached = np.array([robot.fk(q, hand).translation for q in log.q[::50]])
+        assert np.abs(reached - targets[::50]).max() < 1e-5, hand
+    assert log.max_error < 1e-5
+
+
+def test_demo_quadruped_moves_its_body_in_a_circle_over_held_feet(quadruped):
+    """Solo-12's centre of mass goes round a 4 cm circle about its start, 3 cm lower, and
+    back; its point feet stay put (1e-5 m) and the projection the margin inside them."""
+    from sjt_pin.viewer.demo import CIRCLE_RADIUS, CROUCH, FEET
+
+    robot, log, support = quadruped.robot, quadruped.log, quadruped.support
+    assert not log.diverged and log.max_error < 1e-5  # the centre of mass on its circle
+    offsets = log.target - log.target[0]
+    full = (log.t >= 1.0) & (log.t <= 3.0)  # ramped in, not yet out
+    np.testing.assert_allclose(np.linalg.norm(offsets[full, :2], axis=1), CIRCLE_RADIUS)
+    np.testing.assert_allclose(offsets[full, 2], -CROUCH)
+    np.testing.assert_allclose(offsets[-1], 0.0, atol=1e-12)
+    for foot in FEET:
+        start = robot.fk(log.q[0], foot).translation
+        slip = max(np.linalg.norm(robot.fk(q, foot).translation - start) for q in log.q)
+        assert slip < 1e-5, (foot, slip)
+    feet = np.array([robot.fk(log.q[0], f).translation[:2] for f in FEET])
+    np.testing.assert_allclose(support.polygon.min(axis=0), feet.min(axis=0), atol=1e-9)
+    np.testing.assert_allclose(support.polygon.max(axis=0), feet.max(axis=0), atol=1e-9)
+    assert min(inside(c, support.polygon) for c in ground_points(robot, log.q)) >= support.margin
+
+
+def floats(ext) -> np.ndarray:
+    """A packed Float32Array of a meshcat command (an msgpack extension) as an array."""
+    return np.frombuffer(ext.data, dtype=np.float32).astype(float)
+
+
+def test_demo_page_draws_each_support_polygon_and_the_centre_of_mass_over_it(humanoid,
+                                                                              quadruped):
+    """The page's scene holds, for each whole-body robot, its support polygon as a closed loop
+    on the ground (the limit's polygon), and a disc keyed at every frame on the centre of
+    mass's ground projection, inside the polygon; TALOS' two hand targets move with the run."""
+    from sjt_pin.viewer.demo import HANDS, demo_viewer
+
+    viewer = demo_viewer({}, whole_body=[humanoid, quadruped])
+    page = viewer.static_html("demo")
+    for label in ("TALOS reaching over its soles", "Solo-12 moving its body"):
+        assert f"<h2>{label}</h2>" in page
+    assert page.count('<p class="guide">Green: the support polygon and the centre of '
+                      "mass&#x27;s ground projection, held 20 mm inside it.</p>") == 2
+    commands = scene_of(page)
+    objects = {c["path"]: c for c in commands if c["type"] == "set_object"}
+    clips = {c["path"]: c["clip"] for c in commands[-1]["animations"]}
+    for scene in (humanoid, quadruped):
+        node, polygon, margin = f"/meshcat/{scene.node}", scene.support.polygon, \
+            scene.support.margin
+        loop = objects[f"{node}/paths/support"]["object"]
+        assert loop["object"]["type"] == "Line"
+        points = floats(loop["geometries"][0]["data"]["attributes"]["position"]["array"])
+        points = points.reshape(-1, 3)
+        np.testing.assert_allclose(points[:-1, :2], polygon, atol=1e-6)
+        np.testing.assert_allclose(points[-1], points[0])  # closed
+        contacts = [scene.robot.fk(scene.log.q[0], c).translation[2]
+                    for c in scene.support.contacts]
+        assert np.ptp(points[:, 2]) == 0 and 0 < points[0, 2] - min(contacts) < 0.005
+        assert f"{node}/paths/support_area" in objects
+        # the disc: one key per frame (30 fps, 4 s) plus the track's end, on the ground
+        assert f"{node}/markers/com" in objects
+        track = next(t for t in clips[f"{node}/markers/com"]["tracks"]
+                     if t["name"] == ".position")
+        keyed = np.array([k["value"] for k in track["keys"]])
+        assert len(keyed) == 122 and np.allclose(keyed[:, 2], points[0, 2])
+        rows = np.minimum(np.searchsorted(scene.log.t, np.arange(121) / 30), len(scene.log) - 1)
+        np.testing.assert_allclose(keyed[:121, :2], ground_points(scene.robot,
+                                                                  scene.log.q[rows]),
+                                   atol=1e-6)
+        assert min(inside(p, polygon) for p in keyed) >= margin - 1e-6
+    targets = {path: clips[path] for path in clips
+               if path.startswith("/meshcat/talos/markers/target")}
+    assert set(targets) == {"/meshcat/talos/markers/target",
+                            f"/meshcat/talos/markers/target-{HANDS[1]}"}
+    right = next(t for t in targets[f"/meshcat/talos/markers/target-{HANDS[1]}"]["tracks"]
+                 if t["name"] == ".position")
+    np.testing.assert_allclose(right["keys"][60]["value"], humanoid.targets[HANDS[1]][2000],
+                               atol=1e-6)
+    assert f"/meshcat/talos/runs/sjt/ee-{HANDS[1]}" in clips
+
+
+def test_animate_refuses_a_support_without_polygon_and_targets_of_another_length(two_runs):
+    robot, logs, _ = two_runs
+    viewer = Viewer(robot, live=False)
+    with pytest.raises(ValueError, match="support has no polygon"):
+        viewer.animate(logs["sjt"], support=sjt.SupportLimit(["ee"]))
+    with pytest.raises(ValueError, match=r"targets\['ee'\] must have one row per row"):
+        viewer.animate(logs["sjt"], targets={"ee": np.zeros((3, 3))})
+    viewer.animate(logs["sjt"])  # nothing was half added

@@ -44,13 +44,15 @@ class Run:
 
 @dataclass(frozen=True)
 class RobotEntry:
-    """A robot of the scene: its node name, the label shown for it, its runs in order, and
-    further plots (SVG markup) shown under its error plot."""
+    """A robot of the scene: its node name, the label shown for it, its runs in order,
+    further plots (SVG markup) shown under its error plot, and notes (plain text) on what its
+    drawing shows, under its label."""
 
     node: str
     label: str
     runs: tuple[Run, ...]
     plots: tuple[str, ...] = ()
+    notes: tuple[str, ...] = ()
 
 
 #: Height (px) of a robot's error plot: the demo's four robots' blocks and the guide fit a
@@ -216,6 +218,7 @@ def _robot(robot: RobotEntry) -> str:
             for run in robot.runs)
         parts.append(f'<ul class="legend">{items}</ul>')
     parts.append("</div>")  # the label and its legend on one line where they fit
+    parts.extend(f'<p class="guide">{html.escape(note)}</p>' for note in robot.notes)
     if robot.runs:
         series = [Series(run.label, run.color, run.log.t - run.log.t[0], run.log.error_norm)
                   for run in robot.runs]

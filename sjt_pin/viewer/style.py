@@ -17,6 +17,8 @@ OTHER_COLOR = 0xFF7F0E
 EXTRA_COLORS = (0xFF7F0E, 0x17BECF, 0x8C564B, 0xE377C2, 0xBCBD22, 0x7F7F7F)
 #: Colour of the desired path and of the target marker.
 DESIRED_COLOR = 0x222222
+#: Colour of the support polygon and of the centre of mass's ground projection.
+SUPPORT_COLOR = 0x2E8B57
 
 _NAMED = {"blue": 0x1F77B4, "red": 0xD62728, "green": 0x2CA02C, "purple": 0x9467BD,
           "orange": 0xFF7F0E, "black": 0x000000, "gray": 0x7F7F7F, "white": 0xFFFFFF}

@@ -43,7 +43,14 @@ from .page_script import DOT_PIXELS
 from .plot import Series, error_plot
 from .scene import SceneRecord
 from .server import LiveWindow, LoopbackServer
-from .style import DESIRED_COLOR, EXTRA_COLORS, METHOD_COLORS, OTHER_COLOR, to_int
+from .style import (
+    DESIRED_COLOR,
+    EXTRA_COLORS,
+    METHOD_COLORS,
+    OTHER_COLOR,
+    SUPPORT_COLOR,
+    to_int,
+)
 
 #: Direction (world, from the scene's centre) the page's camera looks from unless it is set.
 VIEW_DIRECTION = (1.0, 0.3, 0.4)
@@ -56,6 +63,11 @@ DESIRED_DOTS = 60
 #: followed shows between them. They are :data:`.page_script.DOT_PIXELS` wide whatever the
 #: distance (the page makes them smaller where they would crowd).
 DOT_SPACING = 0.03
+#: Radius and thickness (m) of the disc that marks the centre of mass's ground projection, and
+#: the height (m) over the contacts at which it and the support polygon are drawn (above the
+#: grid, which would hide them).
+COM_DISC = (0.025, 0.004)
+GROUND_LIFT = 0.002
 _NOT_LIVE = ("this viewer has no live server (it was made with live=False, or closed); "
              "restart() starts one")
 _GRID_SCALE = 0.25
@@ -94,6 +106,8 @@ class _Rig:
         self.robot, self.name, self.label = robot, name, label
         self.runs: list[Run] = []
         self.distances: list[Series] = []  # closest distance over each run with a collision
+        self.dots: list[str] = []  # nodes of the desired paths' dots
+        self.notes: list[str] = []  # what the page says under the robot's label
         self.nodes: list[str] = []
         self.geometries: list[int] = []
         for index, geometry in enumerate(robot.visual_model.geometryObjects):
@@ -311,7 +325,8 @@ class Viewer:
     # -- animations --------------------------------------------------------------------------
     def animate(self, log: TrackingLog, fps: float = 30.0, robot: str | None = None,
                 color=None, start: float = 0.0, label: str | None = None, collision=None,
-                segments: int = 4, geometry: bool = False) -> float:
+                segments: int = 4, geometry: bool = False,
+                targets: Mapping[str, np.ndarray] | None = None, support=None) -> float:
         """Play ``log`` on ``robot`` from ``start`` s of the timeline; returns its end time.
 
         Draws the desired path (dark) and the path followed (``color``, default the method's,
@@ -321,10 +336,22 @@ class Viewer:
         robot), the closest-point segments of its ``segments`` closest pairs within
         ``influence`` move with the run, and the page plots the closest distance over time;
         with ``geometry`` also the collision geometry it measures (translucent).
+
+        A run of several task frames (a humanoid's two hands): the log holds the first, and
+        ``targets`` maps each further frame to its targets (N, 3; m, world; one per row of the
+        log), drawn as the log's (its position taken from ``log.q``). With ``support`` (the
+        :class:`~sjt_pin.SupportLimit` that held the run), its polygon is drawn as a closed
+        line on the ground (at the contacts' height at the run's start) and a disc on it
+        follows the centre of mass's ground projection.
         """
-        end = self._add_run(log, fps, robot, color, start, label)
+        if support is not None and getattr(support, "polygon", None) is None:
+            raise ValueError("support has no polygon: it takes one at its first step; pass the "
+                             "SupportLimit that held the run, after it")
+        end = self._add_run(log, fps, robot, color, start, label, targets)
         if collision is not None:
             self._add_distances(log, fps, robot, start, collision, segments, geometry)
+        if support is not None:
+            self._add_support(log, fps, robot, start, support)
         self._send_animation()
         return end
 
@@ -334,9 +361,8 @@ class Viewer:
         it plays) and keep its closest distance over time for the page."""
         rig = self._rig(robot)
         run = rig.runs[-1]
-        safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in run.label)
-        frames = np.arange(0.0, log.t[-1] + 0.5 / fps, 1.0 / fps)
-        indices = np.minimum(np.searchsorted(log.t, frames), len(log) - 1)
+        safe = _safe(run.label)
+        frames, indices = _keyed_rows(log, fps)
         first = int(round(start * fps))
         closest = key_segments(self._animation, self.meshcat, f"{rig.name}/runs/{safe}/segments",
                                collision, log.q[indices], first, segments)
@@ -344,6 +370,40 @@ class Viewer:
             key_geometry(self._animation, self.meshcat, f"{rig.name}/runs/{safe}/collision",
                          collision, log.q[indices], first)
         rig.distances.append(Series(run.label, run.color, frames, np.array(closest)))
+
+    def _add_support(self, log: TrackingLog, fps: float, robot: str | None, start: float,
+                     support) -> None:
+        """Draw ``support``'s polygon on the ground and key the last run's centre of mass's
+        ground projection (a disc, the robot's as its target is: it stays where the run left
+        it)."""
+        rig, polygon = self._rig(robot), support.polygon
+        model, data = rig.robot.model, rig.data
+        pin.framesForwardKinematics(model, data, log.q[0])
+        z = min(float(data.oMf[rig.robot.frame_id(c)].translation[2])
+                for c in support.contacts) + GROUND_LIFT
+        loop = np.column_stack([polygon, np.full(len(polygon), z)])
+        self.draw_path(np.vstack([loop, loop[:1]]), SUPPORT_COLOR, "support", robot=rig.name)
+        note = (f"Green: the support polygon and the centre of mass's ground projection, held "
+                f"{1e3 * support.margin:g} mm inside it.")
+        if note not in rig.notes:
+            rig.notes.append(note)
+        fan = np.array([[0, k, k + 1] for k in range(1, len(loop) - 1)], dtype=np.uint32)
+        self.meshcat[f"{rig.name}/paths/support_area"].set_object(  # (a line is 1 pixel wide)
+            mg.TriangularMeshGeometry(loop.astype(np.float32), fan),
+            mg.MeshBasicMaterial(color=SUPPORT_COLOR, opacity=0.2, transparent=True))
+        node = f"{rig.name}/markers/com"
+        radius, thickness = COM_DISC
+        self.meshcat[node].set_object(mg.Cylinder(thickness, radius),
+                                      mg.MeshLambertMaterial(color=SUPPORT_COLOR))
+        disc = np.eye(4)  # meshcat's cylinder stands on its y axis: lay it flat
+        disc[:3, :3] = pin.utils.rotate("x", np.pi / 2)
+        _, indices = _keyed_rows(log, fps)
+        first = int(round(start * fps))
+        for k, i in enumerate(indices):
+            disc[:2, 3] = pin.centerOfMass(model, data, log.q[i])[:2]
+            disc[2, 3] = z
+            with self._animation.at_frame(self.meshcat, first + k) as frame:
+                frame[node].set_transform(disc)
 
     def compare(self, logs: Mapping[str, TrackingLog] | Sequence[TrackingLog], fps: float = 30.0,
                 robot: str | None = None) -> None:
@@ -359,12 +419,14 @@ class Viewer:
         self._send_animation()
 
     def _add_run(self, log: TrackingLog, fps: float, robot: str | None, color,
-                 start: float, label: str | None = None) -> float:
+                 start: float, label: str | None = None,
+                 targets: Mapping[str, np.ndarray] | None = None) -> float:
         """Key ``log``'s frames into the animation (not sent yet); returns the run's end (s).
 
         The run's followed path and end-effector sphere sit under the node ``runs/<method>`` of
         the robot, shown only while the run plays; the desired path (dots) and the target (a
-        grey halo around the end effector) are the robot's.
+        grey halo around the end effector) are the robot's. Each frame of ``targets`` gets the
+        same, its nodes named with a ``-<frame>`` suffix.
         """
         if not isinstance(log, TrackingLog) or len(log) == 0:
             raise ValueError("log must be a non-empty TrackingLog")
@@ -378,37 +440,67 @@ class Viewer:
                     if c not in taken]
             color = free[0] if free else OTHER_COLOR
         color = to_int(color)
-        safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in label)
-        run_node, target_node = f"{rig.name}/runs/{safe}", f"{rig.name}/markers/target"
+        tracked = [("", log.position, log.target), *self._further(rig, log, targets)]
+        run_node, target_node = f"{rig.name}/runs/{_safe(label)}", f"{rig.name}/markers/target"
         every = -(-len(log) // PATH_POINTS)  # a path of at most PATH_POINTS points
-        dots = _dots(log.target, DOT_SPACING * rig.size)
         rgb = np.array([(DESIRED_COLOR >> shift & 255) / 255.0 for shift in (16, 8, 0)])
-        self.meshcat[f"{rig.name}/paths/desired"].set_object(mg.Points(
-            mg.PointsGeometry(dots.T, color=np.tile(rgb[:, None], len(dots))),
-            _ScreenPointsMaterial(size=DOT_PIXELS)))
-        self.meshcat[f"{run_node}/path"].set_object(mg.Line(
-            mg.PointsGeometry(_points(log.position[::every]).T),
-            mg.LineBasicMaterial(color=color, linewidth=2.0)))
-        self.meshcat[f"{run_node}/ee"].set_object(
-            mg.Sphere(0.011), mg.MeshLambertMaterial(color=color))
-        self.meshcat[target_node].set_object(mg.Sphere(0.02), mg.MeshLambertMaterial(
-            color=DESIRED_COLOR, opacity=0.3, transparent=True))
+        halo = mg.MeshLambertMaterial(color=DESIRED_COLOR, opacity=0.3, transparent=True)
+        for suffix, positions, desired in tracked:
+            dots = _dots(desired, DOT_SPACING * rig.size)
+            node = f"{rig.name}/paths/desired{suffix}"
+            self.meshcat[node].set_object(mg.Points(
+                mg.PointsGeometry(dots.T, color=np.tile(rgb[:, None], len(dots))),
+                _ScreenPointsMaterial(size=DOT_PIXELS)))
+            if node not in rig.dots:
+                rig.dots.append(node)
+            self.meshcat[f"{run_node}/path{suffix}"].set_object(mg.Line(
+                mg.PointsGeometry(_points(positions[::every]).T),
+                mg.LineBasicMaterial(color=color, linewidth=2.0)))
+            self.meshcat[f"{run_node}/ee{suffix}"].set_object(
+                mg.Sphere(0.011), mg.MeshLambertMaterial(color=color))
+            self.meshcat[f"{target_node}{suffix}"].set_object(mg.Sphere(0.02), halo)
         self._animation.default_framerate = fps
-        frames = np.arange(0.0, log.t[-1] + 0.5 / fps, 1.0 / fps)
-        indices = np.minimum(np.searchsorted(log.t, frames), len(log) - 1)
+        frames, indices = _keyed_rows(log, fps)
         first = int(round(start * fps))
         for k, i in enumerate(indices):
             with self._animation.at_frame(self.meshcat, first + k) as frame:
                 for node, T in zip(rig.nodes, rig.placements(log.q[i]), strict=True):
                     frame[node].set_transform(T)
-                frame[target_node].set_transform(_translation(log.target[i]))
-                frame[f"{run_node}/ee"].set_transform(_translation(log.position[i]))
+                for suffix, positions, desired in tracked:
+                    frame[f"{target_node}{suffix}"].set_transform(_translation(desired[i]))
+                    frame[f"{run_node}/ee{suffix}"].set_transform(_translation(positions[i]))
         for frame, visible in ((0, first == 0), (first, True), (first + len(frames), False)):
             with self._animation.at_frame(self.meshcat, frame) as keyed:
                 keyed[run_node].set_property("visible", "boolean", visible)
         end = start + frames[-1] + 1.0 / fps
         rig.runs.append(Run(label, log.method, color, start, end, log))
         return end
+
+    @staticmethod
+    def _further(rig: _Rig, log: TrackingLog, targets: Mapping[str, np.ndarray] | None
+                 ) -> list[tuple[str, np.ndarray, np.ndarray]]:
+        """(node suffix, positions, targets), each (N, 3), of each frame of ``targets``, its
+        positions at the rows of ``log.q``."""
+        if targets is None:
+            return []
+        if not isinstance(targets, Mapping):
+            raise TypeError(f"targets must map frame names to targets (N, 3), got "
+                            f"{type(targets).__name__}")
+        model, data = rig.robot.model, rig.data
+        further = []
+        for frame, desired in targets.items():
+            fid = rig.robot.frame_id(frame)
+            name = model.frames[fid].name
+            desired = _points(desired, f"targets[{name!r}]")
+            if len(desired) != len(log):
+                raise ValueError(f"targets[{name!r}] must have one row per row of the log "
+                                 f"({len(log)}), got {len(desired)}")
+            positions = np.empty((len(log), 3))
+            for i, q in enumerate(log.q):
+                pin.forwardKinematics(model, data, q)
+                positions[i] = pin.updateFramePlacement(model, data, fid).translation
+            further.append((f"-{_safe(name)}", positions, desired))
+        return further
 
     def _send_animation(self) -> None:
         """Send the animation, its tracks lengthened to the last key of all (meshcat loops
@@ -436,9 +528,9 @@ class Viewer:
         robots = [RobotEntry(rig.name, rig.label, tuple(rig.runs), tuple(
             [error_plot(rig.distances, width=PLOT_WIDTH_BESIDE, height=PLOT_HEIGHT,
                         ylabel="closest distance (m)")]
-            if rig.distances else [])) for rig in self._rigs.values()]
+            if rig.distances else []), tuple(rig.notes)) for rig in self._rigs.values()]
         view = None if self._camera is not None else VIEW_DIRECTION
-        dots = [f"{rig.name}/paths/desired" for rig in self._rigs.values() if rig.runs]
+        dots = [node for rig in self._rigs.values() for node in rig.dots]
         return page_html(self._record.commands(), robots, title, description, view, dots)
 
     def save_html(self, path: str | Path, title: str = "sjt-pin viewer",
@@ -506,6 +598,19 @@ def _dots(path: np.ndarray, spacing: float) -> np.ndarray:
     count = int(min(DESIRED_DOTS, arc[-1] / max(spacing, 1e-12))) + 1
     indices = np.searchsorted(arc, np.linspace(0.0, arc[-1], max(count, 2)))
     return path[np.minimum(indices, len(path) - 1)]
+
+
+def _safe(label: str) -> str:
+    """``label`` as a meshcat node name: characters other than letters, digits, ``-_.`` as
+    ``_``."""
+    return "".join(c if c.isalnum() or c in "-_." else "_" for c in label)
+
+
+def _keyed_rows(log: TrackingLog, fps: float) -> tuple[np.ndarray, np.ndarray]:
+    """The animation's frame times (s, from the run's start) at ``fps`` and the rows of ``log``
+    shown at each."""
+    frames = np.arange(0.0, log.t[-1] + 0.5 / fps, 1.0 / fps)
+    return frames, np.minimum(np.searchsorted(log.t, frames), len(log) - 1)
 
 
 def _translation(p) -> np.ndarray:
