@@ -19,7 +19,12 @@ constexpr double kKeepDirection = 1e4;
 // the projection keeps at least this share of the progress of the Cauchy point (the steepest
 // feasible progress within a ball of the method's own step size)
 constexpr double kSufficient = 0.25;
-// lower_line_search's penalty on motion, as a share of the lower rows' mean squared column norm
+// lower_nearest's weight of a posture's rows beside the tasks above it (the tasks' level comes
+// first: with the posture's full weight, TALOS-like humanoids rested 1e-5 m short of a hand
+// target, the posture pulling against the hand)
+constexpr double kPostureShare = 1e-3;
+// lower_nearest's weight of a motion no lower task sees, as a share of their rows' mean squared
+// column norm
 constexpr double kInvisible = 1e-2;
 
 }  // namespace
@@ -58,7 +63,8 @@ Controller::Controller(const MethodParameters& method_, Index rows, Index nv_, I
   dq.setZero(nv);
   ddq.setZero(nv);
   escape_velocity.setZero(nv);
-  for (Vector* v : {&desired, &fb, &ff, &velocity, &fb0_, &ff0_, &desired_top, &x0_, &xa_, &tmp_, &tmp2_, &lam_low_})
+  for (Vector* v : {&desired, &fb, &ff, &velocity, &fb0_, &ff0_, &desired_top, &x0_, &xa_, &tmp_, &tmp2_, &lam_low_,
+                    &low_p_, &low_h_, &low_d_, &low_dh_, &low_dinv_, &anchor_})
     v->setZero(nv);
   Jw_.resize(m, nv);
   ew_.resize(m);
@@ -68,6 +74,9 @@ Controller::Controller(const MethodParameters& method_, Index rows, Index nv_, I
   Cnone_.resize(0, nv);
   box.resize(nv);
   for (Index j = 0; j < nv; ++j) lam_low_[j] = moving[j] != 0.0 ? 1.0 : kInf;
+  // (Eigen's LLT leaves its status unset until a first compute, and a copy or move of the
+  // controller reads it: UBSan's invalid enum load)
+  low_llt_.compute(Eigen::MatrixXd::Identity(1, 1));
 }
 
 void Controller::set_gains(const Vector& gains_, bool auto_gain, double factor) {
@@ -247,13 +256,7 @@ void Controller::project(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<
     if (feasible(tmp_, A, b, lo, hi)) {
       velocity = tmp_;
     } else {
-      Vector d = J0 * x0_;
-      RowMatrix C = J0;
-      ProjectionReport r =
-          projection_.solve(tmp_, lam_low_, Bnone_, lo, hi, A, b, C, d, velocity);
-      report.iterations += r.iterations;
-      report.converged = report.converged && r.converged;
-      lower_line_search(tmp_);
+      lower_nearest(J0, A, b, lo, hi);
     }
   }
   if (!rows_hold(A, b)) {
@@ -270,39 +273,74 @@ void Controller::project(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<
   }
 }
 
-// The lower levels' share of a constrained step. The projection above is the feasible velocity
-// nearest (Euclidean) to the lower levels' step: where a row or a bound blocks a lower task
-// (a centre of mass at the edge of its support, a posture against a joint limit), that nearest
-// velocity keeps the step's motions that no lower task sees (a leg's self-motion under its
-// held foot) and the arm never comes to rest. So the lower part u = velocity - x0_ is scaled by
-// w in [0, 1]: for each lower level k, w_k minimises its linearised error after the step with a
-// penalty on motion, |r_k - w B_k u|^2 + mu_k w^2 |u|^2 (r_k = e_w / dt + feed-forward - B_k x0_,
-// B_k its weighted rows, mu_k kInvisible of their mean squared column norm), and w is the
-// largest w_k: a motion some lower level sees as progress is kept (near whole), one that none
-// does is dropped, and no level vetoes another's progress (a posture pulled away from its
-// reference by the hands above it). x0_ and velocity are feasible, so is the blend. Only where
-// the projection changed the step: a feasible step is returned unchanged.
-void Controller::lower_line_search(const Vector& unconstrained) {
-  low_move_ = velocity - unconstrained;
-  if (low_move_.norm() <= kBoundTol * (1.0 + unconstrained.norm())) return;
-  low_move_ = velocity - x0_;
-  const double uu = low_move_.squaredNorm();
-  if (!(uu > 0.0)) return;
-  const double moving_joints = std::max(moving.sum(), 1.0);
-  double w = 0.0;
-  for (size_t index = 1; index < levels.size() && w < 1.0; ++index) {
+// The lower levels' step where it is not feasible: the velocity nearest it in their own task
+// metric, with level 0's task motion held (Siciliano and Slotine's priority within the limits):
+//
+//     min  eps |x - x0|^2 + |P (x - t)|^2 + |B (x - t)|^2   s.t. box, rows, J0 x = J0 x0
+//
+// t = x0 + their step (tmp_), B their task rows (weighted), P^2 the diagonal of a posture's
+// identity rows (times kPostureShare), eps kInvisible of the posture's mean weight, or without a
+// posture of the task rows' mean squared column norm. A task below the first
+// level keeps as much of its task motion as the limits allow, other joints taking over where one
+// is at its limit (a knee at its limit under a humanoid's reaching hand); a motion no lower task
+// sees costs eps and stays as level 0 has it: the nearest velocity in joint space kept the
+// step's motions no lower task sees (Solo-12's legs turned at 23 rad/s under held feet with its
+// centre of mass at the support's edge, and never came to rest). The objective is the
+// projection's, (x - x*)^T (D + B^T B) (x - x*), D = eps + P^2 per moving joint, with x* its
+// unconstrained minimiser (Woodbury: x* = D^-1 h - D^-1 B^T (I + B D^-1 B^T)^-1 B D^-1 h,
+// h = eps x0 + P^2 t + B^T B t).
+void Controller::lower_nearest(const Eigen::Ref<const RowMatrix>& J0,
+                               const Eigen::Ref<const RowMatrix>& A,
+                               const Eigen::Ref<const Vector>& b, const Vector& lo,
+                               const Vector& hi) {
+  Index task_rows = 0;
+  for (size_t index = 1; index < levels.size(); ++index)
+    if (!levels[index].identity) task_rows += levels[index].end - levels[index].begin;
+  low_B_.resize(task_rows, nv);
+  low_p_.setZero(nv);
+  Index at = 0;
+  for (size_t index = 1; index < levels.size(); ++index) {
     const Level& level = levels[index];
     const Index rows = level.end - level.begin;
-    if (rows == 0) continue;
-    const auto B = Jw_.middleRows(level.begin, rows);
-    low_res_ = ew_.segment(level.begin, rows) / dt_;
-    if (ff_in_) low_res_ += ffw_.segment(level.begin, rows);
-    low_res_.noalias() -= B * x0_;
-    tmp2_.noalias() = B * low_move_;
-    const double mu = kInvisible * B.squaredNorm() / moving_joints;
-    w = std::max(w, std::clamp(low_res_.dot(tmp2_) / (tmp2_.squaredNorm() + mu * uu), 0.0, 1.0));
+    if (level.identity) {
+      for (Index j = 0; j < nv; ++j) low_p_[j] += Jw_(level.begin + j, j) * Jw_(level.begin + j, j);
+    } else {
+      low_B_.middleRows(at, rows) = Jw_.middleRows(level.begin, rows);
+      at += rows;
+    }
   }
-  velocity = x0_ + w * low_move_;
+  // (with a posture, its velocity is the lower step's part that no task above sees, and eps a
+  // small share of its weight, so that it is not slowed; without, eps a share of the tasks')
+  const double moving_joints = std::max(moving.sum(), 1.0);
+  low_p_ *= kPostureShare;
+  const double posture = low_p_.sum() / moving_joints;
+  const double eps = std::max(kInvisible * (posture > 0.0 ? posture
+                                                           : low_B_.squaredNorm() / moving_joints),
+                              1e-300);
+  // h, then D^-1 h (0 where a joint is held: it stays at x0)
+  low_h_ = eps * x0_ + low_p_.cwiseProduct(tmp_);
+  low_r_.noalias() = low_B_ * tmp_;
+  low_h_.noalias() += low_B_.transpose() * low_r_;
+  for (Index j = 0; j < nv; ++j) {
+    const bool moves = moving[j] != 0.0 && eps + low_p_[j] > 0.0;
+    low_d_[j] = moves ? eps + low_p_[j] : kInf;
+    low_dh_[j] = moves ? low_h_[j] / low_d_[j] : 0.0;
+    low_dinv_[j] = moves ? 1.0 / low_d_[j] : 0.0;
+  }
+  low_gram_.noalias() = low_B_ * low_dinv_.asDiagonal() * low_B_.transpose();
+  low_gram_.diagonal().array() += 1.0;
+  low_r_.noalias() = low_B_ * low_dh_;
+  low_llt_.compute(low_gram_);
+  low_r_ = low_llt_.solve(low_r_);
+  anchor_.noalias() = low_B_.transpose() * low_r_;
+  anchor_ = low_dh_ - low_dinv_.cwiseProduct(anchor_);
+  for (Index j = 0; j < nv; ++j)
+    if (low_dinv_[j] == 0.0) anchor_[j] = x0_[j];
+  Vector d = J0 * x0_;
+  RowMatrix C = J0;
+  ProjectionReport r = projection_.solve(anchor_, low_d_, low_B_, lo, hi, A, b, C, d, velocity);
+  report.iterations += r.iterations;
+  report.converged = report.converged && r.converged;
 }
 
 // The sufficient decrease of trust-region methods. The model is the linearised error after the
@@ -461,7 +499,6 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
     }
   }
   if (!std::isfinite(e_sq + ff_sq)) return kNonFinite;
-  ff_in_ = ff_in != nullptr;
   // 2. the first level's method
   const Level& L0 = levels[0];
   const Index r0 = L0.end - L0.begin;

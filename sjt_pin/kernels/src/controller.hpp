@@ -86,7 +86,8 @@ class Controller {
                            const Eigen::Ref<const RowMatrix>& A,
                            const Eigen::Ref<const Vector>& b, double ball);
   void cauchy_point(const Eigen::Ref<const RowMatrix>& J0, double ball);
-  void lower_line_search(const Vector& unconstrained);
+  void lower_nearest(const Eigen::Ref<const RowMatrix>& J0, const Eigen::Ref<const RowMatrix>& A,
+                     const Eigen::Ref<const Vector>& b, const Vector& lo, const Vector& hi);
   void project(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b,
                const Vector& box_lo, const Vector& box_hi);
   bool rows_hold(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b) const;
@@ -101,8 +102,11 @@ class Controller {
   // error in a step (e_w / dt, and the feed-forward); J0^T of it, the error's steepest
   // descent; the Cauchy point and its path's state
   Vector plo_, phi_, wanted_, descent_, cauchy_, free_, jd_, res_;
-  Vector low_move_, low_res_;  // lower_line_search's step and its levels' residual
-  bool ff_in_ = false;         // whether this step has a feed-forward (ffw_ holds it)
+  // lower_nearest's task rows, their posture's diagonal, its anchor and Woodbury solve
+  RowMatrix low_B_;
+  Vector low_p_, low_h_, low_r_, low_d_, low_dh_, low_dinv_, anchor_;
+  Eigen::MatrixXd low_gram_;
+  Eigen::LLT<Eigen::MatrixXd> low_llt_;
   std::vector<std::pair<double, Index>> breaks_;  // the Cauchy path's breakpoints
   Vector empty_, wide_lo_, wide_hi_, delta_, aim_, bk_;
   Eigen::MatrixXd gram_;
