@@ -81,8 +81,7 @@ class Solver:
         tasks = normalise_tasks(solver_parts.options_task(opts), opts.posture)
         self.stack = stack = TaskStack(robot, tasks)
         self._model, self._q_shape = robot.model, (robot.nq,)
-        #: a q with quaternions or (cos, sin) pairs is checked on its manifold, unless it is
-        #: the array the last step returned (pin.integrate keeps it there)
+        #: a q with unit blocks is checked on its manifold, unless the last step returned it
         self._unit_blocks = robot.unit_blocks
         self._units = self._unit_blocks.size > 0
         # the array the last step returned (trusted as it is); none before the first step
@@ -103,12 +102,10 @@ class Solver:
         self._step = np.zeros(robot.nv)
         self._escaped = (-1, False)  # (step count, whether that step added the escape)
         self._probe: TaskStack | None = None
-        self._search = None
-        self._count = 0
+        self._search, self._count = None, 0
         self._stepping = False  # a step runs (ConcurrentStepError for a second thread)
         self._last: StepInfo | None = None
-        #: the last step's rows, error, configuration, feed-forward and row owners
-        self._record: tuple | None = None
+        self._record: tuple | None = None  # the last step's rows, e, q, ff and row owners
         self._configure()
 
     # -- construction --------------------------------------------------------------------------
@@ -362,18 +359,18 @@ class Solver:
 
     # -- copies --------------------------------------------------------------------------------
     def __reduce__(self):
-        """A copy (``pickle``, ``copy.deepcopy``, another process) is the same solver made anew
-        — buffers of its own, bound to its own arrays — carrying this one's state: the gain and
-        period as set now, the commanded velocity and acceleration, the saddle escape (also
-        mid-escape) and the stability warning. Its next steps are this one's, bitwise; it has
-        no :attr:`last` step until it makes one."""
+        """A copy (``pickle``, ``copy.deepcopy``, another process) is the same solver made anew,
+        carrying this one's state: gain and period as set now, the commanded velocity and
+        acceleration, the saddle escape, the stability warning and the contacts' held poses.
+        Its next steps are this one's, bitwise; it has no :attr:`last` until it steps."""
         arguments = self.options.replace(gain=self._gain, dt=self._dt,
                                          check_stability=self._stability.enabled)
         c = self._controller
         state = {"motion": (c.dq.copy(), c.ddq.copy()), "escape": self.escape,
                  "escaping": c.escaping, "escape_velocity": c.escape_velocity.copy(),
                  "warned": self._stability.warned, "count": self._count, "first": self._first,
-                 "stall": (c.stall_run, c.stall_wait)}
+                 "stall": (c.stall_run, c.stall_wait),
+                 "held": [getattr(t, "held", None) for t in self.stack.tasks]}
         return (_rebuild, (type(self), self.robot, self.method, arguments), state)
 
     def __setstate__(self, state: dict) -> None:
@@ -385,6 +382,9 @@ class Solver:
         self._stability.warned, self._count = state["warned"], state["count"]
         self._first = state["first"]
         c.stall_run, c.stall_wait = state["stall"]
+        for task, held in zip(self.stack.tasks, state["held"], strict=True):
+            if held is not None:  # (a contact's)
+                task.held = held  # type: ignore[attr-defined]
         self._configure()
 
     def __repr__(self) -> str:
