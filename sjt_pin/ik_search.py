@@ -16,6 +16,7 @@ from .kinematics import Kinematics
 from .limits.base import Motion
 from .methods.transpose import COLUMN_TOL
 from .restarts import NearStarts, Sampler
+from .tasks import ContactTask
 
 #: the largest joint motion of one iteration (rad or m): a trust region
 MAX_STEP = 2.0
@@ -81,6 +82,9 @@ class Search:
         """Set up one solve: its targets (validated) and tolerance (|e|, task units)."""
         self.targets = targets
         self.core.tol = tol
+        for task in self.stack.tasks:  # contacts hold where this solve starts (or their pose=)
+            if isinstance(task, ContactTask):
+                task.release()
         if self.pose is not None:
             self.pose.aim(self.core, targets[0])
 
