@@ -79,8 +79,7 @@ class TaskStack:
     ``J`` (m, nv), ``e`` (m,) and ``ff`` (m,) hold every task's rows, level by level
     (:func:`ordered_by_level`); ``levels`` says which rows each priority level has:
     ``(begin, end, identity, targets)`` — ``identity`` for a level that is a posture task's
-    rows alone, ``targets`` the level's leading rows that are an error to report (every task's
-    but a posture's: a contact's slip counts).
+    rows alone, ``targets`` the level's leading rows of tasks that take targets.
     ``sqrt_weight`` (m,) holds the weights' square roots; ``chain`` (nv,) is 1 for the joints
     that move at least one task (``Task.joints``; a posture task moves all). With a single
     task, :meth:`evaluate` returns that task's own arrays without copying.
@@ -108,14 +107,19 @@ class TaskStack:
         self.slices = [slice(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
         #: the priority levels: (begin, end, identity, targets) rows of each, top first
         self.levels: list[tuple[int, int, bool, int]] = []
+        #: each level's rows that are an error to report (every task's but a posture's: a
+        #: contact's slip counts), StepInfo.levels' error
+        self.level_errors: list[tuple[int, int]] = []
         for level in sorted(set(task_levels)):
             members = [k for k, lv in enumerate(task_levels) if lv == level]
             begin, end = self.slices[members[0]].start, self.slices[members[-1]].stop
-            targets = sum(self.tasks[k].dim for k in members
-                          if not isinstance(self.tasks[k], PostureTask))
+            targets = sum(self.tasks[k].dim for k in members if self.tasks[k].takes_target)
+            kept = sum(self.tasks[k].dim for k in members
+                       if not isinstance(self.tasks[k], PostureTask))
             identity = (level > 0 and len(members) == 1
                         and isinstance(self.tasks[members[0]], PostureTask))
             self.levels.append((begin, end, identity, targets))
+            self.level_errors.append((begin, begin + kept))
         #: trailing rows that are rows of the identity (a posture task's, last): the set-point
         #: search solves the stacked system as diagonal plus low rank, linear in nv
         self.identity_rows = (nv if self.tasks and isinstance(self.tasks[-1], PostureTask)

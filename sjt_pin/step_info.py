@@ -32,10 +32,11 @@ def makes_no_progress(Jw: np.ndarray, ew: np.ndarray, dq: np.ndarray, ffw: np.nd
 
 @dataclass(frozen=True)
 class LevelInfo:
-    """One priority level of a step: ``error_norm`` (|e| of its tasks' target rows, task units;
-    0 for a posture level) and ``scale``, the share in [0, 1] of the motion its rows asked for
-    that the step kept (the projection of the achieved task velocity onto the asked one, over
-    the asked one's squared norm; 1 when the limits left the level whole)."""
+    """One priority level of a step: ``error_norm`` (|e| of its tasks' rows but a posture's,
+    task units: a contact's slip counts; 0 for a posture level) and ``scale``, the share in
+    [0, 1] of the motion its rows asked for that the step kept (the projection of the achieved
+    task velocity onto the asked one, over the asked one's squared norm; 1 when the limits
+    left the level whole)."""
 
     priority: int
     error_norm: float
@@ -155,13 +156,14 @@ def step_info(controller, stack, robot, J: np.ndarray, e: np.ndarray, q: np.ndar
     stalled = not escaped and makes_no_progress(Jw[rows], (sw * e)[rows], dq, ffw,
                                                 c.stall_floor_sq)
     levels = []
-    for k, (begin, end, identity, targets) in enumerate(stack.levels):
+    for k, ((begin, end, identity, _), (first, last)) in enumerate(
+            zip(stack.levels, stack.level_errors, strict=True)):
         Jk = Jw[begin:end]
         asked = Jk @ (c.desired_top if k == 0 else c.desired)
         got = Jk @ dq
         size = float(asked @ asked)
         scale = 1.0 if size == 0.0 else min(max(float(got @ asked) / size, 0.0), 1.0)
-        error = 0.0 if identity else float(np.linalg.norm(e[begin:begin + targets]))
+        error = 0.0 if identity else float(np.linalg.norm(e[first:last]))
         levels.append(LevelInfo(k, error, scale))
     return StepInfo(
         error=np.array(stack.task_error(e), dtype=float), error_norm=math.sqrt(c.e_sq), dq=dq,
