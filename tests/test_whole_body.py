@@ -314,3 +314,40 @@ def test_a_slipping_contact_is_the_level_error_a_step_reports(solo):
     solver.step(solo.q0, com(solo, solo.q0))
     assert solver.last.levels[0].error_norm == pytest.approx(0.05 * 2, rel=1e-9)  # 4 feet
     assert solver.last.levels[1].error_norm == pytest.approx(0.0, abs=1e-12)
+    # the step's error is the targets' (the centre of mass's), its norm that error's
+    assert solver.last.error_norm == pytest.approx(np.linalg.norm(solver.last.error), abs=1e-15)
+
+
+def test_copies_of_a_solver_with_contacts_continue_bitwise(solo):
+    """A copy carries the contacts' held poses (the rebuilt solver took them anew where its
+    first step was: 0.61 rad apart after the copy)."""
+    import copy
+    import pickle
+
+    solver = sjt.DLSSolver(solo, task=[sjt.ContactTask(f, point=True) for f in FEET]
+                           + [sjt.CoMTask(priority=1)], dt=DT, velocity_limits=SOLO_SPEEDS)
+    goal = com(solo, solo.q0) + [0.04, 0.0, -0.03]
+    q = solo.q0.copy()
+    for _ in range(300):
+        q = solver.step(q, goal)
+    copies = [copy.deepcopy(solver), pickle.loads(pickle.dumps(solver))]
+    q_copies = [q.copy(), q.copy()]
+    for _ in range(50):
+        q = solver.step(q, goal)
+        q_copies = [c.step(qc, goal) for c, qc in zip(copies, q_copies, strict=True)]
+    for qc in q_copies:
+        np.testing.assert_array_equal(qc, q)
+
+
+def test_each_solve_holds_the_contacts_where_it_starts(solo):
+    """solve() holds a contact where that solve starts (it held the first solve's feet)."""
+    solver = sjt.DLSSolver(solo, task=[sjt.ContactTask(f, point=True) for f in FEET]
+                           + [sjt.CoMTask(priority=1)])
+    first = solver.solve(com(solo, solo.q0) + [0.02, 0.0, -0.02], solo.q0)
+    q1 = solo.q0.copy()
+    q1[0] += 0.3  # the robot moved 30 cm
+    second = solver.solve(com(solo, q1) + [0.02, 0.0, -0.02], q1)
+    assert first.success and second.success
+    for f in FEET:
+        np.testing.assert_allclose(solo.fk(second.q, f).translation, solo.fk(q1, f).translation,
+                                   atol=1e-6)
