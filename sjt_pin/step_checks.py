@@ -10,7 +10,7 @@ import warnings
 
 import numpy as np
 
-from . import kernels
+from . import kernels, solver_parts
 from .exceptions import ConcurrentStepError
 from .gains import Gain
 from .joint_ranges import outside
@@ -29,7 +29,7 @@ def matrix_step(method: Method, stack: TaskStack, gain: Gain, dt: float,
     sw = stack.sqrt_weight[begin:end]
     Jw = sw[:, None] * J[begin:end] * stack.chain
     M = np.asarray(method.matrix(Jw), dtype=float)
-    k = gain.rows(stack.target_dim, stack.posture_dim)[:end - begin]
+    k = solver_parts.row_gains(stack, gain)[begin:end]
     if gain.mode == kernels.GAIN_FIXED:
         scale = 1.0
     else:
