@@ -40,9 +40,8 @@ def test_the_humanoid_holds_its_soles_and_centre_of_mass_and_reaches(short_scene
     assert row.ratio == pytest.approx(row.step.median / row.floor.median)
 
 
+@pytest.mark.bench
 def test_pinks_rows_measure_the_same_scene(short_scene):
-    pytest.importorskip("pink")
-    pytest.importorskip("qpsolvers")
     pinks = [r for r in short_scene if r.solver.startswith("pink")]
     assert len(pinks) == 2 and {"costs" in r.solver for r in pinks} == {True, False}
     for r in pinks:
