@@ -5,7 +5,8 @@
 # numpy >= 2 headers in isolation), and the core's tests, the ones that need no extra, run
 # against that install. A declared floor that does not work fails this job.
 # Run from anywhere; reads the checkout only (everything it makes is under one temp dir, removed
-# on success, kept and named on failure). Env: PYTHON (default python3, >= 3.11 for tomllib).
+# on success, kept and named on failure). Env: PYTHON (default python3, >= 3.11 for tomllib;
+# requires-python's floor, 3.10, is not what this job runs on).
 # Extra arguments go to pytest. Time on 2 cores, warm pip cache, with another job keeping them
 # busy (load 7-9): 333 s and 524 s, most of it the C++ build (80 s alone, 185-363 s loaded);
 # a cold cache adds the downloads (example-robot-data 5.0.0's wheel is 133 MB).

@@ -40,13 +40,16 @@ mkdir -p "$WORK/t"
 tar -C "$ROOT" --exclude=__pycache__ -cf - tests pyproject.toml | tar -C "$WORK/t" -xf -
 cd "$WORK/t"
 # ASan's runtime first, and libstdc++ loaded before it intercepts __cxa_throw (python is no
-# C++ program: without it the first C++ exception aborts in ASan's interceptor)
-export LD_PRELOAD="$(g++ -print-file-name=libasan.so) $(g++ -print-file-name=libstdc++.so)"
+# C++ program: without it the first C++ exception aborts in ASan's interceptor); the runtimes
+# of the g++ that built the kernels, preloaded into the python commands alone
+asan=$(g++ -print-file-name=libasan.so) stdcxx=$(g++ -print-file-name=libstdc++.so)
+[[ -f $asan && -f $stdcxx ]] || { echo "sanitize.sh: no libasan/libstdc++ of g++ ($asan, $stdcxx)" >&2; exit 2; }
+preload="$asan $stdcxx"
 export ASAN_OPTIONS=detect_leaks=0:halt_on_error=1:abort_on_error=1
 export UBSAN_OPTIONS=halt_on_error=1:print_stacktrace=1
-"$VPY" -c "import sjt_pin.kernels._core as c, sys; assert c.__file__.startswith('$site'), c.__file__"
+LD_PRELOAD=$preload "$VPY" -c "import sjt_pin.kernels._core as c, sys; assert c.__file__.startswith('$site'), c.__file__"
 t0=$SECONDS rc=0
-"$VPY" -m pytest -p no:cacheprovider -o "addopts=-ra" -m "not slow" -q -x -s \
+LD_PRELOAD=$preload "$VPY" -m pytest -p no:cacheprovider -o "addopts=-ra" -m "not slow" -q -x -s \
   tests/test_kernels.py tests/test_constraints.py tests/test_decrease.py tests/test_copies.py \
   tests/test_bad_input.py tests/test_boundary_collision.py tests/test_boundary_search.py \
   tests/test_collision_moving.py tests/test_collision_trees.py tests/test_whole_body.py \
