@@ -23,8 +23,8 @@ constexpr double kSufficient = 0.25;
 // first: with the posture's full weight, TALOS-like humanoids rested 1e-5 m short of a hand
 // target, the posture pulling against the hand)
 constexpr double kPostureShare = 1e-3;
-// lower_nearest's weight of a motion no lower task sees, as a share of their rows' mean squared
-// column norm
+// lower_nearest's weight of a motion no lower task sees: a share of the posture's mean weight
+// (times kPostureShare), or without a posture of the task rows' mean squared column norm
 constexpr double kInvisible = 1e-2;
 
 }  // namespace
@@ -249,7 +249,7 @@ void Controller::project(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<
   if (!lower) {
     velocity = x0_;
   } else {
-    // the lower levels: nearest (Euclidean) to their step, with level 0's task motion held
+    // the lower levels: nearest their task motion (lower_nearest), level 0's task motion held
     // (their step is in the null space of level 0's rows: where it is feasible, it is the
     // answer, and the projection is not run)
     tmp_ = x0_ + (desired - desired_top);
@@ -279,8 +279,8 @@ void Controller::project(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<
 //     min  eps |x - x0|^2 + |P (x - t)|^2 + |B (x - t)|^2   s.t. box, rows, J0 x = J0 x0
 //
 // t = x0 + their step (tmp_), B their task rows (weighted), P^2 the diagonal of a posture's
-// identity rows (times kPostureShare), eps kInvisible of the posture's mean weight, or without a
-// posture of the task rows' mean squared column norm. A task below the first
+// identity rows (times kPostureShare), eps kInvisible of the posture's mean weight (times
+// kPostureShare), or without a posture of the task rows' mean squared column norm. A task below the first
 // level keeps as much of its task motion as the limits allow, other joints taking over where one
 // is at its limit (a knee at its limit under a humanoid's reaching hand); a motion no lower task
 // sees costs eps and stays as level 0 has it: the nearest velocity in joint space kept the
