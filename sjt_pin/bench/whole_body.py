@@ -54,12 +54,12 @@ import pinocchio as pin
 
 from ..kinematics import Kinematics
 from ..limits import SupportLimit
-from ..limits.support import convex_hull
+from ..limits.support import sole_corners, support_polygon
 from ..robot import Robot
 from ..solvers import make_solver
 from ..tasks import CoMTask, ContactTask, PositionTask, PostureTask
 from ..tracking import track
-from ..trajectories import Circle
+from ..trajectories import Circle, min_jerk
 from .speed import Timing
 
 POSTURE_ROBOTS = ("panda", "xarm7")
@@ -191,12 +191,6 @@ def talos() -> Robot:
         return Robot.from_example("talos")
 
 
-def smooth(s: float) -> float:
-    """Minimum-jerk 0 -> 1 over s in [0, 1]."""
-    s = min(max(s, 0.0), 1.0)
-    return s * s * s * (10.0 - 15.0 * s + 6.0 * s * s)
-
-
 class _Scene:
     """What every solver of the scene shares: the robot, its start, the held soles, the hands'
     targets, the support polygon, the floor, and the measures of a run."""
@@ -209,15 +203,8 @@ class _Scene:
         kinematics = Kinematics(robot.model)
         kinematics.update(self.q0)
         self.com = kinematics.center_of_mass()[0].copy()
-        hx, hy = SOLE
-        corners = np.array([[hx, hy, 0.0], [hx, -hy, 0.0], [-hx, -hy, 0.0], [-hx, hy, 0.0]])
-        points = np.concatenate([corners @ M.rotation.T + M.translation
-                                 for M in self.held.values()])
-        hull = convex_hull(points[:, :2])
-        edges = np.roll(hull, -1, axis=0) - hull
-        self.normals = (np.column_stack([-edges[:, 1], edges[:, 0]])
-                        / np.linalg.norm(edges, axis=1)[:, None])  # inward
-        self.offsets = np.einsum("ij,ij->i", self.normals, hull)
+        _, self.normals, self.offsets = support_polygon(self.held.values(), sole_corners(SOLE),
+                                                        SOLES)
         self.steps = round((reach_seconds + hold_seconds) / dt)
         self.reach_steps = round(reach_seconds / dt)
         self.data = robot.model.createData()
@@ -237,7 +224,7 @@ class _Scene:
         self.floor = floor
 
     def hand_targets(self, k: int) -> dict[str, np.ndarray]:
-        s = smooth(k / self.reach_steps)
+        s = min_jerk(k / self.reach_steps)
         return {h: self.start[h] + s * (self.goal[h] - self.start[h]) for h in HANDS}
 
     def run(self, name: str, step) -> WholeBodyRow:

@@ -25,6 +25,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..kernels import stoppable_rows
+from ..robot_frames import find_frame
 from ..validation import real_number
 from .base import Limit, Motion
 from .collision import BRAKING_SHARE, EASING_SLACK
@@ -47,6 +48,32 @@ def convex_hull(points: np.ndarray) -> np.ndarray:
 
     lower, upper = half(pts), half(reversed(pts))
     return np.array(lower[:-1] + upper[:-1], dtype=float).reshape(-1, 2)
+
+
+def sole_corners(sole) -> np.ndarray:
+    """A sole's corners (4, 3) in its contact frame for half-sizes ``sole = (hx, hy)`` (m), or
+    the frame's origin (1, 3) for a point foot (0, 0)."""
+    hx, hy = sole
+    if hx > 0 or hy > 0:
+        return np.array([[hx, hy, 0.0], [hx, -hy, 0.0], [-hx, -hy, 0.0], [-hx, hy, 0.0]])
+    return np.zeros((1, 3))
+
+
+def support_polygon(placements, corners: np.ndarray, contacts=None
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The support polygon of soles with ``corners`` (k, 3) at ``placements`` (``pin.SE3``,
+    world): its vertices (m, 2; counter-clockwise), the edges' inward unit normals (m, 2) and
+    offsets (m,), a point ``p`` of the ground being ``n_k^T p - h_k`` inside edge k.
+    ``ValueError`` (naming ``contacts``) where the soles span no area."""
+    points = np.concatenate([corners @ M.rotation.T + M.translation for M in placements])
+    hull = convex_hull(points[:, :2])
+    edges = np.roll(hull, -1, axis=0) - hull
+    lengths = np.linalg.norm(edges, axis=1)
+    if len(hull) < 3 or lengths.min() <= 1e-9 or _area(hull) <= 1e-9:
+        raise ValueError(f"the contacts {contacts} span no area on the ground (a point or a "
+                         "segment): give sole= their size, or more contacts")
+    normals = np.column_stack([-edges[:, 1], edges[:, 0]]) / lengths[:, None]
+    return hull, normals, np.einsum("ij,ij->i", normals, hull)
 
 
 class SupportLimit(Limit):
@@ -87,10 +114,7 @@ class SupportLimit(Limit):
         if not 0.0 < self.gain <= 1.0:
             raise ValueError(f"gain must be in (0, 1], got {gain!r}")
         self.contacts = contacts
-        hx, hy = sole
-        #: the sole's corners in the contact frame (4, 3), or its origin for point feet
-        self._corners = (np.array([[hx, hy, 0.0], [hx, -hy, 0.0], [-hx, -hy, 0.0],
-                                   [-hx, hy, 0.0]]) if hx > 0 or hy > 0 else np.zeros((1, 3)))
+        self._corners = sole_corners(sole)  # in the contact frame
         self._frames: list[int] | None = None
         self.polygon: np.ndarray | None = None
         self.distance = np.nan
@@ -105,24 +129,12 @@ class SupportLimit(Limit):
 
     def _polygon(self, kinematics) -> None:
         model = kinematics.model
-        if self._frames is None:
-            names = [f.name for f in model.frames]
-            missing = [c for c in self.contacts if c not in names]
-            if missing:
-                from ..exceptions import FrameNotFound
-                raise FrameNotFound(missing[0], names, "the robot")
-            self._frames = [names.index(c) for c in self.contacts]
-        poses = [kinematics.placement(f) for f in self._frames]
-        points = np.concatenate([self._corners @ M.rotation.T + M.translation for M in poses])
-        hull = convex_hull(points[:, :2])
-        edges = np.roll(hull, -1, axis=0) - hull
-        lengths = np.linalg.norm(edges, axis=1)
-        if len(hull) < 3 or lengths.min() <= 1e-9 or _area(hull) <= 1e-9:
-            raise ValueError(f"the contacts {self.contacts} span no area on the ground (a point "
-                             "or a segment): give sole= their size, or more contacts")
-        normals = np.column_stack([-edges[:, 1], edges[:, 0]]) / lengths[:, None]  # inward
+        if self._frames is None:  # (found as the tasks find their frames)
+            self._frames = [find_frame(model, c, None, "the robot") for c in self.contacts]
+        hull, normals, offsets = support_polygon(
+            [kinematics.placement(f) for f in self._frames], self._corners, self.contacts)
         self.polygon, self._normals, self._outward = hull, normals, -normals
-        self._offsets = np.einsum("ij,ij->i", normals, hull)
+        self._offsets = offsets
         self._A = np.zeros((len(hull), model.nv))
         self._b, self._d = np.zeros(len(hull)), np.zeros(len(hull))
 
