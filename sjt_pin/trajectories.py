@@ -48,6 +48,13 @@ def _rotation(rotation) -> np.ndarray | None:
                    "rotation").rotation
 
 
+def min_jerk(tau):
+    """The minimum-jerk progress ``s = 10 tau^3 - 15 tau^4 + 6 tau^5`` (rest to rest) of
+    ``tau``, clipped to [0, 1] (0 before, 1 after); a number or an array."""
+    tau = np.clip(tau, 0.0, 1.0)
+    return tau**3 * (10.0 - 15.0 * tau + 6.0 * tau**2)
+
+
 def _progress(t, duration: float, timing: str):
     """Path parameter s(t) in [0, 1] and its rate ds/dt (1/s); ``t`` a number or an array."""
     _finite_times(t)
@@ -56,7 +63,7 @@ def _progress(t, duration: float, timing: str):
     if timing == "linear":
         s, rate = tau, np.where(inside, 1.0 / duration, 0.0)
     else:  # minimum jerk: s = 10 tau^3 - 15 tau^4 + 6 tau^5
-        s = tau**3 * (10.0 - 15.0 * tau + 6.0 * tau**2)
+        s = min_jerk(tau)
         rate = np.where(inside, 30.0 * tau**2 * (1.0 - tau) ** 2 / duration, 0.0)
     if np.ndim(t) == 0:
         return float(s), float(rate)

@@ -22,6 +22,7 @@ import pinocchio as pin
 
 from ..robot import Robot
 from ..tracking import TrackingLog
+from ..trajectories import min_jerk
 from .viewer import Viewer
 
 #: How the demo names its robots on the page.
@@ -92,11 +93,6 @@ SOLO_SPEEDS = np.r_[np.full(6, 2.0), np.full(12, 10.0)]
 HUMANOID_NODE, HUMANOID_LABEL = "talos", "TALOS reaching over its soles"
 QUADRUPED_NODE, QUADRUPED_LABEL = "solo12", "Solo-12 moving its body"
 
-
-def _smooth(s: float) -> float:
-    """Minimum-jerk 0 -> 1 over s in [0, 1] (0 before, 1 after)."""
-    s = min(max(s, 0.0), 1.0)
-    return s * s * s * (10.0 - 15.0 * s + 6.0 * s * s)
 
 
 def _example(name: str) -> Robot:
@@ -188,7 +184,7 @@ def quadruped_scene(dt: float) -> WholeBodyScene:
     com = pin.centerOfMass(solo.model, solo.model.createData(), q0).copy()
 
     def targets(t: float) -> dict:
-        ramp = _smooth(t / CIRCLE_RAMP) * _smooth((CIRCLE_TIME - t) / CIRCLE_RAMP)
+        ramp = min_jerk(t / CIRCLE_RAMP) * min_jerk((CIRCLE_TIME - t) / CIRCLE_RAMP)
         angle = 2.0 * np.pi * t / CIRCLE_PERIOD
         return {"com": com + ramp * np.array([CIRCLE_RADIUS * np.cos(angle),
                                               CIRCLE_RADIUS * np.sin(angle), -CROUCH])}
