@@ -191,6 +191,15 @@ def as_motion(value, name: str = "target_velocity") -> np.ndarray:
     return as_vector(value, name, 6)
 
 
+def axis_rows(axes, name: str = "axes") -> np.ndarray:
+    """The world-axis rows (0, 1, 2 for x, y, z) of ``axes``, a non-empty subset of ``"xyz"``
+    without repeats, in the order given (int64)."""
+    if (not isinstance(axes, str) or not axes or set(axes) - set("xyz")
+            or len(set(axes)) != len(axes)):
+        raise ValueError(f"{name} must be a non-empty subset of 'xyz', got {axes!r}")
+    return np.array(["xyz".index(a) for a in axes], dtype=np.int64)
+
+
 def positive(value, name: str, unit: str = "") -> float:
     """``value`` as a finite float > 0 (``TypeError`` if it is not a number)."""
     number = real_number(value, name, unit)

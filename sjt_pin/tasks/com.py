@@ -5,18 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from ..validation import as_vector
+from ..validation import as_vector, axis_rows
 from .base import Task
-
-_AXES = {"x": 0, "y": 1, "z": 2}
-
-
-def checked_axes(axes) -> str:
-    """``axes`` as a non-empty subset of ``"xyz"`` without repeats, in the order given."""
-    if (not isinstance(axes, str) or not axes or set(axes) - set(_AXES)
-            or len(set(axes)) != len(axes)):
-        raise ValueError(f"axes must be a non-empty subset of 'xyz', got {axes!r}")
-    return axes
 
 
 class CoMTask(Task):
@@ -40,9 +30,8 @@ class CoMTask(Task):
     has_frame = False
 
     def __init__(self, axes: str = "xyz", weight=None, priority: int | None = 0):
-        self.axes = checked_axes(axes)
-        self.dim = len(self.axes)
-        self._rows = np.array([_AXES[a] for a in self.axes], dtype=np.int64)
+        self._rows = axis_rows(axes)
+        self.axes, self.dim = axes, len(axes)
         super().__init__(None, weight, priority)
         self.label = "com"
 

@@ -7,9 +7,8 @@ import pinocchio as pin
 
 from ..exceptions import FrameNotFound
 from ..kernels import position_rows
-from ..validation import as_pose, as_vector
+from ..validation import as_pose, as_vector, axis_rows
 from .base import _NO_VELOCITY, Task
-from .com import _AXES, checked_axes
 
 
 class PositionTask(Task):
@@ -29,16 +28,16 @@ class PositionTask(Task):
 
     def __init__(self, frame: str | None = None, axes: str = "xyz", weight=None,
                  priority: int | None = 0):
-        self.axes = checked_axes(axes)
+        self._rows = axis_rows(axes)
+        self.axes = axes
         self.dim = len(axes)
-        self._rows = np.array([_AXES[a] for a in axes], dtype=np.int64)
         super().__init__(frame, weight, priority)
 
     def bind(self, robot):
         try:
             bound = super().bind(robot)
         except FrameNotFound as error:
-            if self.frame and not set(self.frame) - set(_AXES):  # PositionTask("xy"): axes
+            if self.frame and not set(self.frame) - set("xyz"):  # PositionTask("xy"): axes
                 raise FrameNotFound(error.name, error.available, robot.name, message=(
                     f"{error}; the frame is PositionTask's first argument, as in every "
                     f"task: for the axes write PositionTask(axes={self.frame!r})")) from None
