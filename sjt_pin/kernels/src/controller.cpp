@@ -280,9 +280,9 @@ void Controller::project(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<
 //
 // t = x0 + their step (tmp_), B their task rows (weighted), P^2 the diagonal of a posture's
 // identity rows (times kPostureShare), eps kInvisible of the posture's mean weight (times
-// kPostureShare), or without a posture of the task rows' mean squared column norm. A task below the first
-// level keeps as much of its task motion as the limits allow, other joints taking over where one
-// is at its limit (a knee at its limit under a humanoid's reaching hand); a motion no lower task
+// kPostureShare), or without a posture of the task rows' mean squared column norm. A task below
+// the first level keeps as much of its task motion as the limits allow, other joints taking
+// over where one is at its limit (a knee at its limit under a humanoid's reaching hand); a motion no lower task
 // sees costs eps and stays as level 0 has it: the nearest velocity in joint space kept the
 // step's motions no lower task sees (Solo-12's legs turned at 23 rad/s under held feet with its
 // centre of mass at the support's edge, and never came to rest). The objective is the
