@@ -11,7 +11,6 @@ namespace sjt {
 
 namespace {
 
-constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr double kBoundSlack = 1e-12;  // rad/s: a hard bound this close to the box is on it
 
 inline void tighten_hi(double value, int8_t reason, double& hi, int8_t& by) {

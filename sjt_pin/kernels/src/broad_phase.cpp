@@ -17,8 +17,6 @@ namespace sjt {
 
 namespace {
 
-constexpr double INF = std::numeric_limits<double>::infinity();
-
 // lever_k . moved, summed in index order
 double lever_sum(const ConstMatrixMap& lever, Index k, const double* moved) {
   double acc = 0.0;
@@ -68,9 +66,9 @@ void build_prefilter(const ConstMatrixMap& lever, const double* gap, const doubl
     double norm = lever.row(k).norm();
     double slack = gap[k] - influence[k] - 1e-12 * (1.0 + std::fabs(gap[k]) +
                                                     std::fabs(influence[k]));
-    double r = -INF;
+    double r = -kInf;
     if (std::isinf(gap[k]) && gap[k] > 0 && std::isfinite(influence[k]) && std::isfinite(norm))
-      r = INF;
+      r = kInf;
     else if (slack > 0.0 && norm > 0.0 && std::isfinite(norm))
       r = slack / norm;
     order[static_cast<std::size_t>(k)] = {r, k};
@@ -195,14 +193,14 @@ nb::object refresh_pairs(nb::handle q_obj, nb::handle lower_obj, nb::handle uppe
   if (!inside(q, lower, upper)) return nb::none();  // (nothing changed)
   double* f = floor.data();
   for (Index k = 0; k < npairs; ++k)
-    if (!keep[static_cast<std::size_t>(k)]) f[k] = -INF;  // no bound known
+    if (!keep[static_cast<std::size_t>(k)]) f[k] = -kInf;  // no bound known
   const auto L = lever.matrix();
   std::vector<double> moved(static_cast<std::size_t>(n));
   moves(q, floor_q ? floor_q->data() : nullptr, moved.data());
   nb::list near, listed;
   for (Index k = 0; k < npairs; ++k) {
     if (!(gap.data()[k] < influence.data()[k] + skin)) continue;
-    gap.data()[k] = INF;  // a candidate stays one
+    gap.data()[k] = kInf;  // a candidate stays one
     near.append(nb::int_(k));
     if (floor_q) f[k] -= lever_sum(L, k, moved.data());
     if (!floor_q || !(f[k] > influence.data()[k])) listed.append(nb::int_(k));

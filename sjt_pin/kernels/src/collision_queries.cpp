@@ -27,7 +27,6 @@ struct CollisionTables {
 
 namespace {
 
-constexpr double INF = std::numeric_limits<double>::infinity();
 // Where a pair is apart by more than this (m) the normal is read off the points, (p_b - p_a) /
 // |p_b - p_a|, as coal forms it (to 1e-14 on the bench's scenes): a vector read through Python
 // costs per vector
@@ -189,8 +188,8 @@ nb::object collision_rows(const CollisionTables& t, nb::handle near, nb::handle 
     nb::int_ pair(k);
     nb::object result = compute(t.geometry, t.geometry_data, pair);
     double d = as_double(result.attr(names.distance), "min_distance");
-    floor[k] = d > -UNUSABLE ? d : -INF;  // (NaN, or no closest points: queried again)
-    if (!(d > -INF && d < influence[k])) continue;
+    floor[k] = d > -UNUSABLE ? d : -kInf;  // (NaN, or no closest points: queried again)
+    if (!(d > -kInf && d < influence[k])) continue;
     within.append(pair);
     if (c.reach && rate * (d - margins[k]) >= c.reach->data()[k]) continue;  // cannot bind
     if (count >= N) fail("collision_rows: more pairs within influence than rows");
@@ -206,7 +205,7 @@ nb::object collision_rows(const CollisionTables& t, nb::handle near, nb::handle 
     }
     r[row::distance] = d;
     if (!(d > -UNUSABLE) || !usable(r)) {  // no closest points: the caller forms the row
-      r[row::distance] = -INF;
+      r[row::distance] = -kInf;
       std::fill(r + row::normal, r + row::size, 0.0);
       ++failures;
     }

@@ -9,7 +9,6 @@ namespace sjt {
 
 namespace {
 
-constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr double kBoundTol = 1e-12;  // rad/s: a velocity this close to a bound is on it
 // keeping the task's direction is taken alone while it leaves at least this share of the
 // progress the unconstrained projection makes (which is at most the whole step's)

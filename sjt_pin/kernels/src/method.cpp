@@ -11,7 +11,6 @@ namespace {
 
 // eigenvalues below this fraction of the largest are zero (the eigen-decomposition's accuracy)
 constexpr double kEigenFloor = 1e3 * std::numeric_limits<double>::epsilon();
-constexpr double kInf = std::numeric_limits<double>::infinity();
 // power of the loop bound: lambda_max <= (tr A^(2^(P+1)))^(1/2^(P+1))
 constexpr int kBoundProducts = 2;
 

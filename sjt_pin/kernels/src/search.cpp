@@ -142,7 +142,7 @@ int SetPointSearch::iterate(const double* J, const double* e, const double* q) {
   } else {
     state.stale += 1;
   }
-  if (state.stale >= stale_iters || state.nu > kNuMax || !std::isfinite(f)) return kStalled;
+  if (state.stale >= stale_iters || state.nu > kNuMax || !std::isfinite(f)) return kSearchStalled;
   // the quick test (a stricter progress over fewer iterations): with a joint held at its
   // limit (heading for a minimum on the boundary of the box), or once a trial of the start has
   // been rejected (its damping found: Levenberg-Marquardt then converges fast or not at all;
@@ -154,7 +154,7 @@ int SetPointSearch::iterate(const double* J, const double* e, const double* q) {
   } else {
     state.held_stale += 1;
   }
-  if (state.quick && state.held_stale >= held_iters && (state.rejected || held())) return kStalled;
+  if (state.quick && state.held_stale >= held_iters && (state.rejected || held())) return kSearchStalled;
   limited_step();
   return kContinue;
 }
@@ -324,7 +324,7 @@ bool SetPointSearch::clamp() {
 void register_search(nb::module_& m) {
   m.attr("CONTINUE") = static_cast<int>(kContinue);
   m.attr("CONVERGED") = static_cast<int>(kConverged);
-  m.attr("SEARCH_STALLED") = static_cast<int>(kStalled);
+  m.attr("SEARCH_STALLED") = static_cast<int>(kSearchStalled);
   using S = SetPointSearch;
   nb::class_<S>(m, "SetPointSearch",
                 "SetPointSearch(sqrt_weight, mask, nq, limit_q, limit_v, lower, upper, *, "

@@ -13,7 +13,7 @@
 namespace sjt {
 
 // What an iteration reports (exported by name: CONTINUE, CONVERGED, SEARCH_STALLED)
-enum SearchStatus : int { kContinue = 0, kConverged = 1, kStalled = 2 };
+enum SearchStatus : int { kContinue = 0, kConverged = 1, kSearchStalled = 2 };
 
 // The state of one start: the best point so far (its error f = |W e|^2 / 2, |e|^2 over the
 // target rows), the damping's factor nu, and the stall tests' counters.

@@ -17,7 +17,6 @@ namespace sjt {
 namespace {
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
-constexpr double kInf = std::numeric_limits<double>::infinity();
 
 // The desired twist `velocity` ([linear, angular], world axes at the desired origin oMd) in
 // the frame's own axes at its origin (LOCAL): v' = R^T (v + w x (p_f - p_d)), w' = R^T w.
