@@ -27,10 +27,12 @@ TESTS=(
   test_trajectories test_feedforward test_distances test_braking
   test_example_frames test_example_urdfs test_urdf_semantics test_urdf_errors
   test_collision_speed test_collision_mesh test_collision_moving test_boundary_collision
-  test_boundary_search
+  test_boundary_search test_whole_body
 )
-# nodes that read the checkout's robots/ (as in .ci/wheel.sh)
+# nodes that read the checkout's robots/ (as in .ci/wheel.sh), or build random chains with
+# yourdfpy (the paper extra)
 DESELECT=(
+  test_whole_body.py::test_a_lower_level_costs_the_top_level_nothing
   test_urdf_errors.py::test_bytes_path_and_text_give_the_same_robot
   test_urdf_errors.py::test_single_package_dir_is_one_folder
   test_urdf_errors.py::test_paper_planar3_urdf_passes_the_checks
