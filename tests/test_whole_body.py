@@ -15,7 +15,6 @@ import sjt_pin as sjt
 from sjt_pin.kinematics import Kinematics
 from sjt_pin.limits.support import convex_hull
 
-
 DT = 1e-3
 FEET = ["FL_FOOT", "FR_FOOT", "HL_FOOT", "HR_FOOT"]
 SOLES = ["left_sole_link", "right_sole_link"]
