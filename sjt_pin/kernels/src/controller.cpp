@@ -10,6 +10,10 @@ namespace sjt {
 namespace {
 
 constexpr double kBoundTol = 1e-12;  // rad/s: a velocity this close to a bound is on it
+// a row of a lower level's projection whose part outside the rows above is below this share of
+// their largest row's norm is spanned by them (the former eigen-decomposition's relative
+// cutoff on the Gram matrix's eigenvalues, 1e-12, in singular values)
+constexpr double kRankFloor = 1e-6;
 // keeping the task's direction is taken alone while it leaves at least this share of the
 // progress the unconstrained projection makes (which is at most the whole step's)
 constexpr double kUseful = 0.1;
@@ -36,7 +40,6 @@ Controller::Controller(const MethodParameters& method_, Index rows, Index nv_, I
     : m(rows), nv(nv_), nq(nq_), error_rows(error_rows_), sqrt_weight(sqrt_weight_),
       gains(gains_), moving(moving_), levels(levels_), bounds(bounds_),
       stall_ratio(stall_ratio_), stall_floor(stall_floor_), dt_(dt) {
-  eigen_.compute(Eigen::MatrixXd::Identity(1, 1));  // (its info set: see Method's constructor)
   method.p = method_;
   lower_.p = method_;
   lower_.p.damped_feedback = true;  // lower levels solve for their task velocity
@@ -63,12 +66,12 @@ Controller::Controller(const MethodParameters& method_, Index rows, Index nv_, I
   ddq.setZero(nv);
   escape_velocity.setZero(nv);
   for (Vector* v : {&desired, &fb, &ff, &velocity, &fb0_, &ff0_, &desired_top, &x0_, &xa_, &tmp_, &tmp2_, &lam_low_,
-                    &low_p_, &low_h_, &low_d_, &low_dh_, &low_dinv_, &anchor_})
+                    &low_p_, &low_h_, &low_d_, &low_dh_, &low_dinv_, &anchor_, &coef_})
     v->setZero(nv);
+  basis_.setZero(nv, nv);
   Jw_.resize(m, nv);
   ew_.resize(m);
   ffw_.resize(m);
-  k_.resize(m);
   Bnone_.resize(0, nv);
   Cnone_.resize(0, nv);
   box.resize(nv);
@@ -111,31 +114,57 @@ bool Controller::feasible(const Vector& x, const Eigen::Ref<const RowMatrix>& A,
   return true;
 }
 
+// Appends rows (k x nv, or the identity's when `rows` is null: every joint) to basis_, the
+// orthonormal basis of the row space of the levels above (Gram-Schmidt, each row orthogonalised
+// twice: "twice is enough", Giraud et al. 2005); a row whose part outside the basis is below
+// kRankFloor of the largest row's norm is already spanned, and adds nothing.
+void Controller::extend_basis(const RowMatrix* rows, Index begin, Index count) {
+  for (Index i = 0; i < count && rank_ < nv; ++i) {
+    auto w = basis_.col(rank_);
+    if (rows) {
+      w = rows->row(begin + i).transpose();
+    } else {  // the identity's row i, on the moving joints
+      w.setZero();
+      w[i] = moving[i];
+    }
+    const double norm0 = w.norm();
+    top_norm_ = std::max(top_norm_, norm0);
+    if (!(norm0 > 0.0)) continue;
+    for (int pass = 0; pass < 2; ++pass) {
+      coef_.head(rank_).noalias() = basis_.leftCols(rank_).transpose() * w;
+      w.noalias() -= basis_.leftCols(rank_) * coef_.head(rank_);
+    }
+    const double norm = w.norm();
+    if (norm > kRankFloor * top_norm_) {
+      w /= norm;
+      ++rank_;
+    }
+  }
+}
+
+// v <- v minus its part in the row space of the levels above: v - Q Q^T v.
+void Controller::null_project(Vector& v) {
+  coef_.head(rank_).noalias() = basis_.leftCols(rank_).transpose() * v;
+  v.noalias() -= basis_.leftCols(rank_) * coef_.head(rank_);
+}
+
 // x_fb, x_ff of the levels below the first, each in the null space of the rows above it
 // (Siciliano and Slotine's recursion): a posture's velocity K w (q_ref - q) replaces the
 // self-motion of the levels above, a task level solves its task velocity, less what the levels
-// above already do to it, with the method's damped solve on its projected rows.
+// above already do to it, with the method's damped solve on its projected rows. The projector
+// onto that null space, I - Q Q^T, comes from an orthonormal basis Q of the rows above, grown
+// level by level (an eigen-decomposition of their Gram matrix per level was 60 % of a
+// humanoid's step).
 void Controller::lower_levels(const double* ffw) {
   const Level& top_level = levels[0];
-  high_ = Jw_.middleRows(top_level.begin, top_level.end - top_level.begin);
+  rank_ = 0;
+  top_norm_ = 0.0;
+  extend_basis(&Jw_, top_level.begin, top_level.end - top_level.begin);
+  const double gain = method.p.auto_gain ? method.p.gain_factor / dt_ : 1.0;
   for (size_t index = 1; index < levels.size(); ++index) {
     const Level& level = levels[index];
     const Index rows = level.end - level.begin;
     if (rows == 0) continue;
-    // (high high^T)^+ by its eigen-decomposition, with a relative cutoff
-    gram_.noalias() = high_ * high_.transpose();
-    eigen_.compute(gram_);
-    const Vector& values = eigen_.eigenvalues();
-    const double cutoff = 1e-12 * std::max(values.maxCoeff(), 1e-300);
-    Vector inverse = values.unaryExpr([cutoff](double v) { return v > cutoff ? 1.0 / v : 0.0; });
-    const Eigen::MatrixXd& U = eigen_.eigenvectors();
-    auto null_project = [&](Vector& v) {  // v <- v - high^T (high high^T)^+ high v
-      tmp2_.resize(high_.rows());
-      tmp2_.noalias() = U.transpose() * (high_ * v);
-      tmp2_ = tmp2_.cwiseProduct(inverse);
-      v.noalias() -= high_.transpose() * (U * tmp2_);
-    };
-    const double gain = method.p.auto_gain ? method.p.gain_factor / dt_ : 1.0;
     if (level.identity) {
       for (Index j = 0; j < nv; ++j) {
         const Index row = level.begin + j;
@@ -146,31 +175,29 @@ void Controller::lower_levels(const double* ffw) {
       tmp_ = -ff;
       null_project(tmp_);
       ff += tmp_;
-      high_.conservativeResize(high_.rows() + rows, Eigen::NoChange);
-      high_.bottomRows(rows).setIdentity();
+      if (index + 1 < levels.size()) extend_basis(nullptr, 0, nv);
       continue;
     }
-    // the level's rows projected: Jhat = J_k - (J_k high^T) (high high^T)^+ high
+    // the level's rows projected: Jhat = J_k - (J_k Q) Q^T
     const auto Jk = Jw_.middleRows(level.begin, rows);
-    Eigen::MatrixXd coupling = (Jk * high_.transpose()) * U;
-    coupling = coupling * inverse.asDiagonal() * U.transpose();
+    coupling_.noalias() = Jk * basis_.leftCols(rank_);
     Jhat_ = Jk;
-    Jhat_.noalias() -= coupling * high_;
+    Jhat_.noalias() -= coupling_ * basis_.leftCols(rank_).transpose();
     lower_.prepare(Jhat_, ew_.segment(level.begin, rows), gains.segment(level.begin, rows),
                    level.targets, dt_, lower_step_);
-    Vector t = gain * gains.segment(level.begin, rows).cwiseProduct(ew_.segment(level.begin, rows));
-    t.noalias() -= Jk * fb;
+    level_t_ = gain * gains.segment(level.begin, rows).cwiseProduct(ew_.segment(level.begin, rows));
+    level_t_.noalias() -= Jk * fb;
     const bool pseudo = method.p.family == Family::least_squares && method.p.mu == 0.0;
-    lower_.solve(Jhat_, t, lower_step_.s, lower_step_.damping, pseudo, tmp_);
+    lower_.solve(Jhat_, level_t_, lower_step_.s, lower_step_.damping, pseudo, tmp_);
     null_project(tmp_);
     fb += tmp_;
-    t = ffw ? Vector(ffw_.segment(level.begin, rows)) : Vector::Zero(rows);
-    t.noalias() -= Jk * ff;
-    lower_.solve(Jhat_, t, lower_step_.s, lower_step_.damping, pseudo, tmp_);
+    if (ffw) level_t_ = ffw_.segment(level.begin, rows);
+    else level_t_.setZero(rows);
+    level_t_.noalias() -= Jk * ff;
+    lower_.solve(Jhat_, level_t_, lower_step_.s, lower_step_.damping, pseudo, tmp_);
     null_project(tmp_);
     ff += tmp_;
-    high_.conservativeResize(high_.rows() + rows, Eigen::NoChange);
-    high_.bottomRows(rows) = Jk;
+    if (index + 1 < levels.size()) extend_basis(&Jw_, level.begin, rows);
   }
 }
 

@@ -82,6 +82,8 @@ class Controller {
   bool feasible(const Vector& x, const Eigen::Ref<const RowMatrix>& A,
                 const Eigen::Ref<const Vector>& b, const Vector& lo, const Vector& hi) const;
   void lower_levels(const double* ffw);
+  void extend_basis(const RowMatrix* rows, Index begin, Index count);
+  void null_project(Vector& v);
   void sufficient_decrease(const Eigen::Ref<const RowMatrix>& J0,
                            const Eigen::Ref<const RowMatrix>& A,
                            const Eigen::Ref<const Vector>& b, double ball);
@@ -96,8 +98,14 @@ class Controller {
   void yield_smoothness(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b);
 
   double dt_;
-  RowMatrix Jw_, high_, Jhat_, Bnone_, Cnone_, B_, along_;
-  Vector ew_, ffw_, k_, fb0_, ff0_, t_, tfb_, tff_, x0_, xa_, tstar_, gt_, direction_, tmp_, tmp2_, lam_low_;
+  RowMatrix Jw_, Jhat_, Bnone_, Cnone_, B_, coupling_;
+  // lower_levels: the orthonormal basis of the rows above a level (its first rank_ columns),
+  // the largest of those rows' norms, a level's task velocity
+  Eigen::MatrixXd basis_;
+  Index rank_ = 0;
+  double top_norm_ = 0.0;
+  Vector coef_, level_t_;
+  Vector ew_, ffw_, fb0_, ff0_, x0_, xa_, tstar_, gt_, direction_, tmp_, tmp2_, lam_low_;
   // project(): the box with unbounded joints capped; the task velocity that removes level 0's
   // error in a step (e_w / dt, and the feed-forward); J0^T of it, the error's steepest
   // descent; the Cauchy point and its path's state
@@ -109,8 +117,6 @@ class Controller {
   Eigen::LLT<Eigen::MatrixXd> low_llt_;
   std::vector<std::pair<double, Index>> breaks_;  // the Cauchy path's breakpoints
   Vector empty_, wide_lo_, wide_hi_, delta_, aim_, bk_;
-  Eigen::MatrixXd gram_;
-  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eigen_;
   Method lower_;
   MethodStep lower_step_;
   Projection projection_;
