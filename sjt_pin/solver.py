@@ -89,7 +89,7 @@ class Solver:
         self._first = True  # the first step checks the targets' distance (units)
         self._dt = period(opts.dt)
         self._gain = as_gain(opts.gain, stack.target_dim)
-        method.adapt(stack.targeted, tasks_length(robot, stack.tasks))
+        method.adapt(stack.leading, tasks_length(robot, stack.leading))
         (self.acceleration_limit, self.jerk_limit, self.position_limit, self.velocity_limit,
          self._user, self._motion) = solver_parts.solver_limits(robot, stack, opts, self._dt)
         self.escape = (SaddleEscape(robot.model, stack.chain, robot.velocity_limits,

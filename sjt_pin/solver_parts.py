@@ -122,8 +122,8 @@ def make_controller(robot: Robot, stack: TaskStack, method: Method, dt: float,
         empty if position is None else position.recovery_speeds,
         None if accel is None else accel.limits, None if jerk is None else jerk.limits,
         -1.0 if escape is None else SaddleEscape.STALL_RATIO,
-        # converged, not stalled: |e_w| below ERROR_FLOOR times the tasks' length
-        (SaddleEscape.ERROR_FLOOR * tasks_length(robot, stack.tasks)) ** 2)
+        # converged, not stalled: |e_w| below ERROR_FLOOR times the first level's length
+        (SaddleEscape.ERROR_FLOOR * tasks_length(robot, stack.leading)) ** 2)
     #: the motion state a user's limits read is the controller's own
     motion.dq, motion.ddq = controller.dq, controller.ddq
     return controller, matrix_method

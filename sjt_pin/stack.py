@@ -90,6 +90,11 @@ class TaskStack:
         ordered, task_levels = ordered_by_level([t.bind(robot) for t in tasks])
         self.tasks = ordered
         self.targeted = [t for t in self.tasks if t.takes_target]
+        #: the tasks the method's parameters are set from (their length, whether all turn): the
+        #: first level's target-taking tasks, so that a lower level's leave the first level's
+        #: step as it is; every target-taking task where the first level has none (contacts)
+        self.leading = [t for t, lv in zip(self.tasks, task_levels, strict=True)
+                        if lv == 0 and t.takes_target] or self.targeted
         if not self.targeted:
             raise ValueError("a solver needs at least one task that takes a target (PoseTask, "
                              "PositionTask, OrientationTask, ...)")

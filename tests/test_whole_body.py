@@ -235,6 +235,44 @@ def test_a_lower_level_costs_the_top_level_nothing(Solver, seed):
 
 
 
+@pytest.mark.parametrize("Solver", [sjt.SJTSolver, sjt.DLSSolver, sjt.JPSolver, sjt.JTSolver])
+@pytest.mark.parametrize("second", ["panda_hand", "panda_link5"])
+def test_levels_below_rows_that_repeat_or_fill_the_joints(Solver, second):
+    """Level 0's rows dependent on each other (a pose and a position task on one frame: 9 rows,
+    rank 6 on 7 joints) or more than the joints (two poses: 12 rows, rank 7): the projector of
+    the levels below spans them once, level 0's task motion is the same with and without the
+    levels below, and where level 0 takes every joint the levels below change nothing. (A
+    lower level's tasks once changed level 0's step through the method's parameters: the
+    least-squares damping's length and weight were set from every level's tasks.)"""
+    panda = sjt.Robot.from_example("panda")
+    rng = np.random.default_rng(7)
+    q = panda.q0 + rng.normal(scale=0.2, size=panda.nq)
+    hand = panda.fk(q, "panda_hand") * pin.exp6(pin.Motion(rng.normal(scale=0.02, size=6)))
+    top_tasks = [sjt.PoseTask("panda_hand"),
+                 sjt.PositionTask("panda_hand") if second == "panda_hand" else sjt.PoseTask(second)]
+    targets = {"panda_hand": hand}
+    if second != "panda_hand":
+        targets[second] = panda.fk(q, second) * pin.exp6(pin.Motion(rng.normal(scale=0.02, size=6)))
+    free = dict(dt=DT, position_limits=False, velocity_limits=False)
+    top = Solver(panda, task=top_tasks, **free)
+    below = Solver(panda, task=[*top_tasks, sjt.PositionTask("panda_link4", priority=1)],
+                   posture=sjt.PostureTask(q_ref=panda.q0 + 0.3, weight=0.1), **free)
+    top.step(q, targets)
+    lower_target = panda.fk(q, "panda_link4").translation + [0.02, -0.01, 0.01]
+    below.step(q, targets | {"panda_link4": lower_target})
+    assert np.all(np.isfinite(below.last.dq))
+    J0 = np.vstack([panda.jacobian(q, f) for f in dict.fromkeys(["panda_hand", second])])
+    scale = np.linalg.norm(J0 @ top.last.dq)
+    np.testing.assert_allclose(J0 @ below.last.dq, J0 @ top.last.dq, atol=1e-9 * scale)
+    arm = np.abs(J0).sum(axis=0) > 0  # (the fingers are the posture's alone)
+    moved = np.linalg.norm((below.last.dq - top.last.dq)[arm]) / np.linalg.norm(top.last.dq)
+    if second == "panda_hand":  # one joint left to the levels below, and they use it
+        assert moved > 1e-6
+    else:  # none left
+        assert moved < 1e-9
+
+
+
 def test_solve_brings_the_centre_of_mass_to_its_target_with_the_feet_held(solo):
     """solve()'s success counts the contacts' rows too, not only the rows that take targets
     (it counted the first rows, the contacts': success at the start, the body not moved)."""

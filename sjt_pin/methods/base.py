@@ -35,8 +35,9 @@ class Method:
         return None
 
     def adapt(self, tasks: Sequence[Task], length: float) -> None:  # noqa: B027
-        """Adapt the parameters that depend on the solver's tasks: ``tasks`` are its bound
-        target-taking tasks and ``length`` their characteristic length (m), see
+        """Adapt the parameters that depend on the solver's tasks: ``tasks`` are its first
+        priority level's bound target-taking tasks (every level's where the first has none)
+        and ``length`` their characteristic length (m), see
         :func:`~sjt_pin.tasks.pose.tasks_length`. The solver calls it once; nothing by
         default."""
 

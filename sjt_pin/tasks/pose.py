@@ -43,10 +43,12 @@ def characteristic_length(robot, frame_id: int) -> float:
 
 
 def tasks_length(robot, tasks) -> float:
-    """The characteristic length (m) of a solver's tasks: the largest of the pose tasks'
-    ``length`` and of :func:`characteristic_length` on the other target-taking tasks' frames
-    (1.0 without any). Unit-free thresholds are fractions of it (SJT's floor under the column
-    norms, the escape's converged error)."""
+    """The characteristic length (m) of ``tasks``: the largest of the pose tasks' ``length``
+    and of :func:`characteristic_length` on the other target-taking tasks' frames (1.0 without
+    any). A solver takes its first priority level's (``TaskStack.leading``: a lower level's
+    tasks leave the first level's step as it is); unit-free thresholds are fractions of it
+    (SJT's floor under the column norms, the least-squares methods' error-dependent damping,
+    the escape's converged error)."""
     lengths = [getattr(t, "length", None) or characteristic_length(robot, t.frame_id)
                for t in tasks if t.takes_target and t.frame_id >= 0]
     return max(lengths, default=1.0)

@@ -183,6 +183,10 @@ void Controller::lower_levels(const double* ffw) {
     coupling_.noalias() = Jk * basis_.leftCols(rank_);
     Jhat_ = Jk;
     Jhat_.noalias() -= coupling_ * basis_.leftCols(rank_).transpose();
+    // a row the levels above span (to kRankFloor of its norm) is left with rounding only, which
+    // a pseudo-inverse would blow up into a velocity: it asks nothing of this level
+    for (Index i = 0; i < rows; ++i)
+      if (Jhat_.row(i).norm() <= kRankFloor * Jk.row(i).norm()) Jhat_.row(i).setZero();
     lower_.prepare(Jhat_, ew_.segment(level.begin, rows), gains.segment(level.begin, rows),
                    level.targets, dt_, lower_step_);
     level_t_ = gain * gains.segment(level.begin, rows).cwiseProduct(ew_.segment(level.begin, rows));
