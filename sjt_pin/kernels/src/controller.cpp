@@ -153,8 +153,8 @@ void Controller::null_project(Vector& v) {
 // self-motion of the levels above, a task level solves its task velocity, less what the levels
 // above already do to it, with the method's damped solve on its projected rows. The projector
 // onto that null space, I - Q Q^T, comes from an orthonormal basis Q of the rows above, grown
-// level by level (an eigen-decomposition of their Gram matrix per level was 60 % of a
-// humanoid's step).
+// level by level (an eigen-decomposition of their Gram matrix per level was 61 % of this
+// call's instructions on a humanoid with feet, hands and a posture).
 void Controller::lower_levels(const double* ffw) {
   const Level& top_level = levels[0];
   rank_ = 0;
