@@ -10,7 +10,7 @@ import warnings
 
 import numpy as np
 
-from . import kernels, solver_parts
+from . import kernels
 from .exceptions import ConcurrentStepError
 from .gains import Gain
 from .joint_ranges import outside
@@ -20,16 +20,17 @@ from .stack import TaskStack
 from .validation import raise_non_finite_targets
 
 
-def matrix_step(method: Method, stack: TaskStack, gain: Gain, dt: float,
-                controller: kernels.Controller, J, e, ff):
+def matrix_step(method: Method, stack: TaskStack, gain: Gain, row_gains: np.ndarray,
+                dt: float, controller: kernels.Controller, J, e, ff):
     """A method of your own: its matrix M on the first level's weighted rows, the gain
-    (``"auto"``: ``c / (dt lambda_max(J M))``), and the feedback and feed-forward velocities
-    it asks for (the compiled stage takes them from there)."""
+    (``"auto"``: ``c / (dt lambda_max(J M))``; ``row_gains``: each row's, as
+    :func:`~sjt_pin.solver_parts.row_gains` gives them), and the feedback and feed-forward
+    velocities it asks for (the compiled stage takes them from there)."""
     begin, end, _, targets = stack.levels[0]
     sw = stack.sqrt_weight[begin:end]
     Jw = sw[:, None] * J[begin:end] * stack.chain
     M = np.asarray(method.matrix(Jw), dtype=float)
-    k = solver_parts.row_gains(stack, gain)[begin:end]
+    k = row_gains[begin:end]
     if gain.mode == kernels.GAIN_FIXED:
         scale = 1.0
     else:
