@@ -234,7 +234,6 @@ def test_a_lower_level_costs_the_top_level_nothing(Solver, seed):
     assert np.linalg.norm(below.last.dq - top.last.dq) > 1e-6 * np.linalg.norm(top.last.dq)
 
 
-
 @pytest.mark.parametrize("Solver", [sjt.SJTSolver, sjt.DLSSolver, sjt.JPSolver, sjt.JTSolver])
 @pytest.mark.parametrize("second", ["panda_hand", "panda_link5"])
 def test_levels_below_rows_that_repeat_or_fill_the_joints(Solver, second):
@@ -270,7 +269,6 @@ def test_levels_below_rows_that_repeat_or_fill_the_joints(Solver, second):
         assert moved > 1e-6
     else:  # none left
         assert moved < 1e-9
-
 
 
 def test_solve_brings_the_centre_of_mass_to_its_target_with_the_feet_held(solo):

@@ -94,7 +94,6 @@ HUMANOID_NODE, HUMANOID_LABEL = "talos", "TALOS reaching over its soles"
 QUADRUPED_NODE, QUADRUPED_LABEL = "solo12", "Solo-12 moving its body"
 
 
-
 def _example(name: str) -> Robot:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # (no end effector known: the tasks name their frames)

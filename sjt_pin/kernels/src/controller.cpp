@@ -65,8 +65,9 @@ Controller::Controller(const MethodParameters& method_, Index rows, Index nv_, I
   dq.setZero(nv);
   ddq.setZero(nv);
   escape_velocity.setZero(nv);
-  for (Vector* v : {&desired, &fb, &ff, &velocity, &fb0_, &ff0_, &desired_top, &x0_, &xa_, &tmp_, &tmp2_, &lam_low_,
-                    &low_p_, &low_h_, &low_d_, &low_dh_, &low_dinv_, &anchor_, &coef_})
+  for (Vector* v : {&desired, &fb, &ff, &velocity, &fb0_, &ff0_, &desired_top, &x0_, &xa_,
+                    &tmp_, &tmp2_, &lam_low_, &low_p_, &low_h_, &low_d_, &low_dh_, &low_dinv_,
+                    &anchor_, &coef_})
     v->setZero(nv);
   basis_.setZero(nv, nv);
   Jw_.resize(m, nv);
@@ -312,13 +313,13 @@ void Controller::project(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<
 // identity rows (times kPostureShare), eps kInvisible of the posture's mean weight (times
 // kPostureShare), or without a posture of the task rows' mean squared column norm. A task below
 // the first level keeps as much of its task motion as the limits allow, other joints taking
-// over where one is at its limit (a knee at its limit under a humanoid's reaching hand); a motion no lower task
-// sees costs eps and stays as level 0 has it: the nearest velocity in joint space kept the
-// step's motions no lower task sees (Solo-12's legs turned at 23 rad/s under held feet with its
-// centre of mass at the support's edge, and never came to rest). The objective is the
-// projection's, (x - x*)^T (D + B^T B) (x - x*), D = eps + P^2 per moving joint, with x* its
-// unconstrained minimiser (Woodbury: x* = D^-1 h - D^-1 B^T (I + B D^-1 B^T)^-1 B D^-1 h,
-// h = eps x0 + P^2 t + B^T B t).
+// over where one is at its limit (a knee at its limit under a humanoid's reaching hand); a
+// motion no lower task sees costs eps and stays as level 0 has it: the nearest velocity in
+// joint space kept the step's motions no lower task sees (Solo-12's legs turned at 23 rad/s
+// under held feet with its centre of mass at the support's edge, and never came to rest). The
+// objective is the projection's, (x - x*)^T (D + B^T B) (x - x*), D = eps + P^2 per moving
+// joint, with x* its unconstrained minimiser (Woodbury: x* = D^-1 h - D^-1 B^T
+// (I + B D^-1 B^T)^-1 B D^-1 h, h = eps x0 + P^2 t + B^T B t).
 void Controller::lower_nearest(const Eigen::Ref<const RowMatrix>& J0,
                                const Eigen::Ref<const RowMatrix>& A,
                                const Eigen::Ref<const Vector>& b, const Vector& lo,
