@@ -7,7 +7,9 @@ The discrete loop ``e_{k+1} = (I - dt K J M) e_k`` is stable iff ``k dt lambda_m
 - ``"auto"`` (:class:`AutoGain`): ``k = c / (dt lambda_hat)`` at every step, with
   ``lambda_hat >= lambda_max(J M)``: 1 for JP, DLS and the damped SJT, whose loop eigenvalues
   are at most 1; for the transpose feedbacks of JT and SJT an upper bound within a few per
-  cent of lambda_max (:func:`~sjt_pin.kernels.loop_bound`). With ``c = 1`` the fastest mode of
+  cent of lambda_max (:func:`~sjt_pin.kernels.loop_bound`); for a method of your own the
+  largest eigenvalue of the symmetric part of J M (at least the real part of each eigenvalue
+  of J M, lambda_max itself where J M is symmetric). With ``c = 1`` the fastest mode of
   the linearised loop settles in one step without overshoot, and the gain stays below the
   stability bound ``2 / (dt lambda_max)`` by at least a factor 2, guaranteed.
 """

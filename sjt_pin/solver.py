@@ -113,8 +113,8 @@ class Solver:
         """Write what depends on the gain and dt into the controller: the rows' gains, the
         period, the speed limits (with the user's limits' caps at this period)."""
         stack, gain, c = self.stack, self._gain, self._controller
-        self._row_gains = solver_parts.row_gains(stack, gain)  # (a method of your own's too)
-        c.set_gains(self._row_gains, gain.mode != kernels.GAIN_FIXED, gain.factor)
+        c.set_gains(solver_parts.row_gains(stack, gain), gain.mode != kernels.GAIN_FIXED,
+                    gain.factor)
         c.set_dt(self._dt)
         self._motion.dt = self._dt
         self._stability.arm(gain.mode == kernels.GAIN_FIXED, gain.largest * self._dt)
@@ -210,12 +210,9 @@ class Solver:
                 self._motion.q = q
                 lower, upper, A, b, owners = self._user.evaluate(stack.kinematics, self._motion)
             # 3. method and stage, compiled
-            fb = ff_given = None
-            if self._matrix_method:
-                fb, ff_given = step_checks.matrix_step(self.method, stack, self._gain,
-                                                       self._row_gains, self._dt,
-                                                       self._controller, J, e, ff)
-            status = self._controller.run(J, e, ff, q, self._step, fb, ff_given, lower, upper, A, b)
+            M = (step_checks.method_matrix(self.method, stack, J) if self._matrix_method
+                 else None)
+            status = self._controller.run(J, e, ff, q, self._step, M, lower, upper, A, b)
             self._count += 1
             if status & _PYTHON or self._busy:
                 self._slow(status, q, J, [target] if targets is None else targets)

@@ -102,11 +102,11 @@ def make_controller(robot: Robot, stack: TaskStack, method: Method, dt: float,
                     position: PositionLimit | None, accel: AccelerationLimit | None,
                     jerk: JerkLimit | None, escape: SaddleEscape | None, motion: Motion
                     ) -> tuple[kernels.Controller, bool]:
-    """The compiled controller of a solver, and whether its method is one of the user's (its
-    matrix mapped in Python, :func:`sjt_pin.step_checks.matrix_step`); the ``motion`` state a
-    user's limits read is bound to the controller's own."""
+    """The compiled controller of a solver, and whether its method is one of the user's (the
+    step passes its matrix M(J), :func:`sjt_pin.step_checks.method_matrix`); the ``motion``
+    state a user's limits read is bound to the controller's own."""
     params = method.parameters()
-    matrix_method = params is None  # a method of your own: mapped here
+    matrix_method = params is None  # a method of your own: its matrix M(J) at each step
     if params is None:
         params = kernels.MethodParameters()  # the stage's metric of JT
         params.scaled, params.damped_feedback, params.damped_feedforward = False, False, True

@@ -1,5 +1,5 @@
 """What a :class:`~sjt_pin.solver.Solver`'s step does in Python, off its compiled path: the
-matrix of a method of the user's mapped (:func:`matrix_step`), the first step's warning about
+matrix of a method of the user's (:func:`method_matrix`), the first step's warning about
 joints outside their range that no task moves, the error for a non-finite step, and the task
 rows the saddle escape's curvature test evaluates."""
 
@@ -10,9 +10,7 @@ import warnings
 
 import numpy as np
 
-from . import kernels
 from .exceptions import ConcurrentStepError
-from .gains import Gain
 from .joint_ranges import outside
 from .methods import Method
 from .robot import Robot
@@ -20,26 +18,13 @@ from .stack import TaskStack
 from .validation import raise_non_finite_targets
 
 
-def matrix_step(method: Method, stack: TaskStack, gain: Gain, row_gains: np.ndarray,
-                dt: float, controller: kernels.Controller, J, e, ff):
-    """A method of your own: its matrix M on the first level's weighted rows, the gain
-    (``"auto"``: ``c / (dt lambda_max(J M))``; ``row_gains``: each row's, as
-    :func:`~sjt_pin.solver_parts.row_gains` gives them), and the feedback and feed-forward
-    velocities it asks for (the compiled stage takes them from there)."""
-    begin, end, _, targets = stack.levels[0]
-    sw = stack.sqrt_weight[begin:end]
-    Jw = sw[:, None] * J[begin:end] * stack.chain
-    M = np.asarray(method.matrix(Jw), dtype=float)
-    k = row_gains[begin:end]
-    if gain.mode == kernels.GAIN_FIXED:
-        scale = 1.0
-    else:
-        loop = float(np.max(np.linalg.eigvals(Jw @ M).real, initial=0.0))
-        scale = gain.factor / (dt * loop) if loop > 0.0 else 0.0
-    fb = M @ (scale * k * sw * e[begin:end])
-    controller.given_gain = scale * float(np.mean(k[:max(targets, 1)]))
-    ff_given = None if ff is None else M @ (sw * ff[begin:end])
-    return fb, ff_given
+def method_matrix(method: Method, stack: TaskStack, J: np.ndarray) -> np.ndarray:
+    """A method of your own: its matrix M(J_w) of the first level's weighted, masked rows J_w,
+    C-ordered float64 for the compiled step (which takes the gain, the feedback and the
+    feed-forward from it, and checks its shape and that it is finite)."""
+    begin, end = stack.levels[0][:2]
+    Jw = stack.sqrt_weight[begin:end, None] * J[begin:end] * stack.chain
+    return np.ascontiguousarray(method.matrix(Jw), dtype=float)
 
 
 def warn_idle_outside(robot: Robot, chain: np.ndarray, q: np.ndarray) -> None:

@@ -21,7 +21,9 @@ import numpy as np
 import pinocchio as pin
 
 from ..limits import Limit
+from ..methods import Method
 from ..robot import Robot
+from ..solver import Solver
 from ..solvers import make_solver
 from ..tasks import PoseTask, PositionTask, PostureTask
 from ..tracking import track
@@ -133,12 +135,31 @@ class Path:
     """One way of calling ``step``: the solver's options, its frames and what it is given."""
 
     name: str
-    method: str = "sjt"
+    method: str | Method = "sjt"  # a built-in's name, or a method of one's own
     options: dict = field(default_factory=dict)
     frames: tuple[str, ...] = ()  # several pose tasks on these frames (default: the end effector)
     position: bool = False  # a PositionTask on the end effector
     posture: bool = False
     feedforward: bool = False
+
+
+class OwnTranspose(Method):
+    """A method of one's own as docs/extending.md writes one, J^T as its matrix: the step is
+    computed from the matrix (against the built-in "JT pose" row)."""
+
+    name = "own J^T"
+
+    def matrix(self, J):
+        return J.T
+
+
+class OwnPseudoinverse(Method):
+    """docs/extending.md's own method, numpy's pseudoinverse (its SVD is most of the step)."""
+
+    name = "own pinv"
+
+    def matrix(self, J):
+        return np.linalg.pinv(J, rcond=1e-6)
 
 
 PATHS = [
@@ -156,6 +177,9 @@ PATHS = [
     Path("JT pose + target_velocity", "jt", feedforward=True),
     Path("JP pose + target_velocity", "jp", feedforward=True),
     Path("DLS pose + target_velocity", "dls", feedforward=True),
+    Path("own method (M = J^T) pose", OwnTranspose()),
+    Path("own method (M = numpy pinv) pose + target_velocity", OwnPseudoinverse(),
+         feedforward=True),
 ]
 #: Two frames per robot (the end effector and a link up the arm), and Talos' two hands.
 TWO_FRAMES = {"ur5": ("tool0", "forearm_link"), "panda": ("panda_hand", "panda_link4"),
@@ -232,8 +256,12 @@ def time_path(robot: Robot, q0: np.ndarray, path: Path, steps: int, warmup: int,
         task = PoseTask(frame=frames[0])
     else:
         task = {f: PoseTask() for f in frames}
-    solver = make_solver(path.method, robot, dt=dt, task=task,
-                         posture=PostureTask() if path.posture else None, **path.options)
+    posture = PostureTask() if path.posture else None
+    if isinstance(path.method, Method):
+        solver = Solver(robot, path.method, dt=dt, task=task, posture=posture, **path.options)
+    else:
+        solver = make_solver(path.method, robot, dt=dt, task=task, posture=posture,
+                             **path.options)
     targets = _targets(robot, q0, frames, steps + warmup, dt)
     single = len(frames) == 1
     calls, q = [], q0

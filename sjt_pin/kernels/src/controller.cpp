@@ -70,6 +70,9 @@ Controller::Controller(const MethodParameters& method_, Index rows, Index nv_, I
                     &anchor_, &coef_})
     v->setZero(nv);
   basis_.setZero(nv, nv);
+  const Index r0 = levels[0].end - levels[0].begin;
+  loop_.setZero(r0, r0);
+  kew_.setZero(r0);
   Jw_.resize(m, nv);
   ew_.resize(m);
   ffw_.resize(m);
@@ -509,9 +512,35 @@ void Controller::yield_smoothness(const Eigen::Ref<const RowMatrix>& A,
   rows_hold_within(high, A, b);
 }
 
+// A method of the user's: q_dot = M (k e_w scaled + ff_w) on the first level's weighted rows
+// J0, with "auto" k = c / (dt lambda_hat), lambda_hat the largest eigenvalue of the symmetric
+// part of J0 M (>= the real part of each of J0 M's eigenvalues; exact where J0 M is symmetric,
+// as for M = S J0^T or a pseudoinverse)
+void Controller::map_matrix(const Eigen::Ref<const RowMatrix>& J0, const double* matrix,
+                            bool with_ff) {
+  const Level& L0 = levels[0];
+  const Index r0 = L0.end - L0.begin;
+  const Eigen::Map<const RowMatrix> M(matrix, nv, r0);
+  const auto k0 = gains.segment(L0.begin, r0);
+  double scale = 1.0;
+  if (method.p.auto_gain) {
+    loop_.noalias() = J0 * M;
+    const double lambda = method.symmetric_top(loop_);
+    scale = lambda > 0.0 ? method.p.gain_factor / (dt_ * lambda) : 0.0;
+    top.loop_bound = lambda;
+  }
+  top.gain = scale;
+  kew_ = scale * k0.cwiseProduct(ew_.segment(L0.begin, r0));
+  fb0_.noalias() = M * kew_;
+  if (with_ff) ff0_.noalias() = M * ffw_.segment(L0.begin, r0);
+  else ff0_.setZero();
+  const Index counted = std::min<Index>(std::max<Index>(L0.targets, 1), r0);
+  given_gain = counted > 0 ? scale * k0.head(counted).mean() : 0.0;
+}
+
 int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const Vector>& e,
                     const double* ff_in, const double* q, Eigen::Ref<Vector> step,
-                    const double* fb_given, const double* ff_given, const double* user_lo,
+                    const double* matrix, const double* user_lo,
                     const double* user_hi, const Eigen::Ref<const RowMatrix>& A,
                     const Eigen::Ref<const Vector>& b) {
   const Index n = nv;
@@ -535,9 +564,8 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
   const Index r0 = L0.end - L0.begin;
   const auto J0 = Jw_.middleRows(L0.begin, r0);
   method.prepare(J0, ew_.segment(L0.begin, r0), gains.segment(L0.begin, r0), L0.targets, dt_, top);
-  if (fb_given) {
-    fb0_ = Eigen::Map<const Vector>(fb_given, n);
-    if (ff_given) ff0_ = Eigen::Map<const Vector>(ff_given, n); else ff0_.setZero();
+  if (matrix) {
+    map_matrix(J0, matrix, ff_in != nullptr);
   } else {
     method.feedback(J0, ew_.segment(L0.begin, r0), gains.segment(L0.begin, r0), top, fb0_);
     if (ff_in) method.feedforward(J0, ffw_.segment(L0.begin, r0), top, ff0_); else ff0_.setZero();
@@ -575,7 +603,7 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
   capability(bounds, dt_, dq, ddq, box);
   if (bounds.smooth) {
     const Index counted = L0.targets > 0 ? L0.targets : r0;
-    const double K = fb_given ? given_gain
+    const double K = matrix ? given_gain
                               : (counted > 0 ? gains.segment(L0.begin, counted).mean() : 0.0) *
                                     top.gain;
     if (K > 0.0) delta_ = fb / K;

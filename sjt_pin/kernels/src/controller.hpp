@@ -40,12 +40,13 @@ class Controller {
              Index error_rows, const std::vector<Level>& levels, const BoundsConfig& bounds,
              double stall_ratio, double stall_floor);
 
-  // One step: J (m x nv), e (m), ff (m) or none, q (nq); fb_given/ff_given: a user method's
-  // velocities (nv) instead of the built-in method's; user bounds (nv), rows A (k x nv), b (k).
+  // One step: J (m x nv), e (m), ff (m) or none, q (nq); matrix: a user method's M (nv x r0,
+  // row-major, r0 the first level's rows) mapping the first level instead of the built-in
+  // method; user bounds (nv), rows A (k x nv), b (k).
   // Writes the displacement q_dot dt into `step` (nv); returns the status bits.
   int run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const Vector>& e,
-          const double* ff, const double* q, Eigen::Ref<Vector> step, const double* fb_given,
-          const double* ff_given, const double* user_lo, const double* user_hi,
+          const double* ff, const double* q, Eigen::Ref<Vector> step, const double* matrix,
+          const double* user_lo, const double* user_hi,
           const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b);
 
   void set_dt(double dt) { dt_ = dt; }
@@ -65,7 +66,7 @@ class Controller {
   // -- state (copies carry it): the last commanded velocity and acceleration, the escape
   Vector dq, ddq, escape_velocity;
   bool escaping = false;
-  double given_gain = 1.0;  // K of a user method's feedback (its fb / K is the displacement)
+  double given_gain = 1.0;  // K of a user method's last feedback (its fb / K is the displacement)
   double stall_run = -1.0, stall_wait = 1e300;
 
   // -- the last step, for StepInfo
@@ -82,6 +83,7 @@ class Controller {
   bool feasible(const Vector& x, const Eigen::Ref<const RowMatrix>& A,
                 const Eigen::Ref<const Vector>& b, const Vector& lo, const Vector& hi) const;
   void lower_levels(const double* ffw);
+  void map_matrix(const Eigen::Ref<const RowMatrix>& J0, const double* matrix, bool with_ff);
   void extend_basis(const RowMatrix* rows, Index begin, Index count);
   void null_project(Vector& v);
   void sufficient_decrease(const Eigen::Ref<const RowMatrix>& J0,
@@ -102,6 +104,8 @@ class Controller {
   // lower_levels: the orthonormal basis of the rows above a level (its first rank_ columns),
   // the largest of those rows' norms, a level's task velocity
   Eigen::MatrixXd basis_;
+  Eigen::MatrixXd loop_;  // map_matrix: J0 M, and the gain times the first level's error
+  Vector kew_;
   Index rank_ = 0;
   double top_norm_ = 0.0;
   Vector coef_, level_t_;

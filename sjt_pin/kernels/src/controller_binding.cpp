@@ -98,19 +98,24 @@ void register_controller(nb::module_& m) {
       .def(
           "run",
           [](Controller& c, nb::handle J, nb::handle e, nb::handle ff, nb::handle q,
-             nb::handle step, nb::handle fb_given, nb::handle ff_given, nb::handle lower,
+             nb::handle step, nb::handle matrix, nb::handle lower,
              nb::handle upper, nb::handle A, nb::handle b) -> int {
             Array Ja(J, "J", 2), ea(e, "e", 1), qa(q, "q", 1), sa(step, "step", 1, Access::write);
             Ja.shape(c.m, c.nv);
             ea.length(c.m);
             qa.length(c.nq);
             sa.length(c.nv);
-            std::optional<Array> s1, s2, s3, s4, s5;
+            std::optional<Array> s1, s2, s3, s4;
             const double* ffp = optional(ff, "ff", c.m, s1);
-            const double* fbg = optional(fb_given, "fb", c.nv, s2);
-            const double* ffg = optional(ff_given, "ff_given", c.nv, s3);
-            const double* lo = optional(lower, "lower", c.nv, s4);
-            const double* hi = optional(upper, "upper", c.nv, s5);
+            const double* mp = nullptr;
+            if (!matrix.is_none()) {
+              s2.emplace(matrix, "the method's matrix M(J)", 2);
+              s2->shape(c.nv, c.levels[0].end - c.levels[0].begin);
+              s2->finite();
+              mp = s2->data();
+            }
+            const double* lo = optional(lower, "lower", c.nv, s3);
+            const double* hi = optional(upper, "upper", c.nv, s4);
             if ((lo == nullptr) != (hi == nullptr)) fail("lower and upper come together");
             if (lo) {
               for (Index j = 0; j < c.nv; ++j)
@@ -124,20 +129,21 @@ void register_controller(nb::module_& m) {
               Aa.finite();
               ba.no_nan();
               nb::gil_scoped_release release;
-              return c.run(Ja.matrix(), ea.vector(), ffp, qa.data(), sa.vector(), fbg, ffg, lo,
+              return c.run(Ja.matrix(), ea.vector(), ffp, qa.data(), sa.vector(), mp, lo,
                            hi, Aa.matrix(), ba.vector());
             }
             RowMatrix none(0, c.nv);
             Vector nob(0);
             nb::gil_scoped_release release;
-            return c.run(Ja.matrix(), ea.vector(), ffp, qa.data(), sa.vector(), fbg, ffg, lo, hi,
+            return c.run(Ja.matrix(), ea.vector(), ffp, qa.data(), sa.vector(), mp, lo, hi,
                          none, nob);
           },
           nb::arg("J"), nb::arg("e"), nb::arg("ff").none(), nb::arg("q"), nb::arg("step"),
-          nb::arg("fb").none(), nb::arg("ff_given").none(), nb::arg("lower").none(),
+          nb::arg("matrix").none(), nb::arg("lower").none(),
           nb::arg("upper").none(), nb::arg("A").none(), nb::arg("b").none(),
-          "run(J, e, ff, q, step, fb, ff_given, lower, upper, A, b) -> status: one step; "
-          "None for what a step does not have.")
+          "run(J, e, ff, q, step, matrix, lower, upper, A, b) -> status: one step (matrix: a "
+          "user method's M(J) of the first level's weighted rows); None for what a step does "
+          "not have.")
       .def("set_dt", &Controller::set_dt)
       .def("set_gains", &Controller::set_gains, nb::arg("gains"), nb::arg("auto_gain"),
            nb::arg("factor"))

@@ -31,6 +31,13 @@ double Method::loop_bound(const Eigen::Ref<const Eigen::MatrixXd>& A) {
   return std::exp((2.0 * log_scale + std::log(frob)) / std::pow(2.0, kBoundProducts + 1));
 }
 
+double Method::symmetric_top(const Eigen::MatrixXd& A) {
+  if (A.rows() == 0) return 0.0;
+  work_ = 0.5 * (A + A.transpose());
+  eigen_.compute(work_, Eigen::EigenvaluesOnly);
+  return eigen_.eigenvalues()[A.rows() - 1];
+}
+
 Method::Method() {
   const Eigen::MatrixXd one = Eigen::MatrixXd::Identity(1, 1);
   llt_.compute(one);

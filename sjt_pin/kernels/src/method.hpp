@@ -89,6 +89,10 @@ class Method {
   void forget() { metric_ready_ = false; }
   const Eigen::MatrixXd& task_metric() const { return metric_; }
 
+  // the largest eigenvalue of the symmetric part of the square A, (A + A^T) / 2: at least the
+  // real part of each eigenvalue of A (Bendixson), lambda_max itself where A is symmetric
+  double symmetric_top(const Eigen::MatrixXd& A);
+
   // an upper bound of lambda_max of the PSD A: (tr A^(2^(P+1)))^(1/2^(P+1)), P = 2
   double loop_bound(const Eigen::Ref<const Eigen::MatrixXd>& A);
 
