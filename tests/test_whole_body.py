@@ -120,6 +120,42 @@ def test_quadruped_moves_its_body_over_held_feet_and_rests_at_the_support_edge(s
     assert np.abs(solver.last.dq).max() < 1e-6
 
 
+@pytest.mark.parametrize("Solver", [sjt.SJTSolver, sjt.DLSSolver, sjt.JPSolver])
+@pytest.mark.parametrize("jerk", [None, 2000.0])
+def test_held_feet_hold_under_acceleration_and_jerk_limits(solo, Solver, jerk):
+    """A jump of the centre of mass's target under acceleration (and jerk) limits: each joint's
+    smoothness box taken alone let the held feet slide by centimetres; the feet now hold to
+    1e-6 m at every step, no acceleration passes its limit, and the body rests on the target
+    (then, sent far outside the feet, at the margin: acceleration limits alone)."""
+    q = solo.q0.copy()
+    feet = {f: solo.fk(q, f).translation.copy() for f in FEET}
+    support = sjt.SupportLimit(FEET, margin=0.02)
+    solver = Solver(solo, task=[sjt.ContactTask(f, point=True) for f in FEET]
+                    + [sjt.CoMTask(priority=1)], dt=DT, limits=[support],
+                    velocity_limits=SOLO_SPEEDS, acceleration_limits=20.0, jerk_limits=jerk)
+    c0 = com(solo, q)
+    goals = [(c0 + [0.05, 0.04, -0.04], 3000)]
+    if jerk is None:
+        goals.append((c0 + [0.35, 0.04, -0.04], 6000))
+    dq, slip, closest = np.zeros(solo.nv), 0.0, np.inf
+    for goal, steps in goals:
+        for _ in range(steps):
+            q = solver.step(q, goal)
+            slip = max(slip, max(np.linalg.norm(solo.fk(q, f).translation - p)
+                                 for f, p in feet.items()))
+            closest = min(closest, support.distance)
+            assert np.abs(solver.last.dq - dq).max() <= 20.0 * DT * (1 + 1e-9)
+            assert not solver.last.limit_conflicts
+            dq = solver.last.dq.copy()
+        assert np.abs(dq).max() < 1e-6  # at rest
+    assert slip < 5e-6
+    if jerk is None:  # it went as far as the margin lets it (DLS 0.9 mm into the margin)
+        assert 0.02 - 1e-3 < closest and support.distance < 0.021
+    else:
+        assert np.linalg.norm(com(solo, q) - goals[0][0]) < 1e-9
+        assert closest > 0.02
+
+
 def test_humanoid_reaches_with_both_hands_over_its_held_soles(talos):
     q = talos.q0.copy()
     soles = {f: talos.fk(q, f) for f in SOLES}

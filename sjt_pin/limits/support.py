@@ -13,7 +13,11 @@ projection (positive inside), and one velocity-damper row, as the collision limi
 margin shrinks by at most the fraction ``gain``, so it never crosses the margin, and from
 outside it the rows pull it back in. Beside acceleration limits the closing speed toward each
 edge is also cut to what half of them can brake within the excess (``stoppable_rows``, as for
-collisions). This is the static-balance criterion (the centre of mass over the support): it
+collisions), with the deceleration the held contacts leave: the rows projected onto the
+velocities that keep the contacts (three rows a point foot, six a sole), and their braking
+scaled to what such a velocity gives, the joint nearest its limit setting it (without it, the
+body reached the margin faster than its held legs could stop it, and the acceleration limits
+gave way). This is the static-balance criterion (the centre of mass over the support): it
 holds for slow motions, not for dynamic gaits (a ZMP or centroidal criterion).
 """
 
@@ -115,6 +119,7 @@ class SupportLimit(Limit):
             raise ValueError(f"gain must be in (0, 1], got {gain!r}")
         self.contacts = contacts
         self._corners = sole_corners(sole)  # in the contact frame
+        self._contact_rows = 3 if not np.any(sole) else 6  # a point foot holds its position
         self._frames: list[int] | None = None
         self.polygon: np.ndarray | None = None
         self.distance = np.nan
@@ -157,9 +162,33 @@ class SupportLimit(Limit):
         b = np.subtract(d, self.margin, out=self._b)
         b *= rate
         if motion.acceleration_limits is not None:
-            stoppable_rows(A, b, motion.dq, motion.ddq, motion.acceleration_limits,
-                           motion.jerk_limits, rate, motion.dt, BRAKING_SHARE, EASING_SLACK)
+            held, share = self._held(kinematics, A, motion.acceleration_limits)
+            jerks = None if motion.jerk_limits is None else share * motion.jerk_limits
+            stoppable_rows(held, b, motion.dq, motion.ddq, share * motion.acceleration_limits,
+                           jerks, rate, motion.dt, BRAKING_SHARE, EASING_SLACK)
         return A, b
+
+    def _held(self, kinematics, A: np.ndarray, accelerations: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray]:
+        """The rows ``A P`` (P the projector onto the velocities that keep the contacts, from
+        their world-aligned Jacobians: linear rows of a point foot, all six of a sole), and the
+        share of each joint's acceleration limit that braking along them may count on: along
+        ``a_i P`` the joint nearest its limit sets the rate, ``|a_i P|^2 min_j(A_j / |a_i P|_j)``,
+        against the ``sum_j |a_i P|_j A_j`` that ``stoppable_rows`` assumes (the least share
+        over the rows)."""
+        H = np.concatenate([kinematics.world_aligned_jacobian(f)[:self._contact_rows]
+                            for f in self._frames])
+        gram = H @ H.T
+        gram[np.diag_indices_from(gram)] += 1e-12 * max(np.trace(gram), 1e-300)
+        held = A - (A @ H.T) @ np.linalg.solve(gram, H)
+        magnitude = np.abs(held)
+        assumed = magnitude @ accelerations
+        with np.errstate(divide="ignore"):
+            rate = np.min(accelerations / magnitude, axis=1)
+        gives = np.einsum("ij,ij->i", held, held) * rate
+        counted = (assumed > 0.0) & np.isfinite(assumed)
+        share = float(np.clip(np.min(gives[counted] / assumed[counted], initial=1.0), 0.0, 1.0))
+        return held, share
 
     def __repr__(self) -> str:
         return f"SupportLimit({self.contacts!r}, margin={self.margin:g})"

@@ -10,6 +10,8 @@ namespace sjt {
 namespace {
 
 constexpr double kBoundTol = 1e-12;  // rad/s: a velocity this close to a bound is on it
+// the share of the held rows' motion (1 + its norm) that counts as kept (the rows' own 1e-9)
+constexpr double kHeldTol = 1e-9;
 // a row of a lower level's projection whose part outside the rows above is below this share of
 // their largest row's norm is spanned by them (the former eigen-decomposition's relative
 // cutoff on the Gram matrix's eigenvalues, 1e-12, in singular values)
@@ -67,7 +69,7 @@ Controller::Controller(const MethodParameters& method_, Index rows, Index nv_, I
   escape_velocity.setZero(nv);
   for (Vector* v : {&desired, &fb, &ff, &velocity, &fb0_, &ff0_, &desired_top, &x0_, &xa_,
                     &tmp_, &tmp2_, &lam_low_, &low_p_, &low_h_, &low_d_, &low_dh_, &low_dinv_,
-                    &anchor_, &coef_})
+                    &anchor_, &coef_, &wide_lo_, &wide_hi_})
     v->setZero(nv);
   basis_.setZero(nv, nv);
   const Index r0 = levels[0].end - levels[0].begin;
@@ -77,7 +79,6 @@ Controller::Controller(const MethodParameters& method_, Index rows, Index nv_, I
   ew_.resize(m);
   ffw_.resize(m);
   Bnone_.resize(0, nv);
-  Cnone_.resize(0, nv);
   box.resize(nv);
   for (Index j = 0; j < nv; ++j) lam_low_[j] = moving[j] != 0.0 ? 1.0 : kInf;
   // (Eigen's LLT leaves its status unset until a first compute, and a copy or move of the
@@ -219,9 +220,13 @@ void Controller::lower_levels(const double* ffw) {
 // their own step with the first level's task motion held; last, where a row is still broken,
 // the nearest velocity within the whole box and the rows.
 void Controller::project(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b,
-                         const Vector& box_lo, const Vector& box_hi) {
+                         const Vector& box_lo, const Vector& box_hi, bool hold) {
   const Level& top_level = levels[0];
   const auto J0 = Jw_.middleRows(top_level.begin, top_level.end - top_level.begin);
+  // (the held rows as equalities in the hard box, where a velocity keeps them)
+  const Index held_rows = hold ? held_.size() : 0;
+  const auto H = J0.middleRows(top_level.targets, held_rows);
+  const auto hd = held_.head(held_rows);
   const bool lower = levels.size() > 1;
   // a joint without a speed limit moves no faster than the method's whole step: beyond it the
   // step's linearisation means nothing (a continuous joint asked for 14,000 rad/s to make up
@@ -246,8 +251,7 @@ void Controller::project(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<
     tstar_.noalias() = J0 * desired_top;
     // first the task's direction kept (a motion off it costs kKeepDirection times more)
     method.metric(J0, top, tstar_, kKeepDirection, B_);
-    ProjectionReport r = projection_.solve(desired_top, top.lam, B_, lo, hi, A, b, Cnone_,
-                                           empty_, xa_);
+    ProjectionReport r = projection_.solve(desired_top, top.lam, B_, lo, hi, A, b, H, hd, xa_);
     report.iterations += r.iterations;
     report.converged = report.converged && r.converged;
     const Eigen::MatrixXd& G = method.task_metric();
@@ -268,7 +272,7 @@ void Controller::project(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<
       // ... and the nearest feasible velocity in the method's metric alone: blended in where
       // keeping the direction makes little progress
       method.metric(J0, top, tstar_, 0.0, B_);
-      r = projection_.solve(desired_top, top.lam, B_, lo, hi, A, b, Cnone_, empty_, x0_);
+      r = projection_.solve(desired_top, top.lam, B_, lo, hi, A, b, H, hd, x0_);
       report.iterations += r.iterations;
       report.converged = report.converged && r.converged;
       tmp2_.noalias() = J0 * x0_;
@@ -300,11 +304,45 @@ void Controller::project(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<
     // rows only; within the whole box (a row may need a joint without a speed limit faster
     // than the cap)
     tmp_ = velocity;
-    ProjectionReport r = projection_.solve(tmp_, lam_low_, Bnone_, box_lo, box_hi, A, b, Cnone_,
-                                           empty_, velocity);
+    ProjectionReport r = projection_.solve(tmp_, lam_low_, Bnone_, box_lo, box_hi, A, b, H, hd,
+                                           velocity);
     report.iterations += r.iterations;
     report.converged = report.converged && r.converged;
   }
+}
+
+// The first level's rows that hold (a contact: a task without a target) keep their motion,
+// held_, after each joint's smoothness box: a joint clipped on its own would let a held foot
+// slide (a quadruped's feet slid 1-5 cm under acceleration limits while its centre of mass
+// moved, 10 cm under jerk limits). The nearest velocity (Euclidean over the moving joints)
+// within the limits themselves, the hard box and the acceleration/jerk box without the
+// braking's preferences (within those, the feet still slid), that keeps it. Where none does
+// (a joint the contact needs held at a bound), the joints keep their own boxes' velocities:
+// the least breach of the held rows drove the other joints to their bounds, the feet slid on
+// and the acceleration limits gave way (a humanoid under jerk limits). True: it moved the
+// velocity (within wide_lo_, wide_hi_).
+bool Controller::hold_rows(const Eigen::Ref<const RowMatrix>& A,
+                           const Eigen::Ref<const Vector>& b) {
+  if (held_kept(velocity)) return false;
+  for (Index j = 0; j < nv; ++j) {
+    wide_lo_[j] = std::max(box.hard_lo[j], std::min(box.cap_lo[j], box.hard_hi[j]));
+    wide_hi_[j] = std::min(box.hard_hi[j], std::max(box.cap_hi[j], box.hard_lo[j]));
+  }
+  const auto H = Jw_.middleRows(levels[0].begin + levels[0].targets, held_.size());
+  tmp2_ = velocity;
+  ProjectionReport r = projection_.solve(tmp2_, lam_low_, Bnone_, wide_lo_, wide_hi_, A, b, H,
+                                         held_, velocity);
+  report.iterations += r.iterations;
+  if (r.converged && held_kept(velocity)) return true;
+  velocity = tmp2_;
+  return false;
+}
+
+// whether x keeps the first level's held rows' motion, held_
+bool Controller::held_kept(const Vector& x) {
+  if (held_.size() == 0) return true;
+  held_res_.noalias() = Jw_.middleRows(levels[0].begin + levels[0].targets, held_.size()) * x;
+  return (held_res_ - held_).norm() <= kHeldTol * (1.0 + held_.norm());
 }
 
 // The lower levels' step where it is not feasible: the velocity nearest it in their own task
@@ -384,8 +422,8 @@ void Controller::lower_nearest(const Eigen::Ref<const RowMatrix>& J0,
 // kSufficient of what that point does (the metric of the projection can weigh the joints that
 // could carry the task heavily: a joint at its limit then froze the step), x0_ is blended
 // toward it: the model is convex, so the step then lowers it by at least that share. A Cauchy
-// point that breaks a row is not taken (the projection's own rows stand), nor is one where the
-// box does not hold 0 (a joint returning into its range).
+// point that breaks a row or lets a held row go is not taken (the projection's own rows
+// stand), nor is one where the box does not hold 0 (a joint returning into its range).
 void Controller::sufficient_decrease(const Eigen::Ref<const RowMatrix>& J0,
                                      const Eigen::Ref<const RowMatrix>& A,
                                      const Eigen::Ref<const Vector>& b, double ball) {
@@ -402,6 +440,7 @@ void Controller::sufficient_decrease(const Eigen::Ref<const RowMatrix>& J0,
   const double progress = aa - res_.squaredNorm();
   if (!(best > 0.0) || progress >= kSufficient * best) return;
   if (!feasible(cauchy_, A, b, plo_, phi_)) return;
+  if (!held_kept(cauchy_)) return;
   const double w = progress > 0.0 ? progress / (kSufficient * best) : 0.0;
   x0_ = w * x0_ + (1.0 - w) * cauchy_;
 }
@@ -478,7 +517,7 @@ bool Controller::rows_hold_within(double s, const Eigen::Ref<const RowMatrix>& A
     wide_lo_[j] = lo;
     wide_hi_[j] = hi;
   }
-  project(A, b, wide_lo_, wide_hi_);
+  project(A, b, wide_lo_, wide_hi_, false);
   return rows_hold(A, b);
 }
 
@@ -488,8 +527,6 @@ bool Controller::rows_hold_within(double s, const Eigen::Ref<const RowMatrix>& A
 // At most 6 + 2 log2(s) + 7 projections, in the steps that need them.
 void Controller::yield_smoothness(const Eigen::Ref<const RowMatrix>& A,
                                   const Eigen::Ref<const Vector>& b) {
-  wide_lo_.resize(nv);
-  wide_hi_.resize(nv);
   if (rows_hold_within(1.0, A, b)) return;
   double low = 1.0, high = 2.0;
   bool found = false;
@@ -501,7 +538,7 @@ void Controller::yield_smoothness(const Eigen::Ref<const RowMatrix>& A,
     }
   }
   if (!found) {
-    project(A, b, box.hard_lo, box.hard_hi);
+    project(A, b, box.hard_lo, box.hard_hi, true);
     return;
   }
   while (high > 1.01 * low) {
@@ -598,6 +635,10 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
   if (levels.size() > 1) lower_levels(ff_in ? ffw_.data() : nullptr);
   desired_top = fb0_ + ff0_;
   desired = fb + ff;
+  // the first level's rows that hold (a contact: a task without a target) are equalities of
+  // every projection below, at the motion the first level asks of them
+  const Index held = L0.end - L0.begin - L0.targets;
+  held_.noalias() = J0.middleRows(L0.targets, held) * desired_top;
   // 4. each joint's box: what it can do this step, and the braking that lets it stop where the
   // feedback sends it (the displacement fb / K it asks of each)
   capability(bounds, dt_, dq, ddq, box);
@@ -647,7 +688,7 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
     if (feasible(desired, A, bk, box.hard_lo, box.hard_hi)) {
       velocity = desired;
     } else {
-      project(A, bk, box.hard_lo, box.hard_hi);
+      project(A, bk, box.hard_lo, box.hard_hi, true);
       if (bounds.smooth) {
         // each joint approaches the feasible velocity, not the method's beyond the hard
         // limits: the approach toward an unreachable velocity held joints that the feasible
@@ -659,8 +700,9 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
       }
     }
     for (Index j = 0; j < n; ++j) velocity[j] = std::min(std::max(velocity[j], box.lo[j]), box.hi[j]);
-    if (!feasible(velocity, A, bk, box.lo, box.hi)) {
-      project(A, bk, box.lo, box.hi);
+    const bool held_moved = bounds.smooth && hold_rows(A, bk);
+    if (!feasible(velocity, A, bk, held_moved ? wide_lo_ : box.lo, held_moved ? wide_hi_ : box.hi)) {
+      project(A, bk, box.lo, box.hi, false);
       bool broken = !rows_hold(A, bk);
       if (broken && bounds.smooth) {
         yield_smoothness(A, bk);

@@ -92,15 +92,18 @@ class Controller {
   void cauchy_point(const Eigen::Ref<const RowMatrix>& J0, double ball);
   void lower_nearest(const Eigen::Ref<const RowMatrix>& J0, const Eigen::Ref<const RowMatrix>& A,
                      const Eigen::Ref<const Vector>& b, const Vector& lo, const Vector& hi);
+  // (hold: the first level's held rows as equalities; in the hard box)
   void project(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b,
-               const Vector& box_lo, const Vector& box_hi);
+               const Vector& box_lo, const Vector& box_hi, bool hold);
   bool rows_hold(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b) const;
   bool rows_hold_within(double s, const Eigen::Ref<const RowMatrix>& A,
                         const Eigen::Ref<const Vector>& b);
+  bool hold_rows(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b);
+  bool held_kept(const Vector& x);
   void yield_smoothness(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b);
 
   double dt_;
-  RowMatrix Jw_, Jhat_, Bnone_, Cnone_, B_, coupling_;
+  RowMatrix Jw_, Jhat_, Bnone_, B_, coupling_;
   // lower_levels: the orthonormal basis of the rows above a level (its first rank_ columns),
   // the largest of those rows' norms, a level's task velocity
   Eigen::MatrixXd basis_;
@@ -120,7 +123,8 @@ class Controller {
   Eigen::MatrixXd low_gram_;
   Eigen::LLT<Eigen::MatrixXd> low_llt_;
   std::vector<std::pair<double, Index>> breaks_;  // the Cauchy path's breakpoints
-  Vector empty_, wide_lo_, wide_hi_, delta_, aim_, bk_;
+  Vector wide_lo_, wide_hi_, delta_, aim_, bk_;
+  Vector held_, held_res_;  // hold_rows: the held rows' motion, their residual
   Method lower_;
   MethodStep lower_step_;
   Projection projection_;
