@@ -169,7 +169,7 @@ class SupportLimit(Limit):
         return A, b
 
     def _held(self, kinematics, A: np.ndarray, accelerations: np.ndarray
-              ) -> tuple[np.ndarray, np.ndarray]:
+              ) -> tuple[np.ndarray, float]:
         """The rows ``A P`` (P the projector onto the velocities that keep the contacts, from
         their world-aligned Jacobians: linear rows of a point foot, all six of a sole), and the
         share of each joint's acceleration limit that braking along them may count on: along
@@ -183,12 +183,13 @@ class SupportLimit(Limit):
         held = A - (A @ H.T) @ np.linalg.solve(gram, H)
         magnitude = np.abs(held)
         assumed = magnitude @ accelerations
+        counted = (assumed > 0.0) & np.isfinite(assumed)  # (rows the held legs can move)
+        if not counted.any():
+            return held, 1.0
         with np.errstate(divide="ignore"):
-            rate = np.min(accelerations / magnitude, axis=1)
-        gives = np.einsum("ij,ij->i", held, held) * rate
-        counted = (assumed > 0.0) & np.isfinite(assumed)
-        share = float(np.clip(np.min(gives[counted] / assumed[counted], initial=1.0), 0.0, 1.0))
-        return held, share
+            rate = np.min(accelerations / magnitude[counted], axis=1)
+        gives = np.einsum("ij,ij->i", held[counted], held[counted]) * rate
+        return held, float(np.clip(np.min(gives / assumed[counted]), 0.0, 1.0))
 
     def __repr__(self) -> str:
         return f"SupportLimit({self.contacts!r}, margin={self.margin:g})"
