@@ -156,7 +156,8 @@ def test_held_feet_hold_under_acceleration_and_jerk_limits(solo, Solver, jerk):
         assert closest > 0.02
 
 
-def test_humanoid_reaches_with_both_hands_over_its_held_soles(talos):
+@pytest.mark.parametrize("limits", [{}, {"acceleration_limits": 10.0}])
+def test_humanoid_reaches_with_both_hands_over_its_held_soles(talos, limits):
     q = talos.q0.copy()
     soles = {f: talos.fk(q, f) for f in SOLES}
     hands = {h: talos.fk(q, h).translation.copy() for h in HANDS}
@@ -166,9 +167,9 @@ def test_humanoid_reaches_with_both_hands_over_its_held_soles(talos):
     tasks["com"] = sjt.CoMTask(axes="xy", priority=1)
     support = sjt.SupportLimit(SOLES, sole=(0.1, 0.05), margin=0.02)
     solver = sjt.SJTSolver(talos, task=tasks, dt=DT, limits=[support],
-                           posture=sjt.PostureTask())
+                           posture=sjt.PostureTask(), **limits)
     c0 = com(talos, q)
-    slip, closest = 0.0, np.inf
+    slip, closest, dq = 0.0, np.inf, np.zeros(talos.nv)
     for i in range(2500):  # 1.5 s of a smooth reach, then 1 s held
         s = smooth(i * DT / 1.5)
         target = {h: hands[h] + s * moves[h] for h in HANDS}
@@ -179,6 +180,9 @@ def test_humanoid_reaches_with_both_hands_over_its_held_soles(talos):
         closest = min(closest, support.distance)
         lo, hi = talos.model.lowerPositionLimit[7:], talos.model.upperPositionLimit[7:]
         assert np.all(q[7:] >= lo - 1e-9) and np.all(q[7:] <= hi + 1e-9)
+        if limits:  # (each joint's box taken alone let the soles slide 0.65)
+            assert np.abs(solver.last.dq - dq).max() <= 10.0 * DT * (1 + 1e-9)
+            dq = solver.last.dq.copy()
     for h in HANDS:
         assert np.linalg.norm(talos.fk(q, h).translation - hands[h] - moves[h]) < 1e-4
     assert np.linalg.norm((com(talos, q) - c0)[:2]) < 1e-4

@@ -29,7 +29,8 @@ inline void tighten_lo(double value, int8_t reason, double& lo, int8_t& by) {
 }  // namespace
 
 void JointBox::resize(Index n) {
-  for (Vector* x : {&lo, &hi, &hard_lo, &hard_hi, &soft_lo, &soft_hi, &cap_lo, &cap_hi})
+  for (Vector* x : {&lo, &hi, &hard_lo, &hard_hi, &soft_lo, &soft_hi, &cap_lo, &cap_hi,
+                    &brake_lo, &brake_hi})
     x->resize(n);
   lo_by.resize(n);
   hi_by.resize(n);
@@ -118,6 +119,8 @@ void joint_box(const BoundsConfig& config, double dt, const double* q, const Vec
     soft_lo_by[j] = sl_by, soft_hi_by[j] = sh_by;
   }
   // position limits (hard), planned within the smooth box
+  out.brake_lo.setConstant(-kInf);
+  out.brake_hi.setConstant(kInf);
   for (const PositionRange& r : config.ranges) {
     const Index j = r.v;
     if (config.moving[j] == 0.0) continue;
@@ -151,6 +154,7 @@ void joint_box(const BoundsConfig& config, double dt, const double* q, const Vec
     }
     // (a braking bound no tighter than the smooth box is that box's, not the position's)
     up = std::max(up, 0.0), down = std::max(down, 0.0);
+    out.brake_hi[j] = up, out.brake_lo[j] = -down;
     if (up < out.soft_hi[j]) tighten_hi(up, kPosition, out.hard_hi[j], out.hi_by[j]);
     if (-down > out.soft_lo[j]) tighten_lo(-down, kPosition, out.hard_lo[j], out.lo_by[j]);
   }

@@ -57,6 +57,7 @@ struct JointBox {
   Vector lo, hi;                            // the combined box
   Vector hard_lo, hard_hi, soft_lo, soft_hi;
   Vector cap_lo, cap_hi;                    // the acceleration/jerk box alone (no preference)
+  Vector brake_lo, brake_hi;                // each position range's braking bound (inf: none)
   std::vector<int8_t> lo_by, hi_by;         // Reason of each bound
   std::vector<uint8_t> torn;                // the hard box overrode the smooth one
   std::vector<uint8_t> jerk_apart;          // the jerk box lay outside the acceleration box

@@ -315,8 +315,9 @@ void Controller::project(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<
 // held_, after each joint's smoothness box: a joint clipped on its own would let a held foot
 // slide (a quadruped's feet slid 1-5 cm under acceleration limits while its centre of mass
 // moved, 10 cm under jerk limits). The nearest velocity (Euclidean over the moving joints)
-// within the limits themselves, the hard box and the acceleration/jerk box without the
-// braking's preferences (within those, the feet still slid), that keeps it. Where none does
+// within the limits themselves, the hard box, each position range's braking and the
+// acceleration/jerk box, without the braking's preferences (within those, the feet still
+// slid), that keeps it. Where none does
 // (a joint the contact needs held at a bound), the joints keep their own boxes' velocities:
 // the least breach of the held rows drove the other joints to their bounds, the feet slid on
 // and the acceleration limits gave way (a humanoid under jerk limits). True: it moved the
@@ -325,8 +326,11 @@ bool Controller::hold_rows(const Eigen::Ref<const RowMatrix>& A,
                            const Eigen::Ref<const Vector>& b) {
   if (held_kept(velocity)) return false;
   for (Index j = 0; j < nv; ++j) {
-    wide_lo_[j] = std::max(box.hard_lo[j], std::min(box.cap_lo[j], box.hard_hi[j]));
-    wide_hi_[j] = std::min(box.hard_hi[j], std::max(box.cap_hi[j], box.hard_lo[j]));
+    const double lo = std::max({box.hard_lo[j], box.brake_lo[j], box.cap_lo[j]});
+    const double hi = std::min({box.hard_hi[j], box.brake_hi[j], box.cap_hi[j]});
+    const bool apart = lo > hi;  // (then the combined box, where the hard bounds win)
+    wide_lo_[j] = apart ? box.lo[j] : lo;
+    wide_hi_[j] = apart ? box.hi[j] : hi;
   }
   const auto H = Jw_.middleRows(levels[0].begin + levels[0].targets, held_.size());
   tmp2_ = velocity;
