@@ -31,13 +31,15 @@ class Kinematics:
       :meth:`center_of_mass` (computed once per configuration, shared) and :meth:`difference`.
     """
 
-    __slots__ = ("model", "data", "q", "jacobian", "world_aligned_jacobian", "_com_fresh")
+    __slots__ = ("model", "data", "q", "jacobian", "world_aligned_jacobian", "_com_fresh",
+                 "_zero")
 
     def __init__(self, model: pin.Model):
         self.model = model
         self.data = model.createData()
         self.q: np.ndarray | None = None
         self._com_fresh = False
+        self._zero = np.zeros(model.nv)
         if model.nv == 1:
             self.jacobian = self._column(pin.LOCAL)
             self.world_aligned_jacobian = self._column(pin.LOCAL_WORLD_ALIGNED)
@@ -50,6 +52,13 @@ class Kinematics:
         pin.computeJointJacobians(self.model, self.data, q)
         self.q = q
         self._com_fresh = False
+
+    def velocity_products(self, v: np.ndarray) -> None:
+        """Forward kinematics at ``q`` with the velocity ``v`` (nv,) and no acceleration: each
+        frame's acceleration (``getFrameAcceleration``, ``getFrameClassicalAcceleration``) is
+        then its velocity-product term ``J_dot v`` alone. The placements and joint Jacobians
+        stay those of :meth:`update` (the same ``q``)."""
+        pin.forwardKinematics(self.model, self.data, self.q, v, self._zero)
 
     def center_of_mass(self) -> tuple[np.ndarray, np.ndarray]:
         """``(c, J_c)``: the robot's centre of mass (3,; m, world axes) and its Jacobian

@@ -201,7 +201,10 @@ class Solver:
                 J, e, ff = task.compute(kinematics, target, velocity)
             else:
                 targets, velocities = stack.targets(target, target_velocity)
-                J, e, ff = stack.evaluate(q, targets, velocities)
+                # (held contacts ask back the drift of the last velocity; not under jerk
+                # limits, where that loop held a quadruped in a 0.15 rad/s limit cycle)
+                drift = None if self.jerk_limit is not None else (self._motion.dq, self._dt)
+                J, e, ff = stack.evaluate(q, targets, velocities, drift)
             if not stack.trusted:
                 J, e, ff = stack.contiguous(J, e, ff)
             # 2. the user's limits at q

@@ -9,7 +9,7 @@ import numpy as np
 import pinocchio as pin
 
 from .kinematics import Kinematics
-from .tasks import PoseTask, PostureTask, Task
+from .tasks import ContactTask, PoseTask, PostureTask, Task
 
 #: the usual target types, which are no mappings (isinstance against Mapping costs 0.2 us)
 _NOT_MAPPINGS = (pin.SE3, np.ndarray, list, tuple)
@@ -167,6 +167,9 @@ class TaskStack:
         # per task: its index, the task, its rows, and whether its Jacobian rows are constant
         # (written here once: a posture task's identity)
         self._plan = []
+        #: the held contacts and their rows: :meth:`evaluate` asks their drift back
+        self._contacts = [] if self.single else [
+            (t, self.slices[k]) for k, t in enumerate(self.tasks) if isinstance(t, ContactTask)]
         for k, t in enumerate(self.tasks):
             rows = self.slices[k]
             if not self.single:  # a task may write its rows straight into the stacked buffers
@@ -250,10 +253,14 @@ class TaskStack:
         return targets, self._align(velocities)
 
     # -- rows --------------------------------------------------------------------------------
-    def evaluate(self, q: np.ndarray, targets: list, velocities: list | None
+    def evaluate(self, q: np.ndarray, targets: list, velocities: list | None,
+                 motion: tuple[np.ndarray, float] | None = None
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         """``(J, e, ff)`` stacked at ``q`` (validated by the caller); ``ff`` is ``None`` when
-        there are no velocities. The arrays are reused by the next call."""
+        there are no velocities. The arrays are reused by the next call. ``motion``: the last
+        step's velocity (nv,) and the period (s); with it, held contacts' rows ask back the
+        drift a step at that velocity makes (:meth:`ContactTask.drift
+        <sjt_pin.tasks.ContactTask.drift>`)."""
         kinematics = self.kinematics
         kinematics.update(q)
         if self.single:
@@ -272,6 +279,13 @@ class TaskStack:
                     ff[rows] = fft
             elif velocities is not None and not constant:
                 ff[rows] = 0.0
+        if motion is not None and self._contacts and motion[0].any():
+            if velocities is None:
+                ff[:] = 0.0
+            kinematics.velocity_products(motion[0])
+            for task, rows in self._contacts:
+                ff[rows] = task.drift(kinematics, motion[1])
+            return J, e, ff
         return J, e, None if velocities is None else ff
 
     def search_rows(self, q: np.ndarray, targets: list) -> tuple[np.ndarray, np.ndarray]:

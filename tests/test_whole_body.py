@@ -120,6 +120,32 @@ def test_quadruped_moves_its_body_over_held_feet_and_rests_at_the_support_edge(s
     assert np.abs(solver.last.dq).max() < 1e-6
 
 
+@pytest.mark.parametrize("point", [True, False])
+def test_a_contacts_drift_is_the_second_order_term_of_its_motion(solo, point, rng):
+    """ContactTask.drift: over a step h of velocity v a frame moves by J v h - drift(h) h (as
+    its rows count it) up to third order: the residual falls 8 times when h halves."""
+    model = solo.model
+    task = sjt.ContactTask("FL_FOOT", point=point).bind(solo)
+    kinematics = Kinematics(model)
+    for _ in range(3):
+        q = pin.randomConfiguration(model, -np.ones(solo.nq), np.ones(solo.nq))
+        v = rng.normal(size=solo.nv)
+        kinematics.update(q)
+        M0 = kinematics.placement(task.frame_id)
+        J = (kinematics.world_aligned_jacobian(task.frame_id)[:3] if point
+             else kinematics.jacobian(task.frame_id))
+        kinematics.velocity_products(v)
+        residuals = []
+        for h in (4e-3, 2e-3, 1e-3):
+            drift = task.drift(kinematics, h)
+            data = model.createData()
+            pin.framesForwardKinematics(model, data, pin.integrate(model, q, h * v))
+            M = data.oMf[task.frame_id]
+            moved = M.translation - M0.translation if point else pin.log6(M0.actInv(M)).vector
+            residuals.append(np.linalg.norm(moved - (J @ v * h - drift * h)))
+        assert residuals[0] / residuals[1] > 6.0 and residuals[1] / residuals[2] > 6.0
+
+
 @pytest.mark.parametrize("Solver", [sjt.SJTSolver, sjt.DLSSolver, sjt.JPSolver])
 @pytest.mark.parametrize("jerk", [None, 2000.0])
 def test_held_feet_hold_under_acceleration_and_jerk_limits(solo, Solver, jerk):
@@ -148,8 +174,9 @@ def test_held_feet_hold_under_acceleration_and_jerk_limits(solo, Solver, jerk):
             assert not solver.last.limit_conflicts
             dq = solver.last.dq.copy()
         assert np.abs(dq).max() < 1e-6  # at rest
-    assert slip < 5e-6
-    if jerk is None:  # it went as far as the margin lets it (DLS 0.9 mm into the margin)
+    # (without jerk limits the step asks back the drift of the last velocity)
+    assert slip < (5e-7 if jerk is None else 5e-6)
+    if jerk is None:  # it went as far as the margin lets it (DLS 0.6 mm into the margin)
         assert 0.02 - 1e-3 < closest and support.distance < 0.021
     else:
         assert np.linalg.norm(com(solo, q) - goals[0][0]) < 1e-9

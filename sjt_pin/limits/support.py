@@ -176,8 +176,10 @@ class SupportLimit(Limit):
         ``a_i P`` the joint nearest its limit sets the rate, ``|a_i P|^2 min_j(A_j / |a_i P|_j)``,
         against the ``sum_j |a_i P|_j A_j`` that ``stoppable_rows`` assumes (the least share
         over the rows)."""
+        frames = self._frames
+        assert frames is not None  # (found at the first rows())
         H = np.concatenate([kinematics.world_aligned_jacobian(f)[:self._contact_rows]
-                            for f in self._frames])
+                            for f in frames])
         gram = H @ H.T
         gram[np.diag_indices_from(gram)] += 1e-12 * max(np.trace(gram), 1e-300)
         held = A - (A @ H.T) @ np.linalg.solve(gram, H)

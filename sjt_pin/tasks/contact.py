@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pinocchio as pin
 
 from ..validation import as_pose
 from .base import Task
 from .pose import PoseTask
 from .position import PositionTask
+
+_LOCAL, _WORLD = pin.LOCAL, pin.LOCAL_WORLD_ALIGNED
 
 
 class ContactTask(Task):
@@ -18,8 +21,11 @@ class ContactTask(Task):
     The held pose is ``pose`` when given, else the frame's pose at the first step after the
     solver is built (or after :meth:`release`). It takes no target in ``step``. Put contacts on
     the top level (``priority=0``, the default) and the tasks they carry below them
-    (``priority=1``, ...): those then move only in the contacts' null space, and a foot slips
-    only by the second-order drift the contact's own feedback takes back at the next step.
+    (``priority=1``, ...): those then move only in the contacts' null space. Without jerk
+    limits a step's second-order drift is asked back in the same step from the last step's
+    velocity (:meth:`drift`), and what remains the next step's feedback takes back: a foot
+    slips by the drift's change between steps (small under acceleration limits) and by the
+    third-order terms.
     Mind the count: a quadruped's four feet held as poses are 24 rows on 18 joints and leave
     its body no motion; as points they are 12.
 
@@ -69,6 +75,20 @@ class ContactTask(Task):
         out = self._rows.compute(kinematics, held, None)
         self.placement = self._rows.placement
         return out
+
+    def drift(self, kinematics, dt: float) -> np.ndarray:
+        """The rows' velocity (m/s, and rad/s for a pose) that takes back a step's second-order
+        drift: over a step of ``q_dot`` a held frame moves by ``J q_dot dt + J_dot q_dot dt^2
+        / 2``, so the rows ask ``J q_dot = -dt/2 J_dot q_dot``, from the velocity-product
+        acceleration after :meth:`Kinematics.velocity_products
+        <sjt_pin.kinematics.Kinematics.velocity_products>` (a point's classical acceleration
+        in world axes; a pose's spatial acceleration in its own axes, as its rows)."""
+        model, data = kinematics.model, kinematics.data
+        if self.point:
+            a = pin.getFrameClassicalAcceleration(model, data, self.frame_id, _WORLD).linear
+        else:
+            a = pin.getFrameAcceleration(model, data, self.frame_id, _LOCAL).vector
+        return -0.5 * dt * a
 
     def error_jacobian(self, J):
         return self._rows.error_jacobian(J)
