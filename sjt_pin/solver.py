@@ -201,9 +201,9 @@ class Solver:
                 J, e, ff = task.compute(kinematics, target, velocity)
             else:
                 targets, velocities = stack.targets(target, target_velocity)
-                # (held contacts ask back the drift of the last velocity; not under jerk
-                # limits, where that loop held a quadruped in a 0.15 rad/s limit cycle)
-                drift = None if self.jerk_limit is not None else (self._motion.dq, self._dt)
+                # (contacts ask back the last velocity's drift: ContactTask's docstring says when)
+                drift = ((self._motion.dq, self._dt) if self.acceleration_limit is not None
+                         and self.jerk_limit is None else None)
                 J, e, ff = stack.evaluate(q, targets, velocities, drift)
             if not stack.trusted:
                 J, e, ff = stack.contiguous(J, e, ff)

@@ -21,11 +21,13 @@ class ContactTask(Task):
     The held pose is ``pose`` when given, else the frame's pose at the first step after the
     solver is built (or after :meth:`release`). It takes no target in ``step``. Put contacts on
     the top level (``priority=0``, the default) and the tasks they carry below them
-    (``priority=1``, ...): those then move only in the contacts' null space. Without jerk
-    limits a step's second-order drift is asked back in the same step from the last step's
-    velocity (:meth:`drift`), and what remains the next step's feedback takes back: a foot
-    slips by the drift's change between steps (small under acceleration limits) and by the
-    third-order terms.
+    (``priority=1``, ...): those then move only in the contacts' null space, and a step's
+    second-order drift is taken back by the next step's feedback. Under acceleration limits
+    (without jerk limits) it is also asked back in the same step from the last step's
+    velocity (:meth:`drift`), which those limits make nearly this step's: a foot then slips by
+    the drift's change between steps and the third-order terms. (Under jerk limits that loop
+    held Solo-12 in a 0.15 rad/s limit cycle; without acceleration limits the velocity jumps
+    and the last one does not predict the drift.)
     Mind the count: a quadruped's four feet held as poses are 24 rows on 18 joints and leave
     its body no motion; as points they are 12.
 
