@@ -65,22 +65,35 @@ double largest_stoppable(double lo, double hi, double v, double room, double dt,
     lo = 0.0;
     f_lo = -1.0;
   }
+  // Brent's safeguards (1973) on the bracket [lo, hi], f(lo) <= 0 < f(hi): inverse quadratic
+  // interpolation through the last three points (a secant step while there are two), and a
+  // bisection wherever that lands outside the bracket or the bracket did not halve over the
+  // last two steps. The overshoot is piecewise polynomial with square roots: regula falsi
+  // (Illinois) took up to 53 evaluations a call here.
   const double tol = 1e-12 * (hi - lo + 1e-300);
-  int side = 0;
+  double c = lo, f_c = f_lo;  // the end the bracket's last move dropped
+  double width[2] = {hi - lo, hi - lo};  // the bracket one and two steps ago (the first step bisects)
   for (int k = 0; k < 100 && hi - lo > tol; ++k) {
-    double x = (f_lo < 0.0 && f_hi > 0.0) ? lo - f_lo * (hi - lo) / (f_hi - f_lo) : 0.5 * (lo + hi);
-    if (!(x > lo && x < hi)) x = 0.5 * (lo + hi);
+    double x;
+    if (f_c != f_lo && f_c != f_hi) {
+      x = lo * f_hi * f_c / ((f_lo - f_hi) * (f_lo - f_c)) +
+          hi * f_lo * f_c / ((f_hi - f_lo) * (f_hi - f_c)) +
+          c * f_lo * f_hi / ((f_c - f_lo) * (f_c - f_hi));
+    } else {
+      x = lo - f_lo * (hi - lo) / (f_hi - f_lo);
+    }
+    if (!(x > lo && x < hi) || hi - lo > 0.5 * width[1]) x = 0.5 * (lo + hi);
+    // (a quarter of the tolerance from either end at least: the bracket always shrinks)
+    x = std::min(std::max(x, lo + 0.25 * tol), hi - 0.25 * tol);
+    width[1] = width[0];
+    width[0] = hi - lo;
     const double fx = overshoot(x, v, room, dt, A, J);
     if (fx <= 0.0) {
-      lo = x;
-      f_lo = fx;
-      if (side < 0) f_hi *= 0.5;
-      side = -1;
+      c = lo, f_c = f_lo;
+      lo = x, f_lo = fx;
     } else {
-      hi = x;
-      f_hi = fx;
-      if (side > 0) f_lo *= 0.5;
-      side = 1;
+      c = hi, f_c = f_hi;
+      hi = x, f_hi = fx;
     }
   }
   return lo;

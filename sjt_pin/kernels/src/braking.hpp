@@ -13,7 +13,7 @@ double stopping_distance(double w, double a0, double A, double J);
 
 // The largest velocity x in [lo, hi] such that after moving at x for dt (acceleration
 // (x - v) / dt) the joint can stop within `room` at limits A, J (x <= 0 always can); `lo` when
-// none can (the joint is late: the hardest braking the box allows). Regula falsi (Illinois) on
+// none can (the joint is late: the hardest braking the box allows). Brent's method on
 // the overshoot, to a relative 1e-12 of the bracket.
 double largest_stoppable(double lo, double hi, double v, double room, double dt, double A,
                          double J);
