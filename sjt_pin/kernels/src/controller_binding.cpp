@@ -128,13 +128,11 @@ void register_controller(nb::module_& m) {
               Aa.shape(ba.size(), c.nv);
               Aa.finite();
               ba.no_nan();
-              nb::gil_scoped_release release;
               return c.run(Ja.matrix(), ea.vector(), ffp, qa.data(), sa.vector(), mp, lo,
                            hi, Aa.matrix(), ba.vector());
             }
             RowMatrix none(0, c.nv);
             Vector nob(0);
-            nb::gil_scoped_release release;
             return c.run(Ja.matrix(), ea.vector(), ffp, qa.data(), sa.vector(), mp, lo, hi,
                          none, nob);
           },
