@@ -608,8 +608,13 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
   if (matrix) {
     map_matrix(J0, matrix, ff_in != nullptr);
   } else {
-    method.feedback(J0, ew_.segment(L0.begin, r0), gains.segment(L0.begin, r0), top, fb0_);
-    if (ff_in) method.feedforward(J0, ffw_.segment(L0.begin, r0), top, ff0_); else ff0_.setZero();
+    if (ff_in) {
+      method.both(J0, ew_.segment(L0.begin, r0), gains.segment(L0.begin, r0),
+                  ffw_.segment(L0.begin, r0), top, fb0_, ff0_);
+    } else {
+      method.feedback(J0, ew_.segment(L0.begin, r0), gains.segment(L0.begin, r0), top, fb0_);
+      ff0_.setZero();
+    }
   }
   if (!fb0_.allFinite() || !ff0_.allFinite()) return kNonFinite;
   // the task velocity that removes level 0's error in this step (and follows the target's

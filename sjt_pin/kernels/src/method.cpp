@@ -162,73 +162,105 @@ void Method::metric(const Eigen::Ref<const RowMatrix>& Jw, const MethodStep& ste
 void Method::solve(const Eigen::Ref<const RowMatrix>& Jw, const Eigen::Ref<const Vector>& v,
                    const Eigen::Ref<const Vector>& s, double l, bool pseudo,
                    Eigen::Ref<Vector> out) {
+  factor(Jw, s, l, pseudo);
+  apply(Jw, v, out);
+}
+
+void Method::factor(const Eigen::Ref<const RowMatrix>& Jw, const Eigen::Ref<const Vector>& s,
+                    double l, bool pseudo) {
   const Index m = Jw.rows(), n = Jw.cols();
+  damping_ = l;
   if (m == 0) {
-    out.setZero();
+    solve_ = Solve::none;
     return;
   }
   if (m <= n) {
     scaled_.noalias() = Jw * s.asDiagonal();
     gram_.noalias() = scaled_ * Jw.transpose();
-    sol_ = v;
+    solve_ = Solve::rows_cholesky;
     if (!pseudo) {
       gram_.diagonal().array() += l;
       llt_.compute(gram_);
-      llt_.solveInPlace(sol_);
-    } else {
-      // the pseudoinverse on the eigenvalues above the cutoff, damped by l: by Cholesky when
-      // the smallest eigenvalue is certainly above it (lambda_min >= 1 / tr(A^-1)), else by
-      // the eigen-decomposition
-      const double top = gram_.diagonal().maxCoeff();
-      const double cutoff = std::max(p.rcond * p.rcond, kEigenFloor) * top;
-      llt_.compute(gram_);
-      bool regular = llt_.info() == Eigen::Success;
-      if (regular) {
-        work_.setIdentity(m, m);
-        llt_.matrixL().solveInPlace(work_);
-        regular = work_.squaredNorm() * cutoff < 1.0;
-      }
-      if (regular) {
-        if (l > 0.0) {
-          gram_.diagonal().array() += l;
-          llt_.compute(gram_);
-        }
-        llt_.solveInPlace(sol_);
-      } else {
-        eigen_.compute(gram_);
-        const Vector& values = eigen_.eigenvalues();
-        const Eigen::MatrixXd& U = eigen_.eigenvectors();
-        sol_.setZero();
-        for (Index c = 0; c < m; ++c)
-          if (values[c] > cutoff) sol_ += (U.col(c).dot(v) / (values[c] + l)) * U.col(c);
-      }
+      return;
     }
-    out.noalias() = scaled_.transpose() * sol_;
+    // the pseudoinverse on the eigenvalues above the cutoff, damped by l: by Cholesky when
+    // the smallest eigenvalue is certainly above it (lambda_min >= 1 / tr(A^-1)), else by
+    // the eigen-decomposition
+    const double top = gram_.diagonal().maxCoeff();
+    cutoff_ = std::max(p.rcond * p.rcond, kEigenFloor) * top;
+    llt_.compute(gram_);
+    bool regular = llt_.info() == Eigen::Success;
+    if (regular) {
+      work_.setIdentity(m, m);
+      llt_.matrixL().solveInPlace(work_);
+      regular = work_.squaredNorm() * cutoff_ < 1.0;
+    }
+    if (regular) {
+      if (l > 0.0) {
+        gram_.diagonal().array() += l;
+        llt_.compute(gram_);
+      }
+    } else {
+      eigen_.compute(gram_);
+      solve_ = Solve::rows_eigen;
+    }
     return;
   }
   // more rows than joints: the column space, sqrt(S) (sqrt(S) J^T J sqrt(S) + l I)^-1 sqrt(S) J^T v
   root_ = s.cwiseSqrt();
   scaled_.noalias() = Jw * root_.asDiagonal();
   gram_.noalias() = scaled_.transpose() * scaled_;
-  rhs_.noalias() = scaled_.transpose() * v;
   if (!pseudo) {
     gram_.diagonal().array() += l;
     llt_.compute(gram_);
-    sol_ = rhs_;
-    llt_.solveInPlace(sol_);
+    solve_ = Solve::columns_cholesky;
   } else {
     eigen_.compute(gram_);
-    const double top = std::max(eigen_.eigenvalues().maxCoeff(), 0.0);
-    const double cutoff = std::max(p.rcond * p.rcond, kEigenFloor) * top;
-    sol_.setZero(n);
-    for (Index c = 0; c < n; ++c) {
-      const double value = eigen_.eigenvalues()[c];
-      if (value > cutoff)
-        sol_ += (eigen_.eigenvectors().col(c).dot(rhs_) / (value + l)) *
-                eigen_.eigenvectors().col(c);
+    cutoff_ = std::max(p.rcond * p.rcond, kEigenFloor) *
+              std::max(eigen_.eigenvalues().maxCoeff(), 0.0);
+    solve_ = Solve::columns_eigen;
+  }
+}
+
+void Method::apply(const Eigen::Ref<const RowMatrix>& Jw, const Eigen::Ref<const Vector>& v,
+                   Eigen::Ref<Vector> out) {
+  const double l = damping_;
+  switch (solve_) {
+    case Solve::none:
+      out.setZero();
+      return;
+    case Solve::rows_cholesky:
+      sol_ = v;
+      llt_.solveInPlace(sol_);
+      out.noalias() = scaled_.transpose() * sol_;
+      return;
+    case Solve::rows_eigen: {
+      const Vector& values = eigen_.eigenvalues();
+      const Eigen::MatrixXd& U = eigen_.eigenvectors();
+      sol_.setZero(Jw.rows());
+      for (Index c = 0; c < Jw.rows(); ++c)
+        if (values[c] > cutoff_) sol_ += (U.col(c).dot(v) / (values[c] + l)) * U.col(c);
+      out.noalias() = scaled_.transpose() * sol_;
+      return;
+    }
+    case Solve::columns_cholesky:
+      sol_.noalias() = scaled_.transpose() * v;
+      llt_.solveInPlace(sol_);
+      out = root_.cwiseProduct(sol_);
+      return;
+    case Solve::columns_eigen: {
+      rhs_.noalias() = scaled_.transpose() * v;
+      sol_.setZero(Jw.cols());
+      for (Index c = 0; c < Jw.cols(); ++c) {
+        const double value = eigen_.eigenvalues()[c];
+        if (value > cutoff_)
+          sol_ += (eigen_.eigenvectors().col(c).dot(rhs_) / (value + l)) *
+                  eigen_.eigenvectors().col(c);
+      }
+      out = root_.cwiseProduct(sol_);
+      return;
     }
   }
-  out = root_.cwiseProduct(sol_);
 }
 
 void Method::feedback(const Eigen::Ref<const RowMatrix>& Jw, const Eigen::Ref<const Vector>& ew,
@@ -258,6 +290,21 @@ void Method::feedforward(const Eigen::Ref<const RowMatrix>& Jw,
     out.noalias() = Jw.transpose() * ffw;
     out.array() *= step.s.array();
   }
+}
+
+void Method::both(const Eigen::Ref<const RowMatrix>& Jw, const Eigen::Ref<const Vector>& ew,
+                  const Eigen::Ref<const Vector>& k, const Eigen::Ref<const Vector>& ffw,
+                  const MethodStep& step, Eigen::Ref<Vector> fb, Eigen::Ref<Vector> ff) {
+  const bool least_squares = p.family == Family::least_squares;
+  if (!least_squares && !p.damped_feedback) {  // (no solve in the feedback: nothing to share)
+    feedback(Jw, ew, k, step, fb);
+    feedforward(Jw, ffw, step, ff);
+    return;
+  }
+  factor(Jw, least_squares ? step.s : step.alpha, step.damping, least_squares && p.mu == 0.0);
+  v_.noalias() = step.gain * k.cwiseProduct(ew);
+  apply(Jw, v_, fb);
+  apply(Jw, ffw, ff);
 }
 
 }  // namespace sjt

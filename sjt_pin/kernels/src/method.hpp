@@ -73,10 +73,21 @@ class Method {
                 const Eigen::Ref<const Vector>& k, const MethodStep& step, Eigen::Ref<Vector> out);
   void feedforward(const Eigen::Ref<const RowMatrix>& Jw, const Eigen::Ref<const Vector>& ffw,
                    const MethodStep& step, Eigen::Ref<Vector> out);
+  // Both at once: where they map through the same matrix (least squares, the damped feedback)
+  // one factorisation serves both (the feed-forward cost a second one)
+  void both(const Eigen::Ref<const RowMatrix>& Jw, const Eigen::Ref<const Vector>& ew,
+            const Eigen::Ref<const Vector>& k, const Eigen::Ref<const Vector>& ffw,
+            const MethodStep& step, Eigen::Ref<Vector> fb, Eigen::Ref<Vector> ff);
   // The damped solve of the method's columns, S J_w^T (J_w S J_w^T + l I)^-1 v (least squares:
   // the pseudoinverse when l = 0): lower priority levels and the damped forms.
   void solve(const Eigen::Ref<const RowMatrix>& Jw, const Eigen::Ref<const Vector>& v,
              const Eigen::Ref<const Vector>& s, double l, bool pseudo, Eigen::Ref<Vector> out);
+  // solve() in two halves: the decomposition of (Jw, s, l, pseudo), then its answer for a v
+  // (as many v as wanted, on the same Jw, until the next factor())
+  void factor(const Eigen::Ref<const RowMatrix>& Jw, const Eigen::Ref<const Vector>& s,
+              double l, bool pseudo);
+  void apply(const Eigen::Ref<const RowMatrix>& Jw, const Eigen::Ref<const Vector>& v,
+             Eigen::Ref<Vector> out);
 
   // The stage's task part of the metric: B (m x n) with B^T B = mu_T J_w^T G' J_w, G' = G +
   // beta P^T G P, P = I - t t^T G / (t^T G t) the G-orthogonal projector off the task motion t
@@ -97,6 +108,11 @@ class Method {
   double loop_bound(const Eigen::Ref<const Eigen::MatrixXd>& A);
 
  private:
+  // which decomposition factor() left: none (no rows), Cholesky or eigen-decomposition of the
+  // row space (m <= n) or of the column space
+  enum class Solve { none, rows_cholesky, rows_eigen, columns_cholesky, columns_eigen };
+  Solve solve_ = Solve::none;
+  double damping_ = 0.0, cutoff_ = 0.0;
   Eigen::MatrixXd gram_, work_, work2_;
   Eigen::LLT<Eigen::MatrixXd> llt_;
   Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eigen_;
