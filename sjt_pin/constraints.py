@@ -63,6 +63,7 @@ class UserLimits:
         self.capped: set[int] = set()
         #: the last evaluation's rows ``(A, b, owners)`` (None without rows)
         self.last_rows: tuple[np.ndarray, np.ndarray, list[str]] | None = None
+        self._blocks: list[tuple[Limit, np.ndarray, np.ndarray]] = []
 
     def evaluate(self, kinematics, motion: Motion):
         """``(lower, upper, A, b, owners)`` at this step: the intersection of the limits'
@@ -92,18 +93,27 @@ class UserLimits:
                 if Ak.shape != (bk.size, n):
                     raise ValueError(f"{limit!r}.rows() must return A of shape (k, {n}) and b "
                                      f"of shape (k,), got {Ak.shape} and {bk.shape}")
-                if not math.isfinite(float(Ak.sum())) or math.isnan(float(bk.sum())):
-                    raise ValueError(f"{limit!r}.rows() returned NaN or inf in A or NaN in b: a "
-                                     "row that bounds nothing would let the joints move freely")
-                blocks.append((Ak, bk))
+                # (NaN or inf in A, NaN in b: the compiled stage refuses them, and
+                # raise_non_finite_rows names the limit)
+                blocks.append((limit, Ak, bk))
                 owners += [limit.name] * bk.size
         if blocks:
             if len(blocks) == 1:
-                A, b = blocks[0]
+                _, A, b = blocks[0]
             else:
-                A, b = np.vstack([a for a, _ in blocks]), np.concatenate([c for _, c in blocks])
+                A = np.vstack([a for _, a, _ in blocks])
+                b = np.concatenate([c for _, _, c in blocks])
+        self._blocks = blocks
         self.last_rows = None if A is None or b is None else (A, b, owners)
         return lower, upper, A, b, owners
+
+    def raise_non_finite_rows(self) -> None:
+        """ValueError naming the limit whose last rows hold NaN or inf in ``A`` or NaN in
+        ``b``, if one does (a row that bounds nothing would let the joints move freely)."""
+        for limit, A, b in self._blocks:
+            if not (np.all(np.isfinite(A)) and not np.any(np.isnan(b))):
+                raise ValueError(f"{limit!r}.rows() returned NaN or inf in A or NaN in b: a "
+                                 "row that bounds nothing would let the joints move freely")
 
     def exceeded(self, dq: np.ndarray, tol: float = 1e-9) -> tuple[tuple[str, float], ...]:
         """The limits whose rows of the last evaluation ``dq`` does not keep, each with the

@@ -82,10 +82,8 @@ class Solver:
         self.stack = stack = TaskStack(robot, tasks)
         self._model, self._q_shape = robot.model, (robot.nq,)
         #: a q with unit blocks is checked on its manifold, unless the last step returned it
-        self._unit_blocks = robot.unit_blocks
-        self._units = self._unit_blocks.size > 0
-        # the array the last step returned (trusted as it is); none before the first step
-        self._returned: object = _NOTHING
+        self._unit_blocks, self._units = robot.unit_blocks, robot.unit_blocks.size > 0
+        self._returned: object = _NOTHING  # the array the last step returned (trusted as it is)
         self._first = True  # the first step checks the targets' distance (units)
         self._dt = period(opts.dt)
         self._gain = as_gain(opts.gain, stack.target_dim)
@@ -100,10 +98,9 @@ class Solver:
             self.jerk_limit, self.escape, self._motion)
         self._stability = StabilityCheck(method, stack.n_chain, opts.check_stability)
         self._step = np.zeros(robot.nv)
-        self._escaped = (-1, False)  # (step count, whether that step added the escape)
         self._probe: TaskStack | None = None
-        self._search, self._count = None, 0
-        self._stepping = False  # a step runs (ConcurrentStepError for a second thread)
+        self._escaped = (-1, False)  # (a step's count, whether it added the escape)
+        self._search, self._count, self._stepping = None, 0, False  # (stepping: a step runs)
         self._last: StepInfo | None = None
         self._record: tuple | None = None  # the last step's rows, e, q, ff and row owners
         self._configure()
@@ -215,7 +212,12 @@ class Solver:
             # 3. method and stage, compiled
             M = (step_checks.method_matrix(self.method, stack, J) if self._matrix_method
                  else None)
-            status = self._controller.run(J, e, ff, q, self._step, M, lower, upper, A, b)
+            try:
+                status = self._controller.run(J, e, ff, q, self._step, M, lower, upper, A, b)
+            except ValueError:
+                if self._user is not None:  # (a limit's rows the stage refused: name it)
+                    self._user.raise_non_finite_rows()
+                raise
             self._count += 1
             if status & _PYTHON or self._busy:
                 self._slow(status, q, J, [target] if targets is None else targets)
@@ -268,9 +270,8 @@ class Solver:
     def error(self) -> np.ndarray:
         """The last step's task error e (the target rows), as a view that the next step
         overwrites (copy it to keep it; :attr:`last` holds copies)."""
-        if self._record is None:
-            return np.full(0, np.nan)
-        return self.stack.task_error(self._record[1])
+        return np.full(0, np.nan) if self._record is None else self.stack.task_error(
+            self._record[1])
 
     @property
     def task_scale(self) -> float:
@@ -376,11 +377,10 @@ class Solver:
     def __setstate__(self, state: dict) -> None:
         c = self._controller
         c.dq[:], c.ddq[:] = state["motion"]
-        self.escape = state["escape"]
-        c.escaping = state["escaping"]
+        self.escape, c.escaping = state["escape"], state["escaping"]
         c.escape_velocity[:] = state["escape_velocity"]
-        self._stability.warned, self._count = state["warned"], state["count"]
-        self._first = state["first"]
+        self._stability.warned, self._count, self._first = (state["warned"], state["count"],
+                                                            state["first"])
         c.stall_run, c.stall_wait = state["stall"]
         for task, held in zip(self.stack.tasks, state["held"], strict=True):
             if held is not None:  # (a contact's)
