@@ -114,6 +114,9 @@ class Solver:
                     gain.factor)
         c.set_dt(self._dt)
         self._motion.dt = self._dt
+        # contacts ask back the last velocity's drift (ContactTask's docstring says when)
+        self._drift = ((self._motion.dq, self._dt) if self.acceleration_limit is not None
+                       and self.jerk_limit is None else None)
         self._stability.arm(gain.mode == kernels.GAIN_FIXED, gain.largest * self._dt)
         moving = stack.chain > 0
         speeds, self._speed_by = solver_parts.capped_speeds(self._user, self._dt, moving,
@@ -198,10 +201,7 @@ class Solver:
                 J, e, ff = task.compute(kinematics, target, velocity)
             else:
                 targets, velocities = stack.targets(target, target_velocity)
-                # (contacts ask back the last velocity's drift: ContactTask's docstring says when)
-                drift = ((self._motion.dq, self._dt) if self.acceleration_limit is not None
-                         and self.jerk_limit is None else None)
-                J, e, ff = stack.evaluate(q, targets, velocities, drift)
+                J, e, ff = stack.evaluate(q, targets, velocities, self._drift)
             if not stack.trusted:
                 J, e, ff = stack.contiguous(J, e, ff)
             # 2. the user's limits at q

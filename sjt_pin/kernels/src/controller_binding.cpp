@@ -147,7 +147,6 @@ void register_controller(nb::module_& m) {
            nb::arg("factor"))
       .def("set_speed", &Controller::set_speed, nb::arg("speed"))
       .def("reset", &Controller::reset)
-      .def_rw("given_gain", &Controller::given_gain)
       .def_prop_ro("dt", &Controller::dt)
       .def_prop_ro("dq", [](Controller& c) { return view<WriteView>(c, c.dq.data(), c.nv); },
                    nb::rv_policy::reference_internal)
