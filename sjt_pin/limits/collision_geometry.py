@@ -148,16 +148,19 @@ def _check_pose(pose, name: str) -> None:
     (its rotation orthonormal, of determinant 1, to 1e-6). (Plain floats: a move a step.)"""
     if not isinstance(pose, pin.SE3):
         raise TypeError(f"{name} must be a pin.SE3, got {type(pose).__name__}")
-    H = pose.homogeneous
-    (a, b, c, _), (d, e, f, _), (g, h, i, _), _ = H.tolist()
-    if not math.isfinite(sum(H.ravel().tolist())):
-        raise ValueError(f"{name} is not finite:\n{H}")
-    columns = ((a, d, g), (b, e, h), (c, f, i))
-    gram = [x[0] * y[0] + x[1] * y[1] + x[2] * y[2] for x in columns for y in columns]
+    R = pose.rotation
+    (a, b, c), (d, e, f), (g, h, i) = rows = R.tolist()
+    x, y, z = pose.translation.tolist()
+    if not math.isfinite(a + b + c + d + e + f + g + h + i + x + y + z):
+        raise ValueError(f"{name} is not finite:\n{pose.homogeneous}")
+    # (columns of unit length and at right angles, in plain floats: a pose is checked per move)
+    defect = max(abs(a * a + d * d + g * g - 1.0), abs(b * b + e * e + h * h - 1.0),
+                 abs(c * c + f * f + i * i - 1.0), abs(a * b + d * e + g * h),
+                 abs(a * c + d * f + g * i), abs(b * c + e * f + h * i))
     determinant = a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
-    if max(abs(v - (k % 4 == 0)) for k, v in enumerate(gram)) > 1e-6 or determinant <= 0.0:
+    if defect > 1e-6 or determinant <= 0.0:
         raise ValueError(f"{name} is not a rigid motion (its rotation is not orthonormal with "
-                         f"determinant 1):\n{H[:3, :3]}")
+                         f"determinant 1):\n{np.array(rows)}")
 
 
 def _check_extent(shape, name: str) -> None:
