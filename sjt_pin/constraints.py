@@ -71,7 +71,7 @@ class UserLimits:
         when none applies) and each row's limit name."""
         n = self.nv
         lower = upper = A = b = None
-        blocks: list[tuple[np.ndarray, np.ndarray]] = []
+        blocks: list[tuple[Limit, np.ndarray, np.ndarray]] = []
         owners: list[str] = []
         for k, limit in enumerate(self.limits):
             if k not in self.capped:
