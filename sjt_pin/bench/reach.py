@@ -263,8 +263,8 @@ def jerk_grid(trials: int = 30, robots=ROBOTS, seconds: float = 20.0, seed: int 
         robot = loaded[robots[trial % len(robots)]]
         lower, upper = robot.lower_limits, robot.upper_limits
         bounded = np.isfinite(lower) & np.isfinite(upper)  # (continuous joints: from q0)
-        middle = 0.5 * (lower + upper)[bounded]
-        half = 0.25 * (upper - lower)[bounded]
+        middle = 0.5 * (lower[bounded] + upper[bounded])
+        half = 0.25 * (upper[bounded] - lower[bounded])
         q0 = robot.q0.copy()
         q0[bounded] = rng.uniform(middle - half, middle + half)
         q0 = np.clip(q0, robot.lower_limits, robot.upper_limits)

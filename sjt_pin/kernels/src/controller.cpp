@@ -16,8 +16,8 @@ constexpr double kHeldTol = 1e-9;
 // their largest row's norm is spanned by them (the former eigen-decomposition's relative
 // cutoff on the Gram matrix's eigenvalues, 1e-12, in singular values)
 constexpr double kRankFloor = 1e-6;
-// keeping the task's direction is taken alone while it leaves at least this share of the
-// progress the unconstrained projection makes (which is at most the whole step's)
+// under acceleration limits, keeping the task's direction is taken alone while it leaves at
+// least this share of the progress the unconstrained projection makes (at most the whole step's)
 constexpr double kUseful = 0.1;
 // beta of the first projection: a task motion off the method's direction costs this much more
 constexpr double kKeepDirection = 1e4;
@@ -210,15 +210,19 @@ void Controller::lower_levels(const double* ffw) {
   }
 }
 
-// The first level's step projected (see controller.hpp): first with its task motion kept along
-// the method's (SNS's answer: joints held, the others taking over, in the method's metric);
-// where that keeps less than kUseful of the progress the nearest feasible velocity without that
-// constraint makes (which lowers the error whenever any feasible velocity does), blended toward
-// it, fully where keeping the direction makes none (a joint at its limit that the others cannot
-// replace); then the sufficient decrease (sufficient_decrease). A joint without a speed limit
-// is held within the norm of the method's whole step meanwhile. Then the lower levels, nearest
-// their own step with the first level's task motion held; last, where a row is still broken,
-// the nearest velocity within the whole box and the rows.
+// The first level's step projected (see controller.hpp): the feasible velocity nearest the
+// method's step in the method's metric (joints held at a bound, the others taking over; it lowers
+// the error whenever some feasible velocity does), or under acceleration limits first along the
+// method's direction (keep_direction); then the sufficient decrease (sufficient_decrease). The
+// nearest velocity, not the step scaled along its direction: far from a target the method's step
+// is hundreds of rad/s, and scaling it as a whole into the speed box moved one joint at its
+// limit and the others in proportion, where the nearest feasible velocity drives every joint
+// the task can use (measured: per step 1.5-1.7 times the task progress of the scaled step, the
+// median over 200 random far targets on each of UR5, UR10, Panda and Kinova; Kinova's random
+// full-range reaches missed within 5 s 50 -> 43 %, Panda's 47 -> 40 %). A joint without a speed
+// limit is held within the norm of the method's whole step meanwhile. Then the lower levels,
+// nearest their own step with the first level's task motion held; last, where a row is still
+// broken, the nearest velocity within the whole box and the rows.
 void Controller::project(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b,
                          const Vector& box_lo, const Vector& box_hi, bool hold) {
   const Level& top_level = levels[0];
@@ -249,38 +253,14 @@ void Controller::project(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<
   if (!inside || !lower) {
     method.forget();
     tstar_.noalias() = J0 * desired_top;
-    // first the task's direction kept (a motion off it costs kKeepDirection times more)
-    method.metric(J0, top, tstar_, kKeepDirection, B_);
-    ProjectionReport r = projection_.solve(desired_top, top.lam, B_, lo, hi, A, b, H, hd, xa_);
-    report.iterations += r.iterations;
-    report.converged = report.converged && r.converged;
-    const Eigen::MatrixXd& G = method.task_metric();
-    gt_.noalias() = G * tstar_;
-    const double tgt = tstar_.dot(gt_);
-    tmp2_.noalias() = J0 * xa_;
-    const double scale_direction = tgt > 0.0 ? tmp2_.dot(gt_) / tgt : 1.0;
-    x0_ = xa_;
-    // an upper bound of the unconstrained projection's progress: the box's best along G t*
-    double reach = 0.0;
-    if (tgt > 0.0) {
-      direction_.noalias() = J0.transpose() * gt_;
-      for (Index j = 0; j < nv; ++j)
-        reach += direction_[j] * (direction_[j] > 0.0 ? hi[j] : lo[j]);
-      reach /= tgt;
-    }
-    if (scale_direction < kUseful * reach) {
-      // ... and the nearest feasible velocity in the method's metric alone: blended in where
-      // keeping the direction makes little progress
+    if (bounds.smooth) {
+      keep_direction(J0, A, b, lo, hi, H, hd);
+    } else {
       method.metric(J0, top, tstar_, 0.0, B_);
-      r = projection_.solve(desired_top, top.lam, B_, lo, hi, A, b, H, hd, x0_);
+      const ProjectionReport r =
+          projection_.solve(desired_top, top.lam, B_, lo, hi, A, b, H, hd, x0_);
       report.iterations += r.iterations;
       report.converged = report.converged && r.converged;
-      tmp2_.noalias() = J0 * x0_;
-      const double scale_free = tmp2_.dot(gt_) / tgt;
-      const double w = scale_free > 0.0
-                           ? std::clamp(scale_direction / (kUseful * scale_free), 0.0, 1.0)
-                           : 1.0;
-      x0_ = w * xa_ + (1.0 - w) * x0_;
     }
     sufficient_decrease(J0, A, b, desired_top.norm());
   }
@@ -308,6 +288,53 @@ void Controller::project(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<
                                            velocity);
     report.iterations += r.iterations;
     report.converged = report.converged && r.converged;
+  }
+}
+
+// Under acceleration limits, the first level's projection with its task motion kept along the
+// method's (SNS's answer: joints held, the others taking over, in the method's metric); where
+// that keeps less than kUseful of the progress the nearest feasible velocity without that
+// constraint makes (which lowers the error whenever any feasible velocity does), blended toward
+// it, fully where keeping the direction makes none (a joint at its limit that the others cannot
+// replace). Each joint then brakes toward the displacement the method's feedback asks of it,
+// which lies along that direction: the nearest feasible velocity alone, off it, sent the joints
+// past their braking targets (measured on the jerk grid: 18 of 30 runs rested later than twice
+// Ruckig's time, 2 never rested, where the direction kept leaves 2 late). Into x0_.
+void Controller::keep_direction(const Eigen::Ref<const RowMatrix>& J0,
+                                const Eigen::Ref<const RowMatrix>& A,
+                                const Eigen::Ref<const Vector>& b, const Vector& lo,
+                                const Vector& hi, const Eigen::Ref<const RowMatrix>& H,
+                                const Eigen::Ref<const Vector>& hd) {
+  // first the task's direction kept (a motion off it costs kKeepDirection times more)
+  method.metric(J0, top, tstar_, kKeepDirection, B_);
+  ProjectionReport r = projection_.solve(desired_top, top.lam, B_, lo, hi, A, b, H, hd, xa_);
+  report.iterations += r.iterations;
+  report.converged = report.converged && r.converged;
+  const Eigen::MatrixXd& G = method.task_metric();
+  gt_.noalias() = G * tstar_;
+  const double tgt = tstar_.dot(gt_);
+  tmp2_.noalias() = J0 * xa_;
+  const double scale_direction = tgt > 0.0 ? tmp2_.dot(gt_) / tgt : 1.0;
+  x0_ = xa_;
+  // an upper bound of the unconstrained projection's progress: the box's best along G t*
+  double reach = 0.0;
+  if (tgt > 0.0) {
+    direction_.noalias() = J0.transpose() * gt_;
+    for (Index j = 0; j < nv; ++j) reach += direction_[j] * (direction_[j] > 0.0 ? hi[j] : lo[j]);
+    reach /= tgt;
+  }
+  if (scale_direction < kUseful * reach) {
+    // ... and the nearest feasible velocity in the method's metric alone: blended in where
+    // keeping the direction makes little progress
+    method.metric(J0, top, tstar_, 0.0, B_);
+    r = projection_.solve(desired_top, top.lam, B_, lo, hi, A, b, H, hd, x0_);
+    report.iterations += r.iterations;
+    report.converged = report.converged && r.converged;
+    tmp2_.noalias() = J0 * x0_;
+    const double scale_free = tmp2_.dot(gt_) / tgt;
+    const double w =
+        scale_free > 0.0 ? std::clamp(scale_direction / (kUseful * scale_free), 0.0, 1.0) : 1.0;
+    x0_ = w * xa_ + (1.0 - w) * x0_;
   }
 }
 

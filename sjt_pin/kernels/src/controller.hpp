@@ -92,6 +92,9 @@ class Controller {
   void cauchy_point(const Eigen::Ref<const RowMatrix>& J0, double ball);
   void lower_nearest(const Eigen::Ref<const RowMatrix>& J0, const Eigen::Ref<const RowMatrix>& A,
                      const Eigen::Ref<const Vector>& b, const Vector& lo, const Vector& hi);
+  void keep_direction(const Eigen::Ref<const RowMatrix>& J0, const Eigen::Ref<const RowMatrix>& A,
+                      const Eigen::Ref<const Vector>& b, const Vector& lo, const Vector& hi,
+                      const Eigen::Ref<const RowMatrix>& H, const Eigen::Ref<const Vector>& hd);
   // (hold: the first level's held rows as equalities; in the hard box)
   void project(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b,
                const Vector& box_lo, const Vector& box_hi, bool hold);

@@ -113,7 +113,11 @@ void Method::metric(const Eigen::Ref<const RowMatrix>& Jw, const MethodStep& ste
   const Index m = Jw.rows(), n = Jw.cols();
   if (!metric_ready_ || metric_.rows() != m) {
     // G: I + l (J S J^T)^-1 (damped forms), (J S J^T)^-1 (transpose feedback), I (JP); the
-    // inverse regularised by delta (1e-9 of the trace, and 1e-3 of l), which bounds G
+    // inverse regularised by delta, which bounds G: 1e-9 of the mean eigenvalue and 1e-3 of l
+    // (damped forms); 1e-2 of the mean eigenvalue (transpose feedback, where nothing else bounds
+    // it: with 1e-9, the nearest feasible velocity at a wrist's position limit was so flat along
+    // the directions J nearly loses that Baxter's arm in mm and in m, the same inputs up to
+    // rounding, parted by 4e-3 to 1e-2 rad over 2.5 s)
     const bool transpose = p.family == Family::transpose && !p.damped_feedback;
     const double l = transpose ? 1.0 : step.damping;
     metric_.setIdentity(m, m);
@@ -124,7 +128,7 @@ void Method::metric(const Eigen::Ref<const RowMatrix>& Jw, const MethodStep& ste
       gram_.noalias() = scaled_ * Jw.transpose();
       const double trace = gram_.trace();
       const double delta =
-          std::max(1e-9 * std::max(trace, 1e-300) / m, transpose ? 0.0 : 1e-3 * l);
+          std::max((transpose ? 1e-2 : 1e-9) * std::max(trace, 1e-300) / m, transpose ? 0.0 : 1e-3 * l);
       gram_.diagonal().array() += delta;
       llt_.compute(gram_);
       work_.setIdentity(m, m);

@@ -93,8 +93,8 @@ class Method {
   // beta P^T G P, P = I - t t^T G / (t^T G t) the G-orthogonal projector off the task motion t
   // (beta > 0: a task motion off t's direction costs 1 + beta times more than one along it; see
   // the file's comment); G itself after the call in task_metric().
-  // (G and mu_T are computed anew on a call with beta = 0, or the first after forget();
-  // a call with beta > 0 reuses them)
+  // (G and mu_T are computed on the first call after forget(), or when the rows change in
+  // number; the calls that follow reuse them)
   void metric(const Eigen::Ref<const RowMatrix>& Jw, const MethodStep& step,
               const Eigen::Ref<const Vector>& t, double beta, RowMatrix& B);
   void forget() { metric_ready_ = false; }
