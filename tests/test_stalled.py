@@ -146,3 +146,31 @@ def test_an_arm_held_by_a_position_limit_says_it_stalled_and_which_limit(options
     assert q[0] == pytest.approx(2.0, abs=1e-12) and np.abs(info.dq).max() < 1e-12  # at rest
     assert info.error_norm > 0.1 and info.stalled
     assert ("position", "shoulder") in info.active_limits
+
+
+#: pairs of the reach benchmark (random start and reachable target over the full ranges,
+#: ``sjt_pin.bench.reach``, seed 0) that end at a minimum against the joint limits, far from
+#: the target. The stage held each there in a limit cycle: UR5 kicked its wrist to 0.9 rad/s
+#: every 9 steps, xArm7 swung three joints by +-3.1 rad/s on alternate steps, Panda, UR10 and
+#: Kinova chattered at 0.01-1 rad/s, all for as long as they ran.
+FAR_MINIMA = [("ur5", 27), ("xarm7", 1), ("panda", 4), ("ur10", 16), ("kinova", 27)]
+
+
+@pytest.mark.parametrize("method", ["sjt", "dls"])
+@pytest.mark.parametrize("name, pair", FAR_MINIMA)
+def test_an_arm_held_far_from_its_target_by_its_limits_comes_to_rest(name, pair, method):
+    robot = sjt.Robot.from_example(name)
+    rng = np.random.default_rng(0)
+    draws = [(robot.random_configuration(rng), robot.random_configuration(rng))
+             for _ in range(pair + 1)]
+    q, goal = draws[pair]
+    target = robot.fk(goal)
+    solver = sjt.make_solver(method, robot)
+    speeds = []
+    for _ in range(7000):
+        q_next = solver.step(q, target)
+        speeds.append(np.abs(pin.difference(robot.model, q, q_next)).max() / solver.dt)
+        q = q_next
+    assert max(speeds[-1000:]) < 1e-9  # at rest over the last second
+    info = solver.last
+    assert info.error_norm > 0.05 and info.stalled and info.active_limits

@@ -24,6 +24,9 @@ constexpr double kKeepDirection = 1e4;
 // the projection keeps at least this share of the progress of the Cauchy point (the steepest
 // feasible progress within a ball of the method's own step size)
 constexpr double kSufficient = 0.25;
+// 1/s: a step that lowers 1/2 |e_w|^2 by less than this share of |e_w|^2 per second makes no
+// progress (StepInfo's STALL_RATE, sjt_pin.step_info)
+constexpr double kStallRate = 1e-6;
 // lower_nearest's weight of a posture's rows beside the tasks above it (the tasks' level comes
 // first: with the posture's full weight, TALOS-like humanoids rested 1e-5 m short of a hand
 // target, the posture pulling against the hand)
@@ -214,6 +217,10 @@ void Controller::lower_levels(const double* ffw) {
 // method's step in the method's metric (joints held at a bound, the others taking over; it lowers
 // the error whenever some feasible velocity does), or under acceleration limits first along the
 // method's direction (keep_direction); then the sufficient decrease (sufficient_decrease). The
+// metric is the Hessian of the method's own objective where it has one (objective_rows): the
+// former task-first metric (mu_T = 1e6) left the free joints' solve undamped, and at minima
+// against the limits far from the target, where the method's damping is large, arms chattered
+// for good (UR5 0.9 rad/s every 9 steps, xArm7 +-3.1 rad/s on alternate steps). The
 // nearest velocity, not the step scaled along its direction: far from a target the method's step
 // is hundreds of rad/s, and scaling it as a whole into the speed box moved one joint at its
 // limit and the others in proportion, where the nearest feasible velocity drives every joint
@@ -256,7 +263,7 @@ void Controller::project(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<
     if (bounds.smooth) {
       keep_direction(J0, A, b, lo, hi, H, hd);
     } else {
-      method.metric(J0, top, tstar_, 0.0, B_);
+      if (!method.objective_rows(J0, B_)) method.metric(J0, top, tstar_, 0.0, B_);
       const ProjectionReport r =
           projection_.solve(desired_top, top.lam, B_, lo, hi, A, b, H, hd, x0_);
       report.iterations += r.iterations;
@@ -452,8 +459,11 @@ void Controller::lower_nearest(const Eigen::Ref<const RowMatrix>& J0,
 // descent within a ball of the method's own step size. Where x0_ lowers the model by less than
 // kSufficient of what that point does (the metric of the projection can weigh the joints that
 // could carry the task heavily: a joint at its limit then froze the step), x0_ is blended
-// toward it: the model is convex, so the step then lowers it by at least that share. A Cauchy
-// point that breaks a row or lets a held row go is not taken (the projection's own rows
+// toward it: the model is convex, so the step then lowers it by at least that share. A best
+// decrease below a stalled step's (kStallRate) counts as none, and the Cauchy point is then 0:
+// an x0_ that raises the model gives way to it, and the arm rests at its minimum against the
+// limits (the decision no longer turns on whether that decrease rounds to 0 or to 1e-16 of
+// |a|^2, which gave the same motion in mm and in m different steps). A Cauchy point that breaks a row or lets a held row go is not taken (the projection's own rows
 // stand), nor is one where the box does not hold 0 (a joint returning into its range).
 void Controller::sufficient_decrease(const Eigen::Ref<const RowMatrix>& J0,
                                      const Eigen::Ref<const RowMatrix>& A,
@@ -465,11 +475,24 @@ void Controller::sufficient_decrease(const Eigen::Ref<const RowMatrix>& J0,
   const double aa = wanted_.squaredNorm();
   res_ = wanted_;
   res_.noalias() -= J0 * cauchy_;
-  const double best = aa - res_.squaredNorm();
-  res_ = wanted_;
-  res_.noalias() -= J0 * x0_;
+  double best = aa - res_.squaredNorm();
+  if (best < 2.0 * kStallRate * dt_ * aa) {  // (the decrease of a stalled step: none)
+    best = 0.0;
+    cauchy_.setZero(nv);
+  }
+  // x0_ no further along its own direction than the model's minimum there
+  tmp2_.noalias() = J0 * x0_;
+  const double along = wanted_.dot(tmp2_), curvature = tmp2_.squaredNorm();
+  if (along < curvature) {
+    xa_ = (std::max(along, 0.0) / curvature) * x0_;
+    if (feasible(xa_, A, b, plo_, phi_) && held_kept(xa_)) {
+      x0_ = xa_;
+      tmp2_.noalias() = J0 * x0_;
+    }
+  }
+  res_ = wanted_ - tmp2_;
   const double progress = aa - res_.squaredNorm();
-  if (!(best > 0.0) || progress >= kSufficient * best) return;
+  if (!(best >= 0.0) || progress >= kSufficient * best) return;
   if (!feasible(cauchy_, A, b, plo_, phi_)) return;
   if (!held_kept(cauchy_)) return;
   const double w = progress > 0.0 ? progress / (kSufficient * best) : 0.0;

@@ -108,6 +108,12 @@ void Method::prepare(const Eigen::Ref<const RowMatrix>& Jw, const Eigen::Ref<con
   for (Index j = 0; j < n; ++j) out.lam[j] = out.s[j] > 0.0 ? std::max(out.damping, floor) : kInf;
 }
 
+bool Method::objective_rows(const Eigen::Ref<const RowMatrix>& Jw, RowMatrix& B) const {
+  if (p.family == Family::transpose && !(p.damped_feedback && p.scaled)) return false;
+  B = Jw;
+  return true;
+}
+
 void Method::metric(const Eigen::Ref<const RowMatrix>& Jw, const MethodStep& step,
                     const Eigen::Ref<const Vector>& t, double beta, RowMatrix& B) {
   const Index m = Jw.rows(), n = Jw.cols();

@@ -9,7 +9,10 @@
 // for JT, v = K e_w + x_dot_d,w the weighted task velocity, l the damping (mu^2 plus the
 // Levenberg-Marquardt term that grows with the error).
 //
-// The stage's metric H = diag(lam) + mu_T J_w^T G J_w (projection.hpp) has two parts:
+// The stage's metric without acceleration limits, for SJT's damped form and least squares, is
+// the Hessian of the objective their step minimises, diag(lam) + J_w^T J_w (objective_rows).
+// Otherwise (under acceleration limits, where the stage keeps the step's direction first, and
+// for the transpose feedback) it is H = diag(lam) + mu_T J_w^T G J_w, in two parts:
 // - G, a task-space metric in which the method's task motion t* = J_w q_dot* is K e_w itself:
 //   G t* = K e_w (G = I + l (J S J^T)^-1 for the damped forms, (J S J^T)^-1 for the transpose
 //   feedback, I for JP). Then the point of any convex feasible set nearest t* in G is a descent
@@ -98,6 +101,13 @@ class Method {
   void metric(const Eigen::Ref<const RowMatrix>& Jw, const MethodStep& step,
               const Eigen::Ref<const Vector>& t, double beta, RowMatrix& B);
   void forget() { metric_ready_ = false; }
+  // SJT's damped form and least squares: B = J_w, the task part of the Hessian of the objective
+  // their step minimises, 1/2 |J_w q_dot - v|^2 + 1/2 q_dot^T diag(lam) q_dot (v = K e_w and
+  // the feed-forward; lam = l D^-1, or l I), so that the stage's metric diag(lam) + B^T B is
+  // that Hessian; true. Otherwise false, B untouched (the stage takes metric()): the transpose
+  // feedback's objective 1/2 q_dot^T diag(lam) q_dot - (K e_w)^T J_w q_dot has no task part,
+  // and JT's damped step is not the minimiser of one with its joint metric (l |J_i|^2).
+  bool objective_rows(const Eigen::Ref<const RowMatrix>& Jw, RowMatrix& B) const;
   const Eigen::MatrixXd& task_metric() const { return metric_; }
 
   // the largest eigenvalue of the symmetric part of the square A, (A + A^T) / 2: at least the
