@@ -111,6 +111,10 @@ RESTING = [("panda", 0), ("panda", 1), ("panda", 2), ("panda", 3), ("panda", 4),
            ("panda", 14),
            ("ur5", 0), ("ur5", 1), ("ur5", 2), ("ur5", 3), ("ur5", 4), ("ur5", 5), ("ur5", 6),
            ("ur5", 7), ("ur10", 0), ("ur10", 1), ("ur10", 3)]
+# arms no other collision test uses. Before the stage's projection took the Hessian of the
+# method's own objective as its metric, five of UR3's ten (seeds 3, 5, 6, 7, 9) chattered
+# against the obstacle at 1.6 rad/s RMS for good, and two of xArm7's (6: 1.2, 9: 4e-3 rad/s)
+RESTING += [("ur3_gripper", seed) for seed in range(10)] + [("xarm7", seed) for seed in range(10)]
 
 
 @pytest.fixture(scope="module")
@@ -118,11 +122,18 @@ def ur10() -> sjt.Robot:
     return sjt.Robot.from_example("ur10")
 
 
+@pytest.fixture(scope="module")
+def arms(panda, ur5, ur10) -> dict[str, sjt.Robot]:
+    loaded = {"panda": panda, "ur5": ur5, "ur10": ur10}
+    loaded.update((name, sjt.Robot.from_example(name)) for name in ("ur3_gripper", "xarm7"))
+    return loaded
+
+
 @pytest.mark.parametrize("name,seed", RESTING)
-def test_random_blocked_targets_come_to_rest(name, seed, panda, ur5, ur10):
+def test_random_blocked_targets_come_to_rest(name, seed, arms):
     """A target inside an obstacle, with self-collision: both methods come to rest, every
     pair at least margin - 1 mm apart (independently)."""
-    robot = {"panda": panda, "ur5": ur5, "ur10": ur10}[name]
+    robot = arms[name]
     q0, end, target, obstacle = _blocked_scene(robot, np.random.default_rng(seed))
     moving = {}
     for method in ("sjt", "dls"):
