@@ -226,7 +226,7 @@ void Controller::lower_levels(const double* ffw) {
 // limit and the others in proportion, where the nearest feasible velocity drives every joint
 // the task can use (measured: per step 1.5-1.7 times the task progress of the scaled step, the
 // median over 200 random far targets on each of UR5, UR10, Panda and Kinova; Kinova's random
-// full-range reaches missed within 5 s 50 -> 43 %, Panda's 47 -> 40 %). A joint without a speed
+// full-range reaches missed within 5 s 50 -> 40 %, Panda's 47 -> 43 %). A joint without a speed
 // limit is held within the norm of the method's whole step meanwhile. Then the lower levels,
 // nearest their own step with the first level's task motion held; last, where a row is still
 // broken, the nearest velocity within the whole box and the rows.
@@ -463,8 +463,9 @@ void Controller::lower_nearest(const Eigen::Ref<const RowMatrix>& J0,
 // decrease below a stalled step's (kStallRate) counts as none, and the Cauchy point is then 0:
 // an x0_ that raises the model gives way to it, and the arm rests at its minimum against the
 // limits (the decision no longer turns on whether that decrease rounds to 0 or to 1e-16 of
-// |a|^2, which gave the same motion in mm and in m different steps). A Cauchy point that breaks a row or lets a held row go is not taken (the projection's own rows
-// stand), nor is one where the box does not hold 0 (a joint returning into its range).
+// |a|^2, which gave the same motion in mm and in m different steps). A Cauchy point that
+// breaks a row or lets a held row go is not taken (the projection's own rows stand), nor is
+// one where the box does not hold 0 (a joint returning into its range).
 void Controller::sufficient_decrease(const Eigen::Ref<const RowMatrix>& J0,
                                      const Eigen::Ref<const RowMatrix>& A,
                                      const Eigen::Ref<const Vector>& b, double ball) {

@@ -134,7 +134,8 @@ void Method::metric(const Eigen::Ref<const RowMatrix>& Jw, const MethodStep& ste
       gram_.noalias() = scaled_ * Jw.transpose();
       const double trace = gram_.trace();
       const double delta =
-          std::max((transpose ? 1e-2 : 1e-9) * std::max(trace, 1e-300) / m, transpose ? 0.0 : 1e-3 * l);
+          std::max((transpose ? 1e-2 : 1e-9) * std::max(trace, 1e-300) / m,
+                   transpose ? 0.0 : 1e-3 * l);
       gram_.diagonal().array() += delta;
       llt_.compute(gram_);
       work_.setIdentity(m, m);
