@@ -177,9 +177,10 @@ def _checked_bounds(limit: Limit, bounds, n: int) -> tuple[np.ndarray, np.ndarra
 def active_limits(controller, joint_names: Sequence[str], user: UserLimits | None,
                   speed_by: Sequence[str]) -> tuple[tuple[str, str], ...]:
     """``(limit, joint)`` for each joint the stage held on a bound (its velocity on the bound
-    and different from the method's): from the compiled report's reasons. ``speed_by`` names
+    and different from the method's; where the arm rests short of a step too small to make,
+    that step's): from the compiled report's reasons. ``speed_by`` names
     the limit behind each joint's speed bound (``"velocity"``, or a user limit's speed caps)."""
-    x, desired = controller.velocity, controller.desired
+    x, desired = controller.holding, controller.desired  # (the step the arm rests short of)
     lower, upper = controller.lower, controller.upper
     lower_by, upper_by = controller.lower_by, controller.upper_by
     pairs: list[tuple[str, str]] = []

@@ -91,9 +91,11 @@ class StepInfo:
             target's own velocity, lowers ``1/2 |e_w|^2`` by less than :data:`STALL_RATE` of
             itself per second. The stage never stops an arm that some admissible velocity
             would bring closer (its step is a descent direction of the error whenever one
-            exists), so the arm is at a stationary point of its error: with ``active_limits``
-            naming the limits that hold it, a minimum against them (``solver.move_to()``
-            reaches such targets by another way); without, a minimum of the error itself — a
+            exists; a projected step that lowers ``1/2 |e_w|^2`` by less than 1e-4 of
+            ``|e_w|^2`` per second gives way to rest), so the arm is at a stationary point of
+            its error: with ``active_limits`` naming the limits that hold it, a minimum
+            against them (``solver.move_to()`` reaches such targets by another way); without,
+            a minimum of the error itself — a
             target out of reach, or one reachable only on another branch of the inverse
             kinematics — or, for JT and SJT, a saddle that the escape tests after a window of
             stalled steps (``escaped`` is then true on the steps that follow).

@@ -113,7 +113,11 @@ RESTING = [("panda", 0), ("panda", 1), ("panda", 2), ("panda", 3), ("panda", 4),
            ("ur5", 7), ("ur10", 0), ("ur10", 1), ("ur10", 3)]
 # arms no other collision test uses. Before the stage's projection took the Hessian of the
 # method's own objective as its metric, five of UR3's ten (seeds 3, 5, 6, 7, 9) chattered
-# against the obstacle at 1.6 rad/s RMS for good, and two of xArm7's (6: 1.2, 9: 4e-3 rad/s)
+# against the obstacle at 1.6 rad/s RMS for good, and two of xArm7's (6: 1.2, 9: 4e-3 rad/s).
+# Before a step that lowers the error by less than a resting arm's rate gave way to rest, Panda's
+# seeds 1, 2, 7 and 11 and xArm7's seed 6 slid on at 3e-3 to 8e-2 rad/s with the hand still:
+# the projection's answer lowered the linearised error by 3e-7 to 2e-5 of itself per second
+# (it grew by 5e-4 per second on Panda's seed 7)
 RESTING += [("ur3_gripper", seed) for seed in range(10)] + [("xarm7", seed) for seed in range(10)]
 
 
@@ -135,18 +139,13 @@ def test_random_blocked_targets_come_to_rest(name, seed, arms):
     pair at least margin - 1 mm apart (independently)."""
     robot = arms[name]
     q0, end, target, obstacle = _blocked_scene(robot, np.random.default_rng(seed))
-    moving = {}
     for method in ("sjt", "dls"):
         limit = CollisionLimit(robot, [obstacle], self_collision=True, margin=MARGIN)
         # DLS's error damping (w |e_w| L, large while the obstacle holds the arm short) slides
         # it more slowly to its rest along the obstacle: 10 s
         qs = _run(robot, q0, target, limit, method, 6.0 if method == "sjt" else 10.0)
         assert _closest(robot, [obstacle], limit, qs) >= MARGIN - 1e-3, method
-        if _rest(qs) >= 1e-3:
-            moving[method] = _rest(qs)
-    if moving:
-        pytest.xfail(f"a target missed: not at rest against the obstacle ({moving} rad/s RMS "
-                     "over the last second; aim 1e-3)")
+        assert _rest(qs) < 1e-3, method
 
 
 # seeds that settle more slowly: the speed limits cut the blocked push to about 2 % of the
@@ -159,14 +158,10 @@ SLOW = [("ur5", 8), ("ur5", 13), ("ur10", 2)]
 def test_slow_blocked_targets_come_to_rest_within_20_s(name, seed, ur5, ur10):
     robot = {"ur5": ur5, "ur10": ur10}[name]
     q0, end, target, obstacle = _blocked_scene(robot, np.random.default_rng(seed))
-    moving = {}
     for method in ("sjt", "dls"):
         limit = CollisionLimit(robot, [obstacle], self_collision=True, margin=MARGIN)
         qs = _run(robot, q0, target, limit, method, 20.0)
         assert _closest(robot, [obstacle], limit, qs) >= MARGIN - 1e-3, method
-        if _rest(qs) >= 1e-3:
-            moving[method] = _rest(qs)
-    if moving:
-        pytest.xfail(f"a target missed: not at rest after 20 s ({moving} rad/s RMS; aim 1e-3)")
+        assert _rest(qs) < 1e-3, method
 
 

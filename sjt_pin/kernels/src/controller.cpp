@@ -27,6 +27,14 @@ constexpr double kSufficient = 0.25;
 // 1/s: a step that lowers 1/2 |e_w|^2 by less than this share of |e_w|^2 per second makes no
 // progress (StepInfo's STALL_RATE, sjt_pin.step_info)
 constexpr double kStallRate = 1e-6;
+// 1/s: a projected step that lowers the linearised 1/2 |e_w|^2 by less than this share of
+// |e_w|^2 per second is no motion worth making, and the arm rests (sufficient_decrease).
+// Measured against obstacles the arm cannot pass (Panda, xArm7; tests/test_collision_rest.py):
+// the projection's answer there lowered it by 3e-7 to 2.2e-5 of itself per second while the
+// elbow slid at 3e-3 to 8e-2 rad/s and the true error stayed or grew (Panda's seed 7 by 5e-4
+// per second); any step that makes progress worth the name does far more (the method's own
+// gain is 1 to 100 per second)
+constexpr double kRestRate = 1e-4;
 // lower_nearest's weight of a posture's rows beside the tasks above it (the tasks' level comes
 // first: with the posture's full weight, TALOS-like humanoids rested 1e-5 m short of a hand
 // target, the posture pulling against the hand)
@@ -72,7 +80,7 @@ Controller::Controller(const MethodParameters& method_, Index rows, Index nv_, I
   escape_velocity.setZero(nv);
   for (Vector* v : {&desired, &fb, &ff, &velocity, &fb0_, &ff0_, &desired_top, &x0_, &xa_,
                     &tmp_, &tmp2_, &lam_low_, &low_p_, &low_h_, &low_d_, &low_dh_, &low_dinv_,
-                    &anchor_, &coef_, &wide_lo_, &wide_hi_})
+                    &anchor_, &coef_, &wide_lo_, &wide_hi_, &rest_, &holding})
     v->setZero(nv);
   basis_.setZero(nv, nv);
   const Index r0 = levels[0].end - levels[0].begin;
@@ -269,7 +277,7 @@ void Controller::project(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<
       report.iterations += r.iterations;
       report.converged = report.converged && r.converged;
     }
-    sufficient_decrease(J0, A, b, desired_top.norm());
+    sufficient_decrease(J0, A, b, H, hd, desired_top.norm());
   }
   if (!lower) {
     velocity = x0_;
@@ -468,7 +476,9 @@ void Controller::lower_nearest(const Eigen::Ref<const RowMatrix>& J0,
 // one where the box does not hold 0 (a joint returning into its range).
 void Controller::sufficient_decrease(const Eigen::Ref<const RowMatrix>& J0,
                                      const Eigen::Ref<const RowMatrix>& A,
-                                     const Eigen::Ref<const Vector>& b, double ball) {
+                                     const Eigen::Ref<const Vector>& b,
+                                     const Eigen::Ref<const RowMatrix>& H,
+                                     const Eigen::Ref<const Vector>& hd, double ball) {
   if (!(ball > 0.0)) return;
   for (Index j = 0; j < nv; ++j)
     if (plo_[j] > 0.0 || phi_[j] < 0.0) return;
@@ -492,7 +502,27 @@ void Controller::sufficient_decrease(const Eigen::Ref<const RowMatrix>& J0,
     }
   }
   res_ = wanted_ - tmp2_;
-  const double progress = aa - res_.squaredNorm();
+  double progress = aa - res_.squaredNorm();
+  // a step below a resting arm's progress (kRestRate) gives way to the least motion within
+  // the limits (0 where 0 is feasible: a row the arm is inside of pushes it out), fully at
+  // kRestRate and not at all at twice that, so that the velocity stays continuous in q
+  const double rest = 2.0 * kRestRate * dt_ * aa;
+  if (progress < 2.0 * rest) {
+    const double w = std::clamp(progress / rest - 1.0, 0.0, 1.0);
+    rest_.setZero(nv);
+    if (!feasible(rest_, A, b, plo_, phi_) || !held_kept(rest_)) {
+      xa_.setZero(nv);
+      ProjectionReport r = projection_.solve(xa_, lam_low_, Bnone_, plo_, phi_, A, b, H, hd,
+                                             rest_);
+      report.iterations += r.iterations;
+    }
+    holding = x0_;
+    rested_ = true;
+    x0_ = w * x0_ + (1.0 - w) * rest_;
+    tmp2_.noalias() = J0 * x0_;
+    res_ = wanted_ - tmp2_;
+    progress = aa - res_.squaredNorm();
+  }
   if (!(best >= 0.0) || progress >= kSufficient * best) return;
   if (!feasible(cauchy_, A, b, plo_, phi_)) return;
   if (!held_kept(cauchy_)) return;
@@ -740,6 +770,7 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
   // that breaks a row, the projection within the whole box, or the hard box alone (the
   // smoothness yields to a collision row).
   report = ProjectionReport{};
+  rested_ = false;
   kept = feasible(desired, A, bk, box.lo, box.hi);
   if (kept) {
     velocity = desired;
@@ -777,9 +808,10 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
     }
     if (!report.converged) status |= kUnconverged;
   }
+  if (!rested_) holding = velocity;
   rows_active.clear();
   for (Index i = 0; i < A.rows(); ++i)
-    if (A.row(i).dot(velocity) >= bk[i] - 1e-9 * (1.0 + std::abs(bk[i]))) rows_active.push_back(static_cast<int>(i));
+    if (A.row(i).dot(holding) >= bk[i] - 1e-9 * (1.0 + std::abs(bk[i]))) rows_active.push_back(static_cast<int>(i));
   // the share of level 0's task motion kept
   if (kept) {
     task_scale = 1.0;

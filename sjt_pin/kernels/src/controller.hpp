@@ -74,6 +74,9 @@ class Controller {
   double e_sq = 0.0, ff_sq = 0.0, regular = 0.0, task_scale = 1.0;
   Vector desired, fb, ff, velocity;  // the method's velocity, its two parts, and the result
   Vector desired_top;                // the first level's own velocity (with the escape's)
+  // the velocity whose bounds and rows StepInfo names as holding the arm: the result, or
+  // where the arm rests short of a step worth making (sufficient_decrease), that step
+  Vector holding;
   JointBox box;
   std::vector<int> rows_active;
   ProjectionReport report;
@@ -88,7 +91,9 @@ class Controller {
   void null_project(Vector& v);
   void sufficient_decrease(const Eigen::Ref<const RowMatrix>& J0,
                            const Eigen::Ref<const RowMatrix>& A,
-                           const Eigen::Ref<const Vector>& b, double ball);
+                           const Eigen::Ref<const Vector>& b,
+                           const Eigen::Ref<const RowMatrix>& H,
+                           const Eigen::Ref<const Vector>& hd, double ball);
   void cauchy_point(const Eigen::Ref<const RowMatrix>& J0, double ball);
   void lower_nearest(const Eigen::Ref<const RowMatrix>& J0, const Eigen::Ref<const RowMatrix>& A,
                      const Eigen::Ref<const Vector>& b, const Vector& lo, const Vector& hi);
@@ -119,7 +124,8 @@ class Controller {
   // project(): the box with unbounded joints capped; the task velocity that removes level 0's
   // error in a step (e_w / dt, and the feed-forward); J0^T of it, the error's steepest
   // descent; the Cauchy point and its path's state
-  Vector plo_, phi_, wanted_, descent_, cauchy_, free_, jd_, res_;
+  Vector plo_, phi_, wanted_, descent_, cauchy_, free_, jd_, res_, rest_;
+  bool rested_ = false;
   // lower_nearest's task rows, their posture's diagonal, its anchor and Woodbury solve
   RowMatrix low_B_;
   Vector low_p_, low_h_, low_r_, low_d_, low_dh_, low_dinv_, anchor_;

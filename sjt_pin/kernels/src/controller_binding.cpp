@@ -170,6 +170,8 @@ void register_controller(nb::module_& m) {
                    nb::rv_policy::reference_internal)
       .def_prop_ro("velocity", [](Controller& c) { return view<ReadView>(c, c.velocity.data(), c.nv); },
                    nb::rv_policy::reference_internal)
+      .def_prop_ro("holding", [](Controller& c) { return view<ReadView>(c, c.holding.data(), c.nv); },
+                   nb::rv_policy::reference_internal)
       .def_prop_ro("alpha", [](Controller& c) { return view<ReadView>(c, c.top.alpha.data(), c.nv); },
                    nb::rv_policy::reference_internal)
       .def_prop_ro("lower", [](Controller& c) { return view<ReadView>(c, c.box.lo.data(), c.nv); },
