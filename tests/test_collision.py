@@ -649,6 +649,24 @@ def test_demo_collision_scene_keeps_the_margin_and_plots_the_distance():
 
 
 # -- sjt-pin bench collision --------------------------------------------------------------
+def test_the_bench_checker_measures_a_robot_loaded_from_its_urdf_file(ur5):
+    """A robot from ``Robot.from_urdf`` carries no collision model: the independent checker
+    loads it from the URDF (it raised AttributeError), and measures what it measures on the
+    example robot."""
+    from sjt_pin.bench.collision import Checker
+
+    loaded = sjt.Robot.from_urdf(ur5.urdf, ee_frame=ur5.ee_frame)
+    assert loaded.collision_model is None
+    ball = (coal.Sphere(0.05), pin.SE3(np.eye(3), np.array([0.3, 0.2, 0.4])))
+    pairs = CollisionLimit(ur5, [ball], self_collision=True).pair_names
+    checkers = [Checker(robot, [ball], pairs) for robot in (ur5, loaded)]
+    rng = np.random.default_rng(0)
+    for _ in range(5):
+        q = rng.uniform(-np.pi, np.pi, ur5.nq)
+        (d0, pair0), (d1, pair1) = (c.closest(q) for c in checkers)
+        assert d1 == pytest.approx(d0, abs=1e-12) and pair1 == pair0
+
+
 @pytest.mark.slow
 def test_bench_collision_meets_the_targets():
     """The bench's scenes for SJT and DLS: without the limit each scene collides; with it no

@@ -32,6 +32,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..limits.collision import CollisionLimit, _to_hulls
+from ..limits.collision_geometry import collision_model_of
 from ..robot import Robot
 from ..solvers import make_solver
 from ..trajectories import PoseInterpolation
@@ -128,7 +129,7 @@ class Checker:
     def __init__(self, robot: Robot, obstacles, pair_names):
         self.model = robot.model
         self.data = robot.model.createData()
-        self.mesh = robot.collision_model.copy()
+        self.mesh = collision_model_of(robot)  # (a URDF file's robot loads it here)
         for i, (shape, pose) in enumerate(obstacles):
             self.mesh.addGeometryObject(pin.GeometryObject(f"obstacle_{i}", 0, 0, pose, shape))
         names = [g.name for g in self.mesh.geometryObjects]

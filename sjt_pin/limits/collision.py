@@ -102,11 +102,11 @@ from .collision_geometry import (
     CollisionError,
     PairDistance,
     _check_pose,
-    _collision_model,
     _srdf_of,
     _to_hulls,
     _twist,
     coal,
+    collision_model_of,
 )
 from .collision_moving import MovingMixin
 from .collision_pairs import PairsMixin
@@ -201,7 +201,7 @@ class CollisionLimit(PairsMixin, TablesMixin, BroadPhaseMixin, MovingMixin, Rows
         self._mimics = list(getattr(robot, "mimic_joints", ()))
         self._mimic = _mimic_map(robot.model, self._mimics)
         source = self.__dict__.pop("_restored_geometry", None)  # set by __setstate__
-        self.geometry = source.copy() if source is not None else _collision_model(robot)
+        self.geometry = source.copy() if source is not None else collision_model_of(robot)
         self._source = self.geometry.copy()  # the robot's own geometry (meshes), for copies
         if convex:
             _to_hulls(self.geometry)

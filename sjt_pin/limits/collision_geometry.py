@@ -87,7 +87,9 @@ def _srdf_of(robot) -> str | None:
     return srdf if os.path.isfile(srdf) else None
 
 
-def _collision_model(robot) -> pin.GeometryModel:
+def collision_model_of(robot) -> pin.GeometryModel:
+    """A copy of ``robot``'s collision geometry: its ``collision_model``, else the
+    ``<collision>`` elements of its URDF (a robot loaded with :meth:`Robot.from_urdf`)."""
     geom = getattr(robot, "collision_model", None)
     if geom is None:
         urdf = getattr(robot, "urdf", None)
