@@ -143,7 +143,9 @@ def test_an_arm_held_by_a_position_limit_says_it_stalled_and_which_limit(options
     for _ in range(3000):
         q = solver.step(q, target.translation)
     info = solver.last
-    assert q[0] == pytest.approx(2.0, abs=1e-12) and np.abs(info.dq).max() < 1e-12  # at rest
+    # at rest, at the limit (under acceleration limits 5e-11 rad short of it: braking into the
+    # limit, the last of the approach lowers the error by less than the stage's rest rate)
+    assert q[0] == pytest.approx(2.0, abs=1e-9) and np.abs(info.dq).max() < 1e-12
     assert info.error_norm > 0.1 and info.stalled
     assert ("position", "shoulder") in info.active_limits
 

@@ -505,15 +505,18 @@ void Controller::sufficient_decrease(const Eigen::Ref<const RowMatrix>& J0,
   double progress = aa - res_.squaredNorm();
   // a step below a resting arm's progress (kRestRate) gives way to the least motion within
   // the limits (0 where 0 is feasible: a row the arm is inside of pushes it out), fully at
-  // kRestRate and not at all at twice that, so that the velocity stays continuous in q. Not
-  // under acceleration limits: each joint brakes toward the projection's answer there, and
-  // toward that rest a ball driven at Panda's hand at 0.5 m/s got close enough that the rows
-  // then took the arm past its acceleration (1.08x) and jerk (1.17x) limits
+  // kRestRate and not at all at twice that, so that the velocity stays continuous in q. Under
+  // acceleration limits only where 0 is feasible: each joint brakes toward the projection's
+  // answer there, and toward the least motion that keeps the rows a ball driven at Panda's
+  // hand at 0.5 m/s got close enough that the rows then took the arm past its acceleration
+  // (1.08x) and jerk (1.17x) limits
   const double rest = 2.0 * kRestRate * dt_ * aa;
-  if (!bounds.smooth && progress < 2.0 * rest) {
+  rest_.setZero(nv);
+  const bool still = progress < 2.0 * rest && feasible(rest_, A, b, plo_, phi_) &&
+                     held_kept(rest_);
+  if (progress < 2.0 * rest && (still || !bounds.smooth)) {
     const double w = std::clamp(progress / rest - 1.0, 0.0, 1.0);
-    rest_.setZero(nv);
-    if (!feasible(rest_, A, b, plo_, phi_) || !held_kept(rest_)) {
+    if (!still) {
       xa_.setZero(nv);
       ProjectionReport r = projection_.solve(xa_, lam_low_, Bnone_, plo_, phi_, A, b, H, hd,
                                              rest_);
