@@ -139,8 +139,8 @@ def test_blocked_targets_with_acceleration_limits_come_to_rest(seed, method):
         reported.append(bool(solver.last.limit_conflicts))
         errors.append(solver.last.error_norm)
     qs = np.array(qs)
-    # no farther from the target than 3 s before (means over a second: the contact's bounce,
-    # the expected failure below, moves the error by some 1e-5 from step to step)
+    # no farther from the target than 3 s before (means over a second: the motion along the
+    # contact, the expected failure below, moves the error by some 1e-5 from step to step)
     assert np.mean(errors[-1000:]) <= np.mean(errors[-4000:-3000]) + 1e-9
     assert _closest(panda, [obstacle], limit, qs) >= MARGIN - 1e-3
     v = np.diff(qs, axis=0) / DT  # (Panda's coordinates are its tangent space)
@@ -149,7 +149,9 @@ def test_blocked_targets_with_acceleration_limits_come_to_rest(seed, method):
     for k in np.flatnonzero(over & ~np.concatenate([[False], over[:-1]])):
         assert reported[k], f"step {k} broke the acceleration limit unreported"
     if _rest(qs) >= 1e-3:
-        pytest.xfail(f"a target missed: with jerk limits the contact still bounces at "
+        # (seed 9, SJT, traced: sliding along the obstacle with the error still falling,
+        # 0.1122 -> 0.1099 over 0.6 s, the joints ramping against the dampers)
+        pytest.xfail(f"a target missed: with jerk limits the arm still moves at "
                      f"{_rest(qs):.1e} rad/s RMS over the 8th second (aim: 1e-3)")
 
 

@@ -473,7 +473,9 @@ void Controller::lower_nearest(const Eigen::Ref<const RowMatrix>& J0,
 // limits (the decision no longer turns on whether that decrease rounds to 0 or to 1e-16 of
 // |a|^2, which gave the same motion in mm and in m different steps). A Cauchy point that
 // breaks a row or lets a held row go is not taken (the projection's own rows stand), nor is
-// one where the box does not hold 0 (a joint returning into its range).
+// one where the box does not hold 0 (a joint returning into its range). Before that, an x0_
+// that lowers the model by less than a resting arm does (kRestRate) gives way to rest; H, hd:
+// the held rows and their motion, which the rest keeps.
 void Controller::sufficient_decrease(const Eigen::Ref<const RowMatrix>& J0,
                                      const Eigen::Ref<const RowMatrix>& A,
                                      const Eigen::Ref<const Vector>& b,
