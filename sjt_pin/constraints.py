@@ -178,9 +178,9 @@ def active_limits(controller, joint_names: Sequence[str], user: UserLimits | Non
                   speed_by: Sequence[str]) -> tuple[tuple[str, str], ...]:
     """``(limit, joint)`` for each joint the stage held on a bound (its velocity on the bound
     and different from the method's; where the arm rests short of a step too small to make,
-    that step's): from the compiled report's reasons. ``speed_by`` names
-    the limit behind each joint's speed bound (``"velocity"``, or a user limit's speed caps)."""
-    x, desired = controller.holding, controller.desired  # (the step the arm rests short of)
+    that step's): from the compiled report's reasons. ``speed_by`` names the limit behind
+    each joint's speed bound (``"velocity"``, or a user limit's speed caps)."""
+    x, desired = controller.holding, controller.desired
     lower, upper = controller.lower, controller.upper
     lower_by, upper_by = controller.lower_by, controller.upper_by
     pairs: list[tuple[str, str]] = []

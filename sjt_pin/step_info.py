@@ -95,10 +95,10 @@ class StepInfo:
             ``|e_w|^2`` per second gives way to rest), so the arm is at a stationary point of
             its error: with ``active_limits`` naming the limits that hold it, a minimum
             against them (``solver.move_to()`` reaches such targets by another way); without,
-            a minimum of the error itself — a
-            target out of reach, or one reachable only on another branch of the inverse
-            kinematics — or, for JT and SJT, a saddle that the escape tests after a window of
-            stalled steps (``escaped`` is then true on the steps that follow).
+            a minimum of the error itself — a target out of reach, or one reachable only on
+            another branch of the inverse kinematics — or, for JT and SJT, a saddle that the
+            escape tests after a window of stalled steps (``escaped`` is then true on the
+            steps that follow).
         levels: one :class:`LevelInfo` per priority level, top first: its error norm and
             the share of its task motion the step kept.
         velocity_scale: the same as ``task_scale`` (its former name).

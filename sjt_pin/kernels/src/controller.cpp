@@ -513,23 +513,24 @@ void Controller::sufficient_decrease(const Eigen::Ref<const RowMatrix>& J0,
   // hand at 0.5 m/s got close enough that the rows then took the arm past its acceleration
   // (1.08x) and jerk (1.17x) limits
   const double rest = 2.0 * kRestRate * dt_ * aa;
-  rest_.setZero(nv);
-  const bool still = progress < 2.0 * rest && feasible(rest_, A, b, plo_, phi_) &&
-                     held_kept(rest_);
-  if (progress < 2.0 * rest && (still || !bounds.smooth)) {
-    const double w = std::clamp(progress / rest - 1.0, 0.0, 1.0);
-    if (!still) {
-      xa_.setZero(nv);
-      ProjectionReport r = projection_.solve(xa_, lam_low_, Bnone_, plo_, phi_, A, b, H, hd,
-                                             rest_);
-      report.iterations += r.iterations;
+  if (progress < 2.0 * rest) {
+    rest_.setZero(nv);
+    const bool still = feasible(rest_, A, b, plo_, phi_) && held_kept(rest_);
+    if (still || !bounds.smooth) {
+      if (!still) {
+        xa_.setZero(nv);
+        ProjectionReport r = projection_.solve(xa_, lam_low_, Bnone_, plo_, phi_, A, b, H, hd,
+                                               rest_);
+        report.iterations += r.iterations;
+      }
+      const double w = std::clamp(progress / rest - 1.0, 0.0, 1.0);
+      holding = x0_;
+      rested_ = true;
+      x0_ = w * x0_ + (1.0 - w) * rest_;
+      tmp2_.noalias() = J0 * x0_;
+      res_ = wanted_ - tmp2_;
+      progress = aa - res_.squaredNorm();
     }
-    holding = x0_;
-    rested_ = true;
-    x0_ = w * x0_ + (1.0 - w) * rest_;
-    tmp2_.noalias() = J0 * x0_;
-    res_ = wanted_ - tmp2_;
-    progress = aa - res_.squaredNorm();
   }
   if (!(best >= 0.0) || progress >= kSufficient * best) return;
   if (!feasible(cauchy_, A, b, plo_, phi_)) return;
