@@ -115,6 +115,31 @@ def test_a_solver_with_acceleration_limits_slows_the_rows():
     assert any(rows[1][1][k] < 0.5 * rows[0][1][k] for k in rows[0][0])
 
 
+def _blocked_run(seed, method, acceleration, jerk=None):
+    """Panda's blocked scene ``seed`` for 8 s with ``acceleration`` (and ``jerk``) as every
+    joint's limit: the robot, the obstacle, its limit, the configurations (8001, nq) and, per
+    step, whether ``limit_conflicts`` was reported and the error norm."""
+    panda = sjt.Robot.from_example("panda")
+    q0, end, target, obstacle = _blocked_scene(panda, np.random.default_rng(seed))
+    limit = CollisionLimit(panda, [obstacle], self_collision=True, margin=MARGIN)
+    smooth = {} if jerk is None else {"jerk_limits": np.full(panda.nv, jerk)}
+    solver = sjt.make_solver(method, panda, dt=DT, limits=[limit],
+                             acceleration_limits=np.full(panda.nv, acceleration), **smooth)
+    q, qs, reported, errors = q0.copy(), [q0.copy()], [], []
+    for k in range(8000):
+        pose, velocity = target(k * DT)
+        q = solver.step(q, pose, velocity)
+        qs.append(q)
+        reported.append(bool(solver.last.limit_conflicts))
+        errors.append(solver.last.error_norm)
+    return panda, obstacle, limit, np.array(qs), reported, errors
+
+
+def _accelerations(qs, n):
+    v = np.diff(qs, axis=0) / DT  # (Panda's coordinates are its tangent space)
+    return np.diff(np.vstack([np.zeros((1, n)), v]), axis=0) / DT
+
+
 @pytest.mark.slow
 # Panda's blocked scenes with 15 rad/s^2 and 7,500 rad/s^3. An arm whose target lies behind an
 # obstacle slides along it while that lowers the error (the stage never stops an arm some motion
@@ -124,28 +149,13 @@ def test_a_solver_with_acceleration_limits_slows_the_rows():
 @pytest.mark.parametrize("seed", [0, 9])
 @pytest.mark.parametrize("method", ["sjt", "dls"])
 def test_blocked_targets_with_acceleration_limits_come_to_rest(seed, method):
-    panda = sjt.Robot.from_example("panda")
-    n = panda.nv
-    accel, jerk = np.full(n, 15.0), np.full(n, 7500.0)
-    q0, end, target, obstacle = _blocked_scene(panda, np.random.default_rng(seed))
-    limit = CollisionLimit(panda, [obstacle], self_collision=True, margin=MARGIN)
-    solver = sjt.make_solver(method, panda, dt=DT, limits=[limit], acceleration_limits=accel,
-                             jerk_limits=jerk)
-    q, qs, reported, errors = q0.copy(), [q0.copy()], [], []
-    for k in range(8000):
-        pose, velocity = target(k * DT)
-        q = solver.step(q, pose, velocity)
-        qs.append(q)
-        reported.append(bool(solver.last.limit_conflicts))
-        errors.append(solver.last.error_norm)
-    qs = np.array(qs)
+    accel = 15.0
+    panda, obstacle, limit, qs, reported, errors = _blocked_run(seed, method, accel, 7500.0)
     # no farther from the target than 3 s before (means over a second: the motion along the
     # contact, the expected failure below, moves the error by some 1e-5 from step to step)
     assert np.mean(errors[-1000:]) <= np.mean(errors[-4000:-3000]) + 1e-9
     assert _closest(panda, [obstacle], limit, qs) >= MARGIN - 1e-3
-    v = np.diff(qs, axis=0) / DT  # (Panda's coordinates are its tangent space)
-    a = np.diff(np.vstack([np.zeros((1, n)), v]), axis=0) / DT
-    over = np.max(np.abs(a) / accel, axis=1) > 1.001
+    over = np.max(np.abs(_accelerations(qs, panda.nv)) / accel, axis=1) > 1.001
     for k in np.flatnonzero(over & ~np.concatenate([[False], over[:-1]])):
         assert reported[k], f"step {k} broke the acceleration limit unreported"
     if _rest(qs) >= 1e-3:
@@ -163,22 +173,10 @@ def test_blocked_targets_with_acceleration_limits_come_to_rest(seed, method):
 @pytest.mark.parametrize("seed", [2, 11])
 @pytest.mark.parametrize("method", ["sjt", "dls"])
 def test_blocked_targets_with_acceleration_limits_alone_come_to_rest(seed, method):
-    panda = sjt.Robot.from_example("panda")
-    accel = np.full(panda.nv, 15.0)
-    q0, end, target, obstacle = _blocked_scene(panda, np.random.default_rng(seed))
-    limit = CollisionLimit(panda, [obstacle], self_collision=True, margin=MARGIN)
-    solver = sjt.make_solver(method, panda, dt=DT, limits=[limit], acceleration_limits=accel)
-    q, qs, reported = q0.copy(), [q0.copy()], []
-    for k in range(8000):
-        pose, velocity = target(k * DT)
-        q = solver.step(q, pose, velocity)
-        qs.append(q)
-        reported.append(bool(solver.last.limit_conflicts))
-    qs = np.array(qs)
+    accel = 15.0
+    panda, obstacle, limit, qs, reported, _ = _blocked_run(seed, method, accel)
     assert _closest(panda, [obstacle], limit, qs) >= MARGIN - 1e-3
-    v = np.diff(qs, axis=0) / DT
-    a = np.diff(np.vstack([np.zeros((1, panda.nv)), v]), axis=0) / DT
-    over = np.max(np.abs(a) / accel, axis=1) > 1.001
+    over = np.max(np.abs(_accelerations(qs, panda.nv)) / accel, axis=1) > 1.001
     assert all(reported[k] for k in np.flatnonzero(over)), "an acceleration limit broken unreported"
     assert _rest(qs) < 1e-3
 
