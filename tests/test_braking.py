@@ -23,9 +23,11 @@ def stopping_distance(w, a0, A, J):
 def simulated_stop(w, a0, A, J, h=1e-6):
     """The distance a braking covers, integrated in steps of h: the acceleration ramps at the
     jerk limit toward -A (down to 0 first when positive), holds, and ramps back to 0 when the
-    velocity left is what that ramp loses; it ends where the velocity reaches 0."""
+    velocity left is what that ramp loses; it ends where the velocity reaches 0 (or, from a
+    velocity away from the room, where the acceleration toward it has ramped down before the
+    velocity turned)."""
     x, v, a = 0.0, w, a0
-    while v > 0.0:
+    while v > 0.0 or a > 0.0:
         release = a < 0.0 and a * a / (2.0 * J) >= v  # ramping to 0 now loses all of v
         a = a + J * h if release else max(a - J * h, -A) if a > -A else a
         v += a * h
@@ -34,11 +36,12 @@ def simulated_stop(w, a0, A, J, h=1e-6):
 
 
 @settings(max_examples=60, deadline=None)
-@given(w=st.floats(0.01, 2.0), a0=st.floats(-1.0, 1.0), A=st.floats(2.0, 30.0),
+@given(w=st.floats(-1.0, 2.0), a0=st.floats(-1.0, 1.0), A=st.floats(2.0, 30.0),
        J=st.floats(500.0, 20000.0))
 def test_the_stopping_distance_is_the_simulated_braking(w, a0, A, J):
     """From a deceleration within the limit or an acceleration (a0 times A), the formula is
-    the distance the jerk-limited braking covers (to the integration's step)."""
+    the distance the jerk-limited braking covers (to the integration's step), also from a
+    velocity away from the room (w < 0) that an acceleration toward it turns."""
     a0 = a0 * A
     exact = float(stopping_distance(np.array([w]), np.array([a0]), np.array([A]), np.array([J]))[0])
     assert abs(exact - simulated_stop(w, a0, A, J)) <= 1e-5 * (1.0 + exact) + 3e-6 * w
@@ -73,9 +76,10 @@ def test_the_braking_speed_is_the_largest_that_still_stops(v, A, J, room, dt):
     x = largest_stoppable(low, high, v, room, dt, A, J)
     assert low <= x <= high
 
-    def overshoot(y):
-        d = stopping_distance(np.array([y]), np.array([(y - v) / dt]), np.array([A]),
-                              np.array([J]))[0] if y > 0.0 else 0.0
+    def overshoot(y):  # (a velocity away from the room stops in it unless accelerated toward it)
+        a0 = (y - v) / dt
+        d = stopping_distance(np.array([y]), np.array([a0]), np.array([A]),
+                              np.array([J]))[0] if y > 0.0 or a0 > 0.0 else 0.0
         return y * dt + d - room
 
     if x == low:  # nothing one step reaches can stop in time

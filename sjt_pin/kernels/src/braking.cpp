@@ -40,10 +40,15 @@ double stopping_distance(double w, double a0, double A, double J) {
 
 namespace {
 
-// > 0 where velocity x (after this step) cannot stop within room
+// > 0 where velocity x (after this step) cannot stop within room. A velocity away from the
+// room fits, but not with an acceleration toward it that the jerk limit cannot take back in
+// time: reversing from -0.076 rad/s at 6.5 rad/s^2 with a jerk limit of 78 rad/s^3 (the
+// acceleration needs 83 ms to ramp down, and gains 0.27 rad/s meanwhile), UR5's wrist passed
+// a goal 4 mrad ahead by 20 mrad, and swung about it for seconds
 double overshoot(double x, double v, double room, double dt, double A, double J) {
-  if (x <= 0.0) return -1.0;
-  return x * dt + stopping_distance(x, (x - v) / dt, A, J) - room;
+  const double a0 = (x - v) / dt;
+  if (x <= 0.0 && (a0 <= 0.0 || !std::isfinite(J))) return -1.0;
+  return x * dt + stopping_distance(x, a0, A, J) - room;
 }
 
 }  // namespace
@@ -60,8 +65,9 @@ double largest_stoppable(double lo, double hi, double v, double room, double dt,
   if (f_hi <= 0.0) return hi;
   double f_lo = overshoot(lo, v, room, dt, A, J);
   if (f_lo > 0.0) return lo;
-  // (0 always fits, and the overshoot may jump just above it: the bracket starts at >= 0)
-  if (lo < 0.0) {
+  // (0 fits where it needs no acceleration toward the room, and the overshoot may jump just
+  // above it: the bracket then starts at 0)
+  if (lo < 0.0 && 0.0 < hi && overshoot(0.0, v, room, dt, A, J) <= 0.0) {
     lo = 0.0;
     f_lo = -1.0;
   }

@@ -5,15 +5,17 @@
 
 namespace sjt {
 
-// Distance to stop from velocity w >= 0 with acceleration a0 along it (positive: still speeding
-// up), braking at the acceleration limit A reached and left at the jerk limit J (J = inf: at
-// once). Phases: ramp a0 down to 0 if positive; move the deceleration to A (or to the peak of a
-// triangular profile); hold; ramp back to 0. Continuous and increasing in w and a0.
+// Distance to stop from velocity w with acceleration a0 along it (positive: still speeding up;
+// w < 0: moving away, the travel until a0 > 0 has ramped out and the velocity it left is
+// braked), braking at the acceleration limit A reached and left at the jerk limit J (J = inf:
+// at once). Phases: ramp a0 down to 0 if positive; move the deceleration to A (or to the peak
+// of a triangular profile); hold; ramp back to 0. Continuous and increasing in w and a0.
 double stopping_distance(double w, double a0, double A, double J);
 
 // The largest velocity x in [lo, hi] such that after moving at x for dt (acceleration
-// (x - v) / dt) the joint can stop within `room` at limits A, J (x <= 0 always can); `lo` when
-// none can (the joint is late: the hardest braking the box allows). Brent's method on
+// (x - v) / dt) the joint can stop within `room` at limits A, J (x <= 0 can, unless with an
+// acceleration toward the room that the jerk limit cannot ramp out in time); `lo` when none can
+// (the joint is late: the hardest braking the box allows). Brent's method on
 // the overshoot, to a relative 1e-12 of the bracket.
 double largest_stoppable(double lo, double hi, double v, double room, double dt, double A,
                          double J);
