@@ -94,6 +94,11 @@ void joint_box(const BoundsConfig& config, double dt, const double* q, const Vec
     int8_t sl_by = soft_lo_by[j], sh_by = soft_hi_by[j];
     if (config.smooth && config.moving[j] != 0.0) {
       const double A = config.acceleration[j], J = config.jerk[j];
+      if (std::isfinite(J)) {  // approach the method's velocity without passing it
+        const double u = fb[j] + ff[j];
+        if (u > v[j]) tighten_hi(std::max(sl, approach_top(v[j], u, dt, J)), kBraking, sh, sh_by);
+        if (u < v[j]) tighten_lo(std::min(sh, -approach_top(-v[j], -u, dt, J)), kBraking, sl, sl_by);
+      }
       // brake the feedback so that the joint can stop where it sends it (relative to the
       // feed-forward's velocity)
       const double d = delta[j], f = ff[j];
@@ -103,15 +108,6 @@ void joint_box(const BoundsConfig& config, double dt, const double* q, const Vec
       } else if (d < 0.0) {
         const double top = f - largest_stoppable(f - sh, f - sl, f - v[j], -d, dt, keep * A, keep * J);
         tighten_lo(std::min(sh, top), kBraking, sl, sl_by);
-      }
-      // approach the method's velocity without passing it, within the braking: a joint that
-      // must brake below the method's velocity to stop where it is sent brakes (held at the
-      // method's velocity instead, UR10's elbow kept the arm's motion off the task's while its
-      // neighbours braked, the error at 2e-7 for seconds)
-      if (std::isfinite(J)) {
-        const double u = fb[j] + ff[j];
-        if (u > v[j]) tighten_hi(std::max(sl, approach_top(v[j], u, dt, J)), kBraking, sh, sh_by);
-        if (u < v[j]) tighten_lo(std::min(sh, -approach_top(-v[j], -u, dt, J)), kBraking, sl, sl_by);
       }
     }
     if (config.moving[j] == 0.0) {  // no task moves it: it stays
