@@ -833,8 +833,8 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
   // 6. the displacement, exactly onto a limit it reaches (not a rounding past it); the state:
   // the velocity of the displacement made (where a step overran the room its range left, after
   // the rows made the limits yield, the next step's acceleration and jerk box started from the
-  // velocity not made, and xArm7's joint 2, stopped on its limit, took a jerk 1.14x its limit
-  // unreported)
+  // velocity not made: on xArm7's stream beside a ball, under a variant of the braking bounds,
+  // joint 2 stopped on its limit and took a jerk 1.14x its limit unreported)
   step = velocity * dt_;
   for (const PositionRange& r : bounds.ranges) {
     const double x = q[r.q];
