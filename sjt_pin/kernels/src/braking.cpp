@@ -44,10 +44,11 @@ namespace {
 // room fits, but not with an acceleration toward it that the jerk limit cannot take back in
 // time: reversing from -0.076 rad/s at 6.5 rad/s^2 with a jerk limit of 78 rad/s^3 (the
 // acceleration needs 83 ms to ramp down, and gains 0.27 rad/s meanwhile), UR5's wrist passed
-// a goal 4 mrad ahead by 20 mrad, and swung about it for seconds
+// a goal 4 mrad ahead by 20 mrad, and swung about it for seconds. (J finite: without a jerk
+// limit largest_stoppable solves in closed form.)
 double overshoot(double x, double v, double room, double dt, double A, double J) {
   const double a0 = (x - v) / dt;
-  if (x <= 0.0 && (a0 <= 0.0 || !std::isfinite(J))) return -1.0;
+  if (x <= 0.0 && a0 <= 0.0) return -1.0;
   return x * dt + stopping_distance(x, a0, A, J) - room;
 }
 
