@@ -4,31 +4,32 @@ reaches the target without swinging about it and rests within twice Ruckig's tim
 duration for the same joint motion + 0.1 s, never above a limit."""
 
 import numpy as np
-import pinocchio as pin
 import pytest
 
 import sjt_pin as sjt
+from sjt_pin.bench.collision import rates
 from sjt_pin.bench.reach import ruckig_duration
 
 DT = 1e-3
 
 
 def _settle(robot, method, q0, goal, acceleration, jerk, seconds=4.0):
+    """The run's finite-difference velocities, its largest speed, acceleration or jerk over its
+    limit, and when it came to rest for good (None if it did not)."""
     solver = sjt.make_solver(method, robot, dt=DT, acceleration_limits=acceleration,
                              jerk_limits=jerk)
     target = robot.fk(goal)
-    q, v0, a0, vs, worst, rest = q0.copy(), np.zeros(robot.nv), np.zeros(robot.nv), [], 0.0, None
-    for k in range(round(seconds / DT)):
-        q_next = solver.step(q, target)
-        v = pin.difference(robot.model, q, q_next) / DT
-        a = (v - v0) / DT
-        worst = max(worst, np.abs(v / robot.velocity_limits).max(),
-                    np.abs(a).max() / acceleration, np.abs((a - a0) / DT).max() / jerk)
-        q, v0, a0 = q_next, v, a
-        vs.append(v)
-        still = solver.error_norm < 1e-6 and np.abs(v).max() < 1e-6
-        rest = (rest or (k + 1) * DT) if still else None
-    return rest, worst, np.array(vs)
+    qs, errors = [q0.copy()], []
+    for _ in range(round(seconds / DT)):
+        qs.append(solver.step(qs[-1], target))
+        errors.append(solver.error_norm)
+    v, a, j = rates(robot.model, qs, DT)
+    worst = max(np.abs(v / robot.velocity_limits).max(), np.abs(a).max() / acceleration,
+                np.abs(j).max() / jerk)
+    moving = np.flatnonzero((np.array(errors) >= 1e-6) | (np.abs(v).max(axis=1) >= 1e-6))
+    rest = None if moving.size and moving[-1] == len(errors) - 1 else \
+        (moving[-1] + 2 if moving.size else 1) * DT
+    return rest, worst, v
 
 
 @pytest.mark.parametrize("method", ["sjt", "dls", "jp"])
