@@ -362,7 +362,8 @@ class Solver:
     def __reduce__(self):
         """A copy (``pickle``, ``copy.deepcopy``, another process) is the same solver made anew,
         carrying this one's state: gain and period as set now, the commanded velocity and
-        acceleration, the saddle escape, the stability warning and the contacts' held poses.
+        acceleration, the saddle escape, the stability warning, the contacts' held poses and
+        the projection's warm start.
         Its next steps are this one's, bitwise; it has no :attr:`last` until it steps."""
         arguments = self.options.replace(gain=self._gain, dt=self._dt,
                                          check_stability=self._stability.enabled)
@@ -370,7 +371,7 @@ class Solver:
         state = {"motion": (c.dq.copy(), c.ddq.copy()), "escape": self.escape,
                  "escaping": c.escaping, "escape_velocity": c.escape_velocity.copy(),
                  "warned": self._stability.warned, "count": self._count, "first": self._first,
-                 "stall": (c.stall_run, c.stall_wait),
+                 "stall": (c.stall_run, c.stall_wait), "warm": c.warm_state,
                  "held": [getattr(t, "held", None) for t in self.stack.tasks]}
         return (_rebuild, (type(self), self.robot, self.method, arguments), state)
 
@@ -382,6 +383,7 @@ class Solver:
         self._stability.warned, self._count, self._first = (state["warned"], state["count"],
                                                             state["first"])
         c.stall_run, c.stall_wait = state["stall"]
+        c.warm_state = state["warm"]
         for task, held in zip(self.stack.tasks, state["held"], strict=True):
             if held is not None:  # (a contact's)
                 task.held = held  # type: ignore[attr-defined]

@@ -68,6 +68,12 @@ class Controller {
   bool escaping = false;
   double given_gain = 1.0;  // K of a user method's last feedback (its fb / K is the displacement)
   double stall_run = -1.0, stall_wait = 1e300;
+  // the first level's nearest feasible velocity (without acceleration limits) starts from the
+  // last step's dual point: along a path the set of joints at a bound rarely changes, and one
+  // Newton step then solves it (Kinova's 1 cm circle beyond its speed limits: 6.6 Newton
+  // steps a step cold, 2.5 warm; random full-range reaches on UR5, Panda, iiwa and xArm6:
+  // 1.4-4.0 cold, 0.6-1.7 warm, the same results to rounding)
+  Projection nearest;
 
   // -- the last step, for StepInfo
   MethodStep top;                 // level 0's analysis (alpha, gain, loop bound, ...)

@@ -18,6 +18,7 @@ namespace {
 using ReadView = nb::ndarray<nb::numpy, const double, nb::ndim<1>>;
 using WriteView = nb::ndarray<nb::numpy, double, nb::ndim<1>>;
 using CodeView = nb::ndarray<nb::numpy, const int8_t, nb::ndim<1>>;
+using WarmTuple = std::tuple<Vector, std::vector<int>, Index, Index, Index>;
 
 template <class View, class T>
 View view(Controller& c, T* data, Index n) {
@@ -198,6 +199,22 @@ void register_controller(nb::module_& m) {
       .def_prop_ro("regular", [](Controller& c) { return c.regular; })
       .def_prop_ro("task_scale", [](Controller& c) { return c.task_scale; })
       .def_prop_ro("kept", [](Controller& c) { return c.kept; })
+      .def_prop_rw(
+          "warm_state",
+          [](Controller& c) {
+            const Projection::WarmState w = c.nearest.warm_state();
+            return WarmTuple(w.y, w.working, w.n, w.r, w.c);
+          },
+          [](Controller& c, const WarmTuple& state) {
+            const auto& [y, working, n, r, rows_c] = state;
+            bool fits = n < 0 || (n == c.nv && r >= 0 && rows_c >= 0 &&
+                                  y.size() == r + rows_c + static_cast<Index>(working.size()));
+            for (int i : working) fits = fits && i >= 0;
+            if (!fits) fail("warm_state: the projection's state does not fit this controller");
+            c.nearest.set_warm_state(Projection::WarmState{y, working, n, r, rows_c});
+          },
+          "The first level's projection's warm start (dual point, working rows, shape), which "
+          "copies carry.")
       .def_prop_ro("iterations", [](Controller& c) { return c.report.iterations; })
       .def_prop_ro("converged", [](Controller& c) { return c.report.converged; });
 }

@@ -125,6 +125,26 @@ void Projection::polish(const Eigen::Ref<const RowMatrix>& C, const Eigen::Ref<c
   }
 }
 
+Projection::WarmState Projection::warm_state() const {
+  WarmState state;
+  if (last_n_ < 0) return state;
+  state.y = y_.head(last_r_ + last_c_ + static_cast<Index>(working_.size()));
+  state.working = working_;
+  state.n = last_n_;
+  state.r = last_r_;
+  state.c = last_c_;
+  return state;
+}
+
+void Projection::set_warm_state(const WarmState& state) {
+  last_n_ = state.n;
+  last_r_ = state.r;
+  last_c_ = state.c;
+  working_ = state.working;
+  if (y_.size() < state.y.size()) y_.conservativeResize(state.y.size());
+  y_.head(state.y.size()) = state.y;
+}
+
 Projection::Projection() {
   const Eigen::MatrixXd one = Eigen::MatrixXd::Identity(1, 1);
   cod_.compute(one);

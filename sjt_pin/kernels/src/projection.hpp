@@ -51,6 +51,17 @@ class Projection {
   // which rows of A were active (in the working set) at the last solve
   const std::vector<int>& active_rows() const { return working_; }
 
+  // The dual point and working set a warm solve starts from (copies carry them: a warm
+  // solve's result depends on them by rounding), and the shape (n, r, c) they belong to.
+  struct WarmState {
+    Vector y;
+    std::vector<int> working;
+    Index n = -1, r = -1, c = -1;
+  };
+  WarmState warm_state() const;
+  void set_warm_state(const WarmState& state);
+  void forget() { last_n_ = -1; }  // the next warm solve starts cold
+
   static constexpr int kInnerIterations = 60;
   static constexpr double kTolerance = 1e-14;
   static constexpr double kRidge = 1e-12;

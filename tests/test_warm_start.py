@@ -1,0 +1,79 @@
+"""The stage's nearest feasible velocity starts from the last step's dual point (a warm start):
+the same velocities as a cold start, to rounding, in fewer Newton steps; copies carry it."""
+
+import copy
+
+import numpy as np
+import pytest
+
+import sjt_pin as sjt
+
+COLD = (np.empty(0), [], -1, -1, -1)  # a projection state that starts the next solve cold
+
+
+def far_reach(robot, seed):
+    """A start and a target 0.4 m away (the method's step is far beyond the speed limits)."""
+    rng = np.random.default_rng(seed)
+    model = robot.model
+    q = np.clip(robot.q0 + rng.uniform(-0.3, 0.3, robot.nv), model.lowerPositionLimit,
+                model.upperPositionLimit)
+    target = robot.fk(q)
+    target.translation += 0.4 * rng.normal(size=3) / np.sqrt(3.0)
+    return q, target
+
+
+@pytest.mark.parametrize("method", ["sjt", "dls", "jp"])
+@pytest.mark.parametrize("name", ["ur5", "panda"])
+def test_a_warm_start_gives_the_cold_start_s_velocity_in_fewer_newton_steps(name, method):
+    robot = sjt.Robot.from_example(name)
+    q, target = far_reach(robot, seed=3)
+    warm, cold = (sjt.make_solver(method, robot) for _ in range(2))
+    qw = qc = q
+    newton = {"warm": 0, "cold": 0}
+    projected = 0
+    for _ in range(400):
+        cold._controller.warm_state = COLD
+        qw, qc = warm.step(qw, target), cold.step(qc, target)
+        newton["warm"] += warm._controller.iterations
+        newton["cold"] += cold._controller.iterations
+        projected += warm.last.task_scale < 1.0
+        np.testing.assert_allclose(qw, qc, rtol=0.0, atol=1e-9)
+    assert projected > 100  # (the stage projected the step: the start matters)
+    assert newton["warm"] < 0.75 * newton["cold"]
+
+
+def test_a_copy_carries_the_warm_start(ur5):
+    q, target = far_reach(ur5, seed=1)
+    original = sjt.make_solver("sjt", ur5)
+    for _ in range(30):
+        q = original.step(q, target)
+    assert original.last.task_scale < 1.0
+    twin = copy.deepcopy(original)
+    y, working, n, r, c = twin._controller.warm_state
+    np.testing.assert_array_equal(y, original._controller.warm_state[0])
+    assert (n, r, c) == (ur5.nv, 6, 0) and working == []
+    a = b = q
+    for _ in range(200):
+        a, b = original.step(a, target), twin.step(b, target)
+    np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("state", [
+    (np.zeros(3), [], 6, 6, 0),     # a dual point of the wrong length
+    (np.zeros(6), [], 7, 6, 0),     # another robot's joints
+    (np.zeros(7), [-1], 6, 6, 0),   # a row index below 0
+])
+def test_a_warm_start_that_does_not_fit_is_refused(ur5, state):
+    solver = sjt.make_solver("sjt", ur5)
+    with pytest.raises(ValueError, match="does not fit"):
+        solver._controller.warm_state = state
+
+
+def test_reset_forgets_the_warm_start(ur5):
+    q, target = far_reach(ur5, seed=1)
+    solver = sjt.make_solver("sjt", ur5)
+    for _ in range(30):
+        q = solver.step(q, target)
+    assert solver._controller.warm_state[2] == ur5.nv
+    solver.reset()
+    assert solver._controller.warm_state[2] == -1
