@@ -202,12 +202,20 @@ def bench(args: argparse.Namespace) -> int:
         stream = collision_stream.stream()
         print("\nxArm7 with self-collision beside 10 rad/s^2 and 5,000 rad/s^3, targets jumping "
               "every 0.5 s:\n" + collision_stream.stream_table(stream))
-        from .bench import collision_mesh, collision_moving
+        from .bench import collision_mesh, collision_mink, collision_moving, collision_peers
 
         moving = collision_moving.moving()
+        mesh = [collision_mesh.pull(convex) for convex in (True, False)]
+        if not args.no_peers:  # (pink's and mink's rows, where they are installed)
+            def said(row):
+                print(f"  {row.method}, {row.robot}, ball {row.speed:g} m/s, {row.rate:g} Hz",
+                      flush=True)
+
+            moving += collision_peers.pink_moving(progress=said)
+            moving += collision_mink.mink_moving(progress=said)
+            mesh += collision_peers.pink_mesh() + collision_mink.mink_mesh()
         print("\nA 5 cm ball driven at the hand (margin 10 mm; distances on the meshes):\n"
               + collision_moving.moving_table(moving))
-        mesh = [collision_mesh.pull(convex) for convex in (True, False)]
         print("\nPanda's hand pulled over a plate of bumps (a mesh) with Franka-like limits:\n"
               + collision_mesh.mesh_table(mesh))
         _write_json(args.json, {"machine": machine, "rows": [asdict(r) for r in rows],
@@ -507,7 +515,8 @@ def build_parser() -> argparse.ArgumentParser:
                        "full-range reaches beside pink, settling under jerk limits beside "
                        "Ruckig), ik (TRAC-IK's "
                        "protocol on five arms), collision (three scenes with and without "
-                       "CollisionLimit, and pink's barrier).")
+                       "CollisionLimit, and pink's barrier; a moving ball and a mesh, beside "
+                       "pink and mink).")
     p.add_argument("kind", choices=["speed", "accuracy", "reach", "ik", "collision"],
                    help="which benchmark")
     p.add_argument("--peers", action="store_true",
@@ -517,8 +526,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--poses", type=positive_int, default=1000, help="ik: random poses per robot "
                    "(default: 1000)")
     p.add_argument("--no-peers", action="store_true",
-                   help="ik: skip TRAC-IK and robotics-toolbox's ik_LM; collision, reach, "
-                   "accuracy: skip pink")
+                   help="ik: skip TRAC-IK and robotics-toolbox's ik_LM; collision: skip pink and "
+                   "mink; reach, accuracy: skip pink")
     p.add_argument("--pairs", type=positive_int, default=50, help="reach: random (start, "
                    "target) pairs per robot (default: 50)")
     p.add_argument("--trials", type=positive_int, default=30, help="reach: runs of the jerk "

@@ -236,5 +236,6 @@ def test_the_bench_generator_pivots_and_filters():
     headers, body = pivot(entries, spec, None, "variant", "{e}")
     assert headers == ["SJT", "DLS"] and body == [["a", "0.5", "2"], ["b", "1", "–"]]
     assert cells(entries, columns(["e | {e:.1f}"]), "variant == 'DLS'") == [["2.0"]]
+    assert cells([{"e": float("nan")}], columns(["e | {e:.1f}"]), None) == [["–"]]  # none
     with pytest.raises(KeyError):
         cells(entries, columns(["x | {missing}"]), None)

@@ -17,12 +17,16 @@ from the entry (a dotted key such as ``step.median`` reads a nested value: write
 entry's keys is true. ``:pivot: KEY`` with ``:value: TEMPLATE`` makes a wide table: a column
 per distinct value of ``KEY`` (a method, say), one row per distinct row of the body's columns.
 A section that is a record (``cold_start``) gives one entry per key, as ``{key}`` and
-``{value}``. The caption names the machine and the versions the file records.
+``{value}``. A field that is NaN in the file (a quantity a row does not have: a ratio to a limit
+the run had not, the time a run that never failed failed at) shows as "–", whatever its
+format. The caption names the machine and the versions the file records.
 """
 
 from __future__ import annotations
 
 import json
+import math
+import string
 from pathlib import Path
 
 from docutils import nodes
@@ -35,6 +39,20 @@ logger = logging.getLogger(__name__)
 class _Missing(dict):
     def __missing__(self, key):
         raise KeyError(key)
+
+
+class _Formatter(string.Formatter):
+    """``str.format_map``, with "–" for a NaN field."""
+
+    def format_field(self, value, format_spec):
+        if isinstance(value, float) and math.isnan(value):
+            return "–"
+        return super().format_field(value, format_spec)
+
+
+def fill(template: str, entry: dict) -> str:
+    """``template`` filled from ``entry`` (a missing key raises ``KeyError``)."""
+    return _Formatter().vformat(template, (), _Missing(entry))
 
 
 def load(path: Path, section: str) -> tuple[list[dict], dict]:
@@ -68,7 +86,7 @@ def cells(entries: list[dict], spec: list[tuple[str, str]], where: str | None) -
     for entry in entries:
         if where and not eval(where, {"__builtins__": {}}, dict(entry)):  # noqa: S307
             continue
-        rows.append([template.format_map(_Missing(entry)) for _, template in spec])
+        rows.append([fill(template, entry) for _, template in spec])
     return rows
 
 
@@ -81,8 +99,8 @@ def pivot(entries: list[dict], spec: list[tuple[str, str]], where: str | None, b
     headers = list(dict.fromkeys(str(e[by]) for e in kept))
     rows: dict[tuple, dict[str, str]] = {}
     for e in kept:
-        key = tuple(t.format_map(_Missing(e)) for _, t in spec)
-        rows.setdefault(key, {})[str(e[by])] = value.format_map(_Missing(e))
+        key = tuple(fill(t, e) for _, t in spec)
+        rows.setdefault(key, {})[str(e[by])] = fill(value, e)
     body = [[*key, *(cells.get(h, "–") for h in headers)] for key, cells in rows.items()]
     return headers, body
 

@@ -18,13 +18,14 @@ the last second, and the CPU time per step (process time, so other processes do 
 the least of five runs).
 pink runs its ``SelfCollisionBarrier`` on a geometry model with the obstacles attached to the
 world joint (its way to handle obstacles: every pair of its collision model is a barrier row),
-on the same convex hulls as the limit, with a ``FrameTask`` and a small ``PostureTask``.
+on the same convex hulls as the limit, with a ``FrameTask`` and a small ``PostureTask``, and
+the limit's damper (:mod:`.collision_peers`).
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import coal
@@ -168,18 +169,36 @@ def _pose_error(robot: Robot, q: np.ndarray, target: pin.SE3) -> float:
     return float(np.linalg.norm(pin.log6(robot.fk(q).actInv(target)).vector))
 
 
-def _run(scene: Scene, step) -> tuple[np.ndarray, float]:
-    """Run ``step(q, pose, velocity) -> q`` over the scene: the configurations (N+1, nq) and
-    the CPU time per step (us)."""
-    q = scene.q0.copy()
+def run_steps(q0: np.ndarray, inputs: Sequence[tuple],
+              step: Callable[..., np.ndarray | None],
+              after: Callable[[], object] | None = None) -> tuple[np.ndarray, float]:
+    """Run ``step(q, *item) -> q`` for each item of ``inputs`` from ``q0``: the configurations
+    (N + 1, nq) and the CPU time per step (us, process time). ``after()``, if given, is
+    called after each step and left out of the time (a solver's report, say). A step that
+    returns ``None`` (its solver failed) ends the run there: the configurations then stop at
+    the last one it returned, and the time is per step tried."""
+    q = q0.copy()
     qs = [q]
-    targets = [scene.target(k * DT) for k in range(int(round(scene.duration / DT)))]
     clock = time.process_time
     start = clock()
-    for pose, velocity in targets:
-        q = step(q, pose, velocity)
+    for item in inputs:
+        stepped = step(q, *item)
+        if stepped is None:
+            break
+        q = stepped
         qs.append(q)
-    return np.array(qs), (clock() - start) / len(targets) * 1e6
+        if after is not None:
+            pause = clock()
+            after()
+            start += clock() - pause
+    tried = min(len(qs), len(inputs))
+    return np.array(qs), (clock() - start) / max(tried, 1) * 1e6
+
+
+def _run(scene: Scene, step, after=None) -> tuple[np.ndarray, float]:
+    """Run ``step(q, pose, velocity) -> q`` over the scene (:func:`run_steps`)."""
+    return run_steps(scene.q0, [scene.target(k * DT)
+                                for k in range(int(round(scene.duration / DT)))], step, after)
 
 
 def _row(scene: Scene, method: str, limit: bool, qs: np.ndarray, us: float, checker: Checker,
@@ -227,41 +246,6 @@ def _floor(scene: Scene, limit: CollisionLimit, qs: np.ndarray, plain_us: float
     return (plain_us + best / len(active) * 1e6, rows_time / len(active) * 1e6)
 
 
-def _pink(scene: Scene, barrier: bool, geometry: pin.GeometryModel | None):
-    """pink's solve_ik with its SelfCollisionBarrier (or without any barrier)."""
-    try:
-        import pink
-        import qpsolvers
-        from pink.barriers import SelfCollisionBarrier
-        from pink.tasks import FrameTask, PostureTask
-    except ImportError:
-        return None
-    qp = "daqp" if "daqp" in qpsolvers.available_solvers else qpsolvers.available_solvers[0]
-    robot = scene.robot
-    if barrier:
-        gdata = geometry.createData()
-        for req in gdata.distanceRequests:
-            req.enable_signed_distance = True
-        configuration = pink.Configuration(robot.model, robot.model.createData(), scene.q0,
-                                           collision_model=geometry, collision_data=gdata)
-        barriers = [SelfCollisionBarrier(len(geometry.collisionPairs), gain=1.0, d_min=MARGIN)]
-    else:
-        configuration = pink.Configuration(robot.model, robot.model.createData(), scene.q0)
-        barriers = []
-    task = FrameTask(robot.ee_frame, position_cost=1.0, orientation_cost=1.0)
-    posture = PostureTask(cost=1e-3)
-    posture.set_target(scene.q0)
-
-    def step(q, pose, velocity):
-        configuration.update(q)
-        task.set_target(pose)
-        v = pink.solve_ik(configuration, [task, posture], DT, solver=qp, barriers=barriers,
-                          safety_break=False)
-        return configuration.integrate(v, DT)
-
-    return step
-
-
 def collision(methods=("sjt", "dls"), peers: bool = True, progress=None) -> list[CollisionRow]:
     """Every scene (module docstring), every method with and without the limit, and pink; the
     CPU time per step of SJT and DLS is the least of :data:`TIMING_RUNS` runs, with and
@@ -292,16 +276,15 @@ def collision(methods=("sjt", "dls"), peers: bool = True, progress=None) -> list
                 if progress:
                     progress(row)
         if peers:
-            geometry = limit.geometry.copy()  # the same hulls, pairs and obstacles
+            from .collision_peers import pink_scene  # (it imports this module)
+
             for with_barrier in (False, True):
-                step = _pink(scene, with_barrier, geometry)
-                if step is None:
+                peer = pink_scene(scene, limit, with_barrier, checker)
+                if peer is None:
                     break
-                qs, us = _run(scene, step)
-                row = _row(scene, "pink", with_barrier, qs, us, checker)
-                rows.append(row)
+                rows.append(peer)
                 if progress:
-                    progress(row)
+                    progress(peer)
     return rows
 
 

@@ -7,12 +7,13 @@ limits (:func:`.collision_moving.franka_like`). The limit keeps the mesh as its 
 (the default, ``convex=True``) or as given (``convex=False``). Each run reports the least
 distance to the mesh itself (:class:`.collision.Checker`, every 5th step), the largest
 acceleration and jerk over their limits, the steps that named joints in
-``StepInfo.limit_conflicts``, the task error at the end and the step's process time.
+``StepInfo.limit_conflicts``, the hand's pose error at the end (``|log6|``, m and rad) and the
+step's process time. pink's and mink's pulls over the same plate are in
+:mod:`.collision_peers` and :mod:`.collision_mink`.
 """
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 
 import coal
@@ -22,7 +23,7 @@ import pinocchio as pin
 from ..limits import CollisionLimit
 from ..robot import Robot
 from ..solvers import make_solver
-from .collision import Checker, _line, rates
+from .collision import Checker, Scene, _line, _pose_error, _run, rates
 from .collision_moving import franka_like
 
 DT = 1e-3
@@ -35,68 +36,102 @@ class MeshRow:
     closest: float  # m, to the mesh, independent
     acceleration_ratio: float
     jerk_ratio: float
-    conflicts: int  # steps naming joints in limit_conflicts
-    unreported: int  # steps above the acceleration or jerk limit (1.001x) that named none
+    conflicts: int | None  # steps naming joints in limit_conflicts (None: a peer has none)
+    unreported: int | None  # steps above the acceleration or jerk limit (1.001x) that named none
     final_error: float  # m and rad
     us_per_step: float  # process time
+    method: str = "SJT"
+    failed_at: float = float("nan")  # s: when the solver failed and the run ended (nan: never)
 
 
-def bumpy_plate(size: float = 0.36, n: int = 24, height: float = 0.03,
-                period: float = 0.08) -> coal.BVHModelOBBRSS:
-    """A square plate of ``size`` (m) on an ``n`` x ``n`` grid whose height is ``height`` sin(2 pi
-    x / period) sin(2 pi y / period): a non-convex triangle mesh, in its own frame."""
+def plate_grid(size: float = 0.36, n: int = 24, height: float = 0.03, period: float = 0.08
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """The vertices (n * n, 3; m) and triangles (2 (n - 1)^2, 3; vertex indices) of
+    :func:`bumpy_plate`."""
     xs = np.linspace(-size / 2, size / 2, n)
     X, Y = np.meshgrid(xs, xs)
     Z = height * np.sin(2 * np.pi * X / period) * np.sin(2 * np.pi * Y / period)
     corners = np.arange(n * n).reshape(n, n)[:-1, :-1].ravel()
     triangles = np.concatenate([np.column_stack([corners, corners + 1, corners + n + 1]),
                                 np.column_stack([corners, corners + n + 1, corners + n])])
+    return np.column_stack([X.ravel(), Y.ravel(), Z.ravel()]), triangles
+
+
+def bumpy_plate(size: float = 0.36, n: int = 24, height: float = 0.03,
+                period: float = 0.08) -> coal.BVHModelOBBRSS:
+    """A square plate of ``size`` (m) on an ``n`` x ``n`` grid whose height is ``height`` sin(2 pi
+    x / period) sin(2 pi y / period): a non-convex triangle mesh, in its own frame."""
+    vertices, triangles = plate_grid(size, n, height, period)
     mesh = coal.BVHModelOBBRSS()
-    mesh.beginModel(len(triangles), n * n)
-    mesh.addVertices(np.column_stack([X.ravel(), Y.ravel(), Z.ravel()]))
+    mesh.beginModel(len(triangles), len(vertices))
+    mesh.addVertices(vertices)
     mesh.addTriangles(triangles)
     mesh.endModel()
     return mesh
 
 
+def plate_scene(robot: Robot | None = None) -> Scene:
+    """The pull over the plate (module docstring) as a :class:`.collision.Scene` (``robot``:
+    Panda by default)."""
+    robot = robot or Robot.from_example("panda")
+    start = robot.fk(robot.q0)
+    plate = (bumpy_plate(), pin.SE3(np.eye(3), start.translation + np.array([0.1, 0.0, -0.22])))
+    end = pin.SE3(start.rotation, start.translation + np.array([0.0, 0.2, -0.17]))
+    return Scene("Panda pulled over a plate of bumps", robot, robot.q0.copy(), [plate],
+                 _line(start, end, PULL), PULL, PULL + HOLD)
+
+
 def pull(convex: bool, robot: Robot | None = None) -> MeshRow:
     """One run of the pull over the plate (``robot``: Panda by default)."""
-    robot = robot or Robot.from_example("panda")
-    n = robot.nv
-    q = robot.q0.copy()
-    start = robot.fk(q)
-    plate = (bumpy_plate(), pin.SE3(np.eye(3), start.translation + np.array([0.1, 0.0, -0.22])))
-    limit = CollisionLimit(robot, [plate], convex=convex)
-    checker = Checker(robot, [plate], limit.pair_names)
-    accelerations, jerks = franka_like(n)
-    solver = make_solver("sjt", robot, dt=DT, limits=[limit], acceleration_limits=accelerations,
-                         jerk_limits=jerks)
-    end = pin.SE3(start.rotation, start.translation + np.array([0.0, 0.2, -0.17]))
-    target = _line(start, end, PULL)
-    qs, closest, reported, spent = [q], np.inf, [], 0.0
-    for k in range(int(round((PULL + HOLD) / DT))):
-        pose, velocity = target(k * DT)
-        t0 = time.process_time()
-        q = solver.step(q, pose, velocity)
-        spent += time.process_time() - t0
-        qs.append(q)
-        reported.append(bool(solver.last.limit_conflicts))
-        if k % 5 == 0:
-            closest = min(closest, checker.closest(q)[0])
-    _, a, j = rates(robot.model, qs, DT)
-    above = (np.max(np.abs(a) / accelerations, axis=1) > 1.001) | (
-        np.max(np.abs(j) / jerks, axis=1) > 1.001)
-    return MeshRow(convex, float(closest), float(np.max(np.abs(a) / accelerations)),
-                   float(np.max(np.abs(j) / jerks)), int(sum(reported)),
-                   int(np.sum(above & ~np.array(reported))), solver.last.error_norm,
-                   1e6 * spent / (len(qs) - 1))
+    scene = plate_scene(robot)
+    limit = CollisionLimit(scene.robot, scene.obstacles, convex=convex)
+    accelerations, jerks = franka_like(scene.robot.nv)
+    solver = make_solver("sjt", scene.robot, dt=DT, limits=[limit],
+                         acceleration_limits=accelerations, jerk_limits=jerks)
+    reported: list[bool] = []
+    qs, us = _run(scene, lambda q, pose, velocity: solver.step(q, pose, velocity),
+                  after=lambda: reported.append(bool(solver.last.limit_conflicts)))
+    return mesh_row(scene, convex, qs, us, Checker(scene.robot, scene.obstacles, limit.pair_names),
+                    np.array(reported), "SJT")
+
+
+def mesh_row(scene: Scene, convex: bool, qs: np.ndarray, us: float, checker: Checker,
+             reported: np.ndarray | None, method: str) -> MeshRow:
+    """The row of a pull whose configurations are ``qs`` (fewer than the scene's steps + 1 if
+    the solver failed) and CPU time ``us`` per step: the distance to the mesh every 5th step
+    (``checker``), the acceleration and jerk (:func:`.collision.rates`) over
+    :func:`.collision_moving.franka_like`'s limits, the steps that ``reported`` a conflict (and
+    those above a limit that did not; ``None``: the solver has no such report) and the hand's
+    pose error at the end (m and rad)."""
+    robot = scene.robot
+    accelerations, jerks = franka_like(robot.nv)
+    closest = min(checker.closest(q)[0] for q in qs[1::5]) if len(qs) > 1 else np.inf
+    _, a, j = rates(robot.model, qs, DT) if len(qs) > 1 else (np.zeros((0, robot.nv)),) * 3
+    acceleration, jerk = np.abs(a) / accelerations, np.abs(j) / jerks
+    conflicts = unreported = None
+    if reported is not None:
+        above = (np.max(acceleration, axis=1) > 1.001) | (np.max(jerk, axis=1) > 1.001)
+        conflicts, unreported = int(reported.sum()), int(np.sum(above & ~reported))
+    steps = len(qs) - 1
+    failed = round(steps * DT, 9) if steps < int(round(scene.duration / DT)) else float("nan")
+    end, _ = scene.target(scene.duration)
+    return MeshRow(convex, float(closest), float(np.max(acceleration, initial=0.0)),
+                   float(np.max(jerk, initial=0.0)), conflicts, unreported,
+                   _pose_error(robot, qs[-1], end), us, method, failed)
 
 
 def mesh_table(rows: list[MeshRow]) -> str:
-    head = ("| obstacle kept as | closest mm (mesh) | accel. / limit | jerk / limit "
-            "| steps with conflicts | unreported | final error | us/step |\n"
-            "|---|---|---|---|---|---|---|---|\n")
+    """The rows as a markdown table (distances in mm; "failed at" in s)."""
+    head = ("| method | obstacle kept as | closest mm (mesh) | accel. / limit | jerk / limit "
+            "| steps with conflicts | unreported | final error | failed at | us/step |\n"
+            "|---|---|---|---|---|---|---|---|---|---|\n")
     return head + "".join(
-        f"| {'convex hull' if r.convex else 'mesh'} | {1e3 * r.closest:.2f} "
-        f"| {r.acceleration_ratio:.2f} | {r.jerk_ratio:.2f} | {r.conflicts} | {r.unreported} "
-        f"| {r.final_error:.3f} | {r.us_per_step:.0f} |\n" for r in rows)
+        f"| {r.method} | {'convex hull' if r.convex else 'mesh'} | {1e3 * r.closest:.2f} "
+        f"| {r.acceleration_ratio:.2f} | {r.jerk_ratio:.2f} | {_or_dash(r.conflicts)} "
+        f"| {_or_dash(r.unreported)} | {r.final_error:.3f} | "
+        f"{'-' if np.isnan(r.failed_at) else f'{r.failed_at:.3f}'} | {r.us_per_step:.0f} |\n"
+        for r in rows)
+
+
+def _or_dash(x: int | None) -> str:
+    return "-" if x is None else str(x)

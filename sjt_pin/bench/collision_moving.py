@@ -9,12 +9,12 @@ over the run, measured independently at every step (:class:`.collision.Checker`:
 meshes, the ball where it is when the step starts), the steps below ``margin - 1 mm``, the
 largest ratio of the returned speeds, accelerations and jerks (finite differences) to their
 limits, the steps whose ``StepInfo.rows_exceeded`` says the rows could not all be kept, and
-the time of the step with its ``move`` (process time, the checks left out).
+the time of the step with its ``move`` (process time, the checks left out). pink's and mink's
+runs beside the same ball are in :mod:`.collision_peers` and :mod:`.collision_mink`.
 """
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 
 import coal
@@ -24,7 +24,7 @@ import pinocchio as pin
 from ..limits import CollisionLimit
 from ..robot import Robot
 from ..solvers import make_solver
-from .collision import Checker, rates
+from .collision import Checker, rates, run_steps
 
 MARGIN = 0.01
 TRAVEL = 0.45  # m the ball comes from
@@ -40,15 +40,17 @@ class MovingRow:
     robot: str
     speed: float  # m/s of the ball
     rate: float  # Hz
-    smooth: bool  # Franka-like acceleration and jerk limits
+    smooth: bool  # Franka-like acceleration and jerk limits (pink: its acceleration limit)
     told: bool  # the ball's velocity given to move()
     closest: float  # m, the least distance of the ball to the robot, meshes, independent
     below: int  # steps below margin - 1 mm
     speed_ratio: float  # the largest joint speed over its limit
     acceleration_ratio: float  # (nan without acceleration limits)
     jerk_ratio: float
-    exceeded: int  # steps that reported rows_exceeded
+    exceeded: int | None  # steps that reported rows_exceeded (None: a peer has no such report)
     us_per_step: float  # move() and step(), process time
+    method: str = "SJT"
+    failed_at: float = float("nan")  # s: when the solver failed and the run ended (nan: never)
 
 
 def franka_like(n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -58,46 +60,85 @@ def franka_like(n: int) -> tuple[np.ndarray, np.ndarray]:
     return ACCELERATION[pick], JERK[pick]
 
 
+@dataclass
+class Ball:
+    """One run's ball: its path (the pose and the velocity, a 6-vector in m/s and rad/s, at
+    each step), the hand's pose at ``q0`` (the arm's target) and the independent check."""
+
+    speed: float  # m/s
+    path: list[tuple[pin.SE3, np.ndarray]]
+    hand: pin.SE3
+    shape: coal.Sphere
+    checker: Checker | None = None
+
+    @property
+    def obstacles(self) -> list:
+        """The ball at its first pose, as ``CollisionLimit`` takes obstacles."""
+        return [(self.shape, self.path[0][0])]
+
+
+def ball(robot: Robot, speed: float, dt: float, travel: float = TRAVEL) -> Ball:
+    """The ball driven from ``travel`` (m) beside the hand of ``robot`` at its ``q0`` at
+    ``speed`` (m/s) until it stands where the hand is, then :data:`HOLD` s at rest, at period
+    ``dt`` (s)."""
+    hand = robot.fk(robot.q0)
+    start = hand.translation + np.array([0.0, travel, 0.0])
+    heading = np.array([0.0, -1.0, 0.0])
+    path = []
+    for k in range(int(round((travel / speed + HOLD) / dt))):
+        moved = min(speed * k * dt, travel)
+        path.append((pin.SE3(np.eye(3), start + heading * moved),
+                     np.r_[heading * (speed if moved < travel else 0.0), 0.0, 0.0, 0.0]))
+    return Ball(speed, path, hand, coal.Sphere(0.05))
+
+
 def drive(robot: Robot, speed: float, dt: float, smooth: bool = False, told: bool = True,
           travel: float = TRAVEL) -> MovingRow:
     """One run: the ball driven from ``travel`` (m) beside the hand of ``robot`` at its ``q0``
     at ``speed`` (m/s), at period ``dt`` (s)."""
-    n = robot.nv
-    q0 = robot.q0.copy()
-    hand = robot.fk(q0)
-    start = hand.translation + np.array([0.0, travel, 0.0])
-    heading = np.array([0.0, -1.0, 0.0])
-    ball = coal.Sphere(0.05)
-    limit = CollisionLimit(robot, [(ball, pin.SE3(np.eye(3), start))], margin=MARGIN)
-    checker = Checker(robot, [(ball, pin.SE3(np.eye(3), start))], limit.pair_names)
+    driven = ball(robot, speed, dt, travel)
+    limit = CollisionLimit(robot, driven.obstacles, margin=MARGIN)
+    driven.checker = Checker(robot, driven.obstacles, limit.pair_names)
     options = {}
     if smooth:
-        accelerations, jerks = franka_like(n)
+        accelerations, jerks = franka_like(robot.nv)
         options = dict(acceleration_limits=accelerations, jerk_limits=jerks)
     solver = make_solver("sjt", robot, dt=dt, limits=[limit], **options)
-    q, qs, closest, below, exceeded, spent = q0, [q0], np.inf, 0, 0, 0.0
-    for k in range(int(round((travel / speed + HOLD) / dt))):
-        moved = min(speed * k * dt, travel)
-        pose = pin.SE3(np.eye(3), start + heading * moved)
-        velocity = np.r_[heading * (speed if moved < travel else 0.0), 0.0, 0.0, 0.0]
-        checker.move(0, pose)
-        d = checker.closest(q)[0]
-        closest, below = min(closest, d), below + (d < MARGIN - 1e-3)
-        t0 = time.process_time()
+    exceeded: list[bool] = []
+
+    def step(q, pose, velocity):
         limit.move(0, pose, velocity=velocity if told else None)
-        q = solver.step(q, hand)
-        spent += time.process_time() - t0
-        qs.append(q)
-        exceeded += bool(solver.last.rows_exceeded)
-    v, a, j = rates(robot.model, qs, dt)
-    speed_ratio = float(np.max(np.abs(v) / robot.velocity_limits))
+        return solver.step(q, driven.hand)
+
+    qs, us = run_steps(robot.q0, driven.path, step,
+                       after=lambda: exceeded.append(bool(solver.last.rows_exceeded)))
+    return moving_row(robot, driven, dt, smooth, told, qs, us, sum(exceeded), "SJT")
+
+
+def moving_row(robot: Robot, driven: Ball, dt: float, smooth: bool, told: bool,
+               qs: np.ndarray, us: float, exceeded: int | None, method: str) -> MovingRow:
+    """The row of a run whose configurations are ``qs`` (at most one more than the ball's
+    path: fewer if the solver failed) and CPU time ``us`` per step: the distances are checked
+    with the ball where it was when each step started (``driven.checker``, meshes), the
+    ratios are those of :func:`.collision.rates` to the robot's speed limits and
+    :func:`franka_like`."""
+    assert driven.checker is not None
+    closest, below = np.inf, 0
+    for q, (pose, _) in zip(qs, driven.path, strict=False):
+        driven.checker.move(0, pose)
+        d = driven.checker.closest(q)[0]
+        closest, below = min(closest, d), below + (d < MARGIN - 1e-3)
+    v, a, j = rates(robot.model, qs, dt) if len(qs) > 1 else (np.zeros((0, robot.nv)),) * 3
+    speed_ratio = float(np.max(np.abs(v) / robot.velocity_limits, initial=0.0))
     acceleration_ratio = jerk_ratio = float("nan")
     if smooth:
-        acceleration_ratio = float(np.max(np.abs(a) / options["acceleration_limits"]))
-        jerk_ratio = float(np.max(np.abs(j) / options["jerk_limits"]))
-    return MovingRow(robot.name, speed, 1.0 / dt, smooth, told, float(closest), int(below),
-                     speed_ratio, acceleration_ratio, jerk_ratio, exceeded,
-                     1e6 * spent / (len(qs) - 1))
+        accelerations, jerks = franka_like(robot.nv)
+        acceleration_ratio = float(np.max(np.abs(a) / accelerations, initial=0.0))
+        jerk_ratio = float(np.max(np.abs(j) / jerks, initial=0.0))
+    steps = len(qs) - 1
+    failed = round(steps * dt, 9) if steps < len(driven.path) else float("nan")
+    return MovingRow(robot.name, driven.speed, 1.0 / dt, smooth, told, float(closest), int(below),
+                     speed_ratio, acceleration_ratio, jerk_ratio, exceeded, us, method, failed)
 
 
 def moving(robots=("panda", "ur5"), progress=None) -> list[MovingRow]:
@@ -118,14 +159,18 @@ def moving(robots=("panda", "ur5"), progress=None) -> list[MovingRow]:
 
 
 def moving_table(rows: list[MovingRow]) -> str:
-    head = ("| robot | ball m/s | rate Hz | limits | velocity given | closest mm | steps < 9 mm "
-            "| speed / limit | accel. / limit | jerk / limit | rows exceeded | us/step |\n"
-            "|---|---|---|---|---|---|---|---|---|---|---|---|\n")
+    """The rows as a markdown table (distances in mm; "failed at" in s)."""
+    head = ("| robot | method | ball m/s | rate Hz | limits | velocity given | closest mm "
+            "| steps < 9 mm | speed / limit | accel. / limit | jerk / limit | rows exceeded "
+            "| failed at | us/step |\n"
+            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n")
     body = "".join(
-        f"| {r.robot} | {r.speed:g} | {r.rate:g} | {'Franka-like' if r.smooth else 'speed'} "
-        f"| {'yes' if r.told else 'no'} | {1e3 * r.closest:.2f} | {r.below} "
-        f"| {r.speed_ratio:.3f} | {_ratio(r.acceleration_ratio)} | {_ratio(r.jerk_ratio)} "
-        f"| {r.exceeded} | {r.us_per_step:.0f} |\n" for r in rows)
+        f"| {r.robot} | {r.method} | {r.speed:g} | {r.rate:g} "
+        f"| {'Franka-like' if r.smooth else 'speed'} | {'yes' if r.told else 'no'} "
+        f"| {1e3 * r.closest:.2f} | {r.below} | {r.speed_ratio:.3f} "
+        f"| {_ratio(r.acceleration_ratio)} | {_ratio(r.jerk_ratio)} "
+        f"| {'-' if r.exceeded is None else r.exceeded} | {_ratio(r.failed_at)} "
+        f"| {r.us_per_step:.0f} |\n" for r in rows)
     return head + body
 
 
