@@ -156,17 +156,19 @@ void Method::metric(const Eigen::Ref<const RowMatrix>& Jw, const MethodStep& ste
   // G' = G + beta (G - G t t^T G / (t^T G t))
   B.resize(m, n);
   if (m == 0) return;
-  directed_ = metric_;
+  bool directed = false;
   if (beta > 0.0) {
     gt_.noalias() = metric_ * t;
     const double tgt = t.dot(gt_);
     if (tgt > 0.0) {
-      directed_ *= 1.0 + beta;
+      directed_ = (1.0 + beta) * metric_;
       directed_.noalias() -= (beta / tgt) * gt_ * gt_.transpose();
+      llt_.compute(directed_);
+      directed = true;
     }
   }
-  llt_.compute(directed_);
-  B.noalias() = llt_.matrixU() * Jw;  // B^T B = J^T G' J
+  // B^T B = J^T G' J (G' = G: the factor computed above)
+  B.noalias() = (directed ? llt_.matrixU() : metric_llt_.matrixU()) * Jw;
   B *= std::sqrt(task_weight_);
 }
 
