@@ -158,8 +158,8 @@ class Solver:
         self._configure()
 
     def reset(self) -> None:
-        """Forget the commanded velocity and acceleration (the next step starts from rest)
-        and any saddle escape in progress."""
+        """Forget the commanded velocity and acceleration (the next step starts from rest),
+        any saddle escape in progress and the projection's warm start."""
         self._controller.reset()
         if self.escape is not None:
             self.escape.reset()

@@ -5,6 +5,7 @@
 #include <nanobind/stl/tuple.h>
 #include <nanobind/stl/vector.h>
 
+#include <algorithm>
 #include <array>
 #include <optional>
 
@@ -207,9 +208,14 @@ void register_controller(nb::module_& m) {
           },
           [](Controller& c, const WarmTuple& state) {
             const auto& [y, working, n, r, rows_c] = state;
-            bool fits = n < 0 || (n == c.nv && r >= 0 && rows_c >= 0 &&
-                                  y.size() == r + rows_c + static_cast<Index>(working.size()));
-            for (int i : working) fits = fits && i >= 0;
+            // (n < 0: none, the next solve starts cold; else this controller's joints, a
+            // finite dual point of r + c entries, distinct row indices >= 0)
+            std::vector<int> rows = working;
+            std::sort(rows.begin(), rows.end());
+            const bool fits =
+                n < 0 || (n == c.nv && r >= 0 && rows_c >= 0 && y.size() == r + rows_c &&
+                          y.allFinite() && (rows.empty() || rows.front() >= 0) &&
+                          std::adjacent_find(rows.begin(), rows.end()) == rows.end());
             if (!fits) fail("warm_state: the projection's state does not fit this controller");
             c.nearest.set_warm_state(Projection::WarmState{y, working, n, r, rows_c});
           },

@@ -128,7 +128,7 @@ void Projection::polish(const Eigen::Ref<const RowMatrix>& C, const Eigen::Ref<c
 Projection::WarmState Projection::warm_state() const {
   WarmState state;
   if (last_n_ < 0) return state;
-  state.y = y_.head(last_r_ + last_c_ + static_cast<Index>(working_.size()));
+  state.y = y_.head(last_r_ + last_c_);
   state.working = working_;
   state.n = last_n_;
   state.r = last_r_;
@@ -137,6 +137,11 @@ Projection::WarmState Projection::warm_state() const {
 }
 
 void Projection::set_warm_state(const WarmState& state) {
+  working_.clear();
+  if (state.n < 0) {
+    forget();
+    return;
+  }
   last_n_ = state.n;
   last_r_ = state.r;
   last_c_ = state.c;
@@ -174,10 +179,12 @@ ProjectionReport Projection::solve(
     y_.setZero();
     working_.clear();
   } else {
-    // keep the working rows that still exist
+    // keep the working rows that still exist, each once (at most k: the buffers hold r + c + k)
     working_.erase(std::remove_if(working_.begin(), working_.end(),
-                                  [k](int i) { return i >= k; }),
+                                  [k](int i) { return i < 0 || i >= k; }),
                    working_.end());
+    std::sort(working_.begin(), working_.end());
+    working_.erase(std::unique(working_.begin(), working_.end()), working_.end());
     y_.segment(r + c, working_.size()).setZero();  // (their multipliers start anew)
   }
   last_n_ = n;

@@ -51,8 +51,9 @@ class Projection {
   // which rows of A were active (in the working set) at the last solve
   const std::vector<int>& active_rows() const { return working_; }
 
-  // The dual point and working set a warm solve starts from (copies carry them: a warm
-  // solve's result depends on them by rounding), and the shape (n, r, c) they belong to.
+  // The dual point of the task rows and equalities (r + c; the working rows' multipliers
+  // start anew), the working rows and the shape (n, r, c) a warm solve starts from (copies
+  // carry them: a warm solve's result depends on them by rounding); n < 0: none (cold).
   struct WarmState {
     Vector y;
     std::vector<int> working;
