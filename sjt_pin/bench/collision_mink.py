@@ -10,8 +10,11 @@ convex hull (so mink has no run with the plate as given). mink tracks the hand's
 ``FrameTask`` and a small ``PostureTask`` within its ``ConfigurationLimit``, a
 ``VelocityLimit`` at the robot's speed limits and a ``CollisionAvoidanceLimit`` between every
 robot geom and the obstacle, with the limit's margin (``minimum_distance_from_collisions``),
-influence (``collision_detection_distance``) and gain (per step, as ``CollisionLimit``'s),
-its QP solved with daqp. mink has no acceleration or jerk limit: its moving runs are those
+influence (``collision_detection_distance``) and damper: ``CollisionLimit`` lets a step close
+``gain`` (0.5) of ``d - margin``; mink bounds the step's displacement by its ``gain (d -
+margin) / dt`` (its QP's variable is the displacement), so its gain is 0.5 dt (with the 0.5
+of its own (0, 1] range, a step at 1 kHz could close 500 times the gap), its QP solved with
+daqp. mink has no acceleration or jerk limit: its moving runs are those
 with speed limits alone; the pull's ratios are to Franka's limits, as the SJT rows'. MuJoCo
 keeps Panda's second finger as a joint of its own (Pinocchio's mimics the first): it is set
 to the first's value and held by the posture; configurations are mapped to Pinocchio's by
@@ -77,6 +80,9 @@ class MinkArm:
 
     def __init__(self, robot: Robot, dt: float, obstacle: Callable[[mujoco.MjSpec], str],
                  gain: float = 0.5):
+        # (``gain``: the share of d - margin a step may close, CollisionLimit's; mink's
+        # limit bounds the displacement J dq by its gain (d - margin) / dt, so its gain is
+        # ``gain * dt``)
         import mink
 
         spec = mujoco_spec(robot)
@@ -106,7 +112,7 @@ class MinkArm:
         robot_geoms = [g for g in range(model.ngeom) if model.geom_bodyid[g] != obstacle_body]
         self.limits = [mink.ConfigurationLimit(model), mink.VelocityLimit(model, speeds),
                        mink.CollisionAvoidanceLimit(
-                           model, [(robot_geoms, [geom])], gain=gain,
+                           model, [(robot_geoms, [geom])], gain=gain * dt,
                            minimum_distance_from_collisions=MARGIN,
                            collision_detection_distance=INFLUENCE)]
 
