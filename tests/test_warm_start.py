@@ -23,23 +23,43 @@ def far_reach(robot, seed):
     return q, target
 
 
+def side_by_side(warm, cold, q, inputs):
+    """Step ``warm`` and ``cold`` (its warm start cleared before each step) from ``q`` over
+    ``inputs`` (the step's arguments after q): the last configurations, the largest
+    difference on the way, the Newton steps of each, and the steps the stage projected (task
+    scale < 1) or held with a row."""
+    qw = qc = q
+    worst, newton, held = 0.0, {"warm": 0, "cold": 0}, 0
+    for args in inputs:
+        cold._controller.warm_state = COLD
+        qw, qc = warm.step(qw, *args), cold.step(qc, *args)
+        worst = max(worst, np.abs(qw - qc).max())
+        newton["warm"] += warm._controller.iterations
+        newton["cold"] += cold._controller.iterations
+        held += warm.last.task_scale < 1.0 or bool(warm.last.active_rows)
+    return qw, qc, worst, newton, held
+
+
+def ball_scene():
+    """The collision bench's first scene (Panda's hand along a line past a ball, then held),
+    its solvers' limit and its inputs (pose, velocity) per step."""
+    from sjt_pin.bench.collision import scenes
+
+    scene = scenes()[0]
+    inputs = [scene.target(k * 1e-3) for k in range(int(round(scene.duration / 1e-3)))]
+    return scene, inputs, lambda: sjt.CollisionLimit(scene.robot, scene.obstacles,
+                                                     self_collision=True, margin=0.01)
+
+
 @pytest.mark.parametrize("method", ["sjt", "dls", "jp"])
 @pytest.mark.parametrize("name", ["ur5", "panda"])
 def test_a_warm_start_gives_the_cold_start_s_velocity_in_fewer_newton_steps(name, method):
     robot = sjt.Robot.from_example(name)
     q, target = far_reach(robot, seed=3)
     warm, cold = (sjt.make_solver(method, robot) for _ in range(2))
-    qw = qc = q
-    newton = {"warm": 0, "cold": 0}
-    projected = 0
-    for _ in range(400):
-        cold._controller.warm_state = COLD
-        qw, qc = warm.step(qw, target), cold.step(qc, target)
-        newton["warm"] += warm._controller.iterations
-        newton["cold"] += cold._controller.iterations
-        projected += warm.last.task_scale < 1.0
-        np.testing.assert_allclose(qw, qc, rtol=0.0, atol=1e-9)
+    _, _, worst, newton, projected = side_by_side(warm, cold, q, [(target,)] * 400)
     assert projected > 100  # (the stage projected the step: the start matters)
+    assert worst <= 1e-9
     assert newton["warm"] < 0.75 * newton["cold"]
 
 
@@ -60,42 +80,33 @@ def test_a_copy_carries_the_warm_start(ur5):
 
 
 def test_beside_an_obstacle_a_warm_start_comes_to_the_cold_start_s_rest():
-    """Panda's hand along a line that passes a ball, then held (the collision bench's first
-    scene): the collision rows join and leave the projection's working set. Sliding along the
+    """The collision rows join and leave the projection's working set. Sliding along the
     ball, the arm amplifies the starts' rounding (1.1e-5 rad at most, measured); both rest at
     the same configuration, in less than half the Newton steps warm."""
-    from sjt_pin.bench.collision import scenes
-
-    scene = scenes()[0]
-    warm, cold = (sjt.make_solver("sjt", scene.robot, limits=[sjt.CollisionLimit(
-        scene.robot, scene.obstacles, self_collision=True, margin=0.01)]) for _ in range(2))
-    qw = qc = scene.q0
-    rows, newton, worst = 0, {"warm": 0, "cold": 0}, 0.0
-    for k in range(int(round(scene.duration / 1e-3))):
-        pose, velocity = scene.target(k * 1e-3)
-        cold._controller.warm_state = COLD
-        qw, qc = warm.step(qw, pose, velocity), cold.step(qc, pose, velocity)
-        rows += bool(warm.last.active_rows)
-        newton["warm"] += warm._controller.iterations
-        newton["cold"] += cold._controller.iterations
-        worst = max(worst, np.abs(qw - qc).max())
-    assert rows > 1000  # (the rows held the step)
+    scene, inputs, limit = ball_scene()
+    warm, cold = (sjt.make_solver("sjt", scene.robot, limits=[limit()]) for _ in range(2))
+    qw, qc, worst, newton, held = side_by_side(warm, cold, scene.q0, inputs)
+    assert held > 1000  # (the rows or the limits held the step)
     assert worst < 1e-4
     np.testing.assert_allclose(qw, qc, rtol=0.0, atol=1e-9)
     assert newton["warm"] < 0.5 * newton["cold"]
 
 
-def test_a_carried_working_set_with_rows_a_step_no_longer_has_is_dropped(ur5):
-    """A state naming rows 0-2 and 50 (only rows 0-2 exist, or none) steps as a cold start."""
-    q, target = far_reach(ur5, seed=1)
-    solver = sjt.make_solver("sjt", ur5)
-    for _ in range(30):
-        q = solver.step(q, target)
-    y = solver._controller.warm_state[0]
+def test_a_carried_working_set_keeps_only_the_rows_a_step_has():
+    """Beside the ball, with collision rows in the step: a state naming rows 0-2 and 500 (no
+    step has 500 rows) steps as a cold start does."""
+    scene, inputs, limit = ball_scene()
+    solver = sjt.make_solver("sjt", scene.robot, limits=[limit()])
+    q = scene.q0
+    for args in inputs[:1500]:
+        q = solver.step(q, *args)
+    assert solver.last.active_rows
+    y, _, n, r, c = solver._controller.warm_state
     twin = copy.deepcopy(solver)
-    solver._controller.warm_state = (y, [0, 1, 2, 50], ur5.nv, 6, 0)
+    solver._controller.warm_state = (y, [2, 0, 1, 500], n, r, c)
     twin._controller.warm_state = COLD
-    np.testing.assert_allclose(solver.step(q, target), twin.step(q, target), atol=1e-12)
+    np.testing.assert_allclose(solver.step(q, *inputs[1500]), twin.step(q, *inputs[1500]),
+                               rtol=0.0, atol=1e-12)
 
 
 @pytest.mark.parametrize("state", [

@@ -35,7 +35,7 @@ from ..limits import CollisionLimit
 from ..robot import Robot
 from .collision import DT, Checker, Scene, _run, run_steps
 from .collision_mesh import MeshRow, mesh_row, plate_grid, plate_scene
-from .collision_moving import MARGIN, TRAVEL, Ball, MovingRow, ball, moving_row
+from .collision_moving import MARGIN, TRAVEL, Ball, MovingRow, ball, moving_row, sweep
 
 if TYPE_CHECKING:
     import mujoco
@@ -172,15 +172,7 @@ def mink_moving(robots: Sequence[str] = ("panda", "ur5"),
     without mink."""
     if not available():
         return []
-    rows = []
-    for name in robots:
-        robot = Robot.from_example(name)
-        for speed in (0.5, 1.0):
-            for dt in (1e-3, 1e-2):
-                rows.append(mink_drive(robot, speed, dt))
-                if progress is not None:
-                    progress(rows[-1])
-    return rows
+    return sweep(robots, ((1e-3,), (1e-2,)), mink_drive, progress)
 
 
 def mink_pull(scene: Scene | None = None) -> MeshRow:

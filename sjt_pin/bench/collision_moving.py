@@ -15,6 +15,7 @@ runs beside the same ball are in :mod:`.collision_peers` and :mod:`.collision_mi
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import coal
@@ -141,21 +142,28 @@ def moving_row(robot: Robot, driven: Ball, dt: float, smooth: bool, told: bool,
                      speed_ratio, acceleration_ratio, jerk_ratio, exceeded, us, method, failed)
 
 
-def moving(robots=("panda", "ur5"), progress=None) -> list[MovingRow]:
-    """Every robot at 0.5 and 1 m/s: at 1 kHz and 100 Hz with speed limits alone, at 1 kHz
-    with Franka-like limits, each with the velocity told; and the 1 kHz runs without it."""
+def sweep(robots: Sequence[str], settings: Sequence[tuple],
+          run: Callable[..., MovingRow],
+          progress: Callable[[MovingRow], object] | None = None) -> list[MovingRow]:
+    """``run(robot, speed, *setting)`` for every robot (example-robot-data names), the ball
+    at 0.5 and 1 m/s, and every setting (the run's further arguments)."""
     rows = []
     for name in robots:
         robot = Robot.from_example(name)
         for speed in (0.5, 1.0):
-            for dt, smooth, told in ((1e-3, False, True), (1e-2, False, True),
-                                     (1e-3, True, True), (1e-3, False, False),
-                                     (1e-3, True, False)):
-                row = drive(robot, speed, dt, smooth, told)
-                rows.append(row)
+            for setting in settings:
+                rows.append(run(robot, speed, *setting))
                 if progress is not None:
-                    progress(row)
+                    progress(rows[-1])
     return rows
+
+
+def moving(robots=("panda", "ur5"), progress=None) -> list[MovingRow]:
+    """Every robot at 0.5 and 1 m/s: at 1 kHz and 100 Hz with speed limits alone, at 1 kHz
+    with Franka-like limits, each with the velocity told; and the 1 kHz runs without it
+    (``(dt, smooth, told)`` of :func:`drive`)."""
+    return sweep(robots, ((1e-3, False, True), (1e-2, False, True), (1e-3, True, True),
+                          (1e-3, False, False), (1e-3, True, False)), drive, progress)
 
 
 def moving_table(rows: list[MovingRow]) -> str:

@@ -32,7 +32,7 @@ from ..limits import CollisionLimit
 from ..robot import Robot
 from .collision import DT, Checker, CollisionRow, Scene, _row, _run, run_steps
 from .collision_mesh import MeshRow, mesh_row, plate_scene
-from .collision_moving import MARGIN, TRAVEL, MovingRow, ball, franka_like, moving_row
+from .collision_moving import MARGIN, TRAVEL, MovingRow, ball, franka_like, moving_row, sweep
 
 
 def available() -> bool:
@@ -149,16 +149,7 @@ def pink_moving(robots: Sequence[str] = ("panda", "ur5"),
     1 kHz with its acceleration limit (:func:`pink_drive`); empty without pink."""
     if not available():
         return []
-    rows = []
-    for name in robots:
-        robot = Robot.from_example(name)
-        for speed in (0.5, 1.0):
-            for dt, smooth in ((1e-3, False), (1e-2, False), (1e-3, True)):
-                row = pink_drive(robot, speed, dt, smooth)
-                rows.append(row)
-                if progress is not None:
-                    progress(row)
-    return rows
+    return sweep(robots, ((1e-3, False), (1e-2, False), (1e-3, True)), pink_drive, progress)
 
 
 def pink_pull(convex: bool, scene: Scene | None = None) -> MeshRow:
