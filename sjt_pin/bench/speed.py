@@ -40,7 +40,7 @@ ACCELERATION_PATHS = (("SJT pose, acceleration limits", {"acceleration_limits": 
 USER_LIMIT_PATHS = (("SJT pose, acceleration + jerk limits + a user limit (inactive)", -1.0),
                     ("SJT pose, acceleration + jerk limits + a user limit (active)", 1e-3))
 #: serial chains (random axes, seeded) timed with a pose task plus a posture task
-CHAIN_JOINTS = (30, 100)
+CHAIN_JOINTS = (30, 100, 200)
 #: Start configurations inside the limits and away from singularities.
 STARTS = {"ur5": np.array([0.3, -1.2, 1.5, -1.8, -1.5, 0.2])}
 
