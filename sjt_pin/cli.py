@@ -182,9 +182,10 @@ def bench(args: argparse.Namespace) -> int:
             print(f"pink / SJT with a target velocity on {robot}: {ratio:.1f}x")
         _write_json(args.json, report.to_dict() | {"cold_start": cold})
     elif args.kind == "collision":
-        from .bench import collision
+        from .bench import collision, collision_peers
 
-        rows = collision.collision(peers=not args.no_peers, progress=lambda r: print(
+        peer = None if args.no_peers else collision_peers.pink_scene
+        rows = collision.collision(peer=peer, progress=lambda r: print(
             f"  {r.scene}, {r.method}, limit {'on' if r.limit else 'off'}", flush=True))
         print("\nCollision avoidance (margin 10 mm; distances checked with coal on the meshes):\n"
               + collision.collision_table(rows))

@@ -675,7 +675,7 @@ def test_bench_collision_meets_the_targets():
     inside the table."""
     from sjt_pin.bench import collision as bench
 
-    rows = bench.collision(methods=("sjt", "dls"), peers=False)
+    rows = bench.collision(methods=("sjt", "dls"))
     assert len(rows) == 3 * 2 * 2
     missed = []
     for row in rows:
@@ -697,8 +697,9 @@ def test_bench_collision_meets_the_targets():
 @pytest.mark.bench
 def test_bench_collision_runs_pink_on_the_same_scenes():
     from sjt_pin.bench import collision as bench
+    from sjt_pin.bench.collision_peers import pink_scene
 
-    rows = [r for r in bench.collision(methods=(), peers=True) if r.method == "pink"]
+    rows = [r for r in bench.collision(methods=(), peer=pink_scene) if r.method == "pink"]
     assert len(rows) == 3 * 2
     assert all(np.isfinite(r.min_distance) and r.us_per_step > 0 for r in rows)
 

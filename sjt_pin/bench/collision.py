@@ -246,10 +246,18 @@ def _floor(scene: Scene, limit: CollisionLimit, qs: np.ndarray, plain_us: float
     return (plain_us + best / len(active) * 1e6, rows_time / len(active) * 1e6)
 
 
-def collision(methods=("sjt", "dls"), peers: bool = True, progress=None) -> list[CollisionRow]:
-    """Every scene (module docstring), every method with and without the limit, and pink; the
-    CPU time per step of SJT and DLS is the least of :data:`TIMING_RUNS` runs, with and
-    without the limit alike, and so is the coal part of the floor."""
+#: a peer's row on a scene: ``peer(scene, limit, barrier, checker)`` with its barrier on
+#: ``limit``'s geometry (``barrier``) or without; ``None`` where the peer is not installed
+#: (:func:`.collision_peers.pink_scene`)
+Peer = Callable[[Scene, CollisionLimit, bool, Checker], CollisionRow | None]
+
+
+def collision(methods=("sjt", "dls"), peer: Peer | None = None,
+              progress=None) -> list[CollisionRow]:
+    """Every scene (module docstring), every method with and without the limit, and
+    ``peer``'s rows without and with its barrier; the CPU time per step of SJT and DLS is the
+    least of :data:`TIMING_RUNS` runs, with and without the limit alike, and so is the coal
+    part of the floor."""
     rows = []
     for scene in scenes():
         limit = CollisionLimit(scene.robot, scene.obstacles, self_collision=scene.self_collision,
@@ -275,16 +283,14 @@ def collision(methods=("sjt", "dls"), peers: bool = True, progress=None) -> list
                 rows.append(row)
                 if progress:
                     progress(row)
-        if peers:
-            from .collision_peers import pink_scene  # (it imports this module)
-
+        if peer is not None:
             for with_barrier in (False, True):
-                peer = pink_scene(scene, limit, with_barrier, checker)
-                if peer is None:
+                row = peer(scene, limit, with_barrier, checker)
+                if row is None:
                     break
-                rows.append(peer)
+                rows.append(row)
                 if progress:
-                    progress(peer)
+                    progress(row)
     return rows
 
 
