@@ -117,7 +117,8 @@ def rates(model: pin.Model, qs, dt: float) -> tuple[np.ndarray, np.ndarray, np.n
     """The joint velocities, accelerations and jerks (N, nv) of the configurations ``qs``
     (N + 1, nq) a solver returned at period ``dt``: finite differences on the model's tangent
     space (``pin.difference``), from rest before the first step."""
-    v = np.array([pin.difference(model, a, b) for a, b in zip(qs[:-1], qs[1:], strict=True)]) / dt
+    v = np.array([pin.difference(model, a, b) for a, b in zip(qs[:-1], qs[1:], strict=True)]
+                 ).reshape(-1, model.nv) / dt  # (no step: (0, nv))
     a = np.diff(np.vstack([np.zeros((1, model.nv)), v]), axis=0) / dt
     j = np.diff(np.vstack([np.zeros((1, model.nv)), a]), axis=0) / dt
     return v, a, j
@@ -193,6 +194,13 @@ def run_steps(q0: np.ndarray, inputs: Sequence[tuple],
             start += clock() - pause
     tried = min(len(qs), len(inputs))
     return np.array(qs), (clock() - start) / max(tried, 1) * 1e6
+
+
+def failed_at(qs: np.ndarray, steps: int, dt: float) -> float:
+    """When (s) a run of :func:`run_steps` over ``steps`` inputs ended because its solver
+    failed (its configurations ``qs`` stop short), or nan if it ran them all."""
+    made = len(qs) - 1
+    return round(made * dt, 9) if made < steps else float("nan")
 
 
 def _run(scene: Scene, step, after=None) -> tuple[np.ndarray, float]:

@@ -23,7 +23,7 @@ import pinocchio as pin
 from ..limits import CollisionLimit
 from ..robot import Robot
 from ..solvers import make_solver
-from .collision import Checker, Scene, _line, _pose_error, _run, rates
+from .collision import Checker, Scene, _line, _pose_error, _run, failed_at, rates
 from .collision_moving import franka_like
 
 DT = 1e-3
@@ -106,18 +106,17 @@ def mesh_row(scene: Scene, convex: bool, qs: np.ndarray, us: float, checker: Che
     robot = scene.robot
     accelerations, jerks = franka_like(robot.nv)
     closest = min(checker.closest(q)[0] for q in qs[1::5]) if len(qs) > 1 else np.inf
-    _, a, j = rates(robot.model, qs, DT) if len(qs) > 1 else (np.zeros((0, robot.nv)),) * 3
+    _, a, j = rates(robot.model, qs, DT)
     acceleration, jerk = np.abs(a) / accelerations, np.abs(j) / jerks
     conflicts = unreported = None
     if reported is not None:
         above = (np.max(acceleration, axis=1) > 1.001) | (np.max(jerk, axis=1) > 1.001)
         conflicts, unreported = int(reported.sum()), int(np.sum(above & ~reported))
-    steps = len(qs) - 1
-    failed = round(steps * DT, 9) if steps < int(round(scene.duration / DT)) else float("nan")
     end, _ = scene.target(scene.duration)
     return MeshRow(convex, float(closest), float(np.max(acceleration, initial=0.0)),
                    float(np.max(jerk, initial=0.0)), conflicts, unreported,
-                   _pose_error(robot, qs[-1], end), us, method, failed)
+                   _pose_error(robot, qs[-1], end), us, method,
+                   failed_at(qs, int(round(scene.duration / DT)), DT))
 
 
 def mesh_table(rows: list[MeshRow]) -> str:

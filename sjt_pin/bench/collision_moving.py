@@ -25,7 +25,7 @@ import pinocchio as pin
 from ..limits import CollisionLimit
 from ..robot import Robot
 from ..solvers import make_solver
-from .collision import Checker, rates, run_steps
+from .collision import Checker, failed_at, rates, run_steps
 
 MARGIN = 0.01
 TRAVEL = 0.45  # m the ball comes from
@@ -129,17 +129,16 @@ def moving_row(robot: Robot, driven: Ball, dt: float, smooth: bool, told: bool,
         driven.checker.move(0, pose)
         d = driven.checker.closest(q)[0]
         closest, below = min(closest, d), below + (d < MARGIN - 1e-3)
-    v, a, j = rates(robot.model, qs, dt) if len(qs) > 1 else (np.zeros((0, robot.nv)),) * 3
+    v, a, j = rates(robot.model, qs, dt)
     speed_ratio = float(np.max(np.abs(v) / robot.velocity_limits, initial=0.0))
     acceleration_ratio = jerk_ratio = float("nan")
     if smooth:
         accelerations, jerks = franka_like(robot.nv)
         acceleration_ratio = float(np.max(np.abs(a) / accelerations, initial=0.0))
         jerk_ratio = float(np.max(np.abs(j) / jerks, initial=0.0))
-    steps = len(qs) - 1
-    failed = round(steps * dt, 9) if steps < len(driven.path) else float("nan")
     return MovingRow(robot.name, driven.speed, 1.0 / dt, smooth, told, float(closest), int(below),
-                     speed_ratio, acceleration_ratio, jerk_ratio, exceeded, us, method, failed)
+                     speed_ratio, acceleration_ratio, jerk_ratio, exceeded, us, method,
+                     failed_at(qs, len(driven.path), dt))
 
 
 def sweep(robots: Sequence[str], settings: Sequence[tuple],

@@ -30,7 +30,7 @@ import pinocchio as pin
 
 from ..limits import CollisionLimit
 from ..robot import Robot
-from .collision import DT, Checker, CollisionRow, Scene, _row, _run, run_steps
+from .collision import DT, Checker, CollisionRow, Scene, _row, _run, failed_at, run_steps
 from .collision_mesh import MeshRow, mesh_row, plate_scene
 from .collision_moving import MARGIN, TRAVEL, MovingRow, ball, franka_like, moving_row, sweep
 
@@ -121,8 +121,9 @@ def pink_scene(scene: Scene, limit: CollisionLimit, barrier: bool, checker: Chec
     arm = PinkArm(scene.robot, scene.q0, DT, limit if barrier else None)
     qs, us = _run(scene, lambda q, pose, velocity: arm.step(q, pose))
     row = _row(scene, "pink", barrier, qs, us, checker)
-    if len(qs) - 1 < int(round(scene.duration / DT)):
-        row.extra["failed_at"] = (len(qs) - 1) * DT
+    failed = failed_at(qs, int(round(scene.duration / DT)), DT)
+    if not np.isnan(failed):
+        row.extra["failed_at"] = failed
     return row
 
 
