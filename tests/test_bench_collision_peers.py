@@ -11,7 +11,7 @@ import pinocchio as pin
 import pytest
 
 from sjt_pin.bench import collision_mesh, collision_mink, collision_moving, collision_peers
-from sjt_pin.bench.collision import DT, Checker, _run, run_steps
+from sjt_pin.bench.collision import DT, Checker, run_scene, run_steps
 from sjt_pin.limits import CollisionLimit
 
 
@@ -108,7 +108,7 @@ def test_pinks_pull_over_the_plate_measures_what_pink_returned():
     limit = CollisionLimit(scene.robot, scene.obstacles)
     accelerations, _ = collision_moving.franka_like(scene.robot.nv)
     arm = collision_peers.PinkArm(scene.robot, scene.q0, DT, limit, accelerations)
-    qs, _ = _run(scene, lambda q, pose, velocity: arm.step(q, pose))
+    qs, _ = run_scene(scene, lambda q, pose, velocity: arm.step(q, pose))
     checker = Checker(scene.robot, scene.obstacles, limit.pair_names)
     assert row.closest == min(checker.closest(q)[0] for q in qs[1::5])
     v = np.diff(qs, axis=0) / DT

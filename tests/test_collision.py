@@ -180,8 +180,8 @@ def test_srdf_disabled_and_adjacent_pairs_are_skipped(panda):
     geom = panda.collision_model.copy()
     geom.addAllCollisionPairs()
     every = {(p.first, p.second) for p in geom.collisionPairs}
-    from sjt_pin.limits.collision import _srdf_of
-    pin.removeCollisionPairs(panda.model, geom, _srdf_of(panda))
+    from sjt_pin.limits.collision_geometry import srdf_of
+    pin.removeCollisionPairs(panda.model, geom, srdf_of(panda))
     disabled = every - {(p.first, p.second) for p in geom.collisionPairs}
     names = [g.name for g in geom.geometryObjects]
     disabled = {(names[a], names[b]) for a, b in disabled}

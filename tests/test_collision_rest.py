@@ -51,7 +51,7 @@ def _beside_the_base(panda):
     for _ in range(6):
         t = rng.uniform([-0.25, -0.25, 0.05], [0.25, 0.25, 0.5])
         rot = pin.exp3(rng.normal(size=3) * 0.7) @ start.rotation
-    return q0, bench._line(start, pin.SE3(rot, t), 1.5)
+    return q0, bench.line_path(start, pin.SE3(rot, t), 1.5)
 
 
 @pytest.mark.parametrize("method", ["sjt", "dls"])
@@ -89,7 +89,7 @@ def _blocked_scene(robot, rng):
         except CollisionError:
             continue
         if min(d.distance for d in probe.distances(q0)) >= 0.02:
-            return q0, end, bench._line(start, end, 1.0), (shape, pose)
+            return q0, end, bench.line_path(start, end, 1.0), (shape, pose)
 
 
 # seeds of _blocked_scene where both methods come to rest. Panda seed 14 chattered (SJT and DLS,

@@ -32,8 +32,8 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from ..limits.collision import CollisionLimit, _to_hulls
-from ..limits.collision_geometry import collision_model_of
+from ..limits.collision import CollisionLimit
+from ..limits.collision_geometry import collision_model_of, to_hulls
 from ..robot import Robot
 from ..solvers import make_solver
 from ..trajectories import PoseInterpolation
@@ -81,7 +81,7 @@ class CollisionRow:
     extra: dict = field(default_factory=dict)
 
 
-def _line(start: pin.SE3, end: pin.SE3, duration: float):
+def line_path(start: pin.SE3, end: pin.SE3, duration: float):
     path = PoseInterpolation(start, end, duration=duration)
 
     def target(t: float):
@@ -106,9 +106,9 @@ def scenes() -> list[Scene]:
                                                                      top.translation[2] - 0.2])))
     below = pin.SE3(top.rotation, top.translation - [0.0, 0.0, 0.25])
     return [
-        Scene("Panda passes a ball", panda, q0, [ball], _line(start, end, 2.0), 2.0, 4.0),
-        Scene("Panda beside its base", panda, q0, [], _line(start, side, 1.5), 1.5, 3.5),
-        Scene("UR5 under a table", ur5, UR5_START.copy(), [table], _line(top, below, 1.5), 1.5,
+        Scene("Panda passes a ball", panda, q0, [ball], line_path(start, end, 2.0), 2.0, 4.0),
+        Scene("Panda beside its base", panda, q0, [], line_path(start, side, 1.5), 1.5, 3.5),
+        Scene("UR5 under a table", ur5, UR5_START.copy(), [table], line_path(top, below, 1.5), 1.5,
               3.5),
     ]
 
@@ -139,7 +139,7 @@ class Checker:
         for a, b in pair_names:
             self.mesh.addCollisionPair(pin.CollisionPair(names.index(a), names.index(b)))
         self.hull = self.mesh.copy()
-        _to_hulls(self.hull)
+        to_hulls(self.hull)
         self.mesh_data, self.hull_data = self.mesh.createData(), self.hull.createData()
         for data in (self.mesh_data, self.hull_data):
             for req in data.distanceRequests:
@@ -166,7 +166,12 @@ class Checker:
         return float(best), pair
 
 
-def _pose_error(robot: Robot, q: np.ndarray, target: pin.SE3) -> float:
+def dash(x: float | int | None, spec: str = ".2f") -> str:
+    """``x`` formatted for a table, or ``-`` where there is no value (``None`` or NaN)."""
+    return "-" if x is None or x != x else format(x, spec)
+
+
+def pose_error(robot: Robot, q: np.ndarray, target: pin.SE3) -> float:
     return float(np.linalg.norm(pin.log6(robot.fk(q).actInv(target)).vector))
 
 
@@ -203,13 +208,13 @@ def failed_at(qs: np.ndarray, steps: int, dt: float) -> float:
     return round(made * dt, 9) if made < steps else float("nan")
 
 
-def _run(scene: Scene, step, after=None) -> tuple[np.ndarray, float]:
+def run_scene(scene: Scene, step, after=None) -> tuple[np.ndarray, float]:
     """Run ``step(q, pose, velocity) -> q`` over the scene (:func:`run_steps`)."""
     return run_steps(scene.q0, [scene.target(k * DT)
                                 for k in range(int(round(scene.duration / DT)))], step, after)
 
 
-def _row(scene: Scene, method: str, limit: bool, qs: np.ndarray, us: float, checker: Checker,
+def scene_row(scene: Scene, method: str, limit: bool, qs: np.ndarray, us: float, checker: Checker,
          ) -> CollisionRow:
     closest = [checker.closest(q) for q in qs]
     worst = min(range(len(closest)), key=lambda i: closest[i][0])
@@ -217,7 +222,7 @@ def _row(scene: Scene, method: str, limit: bool, qs: np.ndarray, us: float, chec
     end_pose, _ = scene.target(scene.duration)
     speed = np.diff(qs[-int(1.0 / DT) - 1:], axis=0) / DT
     return CollisionRow(scene.name, method, limit, closest[worst][0], closest[worst][1],
-                        _pose_error(scene.robot, qs[settle], end_pose),
+                        pose_error(scene.robot, qs[settle], end_pose),
                         float(np.sqrt(np.mean(speed ** 2))), us)
 
 
@@ -280,12 +285,12 @@ def collision(methods=("sjt", "dls"), peer: Peer | None = None,
                     solver = make_solver(method, scene.robot, dt=DT,
                                          limits=[fence] if with_limit else ())
                     runs[with_limit].append(
-                        (*_run(scene, lambda q, pose, v, s=solver: s.step(q, pose, v)), fence))
+                        (*run_scene(scene, lambda q, pose, v, s=solver: s.step(q, pose, v)), fence))
             plain_us = min(us for _, us, _ in runs[False])
             for with_limit in (False, True):
                 qs, _, fence = runs[with_limit][0]
                 us = min(us for _, us, _ in runs[with_limit])
-                row = _row(scene, method.upper(), with_limit, qs, us, checker)
+                row = scene_row(scene, method.upper(), with_limit, qs, us, checker)
                 if with_limit:
                     row.floor_us, row.rows_us = _floor(scene, fence, qs, plain_us)
                 rows.append(row)
@@ -331,7 +336,8 @@ def idle(steps: int = 3000) -> tuple[float, float]:
     best = [np.inf, np.inf]
     for _ in range(TIMING_RUNS):  # (without and with in turn, as collision())
         for i, solver in enumerate(solvers):
-            best[i] = min(best[i], _run(scene, lambda q, pose, v, s=solver: s.step(q, pose, v))[1])
+            _, us = run_scene(scene, lambda q, pose, v, s=solver: s.step(q, pose, v))
+            best[i] = min(best[i], us)
     return best[0], best[1]
 
 

@@ -23,7 +23,7 @@ import pinocchio as pin
 from ..limits import CollisionLimit
 from ..robot import Robot
 from ..solvers import make_solver
-from .collision import Checker, Scene, _line, _pose_error, _run, failed_at, rates
+from .collision import Checker, Scene, dash, failed_at, line_path, pose_error, rates, run_scene
 from .collision_moving import franka_like
 
 DT = 1e-3
@@ -78,7 +78,7 @@ def plate_scene(robot: Robot | None = None) -> Scene:
     plate = (bumpy_plate(), pin.SE3(np.eye(3), start.translation + np.array([0.1, 0.0, -0.22])))
     end = pin.SE3(start.rotation, start.translation + np.array([0.0, 0.2, -0.17]))
     return Scene("Panda pulled over a plate of bumps", robot, robot.q0.copy(), [plate],
-                 _line(start, end, PULL), PULL, PULL + HOLD)
+                 line_path(start, end, PULL), PULL, PULL + HOLD)
 
 
 def pull(convex: bool, robot: Robot | None = None) -> MeshRow:
@@ -89,7 +89,7 @@ def pull(convex: bool, robot: Robot | None = None) -> MeshRow:
     solver = make_solver("sjt", scene.robot, dt=DT, limits=[limit],
                          acceleration_limits=accelerations, jerk_limits=jerks)
     reported: list[bool] = []
-    qs, us = _run(scene, lambda q, pose, velocity: solver.step(q, pose, velocity),
+    qs, us = run_scene(scene, lambda q, pose, velocity: solver.step(q, pose, velocity),
                   after=lambda: reported.append(bool(solver.last.limit_conflicts)))
     return mesh_row(scene, convex, qs, us, Checker(scene.robot, scene.obstacles, limit.pair_names),
                     np.array(reported), "SJT")
@@ -115,7 +115,7 @@ def mesh_row(scene: Scene, convex: bool, qs: np.ndarray, us: float, checker: Che
     end, _ = scene.target(scene.duration)
     return MeshRow(convex, float(closest), float(np.max(acceleration, initial=0.0)),
                    float(np.max(jerk, initial=0.0)), conflicts, unreported,
-                   _pose_error(robot, qs[-1], end), us, method,
+                   pose_error(robot, qs[-1], end), us, method,
                    failed_at(qs, int(round(scene.duration / DT)), DT))
 
 
@@ -126,11 +126,9 @@ def mesh_table(rows: list[MeshRow]) -> str:
             "|---|---|---|---|---|---|---|---|---|---|\n")
     return head + "".join(
         f"| {r.method} | {'convex hull' if r.convex else 'mesh'} | {1e3 * r.closest:.2f} "
-        f"| {r.acceleration_ratio:.2f} | {r.jerk_ratio:.2f} | {_or_dash(r.conflicts)} "
-        f"| {_or_dash(r.unreported)} | {r.final_error:.3f} | "
-        f"{'-' if np.isnan(r.failed_at) else f'{r.failed_at:.3f}'} | {r.us_per_step:.0f} |\n"
+        f"| {r.acceleration_ratio:.2f} | {r.jerk_ratio:.2f} | {dash(r.conflicts, 'd')} "
+        f"| {dash(r.unreported, 'd')} | {r.final_error:.3f} | "
+        f"{dash(r.failed_at, '.3f')} | {r.us_per_step:.0f} |\n"
         for r in rows)
 
 
-def _or_dash(x: int | None) -> str:
-    return "-" if x is None else str(x)

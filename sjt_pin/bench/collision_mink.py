@@ -33,7 +33,7 @@ import pinocchio as pin
 
 from ..limits import CollisionLimit
 from ..robot import Robot
-from .collision import DT, Checker, Scene, _run, run_steps
+from .collision import DT, Checker, Scene, run_scene, run_steps
 from .collision_mesh import MeshRow, mesh_row, plate_grid, plate_scene
 from .collision_moving import MARGIN, TRAVEL, Ball, MovingRow, ball, moving_row, sweep
 
@@ -194,7 +194,7 @@ def mink_pull(scene: Scene | None = None) -> MeshRow:
 
     arm = MinkArm(scene.robot, DT, add_plate)
     limit = CollisionLimit(scene.robot, scene.obstacles)
-    qs, us = _run(scene, lambda q, target, velocity: arm.step(q, target))
+    qs, us = run_scene(scene, lambda q, target, velocity: arm.step(q, target))
     return mesh_row(scene, True, qs, us, Checker(scene.robot, scene.obstacles, limit.pair_names),
                     None, "mink")
 

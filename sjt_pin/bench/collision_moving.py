@@ -25,7 +25,7 @@ import pinocchio as pin
 from ..limits import CollisionLimit
 from ..robot import Robot
 from ..solvers import make_solver
-from .collision import Checker, failed_at, rates, run_steps
+from .collision import Checker, dash, failed_at, rates, run_steps
 
 MARGIN = 0.01
 TRAVEL = 0.45  # m the ball comes from
@@ -175,11 +175,9 @@ def moving_table(rows: list[MovingRow]) -> str:
         f"| {r.robot} | {r.method} | {r.speed:g} | {r.rate:g} "
         f"| {'Franka-like' if r.smooth else 'speed'} | {'yes' if r.told else 'no'} "
         f"| {1e3 * r.closest:.2f} | {r.below} | {r.speed_ratio:.3f} "
-        f"| {_ratio(r.acceleration_ratio)} | {_ratio(r.jerk_ratio)} "
-        f"| {'-' if r.exceeded is None else r.exceeded} | {_ratio(r.failed_at)} "
+        f"| {dash(r.acceleration_ratio)} | {dash(r.jerk_ratio)} "
+        f"| {dash(r.exceeded, 'd')} | {dash(r.failed_at)} "
         f"| {r.us_per_step:.0f} |\n" for r in rows)
     return head + body
 
 
-def _ratio(x: float) -> str:
-    return "-" if np.isnan(x) else f"{x:.2f}"

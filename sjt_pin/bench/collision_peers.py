@@ -30,7 +30,7 @@ import pinocchio as pin
 
 from ..limits import CollisionLimit
 from ..robot import Robot
-from .collision import DT, Checker, CollisionRow, Scene, _row, _run, failed_at, run_steps
+from .collision import DT, Checker, CollisionRow, Scene, failed_at, run_scene, run_steps, scene_row
 from .collision_mesh import MeshRow, mesh_row, plate_scene
 from .collision_moving import MARGIN, TRAVEL, MovingRow, ball, franka_like, moving_row, sweep
 
@@ -119,8 +119,8 @@ def pink_scene(scene: Scene, limit: CollisionLimit, barrier: bool, checker: Chec
     if not available():
         return None
     arm = PinkArm(scene.robot, scene.q0, DT, limit if barrier else None)
-    qs, us = _run(scene, lambda q, pose, velocity: arm.step(q, pose))
-    row = _row(scene, "pink", barrier, qs, us, checker)
+    qs, us = run_scene(scene, lambda q, pose, velocity: arm.step(q, pose))
+    row = scene_row(scene, "pink", barrier, qs, us, checker)
     failed = failed_at(qs, int(round(scene.duration / DT)), DT)
     if not np.isnan(failed):
         row.extra["failed_at"] = failed
@@ -160,7 +160,7 @@ def pink_pull(convex: bool, scene: Scene | None = None) -> MeshRow:
     scene = scene or plate_scene()
     limit = CollisionLimit(scene.robot, scene.obstacles, convex=convex)
     arm = PinkArm(scene.robot, scene.q0, DT, limit, franka_like(scene.robot.nv)[0])
-    qs, us = _run(scene, lambda q, pose, velocity: arm.step(q, pose))
+    qs, us = run_scene(scene, lambda q, pose, velocity: arm.step(q, pose))
     return mesh_row(scene, convex, qs, us, Checker(scene.robot, scene.obstacles,
                                                    limit.pair_names), None, "pink")
 

@@ -101,17 +101,17 @@ from .collision_geometry import (
     ClosestPoints,
     CollisionError,
     PairDistance,
-    _check_pose,
-    _srdf_of,
-    _to_hulls,
-    _twist,
+    check_pose,
     coal,
     collision_model_of,
+    obstacle_twist,
+    srdf_of,
+    to_hulls,
 )
 from .collision_moving import MovingMixin
 from .collision_pairs import PairsMixin
-from .collision_reach import _mimic_map
 from .collision_reach import damper_rows_reference as damper_rows_reference
+from .collision_reach import mimic_map
 from .collision_rows import RowsMixin
 from .collision_tables import TablesMixin
 
@@ -199,12 +199,12 @@ class CollisionLimit(PairsMixin, TablesMixin, BroadPhaseMixin, MovingMixin, Rows
                           ignore=list(ignore), srdf=srdf, convex=convex, witnesses=witnesses)
         self.model: pin.Model = robot.model
         self._mimics = list(getattr(robot, "mimic_joints", ()))
-        self._mimic = _mimic_map(robot.model, self._mimics)
+        self._mimic = mimic_map(robot.model, self._mimics)
         source = self.__dict__.pop("_restored_geometry", None)  # set by __setstate__
         self.geometry = source.copy() if source is not None else collision_model_of(robot)
         self._source = self.geometry.copy()  # the robot's own geometry (meshes), for copies
         if convex:
-            _to_hulls(self.geometry)
+            to_hulls(self.geometry)
         self._convex = bool(convex)
         self.n_robot = self.geometry.ngeoms
         self._obstacle_ids: list[int] = []
@@ -217,7 +217,7 @@ class CollisionLimit(PairsMixin, TablesMixin, BroadPhaseMixin, MovingMixin, Rows
         self._obstacle_of = np.full(self.geometry.ngeoms, -1, dtype=np.int64)  # (-1: robot's)
         self._obstacle_of[self._obstacle_ids] = np.arange(len(self._obstacle_ids))
         self._choose_pairs(self_collision, list(pairs), list(ignore),
-                           srdf if srdf is not None else (_srdf_of(robot) if self_collision
+                           srdf if srdf is not None else (srdf_of(robot) if self_collision
                                                           else None))
         self._data = self.model.createData()
         self._checked = False
@@ -293,8 +293,8 @@ class CollisionLimit(PairsMixin, TablesMixin, BroadPhaseMixin, MovingMixin, Rows
             raise TypeError(f"obstacle index must be an int, got {type(i).__name__}")
         if not 0 <= i < len(self._obstacle_ids):
             raise IndexError(f"obstacle {i} does not exist ({len(self._obstacle_ids)} obstacles)")
-        _check_pose(pose, f"pose of obstacle {i}")
-        twist = _twist(velocity, f"velocity of obstacle {i}")
+        check_pose(pose, f"pose of obstacle {i}")
+        twist = obstacle_twist(velocity, f"velocity of obstacle {i}")
         g = self._obstacle_ids[i]
         changed = bool(np.any(twist != self._velocity[i]))
         obj = self.geometry.geometryObjects[g]

@@ -65,7 +65,7 @@ def _supported(shape) -> bool:
     return isinstance(shape, tuple(kinds))
 
 
-def _srdf_of(robot) -> str | None:
+def srdf_of(robot) -> str | None:
     """The SRDF of an example-robot-data robot, or None."""
     path = getattr(robot, "srdf", None)
     if path:
@@ -120,7 +120,7 @@ def collision_model_of(robot) -> pin.GeometryModel:
     return geom
 
 
-def _to_hulls(geom: pin.GeometryModel) -> None:
+def to_hulls(geom: pin.GeometryModel) -> None:
     """Replace every mesh of ``geom`` by its convex hull (in place; the meshes themselves,
     possibly shared with the robot's model, are not changed)."""
     for g in geom.geometryObjects:
@@ -145,7 +145,7 @@ def _hull(mesh, name: str):
                          "convex=False to use the mesh itself") from error
 
 
-def _check_pose(pose, name: str) -> None:
+def check_pose(pose, name: str) -> None:
     """TypeError unless ``pose`` is a ``pin.SE3``, ValueError unless it is finite and rigid
     (its rotation orthonormal, of determinant 1, to 1e-6). (Plain floats: a move a step.)"""
     if not isinstance(pose, pin.SE3):
@@ -179,7 +179,7 @@ def _check_extent(shape, name: str) -> None:
                              f"(its box runs from {lo} to {hi})")
 
 
-def _twist(velocity, name: str) -> np.ndarray:
+def obstacle_twist(velocity, name: str) -> np.ndarray:
     """An obstacle's twist (6,), linear (m/s) then angular (rad/s), from ``velocity``: None
     (at rest), a ``pin.Motion`` or 6 numbers; ``name`` names it in the errors."""
     if velocity is None:

@@ -15,9 +15,9 @@ from .collision_geometry import (
     CollisionError,
     PairDistance,
     _check_extent,
-    _check_pose,
     _hull,
     _supported,
+    check_pose,
     coal,
 )
 from .collision_state import CollisionState
@@ -36,7 +36,7 @@ class PairsMixin(CollisionState):
         if not _supported(shape):
             raise CollisionError(f"obstacle {i}: unknown shape {type(shape).__name__}; use a "
                                  "coal Sphere, Box, Capsule, Cylinder, Convex or BVHModel")
-        _check_pose(pose, f"pose of obstacle {i}")
+        check_pose(pose, f"pose of obstacle {i}")
         _check_extent(shape, f"obstacle {i}")
         self._obstacle_shapes.append(shape)
         if self._convex and isinstance(shape, coal.BVHModelBase) and not isinstance(

@@ -25,7 +25,7 @@ def damper_rows_reference(J: np.ndarray, support: np.ndarray, pairs: np.ndarray,
     return ends[0] - ends[1], rate * (pairs[:, 0] - pairs[:, 1])
 
 
-def _translates(kind: str) -> bool:
+def joint_translates(kind: str) -> bool:
     """Whether a joint of this ``shortname()`` translates (its coordinates move points by at
     least a metre per unit)."""
     return any(t in kind for t in ("Prismatic", "FreeFlyer", "Planar", "Translation",
@@ -36,7 +36,7 @@ def _translates(kind: str) -> bool:
 _TURNS = ("JointModelR", "JointModelSpherical", "JointModelUniversal")
 
 
-def _extents(model: pin.Model, mimics: Sequence = ()
+def joint_extents(model: pin.Model, mimics: Sequence = ()
              ) -> tuple[list[str], np.ndarray, np.ndarray, np.ndarray]:
     """Per joint: its kind (``shortname()``; a mimic joint's is the kind of the joint it
     follows) and how far (m) its own motion can carry its frame's origin over its position
@@ -78,7 +78,7 @@ def _extents(model: pin.Model, mimics: Sequence = ()
     return kinds, extent, lower, upper
 
 
-def _mimic_map(model: pin.Model, mimic_joints) -> np.ndarray | None:
+def mimic_map(model: pin.Model, mimic_joints) -> np.ndarray | None:
     """The (nvExtended, nv) matrix from the velocity of every joint coordinate, mimic joints'
     included, to the model's velocity coordinates (a mimic joint's column adds, times its
     multiplier, to the one it follows); ``None`` without mimic joints."""

@@ -13,7 +13,7 @@ import pinocchio as pin
 
 from ..kernels import CollisionTables, Skip
 from .collision_geometry import UNBOUNDED, WITNESS_APART, coal
-from .collision_reach import _extents, _translates
+from .collision_reach import joint_extents, joint_translates
 from .collision_state import CollisionState
 
 
@@ -142,7 +142,7 @@ class TablesMixin(CollisionState):
         exceeds influence, the pair is not queried."""
         self._version = 0  # bumped by move(): a new scene
         self._cache: tuple | None = None
-        self._kinds, self._extent, self._lower, self._upper = _extents(
+        self._kinds, self._extent, self._lower, self._upper = joint_extents(
             self.model, getattr(self, "_mimics", ()))
         self._lever = self._levers()
         # the speed bounds: (dt, the speed limits, whether they let a step cross the band,
@@ -173,7 +173,7 @@ class TablesMixin(CollisionState):
         """For each geometry g and joint coordinate (nvExtended) of a joint k that moves it:
         a bound (m) on the distance from joint k's origin to any point of g's bounding
         sphere, over every configuration with the translating joints in their ranges
-        (:func:`_extents`): the sphere's far side from g's joint, plus, for each joint i from
+        (:func:`joint_extents`): the sphere's far side from g's joint, plus, for each joint i from
         g's joint up to (not including) k, its fixed offset (``jointPlacements``) and how far
         its own motion can carry its frame (a prismatic joint's extension); ``unbounded``
         stands for the extension of a joint without a finite range. And which coordinates
@@ -217,7 +217,7 @@ class TablesMixin(CollisionState):
         translates = np.zeros(model.nvExtended, dtype=bool)
         for k in range(1, model.njoints):
             start = model.idx_vExtendeds[k]
-            translates[start:start + model.nvExtendeds[k]] = _translates(kinds[k])
+            translates[start:start + model.nvExtendeds[k]] = joint_translates(kinds[k])
         lever = np.where(translates, np.maximum(chain, 1.0), chain)
         lever[~moves] = 0.0
         one = moves[self._pa] != moves[self._pb]
@@ -241,7 +241,7 @@ class TablesMixin(CollisionState):
         for j in range(1, model.njoints):
             start = model.idx_vExtendeds[j]
             span = slice(start, start + model.nvExtendeds[j])
-            lever[span] = (np.maximum(reach[span], 1.0) if _translates(self._kinds[j])
+            lever[span] = (np.maximum(reach[span], 1.0) if joint_translates(self._kinds[j])
                            else reach[span])
         if self._mimic is not None:  # a coordinate's lever: the largest of the joints it drives
             lever = (np.abs(self._mimic) * lever[:, None]).max(axis=0)
