@@ -103,6 +103,7 @@ class Controller {
                            const Eigen::Ref<const RowMatrix>& H,
                            const Eigen::Ref<const Vector>& hd, double ball);
   void cauchy_point(const Eigen::Ref<const RowMatrix>& J0, double ball);
+  void range_goal(const Eigen::Ref<const RowMatrix>& J0, const double* q, double K);
   void lower_nearest(const Eigen::Ref<const RowMatrix>& J0, const Eigen::Ref<const RowMatrix>& A,
                      const Eigen::Ref<const Vector>& b, const Vector& lo, const Vector& hi);
   void keep_direction(const Eigen::Ref<const RowMatrix>& J0, const Eigen::Ref<const RowMatrix>& A,
@@ -142,6 +143,11 @@ class Controller {
   std::vector<std::pair<double, Index>> breaks_;  // the Cauchy path's breakpoints
   Vector wide_lo_, wide_hi_, delta_, aim_, bk_;
   Vector held_, held_res_;  // hold_rows: the held rows' motion, their residual
+  // range_goal: the least-squares displacement (its Gram matrix and factor), its box, result
+  Eigen::MatrixXd goal_gram_;
+  Eigen::LLT<Eigen::MatrixXd> goal_llt_;
+  Vector goal_xb_, goal_lam_, goal_lo_, goal_hi_, goal_, goal_y_;
+  Projection goal_projection_;
   Method lower_;
   MethodStep lower_step_;
   Projection projection_;
