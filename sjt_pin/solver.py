@@ -317,15 +317,14 @@ class Solver:
         :class:`~sjt_pin.joint_move.JointMove` follows the minimum-jerk joint-space path there,
         timed within ``share`` of this solver's speed, acceleration and jerk limits.
 
-        Step it like a solver, ``q = move.step(q)``, until ``move.done``: each step is a step
-        of a twin of this solver (the same method, options and limits, so every limit holds on
-        every step) tracking the frame's pose along the path, with a posture task pulling the
-        joints along it, stacked with the pose task (in a null space alone it would leave a
-        non-redundant arm free to change branch at a singularity on the path, and a redundant
-        one to drift); this solver's motion
-        state follows, so it carries on from the move without a jump. Raises ``ValueError``
-        when ``solve()`` finds no configuration within its tolerance, or when the solver's
-        task is not one frame's (a multi-task solver moves by its own targets)."""
+        Step it like a solver, ``q = move.step(q)``, until ``move.done``: each step is a step of a
+        twin of this solver (the same method, options and limits, so every limit holds on every
+        step) tracking the frame's pose along the path, with a posture task pulling the joints
+        along it, stacked with the pose task (in a null space alone it would leave a non-redundant
+        arm free to change branch at a singularity on the path, and a redundant one to drift); this
+        solver's motion state follows, so it carries on from the move without a jump. Raises
+        ``ValueError`` when ``solve()`` finds no configuration within its tolerance, or when the
+        solver's task is not one frame's (a multi-task solver moves by its own targets)."""
         q, result = move_goal(self, q, target, options)
         posture = PostureTask(q, weight=JointMove.POSTURE_WEIGHT, priority=0)
         twin = _rebuild(type(self), self.robot, self.method,
@@ -344,8 +343,7 @@ class Solver:
         mine.dq[:], mine.ddq[:] = theirs.dq, theirs.ddq
 
     def search(self):
-        """The set-point IK state of this solver (:class:`~sjt_pin.ik.Search`, created on
-        first use; its buffers are its own)."""
+        """This solver's set-point IK state (:class:`~sjt_pin.ik.Search`, its own, made on use)."""
         if self._search is None:
             from .ik import Search
 
@@ -362,9 +360,9 @@ class Solver:
     def __reduce__(self):
         """A copy (``pickle``, ``copy.deepcopy``, another process) is the same solver made anew,
         carrying this one's state: gain and period as set now, the commanded velocity and
-        acceleration, the saddle escape, the stability warning, the contacts' held poses and
-        the projection's warm start.
-        Its next steps are this one's, bitwise; it has no :attr:`last` until it steps."""
+        acceleration, the saddle escape, the stability warning, the contacts' held poses and the
+        projection's warm start. Its next steps are this one's, bitwise; it has no :attr:`last`
+        until it steps."""
         arguments = self.options.replace(gain=self._gain, dt=self._dt,
                                          check_stability=self._stability.enabled)
         c = self._controller
