@@ -2,10 +2,11 @@
 comes to rest at a constrained stationary point of its task error (no velocity within the
 ranges lowers the linearised error), never above a limit.
 
-Before the first level's feedback became the least-squares displacement within the ranges
-wherever the method's own displacement leaves them (``Controller::range_goal``), the joints
-chased displacements that assumed a motion the range forbids: on these draws 24 of 30 runs
-(UR5, Panda, UR10, KUKA iiwa, xArm6) still moved after 12 s, at up to 2.5 rad/s."""
+Before the first level's feedback became the bounded least-squares displacement wherever the
+method's own displacement leaves a range (``Controller::range_goal``), 23 of these 24 runs
+failed: the joints chased displacements that assumed a motion the range forbids, and passed
+the constrained minimum again and again (on a wider draw, over UR5, Panda, UR10, KUKA iiwa and
+xArm6, 24 of 30 runs still moved after 12 s, at up to 2.5 rad/s)."""
 
 import numpy as np
 import pinocchio as pin
@@ -40,7 +41,7 @@ def _case(name: str, seed: int):
                                                        model.upperPositionLimit))
     acceleration = 10 ** rng.uniform(0.0, np.log10(50.0))
     jerk = acceleration * 10 ** rng.uniform(1.0, 2.5)
-    return robot, q0, base.fk(goal), acceleration, jerk
+    return robot, q0, base.fk(goal), acceleration, jerk, model.names[j + 1]
 
 
 def _stationarity(robot, q, target) -> tuple[float, float]:
@@ -63,12 +64,19 @@ def _stationarity(robot, q, target) -> tuple[float, float]:
                                                 (np.linalg.norm(J) * np.linalg.norm(w * e)))
 
 
-@pytest.mark.parametrize("method", ["sjt", "dls", "jp", "jt"])
-@pytest.mark.parametrize("name, seed", [("ur5", 0), ("ur5", 5), ("ur10", 2), ("ur10", 7),
-                                        ("panda", 7), ("panda", 15)])
-def test_a_target_beyond_a_range_ends_at_rest_on_the_constrained_minimum(name, seed, method):
-    robot, q0, target, acceleration, jerk = _case(name, seed)
+CASES = [("ur5", 0), ("ur5", 5), ("ur10", 2), ("ur10", 7), ("panda", 7), ("panda", 15)]
+
+
+# (a posture at the lowest level: on the six-joint arms, whose task leaves no self-motion with
+# a joint at its range; Panda with one does not rest yet, see docs/limits.md)
+@pytest.mark.parametrize("name, seed, method, posture", [
+    *[(n, s, m, False) for n, s in CASES for m in ("sjt", "dls", "jp", "jt")],
+    *[(n, s, "sjt", True) for n, s in CASES[:4]]])
+def test_a_target_beyond_a_range_ends_at_rest_on_the_constrained_minimum(name, seed, method,
+                                                                         posture):
+    robot, q0, target, acceleration, jerk, narrowed = _case(name, seed)
     solver = sjt.make_solver(method, robot, dt=DT, task=sjt.PoseTask(length=LENGTH),
+                             posture=sjt.PostureTask(q0) if posture else None,
                              acceleration_limits=acceleration, jerk_limits=jerk)
     qs = [q0]
     for _ in range(round(SECONDS / DT)):
@@ -82,8 +90,11 @@ def test_a_target_beyond_a_range_ends_at_rest_on_the_constrained_minimum(name, s
     assert np.all(q >= robot.lower_limits - 1e-12) and np.all(q <= robot.upper_limits + 1e-12)
     # at rest over the last second
     assert np.abs(v[-1000:]).max() < 1e-6, np.abs(v[-1000:]).max()
-    # where no descent within the ranges lowers the error
+    # where no velocity within the ranges lowers the linearised error
     error, free = _stationarity(robot, qs[-1], target)
     assert error > 1e-3  # (the target is beyond the range: the case is what it says)
     assert free < 1e-6, free
-    assert pin.isNormalized(robot.model, qs[-1])
+    # and the step says so, naming the range that holds the arm
+    info = solver.last
+    assert info.stalled and info.task_scale < 1.0
+    assert ("position", narrowed) in info.active_limits, info.active_limits

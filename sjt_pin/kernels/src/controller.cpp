@@ -563,43 +563,54 @@ void Controller::sufficient_decrease(const Eigen::Ref<const RowMatrix>& J0,
 // 2.5 rad/s). There the first level's feedback is instead K times the damped least-squares
 // displacement within the ranges (Levenberg-Marquardt with bounds),
 //     min |J0 d - e_w|^2 + mu |d|^2   s.t.   lower - q <= d <= upper - q,
-// solved as the point nearest its unconstrained minimiser in the metric mu I + J0^T J0. At a
-// constrained stationary point of the error it is 0, and every joint brakes to rest there.
-// The lower levels' feedback is kept (it lies in the first level's null space).
-void Controller::range_goal(const Eigen::Ref<const RowMatrix>& J0, const double* q, double K) {
+// solved as the point nearest its unconstrained minimiser in the metric mu I + J0^T J0, the
+// rows weighted by their gains as in the method's feedback, the held rows (contacts) kept at
+// the motion the method asks of them as equalities. At a constrained stationary point of the
+// error it is 0, and every joint brakes to rest there. The lower levels are then computed on
+// it. True: it replaced the feedback (its box holds 0: a joint outside its range returns by
+// the position bounds).
+bool Controller::range_goal(const Eigen::Ref<const RowMatrix>& J0, const double* q, double K,
+                            double row_scale, bool user) {
+  // (a joint outside its range counts only where the displacement takes it further out)
   bool crosses = false;
   for (const PositionRange& r : bounds.ranges) {
     if (moving[r.v] == 0.0) continue;
-    const double to = q[r.q] + fb0_[r.v] / K;
-    crosses = crosses || to < r.lower || to > r.upper;
+    const double step = fb0_[r.v] / K, to = q[r.q] + step;
+    crosses = crosses || (to > r.upper && step > 0.0) || (to < r.lower && step < 0.0);
   }
-  if (!crosses) return;
-  const Index r0 = J0.rows();
-  const auto e0 = ew_.segment(levels[0].begin, r0);
-  const double mu = (kGoalFloor + kGoalDamping * e0.norm()) *
+  if (!crosses) return false;
+  const Level& L0 = levels[0];
+  const Index r0 = J0.rows(), targets = L0.targets, held = r0 - targets;
+  // the rows' own gains weigh them as in the method's feedback (K e_w, over the mean gain)
+  goal_e_ = ew_.segment(L0.begin, r0);
+  if (!user) goal_e_.array() *= gains.segment(L0.begin, r0).array() * row_scale;
+  const double mu = (kGoalFloor + kGoalDamping * goal_e_.head(targets).norm()) *
                     std::max(J0.squaredNorm() / static_cast<double>(nv), 1e-300);
   goal_gram_.noalias() = J0 * J0.transpose();
   goal_gram_.diagonal().array() += mu;
   goal_llt_.compute(goal_gram_);
-  goal_y_ = goal_llt_.solve(e0);
+  goal_y_ = goal_llt_.solve(goal_e_);
   goal_xb_.noalias() = J0.transpose() * goal_y_;
   goal_lam_.resize(nv);
   goal_lo_.setConstant(nv, -kInf);
   goal_hi_.setConstant(nv, kInf);
   for (Index j = 0; j < nv; ++j) goal_lam_[j] = moving[j] != 0.0 ? mu : kInf;
-  for (const PositionRange& r : bounds.ranges) {
-    const double x = q[r.q];
+  for (const PositionRange& r : bounds.ranges) {  // (the box holds 0: a joint outside its
+    const double x = q[r.q];                       // range returns by the position bounds)
     goal_lo_[r.v] = std::min(r.lower - x, 0.0);
     goal_hi_[r.v] = std::max(r.upper - x, 0.0);
   }
+  // the held rows (contacts) keep the motion the method asks of them, as equalities
+  const auto C = J0.middleRows(targets, held);
+  goal_d_.noalias() = C * fb0_;
+  goal_d_ /= K;
   goal_.resize(nv);
   const ProjectionReport report_goal = goal_projection_.solve(
-      goal_xb_, goal_lam_, J0, goal_lo_, goal_hi_, Bnone_, goal_y_.head(0), Bnone_,
-      goal_y_.head(0), goal_);
-  if (!report_goal.converged || !goal_.allFinite()) return;
-  goal_ *= K;
-  fb += goal_ - fb0_;
-  fb0_ = goal_;
+      goal_xb_, goal_lam_, J0, goal_lo_, goal_hi_, Bnone_, goal_y_.head(0), C, goal_d_, goal_);
+  if (!report_goal.converged || !goal_.allFinite()) return false;
+  method_top_ = fb0_ + ff0_;
+  fb0_ = K * goal_;
+  return true;
 }
 
 // The generalized Cauchy point (Byrd, Lu, Nocedal and Zhu 1995, section 4) of m within the box
@@ -791,15 +802,18 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
     stall_run = -1.0;
   }
   if (escaping) ff0_ += escape_velocity;
-  // 3. the lower levels
-  fb = fb0_;
-  ff = ff0_;
-  if (levels.size() > 1) lower_levels(ff_in ? ffw_.data() : nullptr);
+  // under acceleration limits, a first-level displacement past a position range gives way to
+  // the bounded least-squares one (range_goal; the method's own velocity stays in method_top_)
   const Index counted = L0.targets > 0 ? L0.targets : r0;
   const double K = matrix ? given_gain
                           : (counted > 0 ? gains.segment(L0.begin, counted).mean() : 0.0) *
                                 top.gain;
-  if (bounds.smooth && K > 0.0) range_goal(J0, q, K);
+  replaced_ = bounds.smooth && K > 0.0 &&
+              range_goal(J0, q, K, matrix ? 1.0 : top.gain / K, matrix != nullptr);
+  // 3. the lower levels
+  fb = fb0_;
+  ff = ff0_;
+  if (levels.size() > 1) lower_levels(ff_in ? ffw_.data() : nullptr);
   desired_top = fb0_ + ff0_;
   desired = fb + ff;
   // the first level's rows that hold (a contact: a task without a target) are equalities of
@@ -809,12 +823,8 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
   // 4. each joint's box: what it can do this step, and the braking that lets it stop where the
   // feedback sends it (the displacement fb / K it asks of each)
   capability(bounds, dt_, dq, ddq, box);
-  if (bounds.smooth) {
-    if (K > 0.0) {
-      delta_ = fb / K;
-    } else {
-      delta_.setZero();
-    }
+  if (bounds.smooth && K > 0.0) {
+    delta_ = fb / K;
   } else {
     delta_.setZero(n);
   }
@@ -888,6 +898,22 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
   rows_active.clear();
   for (Index i = 0; i < A.rows(); ++i)
     if (A.row(i).dot(holding) >= bk[i] - 1e-9 * (1.0 + std::abs(bk[i]))) rows_active.push_back(static_cast<int>(i));
+  // where range_goal replaced the first level's feedback, the step is reported against the
+  // method's own velocity: constrained, its share of the method's task motion, and the limits
+  // that hold it (StepInfo compares the velocity with `desired`)
+  if (replaced_) {
+    status |= kConstrained;
+    kept = false;
+    // a joint the displacement holds at its range end is held by the range, whatever bound
+    // (the braking toward that displacement) is the tighter one at rest there
+    for (const PositionRange& r : bounds.ranges) {
+      const Index j = r.v;
+      if (goal_[j] >= goal_hi_[j] && box.hi_by[j] == kBraking) box.hi_by[j] = kPosition;
+      if (goal_[j] <= goal_lo_[j] && box.lo_by[j] == kBraking) box.lo_by[j] = kPosition;
+    }
+    desired += method_top_ - desired_top;
+    desired_top = method_top_;
+  }
   // the share of level 0's task motion kept
   if (kept) {
     task_scale = 1.0;
