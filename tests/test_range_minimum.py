@@ -3,10 +3,10 @@ comes to rest at a constrained stationary point of its task error (no velocity w
 ranges lowers the linearised error), never above a limit.
 
 Before the first level's feedback became the bounded least-squares displacement wherever the
-method's own displacement leaves a range (``Controller::range_goal``), 23 of these 24 runs
-failed: the joints chased displacements that assumed a motion the range forbids, and passed
-the constrained minimum again and again (on a wider draw, over UR5, Panda, UR10, KUKA iiwa and
-xArm6, 24 of 30 runs still moved after 12 s, at up to 2.5 rad/s)."""
+method's own displacement leaves a range (``Controller::range_goal``), 23 of the 24 runs
+without a posture failed: the joints chased displacements that assumed a motion the range
+forbids, and passed the constrained minimum again and again (on a wider draw, over UR5, Panda,
+UR10, KUKA iiwa and xArm6, 24 of 30 runs still moved after 12 s, at up to 2.5 rad/s)."""
 
 import numpy as np
 import pinocchio as pin
@@ -23,7 +23,7 @@ LENGTH = 0.5  # m: the pose task's angular rows' weight
 def _case(name: str, seed: int):
     """A start in the middle half of the ranges, a goal up to 0.6 rad away in each joint, and
     one joint's range narrowed to end 30 % of the way there: the robot with the narrowed range,
-    start, target, acceleration and jerk limits."""
+    start, target, acceleration and jerk limits, and the narrowed joint's name."""
     rng = np.random.default_rng(seed)
     base = sjt.Robot.from_example(name)
     model = base.model.copy()
