@@ -570,7 +570,7 @@ void Controller::sufficient_decrease(const Eigen::Ref<const RowMatrix>& J0,
 // it. True: it replaced the feedback (its box holds 0: a joint outside its range returns by
 // the position bounds).
 bool Controller::range_goal(const Eigen::Ref<const RowMatrix>& J0, const double* q, double K,
-                            double row_scale, bool user) {
+                            bool user) {
   // (a joint outside its range counts only where the displacement takes it further out)
   bool crosses = false;
   for (const PositionRange& r : bounds.ranges) {
@@ -583,7 +583,7 @@ bool Controller::range_goal(const Eigen::Ref<const RowMatrix>& J0, const double*
   const Index r0 = J0.rows(), targets = L0.targets, held = r0 - targets;
   // the rows' own gains weigh them as in the method's feedback (K e_w, over the mean gain)
   goal_e_ = ew_.segment(L0.begin, r0);
-  if (!user) goal_e_.array() *= gains.segment(L0.begin, r0).array() * row_scale;
+  if (!user) goal_e_.array() *= gains.segment(L0.begin, r0).array() * (top.gain / K);
   const double mu = (kGoalFloor + kGoalDamping * goal_e_.head(targets).norm()) *
                     std::max(J0.squaredNorm() / static_cast<double>(nv), 1e-300);
   goal_gram_.noalias() = J0 * J0.transpose();
@@ -605,7 +605,7 @@ bool Controller::range_goal(const Eigen::Ref<const RowMatrix>& J0, const double*
   goal_d_.noalias() = C * fb0_;
   goal_d_ /= K;
   goal_.resize(nv);
-  const ProjectionReport report_goal = goal_projection_.solve(
+  const ProjectionReport report_goal = projection_.solve(
       goal_xb_, goal_lam_, J0, goal_lo_, goal_hi_, Bnone_, goal_y_.head(0), C, goal_d_, goal_);
   if (!report_goal.converged || !goal_.allFinite()) return false;
   method_top_ = fb0_ + ff0_;
@@ -808,8 +808,7 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
   const double K = matrix ? given_gain
                           : (counted > 0 ? gains.segment(L0.begin, counted).mean() : 0.0) *
                                 top.gain;
-  replaced_ = bounds.smooth && K > 0.0 &&
-              range_goal(J0, q, K, matrix ? 1.0 : top.gain / K, matrix != nullptr);
+  replaced_ = bounds.smooth && K > 0.0 && range_goal(J0, q, K, matrix != nullptr);
   // 3. the lower levels
   fb = fb0_;
   ff = ff0_;

@@ -103,8 +103,7 @@ class Controller {
                            const Eigen::Ref<const RowMatrix>& H,
                            const Eigen::Ref<const Vector>& hd, double ball);
   void cauchy_point(const Eigen::Ref<const RowMatrix>& J0, double ball);
-  bool range_goal(const Eigen::Ref<const RowMatrix>& J0, const double* q, double K,
-                  double row_scale, bool user);
+  bool range_goal(const Eigen::Ref<const RowMatrix>& J0, const double* q, double K, bool user);
   void lower_nearest(const Eigen::Ref<const RowMatrix>& J0, const Eigen::Ref<const RowMatrix>& A,
                      const Eigen::Ref<const Vector>& b, const Vector& lo, const Vector& hi);
   void keep_direction(const Eigen::Ref<const RowMatrix>& J0, const Eigen::Ref<const RowMatrix>& A,
@@ -149,7 +148,6 @@ class Controller {
   Eigen::LLT<Eigen::MatrixXd> goal_llt_;
   Vector goal_xb_, goal_lam_, goal_lo_, goal_hi_, goal_, goal_y_, goal_e_, goal_d_, method_top_;
   bool replaced_ = false;  // range_goal replaced the first level's feedback this step
-  Projection goal_projection_;
   Method lower_;
   MethodStep lower_step_;
   Projection projection_;
