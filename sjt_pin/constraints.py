@@ -63,6 +63,10 @@ class UserLimits:
         self.capped: set[int] = set()
         #: the last evaluation's rows ``(A, b, owners)`` (None without rows)
         self.last_rows: tuple[np.ndarray, np.ndarray, list[str]] | None = None
+        #: the room (k,) the last evaluation's rows leave a displacement (:meth:`Limit.room
+        #: <sjt_pin.limits.Limit.room>`; NaN for rows that bound velocity only), None where no
+        #: limit gives one
+        self.room: np.ndarray | None = None
         self._blocks: list[tuple[Limit, np.ndarray, np.ndarray]] = []
 
     def evaluate(self, kinematics, motion: Motion):
@@ -97,15 +101,37 @@ class UserLimits:
                 # raise_non_finite_rows names the limit)
                 blocks.append((limit, Ak, bk))
                 owners += [limit.name] * bk.size
+        room = None
         if blocks:
             if len(blocks) == 1:
                 _, A, b = blocks[0]
             else:
                 A = np.vstack([a for _, a, _ in blocks])
                 b = np.concatenate([c for _, _, c in blocks])
+            room = self._room(blocks)
+        self.room = room
         self._blocks = blocks
         self.last_rows = None if A is None or b is None else (A, b, owners)
         return lower, upper, A, b, owners
+
+    @staticmethod
+    def _room(blocks: list[tuple[Limit, np.ndarray, np.ndarray]]) -> np.ndarray | None:
+        """The rows' room stacked (NaN for a limit without one); None where none has one."""
+        rooms = []
+        for limit, _, bk in blocks:
+            room = limit.room()
+            if room is not None:
+                room = np.asarray(room, dtype=float)
+                if room.shape != bk.shape:
+                    raise ValueError(f"{limit!r}.room() must return one value per row of its "
+                                     f"rows(), shape {bk.shape}, got {room.shape}")
+            rooms.append(room)
+        if all(room is None for room in rooms):
+            return None
+        if len(rooms) == 1:
+            return rooms[0]
+        return np.concatenate([np.full(bk.size, np.nan) if room is None else room
+                               for room, (_, _, bk) in zip(rooms, blocks, strict=True)])
 
     def raise_non_finite_rows(self) -> None:
         """ValueError naming the limit whose last rows hold NaN or inf in ``A`` or NaN in

@@ -205,15 +205,17 @@ class Solver:
             if not stack.trusted:
                 J, e, ff = stack.contiguous(J, e, ff)
             # 2. the user's limits at q
-            lower = upper = A = b = owners = None
+            lower = upper = A = b = owners = room = None
             if self._user is not None:
                 self._motion.q = q
                 lower, upper, A, b, owners = self._user.evaluate(stack.kinematics, self._motion)
+                room = self._user.room
             # 3. method and stage, compiled
             M = (step_checks.method_matrix(self.method, stack, J) if self._matrix_method
                  else None)
             try:
-                status = self._controller.run(J, e, ff, q, self._step, M, lower, upper, A, b)
+                status = self._controller.run(J, e, ff, q, self._step, M, lower, upper, A, b,
+                                              room)
             except ValueError:
                 if self._user is not None:  # (a limit's rows the stage refused: name it)
                     self._user.raise_non_finite_rows()

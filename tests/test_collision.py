@@ -101,6 +101,32 @@ def test_rows_match_finite_differences_of_the_distance(name, panda, ur5):
             assert -A[i] @ v == pytest.approx(fd, rel=1e-4, abs=1e-6), limit.pair_names[k]
 
 
+@pytest.mark.parametrize("accelerations", [False, True])
+def test_room_is_each_rows_distance_less_the_margin(accelerations, panda):
+    """room() of each row of the last rows(): its pair's exact distance (coal, directly on the
+    two shapes) minus the margin, whether or not acceleration limits cut its bound; a small
+    displacement d along a random direction moves the distance by -A d (to second order)."""
+    q = _start(panda)
+    limit = CollisionLimit(panda, _near_obstacles(panda, q), self_collision=True,
+                           influence=0.08, margin=0.01)
+    kin = Kinematics(panda.model)
+    kin.update(q)
+    n = panda.model.nv
+    motion = (Motion(q, np.full(n, 0.5), np.zeros(n), 1e-3,
+                     acceleration_limits=np.full(n, 10.0)) if accelerations else at(1e-3))
+    A, _ = limit.rows(kin, motion)
+    room = limit.room()
+    assert room is not None and room.shape == (A.shape[0],) and len(limit.active) >= 3
+    direction = np.random.default_rng(3).normal(size=n)
+    d = 1e-4 * direction / np.linalg.norm(direction)
+    for i, k in enumerate(limit.active):
+        assert room[i] == pytest.approx(_pair_distance(limit, k, q) - limit.margin, abs=1e-8)
+        moved = _pair_distance(limit, k, pin.integrate(panda.model, q, d)) - limit.margin
+        assert moved == pytest.approx(room[i] - A[i] @ d, abs=1e-7), limit.pair_names[k]
+    far = CollisionLimit(panda, [(coal.Sphere(0.04), pin.SE3(np.eye(3), np.array([3.0, 0, 0])))])
+    assert far.rows(kin, motion) is None and far.room() is None  # (no rows: no room)
+
+
 def test_penetration_row_still_pushes_apart(panda):
     q = panda.q0.copy()
     p = panda.fk(q).translation

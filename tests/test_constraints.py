@@ -98,6 +98,50 @@ def test_a_general_row_limit_in_step_and_solve(panda):
     assert result.success and panda.fk(result.q).translation[2] >= 0.25 - 1e-9
 
 
+class FloorWithRoom(Floor):
+    """Floor whose row also says how far a displacement may lower the hand: z - z_min."""
+
+    def __init__(self, robot, frame, z_min, size=1):
+        super().__init__(robot, frame, z_min)
+        self.size = size
+
+    def rows(self, kinematics, motion):
+        self.z = kinematics.placement(self.frame_id).translation[2]
+        return super().rows(kinematics, motion)
+
+    def room(self):
+        return np.full(self.size, self.z - self.z_min)
+
+
+@pytest.mark.parametrize("jerk", [None, 5000.0])
+def test_a_general_row_with_room_under_acceleration_limits_comes_to_rest(panda, jerk):
+    """A floor under a target below it, with Panda's acceleration (and jerk) limits: the
+    hand comes to rest on the floor (at most 0.1 mm below it), within every limit."""
+    floor = FloorWithRoom(panda, "panda_hand", z_min=0.25)
+    n, dt, accel = panda.nv, 1e-3, 10.0
+    smooth = {} if jerk is None else {"jerk_limits": np.full(n, jerk)}
+    solver = sjt.SJTSolver(panda, task=sjt.PositionTask(), limits=[floor], dt=dt,
+                           acceleration_limits=np.full(n, accel), **smooth)
+    q = panda.q0.copy()
+    target = panda.fk(q).translation + [0.15, -0.1, -0.6]
+    qs = [q]
+    for _ in range(5000):
+        q = solver.step(q, target)
+        qs.append(q)
+        assert panda.fk(q).translation[2] >= 0.25 - 1e-4
+    v = np.diff(np.array(qs), axis=0) / dt
+    assert np.max(np.abs(np.diff(v, axis=0)) / dt) <= accel * (1 + 1e-9)
+    assert np.sqrt(np.mean(v[-1000:] ** 2)) < 1e-6  # at rest by the 4th second
+    assert abs(panda.fk(q).translation[2] - 0.25) < 1e-3  # on the floor, not held above it
+
+
+def test_a_room_of_the_wrong_size_is_refused_naming_its_limit(panda):
+    solver = sjt.SJTSolver(panda, task=sjt.PositionTask(), dt=1e-3,
+                           limits=[FloorWithRoom(panda, "panda_hand", z_min=0.0, size=2)])
+    with pytest.raises(ValueError, match=r"FloorWithRoom.*room\(\) must return one value per row"):
+        solver.step(panda.q0, panda.fk(panda.q0).translation)
+
+
 def projection_problem(rng, n, rows, equalities, task_rows):
     """A random projection whose constraints a known point meets: (xb, lam, B, lo, hi, A, b,
     C, d)."""

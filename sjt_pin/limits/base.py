@@ -73,6 +73,16 @@ class Limit:
         or ``None`` when no row applies (e.g. nothing within a collision's influence)."""
         return None
 
+    def room(self) -> np.ndarray | None:
+        """How far the rows of the last :meth:`rows` let the joints move: ``r`` (k,) with
+        ``A d <= r`` for a displacement ``d`` (rad or m; for a distance row its distance minus
+        its margin, m), NaN for a row that bounds velocity only; ``None`` (the default) where
+        the rows bound velocity only. Under acceleration limits, where the displacement the
+        task's feedback asks would break a row's room or leave a position range, the arm is
+        sent to the nearest displacement within them and so brakes to rest at the constrained
+        minimum of its task error rather than sliding along the bound."""
+        return None
+
     def speed_caps(self, dt: float) -> np.ndarray | None:
         """Speeds (nv,; rad/s or m/s, ``inf`` where none) this limit's :meth:`bounds` never go
         below at period ``dt`` (s), which the solver may hold with its speed limits instead of

@@ -228,6 +228,7 @@ class CollisionLimit(PairsMixin, TablesMixin, BroadPhaseMixin, MovingMixin, Rows
         #: whose row could not bind at the solver's speed limits (left out)
         self.within: list[int] = []
         self._witness_count = 0  # the witness rows of the last rows() (_owners holds their pairs)
+        self._room: np.ndarray | None = None  # room() of the last rows()
         self._prepare_broad_phase()
 
     def __getstate__(self) -> dict:
@@ -342,7 +343,7 @@ class CollisionLimit(PairsMixin, TablesMixin, BroadPhaseMixin, MovingMixin, Rows
             if listed == []:
                 if self.active or self.within:
                     self.active, self.within = [], []
-                self._witness_count = 0
+                self._witness_count, self._room = 0, None
                 return None
             views, speeds = self._views, motion.velocity_limits
             if listed and views[0] is kinematics.data and self._reaches[0] is speeds \
@@ -350,19 +351,21 @@ class CollisionLimit(PairsMixin, TablesMixin, BroadPhaseMixin, MovingMixin, Rows
                 here = self._key(q, motion)
                 cache = self._cache
                 if cache is not None and cache[0] is views[0] and cache[1] == here:
-                    self.active, self.within, self._witness_count = cache[2]
+                    self.active, self.within, self._witness_count, self._room = cache[2]
                 else:
                     out = self._queried(views, listed, self._influence, self._reaches[1],
                                         motion.dt)
+                    self._room = self._room_of(out)
                     cache = self._cache = (views[0], here, (self.active, self.within,
-                                                            self._witness_count), out)
+                                                            self._witness_count, self._room),
+                                           out)
                 return cache[3]
         data, dt = kinematics.data, motion.dt
         accelerations, jerks = motion.acceleration_limits, motion.jerk_limits
         key = self._key(q, motion)
         cache = self._cache
         if cache is not None and q is not None and cache[0] is data and cache[1] == key:
-            self.active, self.within, self._witness_count = cache[2]
+            self.active, self.within, self._witness_count, self._room = cache[2]
             return cache[3]
         if not dt > 0:
             raise ValueError(f"dt must be a period > 0 (s), got {dt!r}")
@@ -390,8 +393,25 @@ class CollisionLimit(PairsMixin, TablesMixin, BroadPhaseMixin, MovingMixin, Rows
                            self.gain / dt, dt, BRAKING_SHARE, EASING_SLACK)
             b.setflags(write=False)
         out = self._carried(out)
-        self._cache = (data, key, (self.active, self.within, self._witness_count), out)
+        self._room = self._room_of(out)
+        self._cache = (data, key, (self.active, self.within, self._witness_count, self._room),
+                       out)
         return out
+
+    def room(self) -> np.ndarray | None:
+        """The room of each row of the last :meth:`rows` (k,): its pair's distance minus
+        ``margin`` (m; a displacement ``d`` of the joints keeps the linearised distance at
+        least ``margin`` where ``A d`` stays within it), None without rows."""
+        return self._room
+
+    def _room_of(self, out: tuple[np.ndarray, np.ndarray] | None) -> np.ndarray | None:
+        """The room of the rows ``out`` just made (:meth:`room`), from their pair rows."""
+        if out is None:
+            return None
+        rows = self._pair_rows[:len(self.active) + self._witness_count]
+        room = rows[:, 0] - rows[:, 1]
+        room.setflags(write=False)
+        return room
 
     @property
     def witness_pairs(self) -> list[int]:

@@ -42,12 +42,14 @@ class Controller {
 
   // One step: J (m x nv), e (m), ff (m) or none, q (nq); matrix: a user method's M (nv x r0,
   // row-major, r0 the first level's rows) mapping the first level instead of the built-in
-  // method; user bounds (nv), rows A (k x nv), b (k).
+  // method; user bounds (nv), rows A (k x nv), b (k), and the rows' room (k; A d <= room for
+  // a displacement d, NaN: none) or null.
   // Writes the displacement q_dot dt into `step` (nv); returns the status bits.
   int run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const Vector>& e,
           const double* ff, const double* q, Eigen::Ref<Vector> step, const double* matrix,
           const double* user_lo, const double* user_hi,
-          const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b);
+          const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b,
+          const double* room = nullptr);
 
   void set_dt(double dt) { dt_ = dt; }
   double dt() const { return dt_; }
@@ -103,7 +105,12 @@ class Controller {
                            const Eigen::Ref<const RowMatrix>& H,
                            const Eigen::Ref<const Vector>& hd, double ball);
   void cauchy_point(const Eigen::Ref<const RowMatrix>& J0, double ball);
-  bool range_goal(const Eigen::Ref<const RowMatrix>& J0, const double* q, double K, bool user);
+  bool range_goal(const Eigen::Ref<const RowMatrix>& J0, const double* q, double K, bool user,
+                  const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b,
+                  const double* room);
+  void settle(const Eigen::Ref<const RowMatrix>& J0, const double* q,
+              const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b,
+              const double* user_lo, const double* user_hi);
   void lower_nearest(const Eigen::Ref<const RowMatrix>& J0, const Eigen::Ref<const RowMatrix>& A,
                      const Eigen::Ref<const Vector>& b, const Vector& lo, const Vector& hi);
   void keep_direction(const Eigen::Ref<const RowMatrix>& J0, const Eigen::Ref<const RowMatrix>& A,
@@ -146,7 +153,10 @@ class Controller {
   // range_goal: the least-squares displacement (its Gram matrix and factor), its box, result
   Eigen::MatrixXd goal_gram_;
   Eigen::LLT<Eigen::MatrixXd> goal_llt_;
-  Vector goal_xb_, goal_lam_, goal_lo_, goal_hi_, goal_, goal_y_, goal_e_, goal_d_, method_top_;
+  Vector goal_xb_, goal_lam_, goal_lo_, goal_hi_, goal_, goal_y_, goal_e_, goal_d_, goal_room_,
+      method_top_;
+  JointBox rest_box_;      // settle: the box of braking to rest
+  bool goal_rows_ = false;  // a row's room binds range_goal's displacement (settle applies)
   bool replaced_ = false;  // range_goal replaced the first level's feedback this step
   Method lower_;
   MethodStep lower_step_;

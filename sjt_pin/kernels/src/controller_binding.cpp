@@ -101,7 +101,7 @@ void register_controller(nb::module_& m) {
           "run",
           [](Controller& c, nb::handle J, nb::handle e, nb::handle ff, nb::handle q,
              nb::handle step, nb::handle matrix, nb::handle lower,
-             nb::handle upper, nb::handle A, nb::handle b) -> int {
+             nb::handle upper, nb::handle A, nb::handle b, nb::handle room) -> int {
             Array Ja(J, "J", 2), ea(e, "e", 1), qa(q, "q", 1), sa(step, "step", 1, Access::write);
             Ja.shape(c.m, c.nv);
             ea.length(c.m);
@@ -130,9 +130,12 @@ void register_controller(nb::module_& m) {
               Aa.shape(ba.size(), c.nv);
               Aa.finite();
               ba.no_nan();
+              std::optional<Array> s5;
+              const double* rp = optional(room, "room", ba.size(), s5);
               return c.run(Ja.matrix(), ea.vector(), ffp, qa.data(), sa.vector(), mp, lo,
-                           hi, Aa.matrix(), ba.vector());
+                           hi, Aa.matrix(), ba.vector(), rp);
             }
+            if (!room.is_none()) fail("room comes with rows A and b");
             RowMatrix none(0, c.nv);
             Vector nob(0);
             return c.run(Ja.matrix(), ea.vector(), ffp, qa.data(), sa.vector(), mp, lo, hi,
@@ -141,9 +144,11 @@ void register_controller(nb::module_& m) {
           nb::arg("J"), nb::arg("e"), nb::arg("ff").none(), nb::arg("q"), nb::arg("step"),
           nb::arg("matrix").none(), nb::arg("lower").none(),
           nb::arg("upper").none(), nb::arg("A").none(), nb::arg("b").none(),
-          "run(J, e, ff, q, step, matrix, lower, upper, A, b) -> status: one step (matrix: a "
-          "user method's M(J) of the first level's weighted rows); None for what a step does "
-          "not have.")
+          nb::arg("room").none() = nb::none(),
+          "run(J, e, ff, q, step, matrix, lower, upper, A, b, room=None) -> status: one step "
+          "(matrix: a user method's M(J) of the first level's weighted rows; room: the "
+          "displacement each row allows, A d <= room, NaN where a row bounds velocity only); "
+          "None for what a step does not have.")
       .def("set_dt", &Controller::set_dt)
       .def("set_gains", &Controller::set_gains, nb::arg("gains"), nb::arg("auto_gain"),
            nb::arg("factor"))
