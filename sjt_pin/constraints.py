@@ -121,7 +121,7 @@ class UserLimits:
         for limit, _, bk in blocks:
             room = limit.room()
             if room is not None:
-                room = np.asarray(room, dtype=float)
+                room = np.ascontiguousarray(room, dtype=float)
                 if room.shape != bk.shape:
                     raise ValueError(f"{limit!r}.room() must return one value per row of its "
                                      f"rows(), shape {bk.shape}, got {room.shape}")

@@ -113,14 +113,16 @@ class FloorWithRoom(Floor):
         return np.full(self.size, self.z - self.z_min)
 
 
-@pytest.mark.parametrize("jerk", [None, 5000.0])
-def test_a_general_row_with_room_under_acceleration_limits_comes_to_rest(panda, jerk):
+@pytest.mark.parametrize("jerk, beside", [(None, False), (5000.0, False), (None, True)])
+def test_a_general_row_with_room_under_acceleration_limits_comes_to_rest(panda, jerk, beside):
     """A floor under a target below it, with Panda's acceleration (and jerk) limits: the
-    hand comes to rest on the floor (at most 0.1 mm below it), within every limit."""
+    hand comes to rest on the floor (at most 0.1 mm below it), within every limit; also with
+    a row without room beside it (NaN in the stacked room: the row bounds velocity only)."""
     floor = FloorWithRoom(panda, "panda_hand", z_min=0.25)
+    limits = [floor, Floor(panda, "panda_link5", z_min=-1.0)] if beside else [floor]
     n, dt, accel = panda.nv, 1e-3, 10.0
     smooth = {} if jerk is None else {"jerk_limits": np.full(n, jerk)}
-    solver = sjt.SJTSolver(panda, task=sjt.PositionTask(), limits=[floor], dt=dt,
+    solver = sjt.SJTSolver(panda, task=sjt.PositionTask(), limits=limits, dt=dt,
                            acceleration_limits=np.full(n, accel), **smooth)
     q = panda.q0.copy()
     target = panda.fk(q).translation + [0.15, -0.1, -0.6]

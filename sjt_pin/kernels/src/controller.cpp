@@ -575,7 +575,7 @@ void Controller::sufficient_decrease(const Eigen::Ref<const RowMatrix>& J0,
 // the motion the method asks of them as equalities. At a constrained stationary point of the
 // error it is 0, and every joint brakes to rest there. The lower levels are then computed on
 // it. The general rows whose `room` is given (A d <= room: a collision pair's distance less its
-// margin; NaN: a row of velocity only) bound it too, by min(room, b / K), what the row's
+// margin; NaN or inf: a row of velocity only) bound it too, by min(room, b / K), what the row's
 // velocity bound lets the gain cover, and one the displacement breaks also calls for it: an arm
 // whose target lies behind an obstacle slid along it under acceleration limits (16 of 18
 // blocked scenes on KUKA iiwa, xArm6 and UR3 still moved after 8 s; with the room, none).
@@ -596,7 +596,7 @@ bool Controller::range_goal(const Eigen::Ref<const RowMatrix>& J0, const double*
   const Index k = room ? A.rows() : 0;
   goal_room_.resize(k);
   for (Index i = 0; i < k; ++i) {
-    goal_room_[i] = std::isnan(room[i]) ? kInf : std::max(std::min(room[i], b[i] / K), 0.0);
+    goal_room_[i] = std::isfinite(room[i]) ? std::max(std::min(room[i], b[i] / K), 0.0) : kInf;
     if (!crosses && std::isfinite(goal_room_[i])) {
       const double closing = A.row(i).dot(fb0_) / K;
       crosses = closing > goal_room_[i];
@@ -644,9 +644,9 @@ bool Controller::range_goal(const Eigen::Ref<const RowMatrix>& J0, const double*
 // Where range_goal replaced the feedback and a row's room binds it, a velocity that lowers
 // 1/2 |e_w|^2 by less than a resting arm does (kRestRate), or by less than the model can vouch
 // for (kAligned), gives way to braking to rest, as a projected step does
-// (sufficient_decrease): fully at that rate, not at all at twice it (the two velocities are
-// within the acceleration and jerk box, the ranges' braking and the rows, and so is their
-// blend). Each joint brakes toward its own share of the displacement, which bends the motion
+// (sufficient_decrease): fully at that rate, not at all at twice it (both velocities keep the
+// rows, and so does their blend; the progress counts the feed-forward's motion too: judging
+// the feedback's share alone stopped UR3 while its target still moved). Each joint brakes toward its own share of the displacement, which bends the motion
 // away from it; against an obstacle, whose rows' room is linearised anew each step, Panda's
 // arm slid along it at 0.045 rad/s for seconds while lowering its error by 6e-7 of itself per
 // second (blocked seed 11 under acceleration limits), where the displacement promised 30

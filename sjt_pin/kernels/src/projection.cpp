@@ -207,7 +207,8 @@ ProjectionReport Projection::solve(
   double scale = 0.0;
   if (r) scale = std::max(scale, off_.head(r).cwiseAbs().maxCoeff());
   if (c) scale = std::max(scale, d.cwiseAbs().maxCoeff());
-  if (k) scale = std::max(scale, b.cwiseAbs().maxCoeff());
+  for (Index i = 0; i < k; ++i)  // (a row with b = inf bounds nothing: not a scale)
+    if (std::isfinite(b[i])) scale = std::max(scale, std::abs(b[i]));
   if (!(scale > 0.0)) scale = 1.0;
   ProjectionReport report;
   bool settled = false;
