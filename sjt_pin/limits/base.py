@@ -77,10 +77,10 @@ class Limit:
         """How far the rows of the last :meth:`rows` let the joints move: ``r`` (k,) with
         ``A d <= r`` for a displacement ``d`` (rad or m; for a distance row its distance minus
         its margin, m), NaN (or inf) for a row that bounds velocity only; ``None`` (the
-        default) where the rows bound velocity only. Under acceleration limits, where the displacement the
-        task's feedback asks would break a row's room or leave a position range, the arm is
-        sent to the nearest displacement within them and so brakes to rest at the constrained
-        minimum of its task error rather than sliding along the bound."""
+        default) where the rows bound velocity only. Under acceleration limits, where the
+        displacement the task's feedback asks would break a row's room or leave a position
+        range, the arm is sent to the nearest displacement within them and so brakes to rest
+        at the constrained minimum of its task error rather than sliding along the bound."""
         return None
 
     def speed_caps(self, dt: float) -> np.ndarray | None:
