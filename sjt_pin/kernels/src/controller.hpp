@@ -111,8 +111,13 @@ class Controller {
   void settle(const Eigen::Ref<const RowMatrix>& J0, const double* q,
               const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b,
               const double* user_lo, const double* user_hi);
-  void lower_nearest(const Eigen::Ref<const RowMatrix>& J0, const Eigen::Ref<const RowMatrix>& A,
-                     const Eigen::Ref<const Vector>& b, const Vector& lo, const Vector& hi);
+  double lower_metric();
+  ProjectionReport lower_nearest(const Eigen::Ref<const RowMatrix>& J0, const Vector& base,
+                                 const Vector& target, const Eigen::Ref<const RowMatrix>& A,
+                                 const Eigen::Ref<const Vector>& b, const Vector& lo,
+                                 const Vector& hi, Vector& out);
+  bool lower_goal(const Eigen::Ref<const RowMatrix>& J0, const double* q, double K,
+                  const Eigen::Ref<const RowMatrix>& A, bool rows);
   void keep_direction(const Eigen::Ref<const RowMatrix>& J0, const Eigen::Ref<const RowMatrix>& A,
                       const Eigen::Ref<const Vector>& b, const Vector& lo, const Vector& hi,
                       const Eigen::Ref<const RowMatrix>& H, const Eigen::Ref<const Vector>& hd);
@@ -144,7 +149,11 @@ class Controller {
   bool rested_ = false;
   // lower_nearest's task rows, their posture's diagonal, its anchor and Woodbury solve
   RowMatrix low_B_;
-  Vector low_p_, low_h_, low_r_, low_d_, low_dh_, low_dinv_, anchor_;
+  Vector low_p_, low_h_, low_r_, low_d_, low_dh_, low_dinv_, low_c_, anchor_;
+  // lower_goal: the top level's displacement, the lower levels' one asked, its box and result
+  Vector lgoal_base_, lgoal_target_, lgoal_lo_, lgoal_hi_, lgoal_;
+  bool lower_replaced_ = false;  // lower_goal replaced the lower levels' feedback this step
+  Vector method_desired_;        // the method's velocity before it (StepInfo compares with it)
   Eigen::MatrixXd low_gram_;
   Eigen::LLT<Eigen::MatrixXd> low_llt_;
   std::vector<std::pair<double, Index>> breaks_;  // the Cauchy path's breakpoints
