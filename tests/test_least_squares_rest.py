@@ -106,3 +106,35 @@ def test_error_damping_is_checked_and_the_default_follows_the_rows(robots):
     assert sjt.DLSSolver(ur5).method.lm_weight == 0.5
     assert sjt.JPSolver(ur5, task=sjt.PositionTask()).method.lm_weight == 1.0
     assert sjt.DLSSolver(ur5, error_damping=0.2).method.lm_weight == 0.2
+
+
+def _far_draw(robot, seed, distance=1.5):
+    """A start in the middle half of the ranges and a target ``distance`` (m) from its hand in a
+    random direction (out of Panda's reach)."""
+    rng = np.random.default_rng(seed)
+    middle = 0.5 * (robot.lower_limits + robot.upper_limits)
+    half = 0.25 * (robot.upper_limits - robot.lower_limits)
+    q = rng.uniform(middle - half, middle + half)
+    pose = robot.fk(q)
+    direction = rng.normal(size=3)
+    return q, pin.SE3(pose.rotation, pose.translation + distance * direction /
+                      np.linalg.norm(direction))
+
+
+@pytest.mark.parametrize("method", ["dls", "jp"])
+@pytest.mark.parametrize("seed", range(4))
+def test_a_posture_rests_with_the_arm_at_a_target_out_of_reach(robots, method, seed):
+    """The arm rests stretched at a singular configuration there, whose two nearly null
+    directions the exact null-space projector split anew each step: the posture's velocity
+    along the one called null swung sign from step to step, +-2.5 rad/s at the speed limits
+    for good, where the arm alone rests. The posture fades where the task's rows lose rank."""
+    robot = robots["panda"]
+    q0, target = _far_draw(robot, seed)
+    alone = sjt.make_solver(method, robot, dt=DT)
+    run(alone, q0, target, 10.0)
+    solver = sjt.make_solver(method, robot, dt=DT, posture=sjt.PostureTask(q0))
+    _, qs = run(solver, q0, target, 10.0)
+    v = np.diff(qs[-1001:], axis=0) / DT
+    assert np.abs(v).max() < 1e-6, np.abs(v).max()
+    assert solver.last.stalled
+    assert solver.error_norm == pytest.approx(alone.error_norm, abs=1e-3)

@@ -67,11 +67,13 @@ def _stationarity(robot, q, target) -> tuple[float, float]:
 CASES = [("ur5", 0), ("ur5", 5), ("ur10", 2), ("ur10", 7), ("panda", 7), ("panda", 15)]
 
 
-# (a posture at the lowest level: on the six-joint arms, whose task leaves no self-motion with
-# a joint at its range; Panda's below)
+# (a posture at the lowest level too. On Panda, whose six free joints are singular at the
+# constrained minimum, it pulled along their nearly null directions and kept the arm moving at
+# 0.02-0.9 rad/s, until the posture faded where the free joints lose rank
+# (``Controller::lower_levels``); Panda's draws whose target it reaches are below)
 @pytest.mark.parametrize("name, seed, method, posture", [
     *[(n, s, m, False) for n, s in CASES for m in ("sjt", "dls", "jp", "jt")],
-    *[(n, s, "sjt", True) for n, s in CASES[:4]]])
+    *[(n, s, "sjt", True) for n, s in CASES], ("panda", 7, "dls", True)])
 def test_a_target_beyond_a_range_ends_at_rest_on_the_constrained_minimum(name, seed, method,
                                                                          posture):
     robot, q0, target, acceleration, jerk, narrowed = _case(name, seed)

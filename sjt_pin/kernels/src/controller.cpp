@@ -16,6 +16,17 @@ constexpr double kHeldTol = 1e-9;
 // their largest row's norm is spanned by them (the former eigen-decomposition's relative
 // cutoff on the Gram matrix's eigenvalues, 1e-12, in singular values)
 constexpr double kRankFloor = 1e-6;
+// a posture's share of the self-motion, lock_: 0 where the first level's target rows' Gram matrix
+// J J^T has its least eigenvalue below kLockLow of its largest, 1 above kLockHigh, a smoothstep
+// between. Where a target is out of reach the arm rests at a singular configuration: its two
+// nearly null directions were split anew each step, and the posture's velocity along the one
+// called null swung sign from step to step (Panda, targets 1.5 m beyond reach, every method
+// with a posture: +-2.5 rad/s at the speed limits for good, where without the posture the arm
+// rests). Weighing the posture as a damped projector would (lambda^2 / (sigma^2 + lambda^2))
+// left a posture pull that the transpose methods' restoring, of order sigma^2, balanced at
+// sigma ~1e-4: SJT swung about it at 0.5 rad/s. (1e-4: a smallest singular value 1 % of the
+// largest; a 7-joint arm away from its singularities has 5-30 %.)
+constexpr double kLockLow = 1e-6, kLockHigh = 1e-4;
 // under acceleration limits, keeping the task's direction is taken alone while it leaves at
 // least this share of the progress the unconstrained projection makes (at most the whole step's)
 constexpr double kUseful = 0.1;
@@ -84,6 +95,7 @@ Controller::Controller(const MethodParameters& method_, Index rows, Index nv_, I
   }
   if (expect != m) fail("levels must cover every row");
   if (levels[0].identity) fail("the first level cannot be a posture's identity rows alone");
+  for (const Level& l : levels) has_posture_ = has_posture_ || l.identity;
   bounds.nv = nv;
   if (bounds.speed.size() != nv || bounds.moving.size() != nv) fail("bounds: speed and moving need nv entries");
   if (bounds.smooth && (bounds.acceleration.size() != nv || bounds.jerk.size() != nv))
@@ -172,6 +184,7 @@ void Controller::extend_basis(const RowMatrix* rows, Index begin, Index count) {
       w /= norm;
       ++rank_;
     }
+
   }
 }
 
@@ -188,11 +201,26 @@ void Controller::null_project(Vector& v) {
 // onto that null space, I - Q Q^T, comes from an orthonormal basis Q of the rows above, grown
 // level by level (an eigen-decomposition of their Gram matrix per level was 61 % of this
 // call's instructions on a humanoid with feet, hands and a posture).
-void Controller::lower_levels(const double* ffw) {
+void Controller::lower_levels(const double* ffw, const double* q) {
   const Level& top_level = levels[0];
   rank_ = 0;
   top_norm_ = 0.0;
   extend_basis(&Jw_, top_level.begin, top_level.end - top_level.begin);
+  lock_ = 1.0;
+  if (top_level.targets > 0 && has_posture_) {
+    // (over the joints not at a position range's end: at a constrained minimum against a
+    // range the joints left free are the singular ones)
+    lock_free_ = moving;
+    for (const PositionRange& r : bounds.ranges)
+      if (q[r.q] <= r.lower || q[r.q] >= r.upper) lock_free_[r.v] = 0.0;
+    const auto Jt = Jw_.middleRows(top_level.begin, top_level.targets);
+    lock_gram_.noalias() = Jt * lock_free_.asDiagonal() * Jt.transpose();
+    lock_eig_.compute(lock_gram_, Eigen::EigenvaluesOnly);
+    const double least = std::max(lock_eig_.eigenvalues()[0], 0.0);
+    const double most = std::max(lock_eig_.eigenvalues()[top_level.targets - 1], 1e-300);
+    const double x = std::clamp((least / most - kLockLow) / (kLockHigh - kLockLow), 0.0, 1.0);
+    lock_ = x * x * (3.0 - 2.0 * x);
+  }
   const double gain = method.p.auto_gain ? method.p.gain_factor / dt_ : 1.0;
   for (size_t index = 1; index < levels.size(); ++index) {
     const Level& level = levels[index];
@@ -204,10 +232,10 @@ void Controller::lower_levels(const double* ffw) {
         tmp_[j] = gain * gains[row] * sqrt_weight[row] * ew_[row] - fb[j];
       }
       null_project(tmp_);
-      fb += tmp_;
+      fb += lock_ * tmp_;
       tmp_ = -ff;
       null_project(tmp_);
-      ff += tmp_;
+      ff += lock_ * tmp_;
       if (index + 1 < levels.size()) extend_basis(nullptr, 0, nv);
       continue;
     }
@@ -932,7 +960,7 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
   // 3. the lower levels
   fb = fb0_;
   ff = ff0_;
-  if (levels.size() > 1) lower_levels(ff_in ? ffw_.data() : nullptr);
+  if (levels.size() > 1) lower_levels(ff_in ? ffw_.data() : nullptr, q);
   lower_replaced_ = bounds.smooth && K > 0.0 && levels.size() > 1 &&
                     lower_goal(J0, q, K, A, room != nullptr);
   desired_top = fb0_ + ff0_;

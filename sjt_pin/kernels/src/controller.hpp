@@ -95,7 +95,7 @@ class Controller {
  private:
   bool feasible(const Vector& x, const Eigen::Ref<const RowMatrix>& A,
                 const Eigen::Ref<const Vector>& b, const Vector& lo, const Vector& hi) const;
-  void lower_levels(const double* ffw);
+  void lower_levels(const double* ffw, const double* q);
   void map_matrix(const Eigen::Ref<const RowMatrix>& J0, const double* matrix, bool with_ff);
   void extend_basis(const RowMatrix* rows, Index begin, Index count);
   void null_project(Vector& v);
@@ -140,6 +140,11 @@ class Controller {
   Vector kew_;
   Index rank_ = 0;
   double top_norm_ = 0.0;
+  double lock_ = 1.0;  // a posture's share of the self-motion (kLockLow)
+  bool has_posture_ = false;
+  Eigen::MatrixXd lock_gram_;
+  Vector lock_free_;
+  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> lock_eig_;
   Vector coef_, level_t_;
   Vector ew_, ffw_, fb0_, ff0_, x0_, xa_, tstar_, gt_, direction_, tmp_, tmp2_, lam_low_;
   // project(): the box with unbounded joints capped; the task velocity that removes level 0's
