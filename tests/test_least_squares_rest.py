@@ -121,20 +121,23 @@ def _far_draw(robot, seed, distance=1.5):
                       np.linalg.norm(direction))
 
 
-@pytest.mark.parametrize("method", ["dls", "jp"])
+@pytest.mark.parametrize("method", ["dls", "jp", "sjt"])
 @pytest.mark.parametrize("seed", range(4))
 def test_a_posture_rests_with_the_arm_at_a_target_out_of_reach(robots, method, seed):
     """The arm rests stretched at a singular configuration there, whose two nearly null
     directions the exact null-space projector split anew each step: the posture's velocity
     along the one called null swung sign from step to step, +-2.5 rad/s at the speed limits
-    for good, where the arm alone rests. The posture fades where the task's rows lose rank."""
+    for good, where the arm alone rests. The posture fades where the task's rows lose rank.
+    (SJT: its saddle escape's settling step, taken again every 0.24 s though it left the error
+    where it was, swung the arm at up to 0.6 rad/s.)"""
     robot = robots["panda"]
     q0, target = _far_draw(robot, seed)
     alone = sjt.make_solver(method, robot, dt=DT)
-    run(alone, q0, target, 10.0)
+    _, qs = run(alone, q0, target, 10.0)
+    settling = np.abs(np.diff(qs[-1001:], axis=0)).max() / DT  # (SJT's seed 2: 1.5e-6 rad/s)
     solver = sjt.make_solver(method, robot, dt=DT, posture=sjt.PostureTask(q0))
     _, qs = run(solver, q0, target, 10.0)
     v = np.diff(qs[-1001:], axis=0) / DT
-    assert np.abs(v).max() < 1e-6, np.abs(v).max()
+    assert np.abs(v).max() < max(1e-6, 2.0 * settling), (np.abs(v).max(), settling)
     assert solver.last.stalled
     assert solver.error_norm == pytest.approx(alone.error_norm, abs=1e-3)

@@ -143,9 +143,13 @@ def test_one_step_is_the_reference_formula(seed, joints, combination, method, fe
         Jw = sw[:target_rows, None] * J[:target_rows] * mask
         null = np.eye(robot.nv) - np.linalg.pinv(Jw, rcond=1e-12) @ Jw
         wanted = DT * k * 0.03 * e[target_rows:]
-        # (fading where the tasks' rows lose rank: a smoothstep of the Gram matrix's least over
-        # largest eigenvalue, from 1e-6 to 1e-4)
-        gram = np.linalg.eigvalsh(Jw @ Jw.T)
+        # (fading where the tasks' rows lose rank: a smoothstep of the least over the largest
+        # eigenvalue of their Gram matrix, each row of unit norm, from 1e-6 to 1e-4)
+        norms = np.linalg.norm(Jw, axis=1)
+        unit = Jw / np.where(norms > 0.0, norms, 1.0)[:, None]
+        gram = unit @ unit.T
+        gram[np.diag_indices_from(gram)] = np.where(norms > 0.0, np.diag(gram), 1.0)
+        gram = np.linalg.eigvalsh(gram)
         x = np.clip((max(gram[0], 0.0) / gram[-1] - 1e-6) / (1e-4 - 1e-6), 0.0, 1.0)
         expected = expected + x * x * (3.0 - 2.0 * x) * null @ (wanted - expected)
     np.testing.assert_allclose(solver.displacement, expected, rtol=1e-7,

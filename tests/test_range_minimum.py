@@ -108,7 +108,7 @@ def test_a_target_beyond_a_range_ends_at_rest_on_the_constrained_minimum(name, s
 # 0.94 rad/s after 12 s.
 @pytest.mark.parametrize("seed", [0, 2, 3, 5])
 def test_a_posture_beside_a_joint_at_its_range_rests_on_the_reached_target(seed):
-    robot, q0, target, acceleration, jerk, _ = _case("panda", seed)
+    robot, q0, target, acceleration, jerk, narrowed = _case("panda", seed)
     solver = sjt.make_solver("sjt", robot, dt=DT, task=sjt.PoseTask(length=LENGTH),
                              posture=sjt.PostureTask(q0), acceleration_limits=acceleration,
                              jerk_limits=jerk)
@@ -124,7 +124,11 @@ def test_a_posture_beside_a_joint_at_its_range_rests_on_the_reached_target(seed)
     assert np.abs(v[-1000:]).max() < 1e-6, np.abs(v[-1000:]).max()
     error, _ = _stationarity(robot, qs[-1], target)
     assert error < 1e-6, error
-    # (the posture held at the range: some joint of the draw's narrowed range is at its end)
-    at_end = (np.isclose(qs[-1], robot.lower_limits, atol=1e-9)
-              | np.isclose(qs[-1], robot.upper_limits, atol=1e-9))
-    assert at_end[:7].any()
+    # the posture held at the narrowed range's end, and the step says so
+    j = robot.model.joints[robot.model.getJointId(narrowed)].idx_q
+    assert min(abs(qs[-1][j] - robot.lower_limits[j]),
+               abs(qs[-1][j] - robot.upper_limits[j])) < 1e-9
+    info = solver.last
+    assert ("position", narrowed) in info.active_limits, info.active_limits
+    assert info.levels[1].scale < 1e-6  # (none of the posture's pull kept)
+    assert not info.stalled and info.levels[0].scale > 1.0 - 1e-9  # (the task is reached)

@@ -16,17 +16,17 @@ constexpr double kHeldTol = 1e-9;
 // their largest row's norm is spanned by them (the former eigen-decomposition's relative
 // cutoff on the Gram matrix's eigenvalues, 1e-12, in singular values)
 constexpr double kRankFloor = 1e-6;
-// a posture's share of the self-motion, lock_: 0 where the first level's target rows' Gram matrix
-// J J^T has its least eigenvalue below kLockLow of its largest, 1 above kLockHigh, a smoothstep
-// between. Where a target is out of reach the arm rests at a singular configuration: its two
-// nearly null directions were split anew each step, and the posture's velocity along the one
-// called null swung sign from step to step (Panda, targets 1.5 m beyond reach, every method
-// with a posture: +-2.5 rad/s at the speed limits for good, where without the posture the arm
+// a posture's share of the self-motion, lock_: 0 where the Gram matrix of the first level's
+// target rows (of unit norm, over the joints free to move) has its least eigenvalue below
+// kLockLow of its largest, 1 above kLockHigh, a smoothstep between (posture_share). Where a
+// target is out of reach the arm rests at a singular configuration: its two nearly null
+// directions were split anew each step, and the posture's velocity along the one called null
+// swung sign from step to step (Panda, targets 1.5 m beyond reach, every method with a
+// posture: +-2.5 rad/s at the speed limits for good, where without the posture the arm
 // rests). Weighing the posture as a damped projector would (lambda^2 / (sigma^2 + lambda^2))
-// left a posture pull that the transpose methods' restoring, of order sigma^2, balanced at
-// sigma ~1e-4: SJT swung about it at 0.5 rad/s. (1e-4: a smallest singular value 1 % of the
-// largest; a 7-joint arm away from its singularities has 5-30 %.)
-constexpr double kLockLow = 1e-6, kLockHigh = 1e-4;
+// left a posture pull along the nearly lost direction that DLS and SJT balanced and swung
+// about. (1e-4: a least singular value 1 % of the largest.)
+constexpr double kLockLow = 1e-6, kLockHigh = 1e-4;  // (posture_share)
 // under acceleration limits, keeping the task's direction is taken alone while it leaves at
 // least this share of the progress the unconstrained projection makes (at most the whole step's)
 constexpr double kUseful = 0.1;
@@ -123,6 +123,7 @@ Controller::Controller(const MethodParameters& method_, Index rows, Index nv_, I
   // controller reads it: UBSan's invalid enum load)
   low_llt_.compute(Eigen::MatrixXd::Identity(1, 1));
   goal_llt_.compute(Eigen::MatrixXd::Identity(1, 1));
+  lock_llt_.compute(Eigen::MatrixXd::Identity(1, 1));
 }
 
 void Controller::set_gains(const Vector& gains_, bool auto_gain, double factor) {
@@ -194,6 +195,44 @@ void Controller::null_project(Vector& v) {
   v.noalias() -= basis_.leftCols(rank_) * coef_.head(rank_);
 }
 
+// lock_ (kLockLow): the smoothstep of the least over the largest eigenvalue of the Gram matrix
+// of the first level's target rows, each of unit norm (a task weighted 1e-3 beside another
+// loses no rank), over the joints not held at a position range's end by the first level's own
+// velocity (at a constrained minimum against a range the joints left free are the singular
+// ones; a joint the first level lets go the posture may pull off its end). A row the free
+// joints do not move counts as independent of the others (no motion changes it). The
+// eigenvalues are computed only where a Cholesky factorisation of G - kLockHigh tr(G) I
+// fails: elsewhere the least is above kLockHigh of the largest, and the share is 1.
+double Controller::posture_share(const double* q) {
+  const Level& L0 = levels[0];
+  const Index t = L0.targets;
+  if (t == 0) return 1.0;
+  lock_free_ = moving;
+  const Vector& own = replaced_ ? method_top_ : desired_top;  // (desired_top: fb0_ + ff0_)
+  for (const PositionRange& r : bounds.ranges) {
+    const double x = q[r.q], v = own[r.v];
+    if ((x >= r.upper && v > 0.0) || (x <= r.lower && v < 0.0)) lock_free_[r.v] = 0.0;
+  }
+  lock_rows_.noalias() = Jw_.middleRows(L0.begin, t) * lock_free_.asDiagonal();
+  for (Index i = 0; i < t; ++i) {
+    const double norm = lock_rows_.row(i).norm();
+    if (norm > 0.0) lock_rows_.row(i) /= norm;
+  }
+  lock_gram_.noalias() = lock_rows_ * lock_rows_.transpose();
+  for (Index i = 0; i < t; ++i)
+    if (lock_gram_(i, i) == 0.0) lock_gram_(i, i) = 1.0;
+  const double trace = lock_gram_.trace();
+  lock_shift_ = lock_gram_;
+  lock_shift_.diagonal().array() -= kLockHigh * trace;
+  lock_llt_.compute(lock_shift_);
+  if (lock_llt_.info() == Eigen::Success) return 1.0;
+  lock_eig_.compute(lock_gram_, Eigen::EigenvaluesOnly);
+  const double least = std::max(lock_eig_.eigenvalues()[0], 0.0);
+  const double most = std::max(lock_eig_.eigenvalues()[t - 1], 1e-300);
+  const double x = std::clamp((least / most - kLockLow) / (kLockHigh - kLockLow), 0.0, 1.0);
+  return x * x * (3.0 - 2.0 * x);
+}
+
 // x_fb, x_ff of the levels below the first, each in the null space of the rows above it
 // (Siciliano and Slotine's recursion): a posture's velocity K w (q_ref - q) replaces the
 // self-motion of the levels above, a task level solves its task velocity, less what the levels
@@ -206,21 +245,7 @@ void Controller::lower_levels(const double* ffw, const double* q) {
   rank_ = 0;
   top_norm_ = 0.0;
   extend_basis(&Jw_, top_level.begin, top_level.end - top_level.begin);
-  lock_ = 1.0;
-  if (top_level.targets > 0 && has_posture_) {
-    // (over the joints not at a position range's end: at a constrained minimum against a
-    // range the joints left free are the singular ones)
-    lock_free_ = moving;
-    for (const PositionRange& r : bounds.ranges)
-      if (q[r.q] <= r.lower || q[r.q] >= r.upper) lock_free_[r.v] = 0.0;
-    const auto Jt = Jw_.middleRows(top_level.begin, top_level.targets);
-    lock_gram_.noalias() = Jt * lock_free_.asDiagonal() * Jt.transpose();
-    lock_eig_.compute(lock_gram_, Eigen::EigenvaluesOnly);
-    const double least = std::max(lock_eig_.eigenvalues()[0], 0.0);
-    const double most = std::max(lock_eig_.eigenvalues()[top_level.targets - 1], 1e-300);
-    const double x = std::clamp((least / most - kLockLow) / (kLockHigh - kLockLow), 0.0, 1.0);
-    lock_ = x * x * (3.0 - 2.0 * x);
-  }
+  lock_ = has_posture_ ? posture_share(q) : 1.0;
   const double gain = method.p.auto_gain ? method.p.gain_factor / dt_ : 1.0;
   for (size_t index = 1; index < levels.size(); ++index) {
     const Level& level = levels[index];
@@ -545,7 +570,8 @@ bool Controller::lower_goal(const Eigen::Ref<const RowMatrix>& J0, const double*
   const Index k = rows ? A.rows() : 0;
   for (Index i = 0; i < k; ++i) {
     if (!std::isfinite(goal_room_[i])) continue;
-    if (A.row(i).dot(fb0_) / K > goal_room_[i]) return false;
+    const double slack = 1e-12 * (std::abs(goal_room_[i]) + A.row(i).cwiseAbs().dot(fb0_.cwiseAbs()) / K);
+    if (A.row(i).dot(fb0_) / K > goal_room_[i] + slack) return false;  // (as the ranges')
     crosses = crosses || A.row(i).dot(fb) / K > goal_room_[i];
   }
   if (!crosses) return false;
@@ -960,10 +986,10 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
   // 3. the lower levels
   fb = fb0_;
   ff = ff0_;
+  desired_top = fb0_ + ff0_;
   if (levels.size() > 1) lower_levels(ff_in ? ffw_.data() : nullptr, q);
   lower_replaced_ = bounds.smooth && K > 0.0 && levels.size() > 1 &&
                     lower_goal(J0, q, K, A, room != nullptr);
-  desired_top = fb0_ + ff0_;
   desired = fb + ff;
   // the first level's rows that hold (a contact: a task without a target) are equalities of
   // every projection below, at the motion the first level asks of them

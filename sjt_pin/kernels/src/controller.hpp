@@ -96,6 +96,7 @@ class Controller {
   bool feasible(const Vector& x, const Eigen::Ref<const RowMatrix>& A,
                 const Eigen::Ref<const Vector>& b, const Vector& lo, const Vector& hi) const;
   void lower_levels(const double* ffw, const double* q);
+  double posture_share(const double* q);
   void map_matrix(const Eigen::Ref<const RowMatrix>& J0, const double* matrix, bool with_ff);
   void extend_basis(const RowMatrix* rows, Index begin, Index count);
   void null_project(Vector& v);
@@ -142,7 +143,9 @@ class Controller {
   double top_norm_ = 0.0;
   double lock_ = 1.0;  // a posture's share of the self-motion (kLockLow)
   bool has_posture_ = false;
-  Eigen::MatrixXd lock_gram_;
+  RowMatrix lock_rows_;
+  Eigen::MatrixXd lock_gram_, lock_shift_;
+  Eigen::LLT<Eigen::MatrixXd> lock_llt_;
   Vector lock_free_;
   Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> lock_eig_;
   Vector coef_, level_t_;
