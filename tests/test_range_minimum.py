@@ -64,6 +64,25 @@ def _stationarity(robot, q, target) -> tuple[float, float]:
                                                 (np.linalg.norm(J) * np.linalg.norm(w * e)))
 
 
+def _run(name: str, seed: int, method: str, posture: bool):
+    """12 s on the draw's held target under its limits, every limit kept: the solver, the
+    robot, the target, the configurations, their speeds (rad/s) and the narrowed joint."""
+    robot, q0, target, acceleration, jerk, narrowed = _case(name, seed)
+    solver = sjt.make_solver(method, robot, dt=DT, task=sjt.PoseTask(length=LENGTH),
+                             posture=sjt.PostureTask(q0) if posture else None,
+                             acceleration_limits=acceleration, jerk_limits=jerk)
+    qs = [q0]
+    for _ in range(round(SECONDS / DT)):
+        qs.append(solver.step(qs[-1], target))
+    v, a, j = rates(robot.model, qs, DT)
+    assert np.abs(v / robot.velocity_limits).max() <= 1.0 + 1e-6
+    assert np.abs(a).max() <= acceleration * (1.0 + 1e-6)
+    assert np.abs(j).max() <= jerk * (1.0 + 1e-6)
+    q = np.array(qs)
+    assert np.all(q >= robot.lower_limits - 1e-12) and np.all(q <= robot.upper_limits + 1e-12)
+    return solver, robot, target, qs, v, narrowed
+
+
 CASES = [("ur5", 0), ("ur5", 5), ("ur10", 2), ("ur10", 7), ("panda", 7), ("panda", 15)]
 
 
@@ -76,20 +95,7 @@ CASES = [("ur5", 0), ("ur5", 5), ("ur10", 2), ("ur10", 7), ("panda", 7), ("panda
     *[(n, s, "sjt", True) for n, s in CASES], ("panda", 7, "dls", True)])
 def test_a_target_beyond_a_range_ends_at_rest_on_the_constrained_minimum(name, seed, method,
                                                                          posture):
-    robot, q0, target, acceleration, jerk, narrowed = _case(name, seed)
-    solver = sjt.make_solver(method, robot, dt=DT, task=sjt.PoseTask(length=LENGTH),
-                             posture=sjt.PostureTask(q0) if posture else None,
-                             acceleration_limits=acceleration, jerk_limits=jerk)
-    qs = [q0]
-    for _ in range(round(SECONDS / DT)):
-        qs.append(solver.step(qs[-1], target))
-    v, a, j = rates(robot.model, qs, DT)
-    # every limit kept
-    assert np.abs(v / robot.velocity_limits).max() <= 1.0 + 1e-6
-    assert np.abs(a).max() <= acceleration * (1.0 + 1e-6)
-    assert np.abs(j).max() <= jerk * (1.0 + 1e-6)
-    q = np.array(qs)
-    assert np.all(q >= robot.lower_limits - 1e-12) and np.all(q <= robot.upper_limits + 1e-12)
+    solver, robot, target, qs, v, narrowed = _run(name, seed, method, posture)
     # at rest over the last second
     assert np.abs(v[-1000:]).max() < 1e-6, np.abs(v[-1000:]).max()
     # where no velocity within the ranges lowers the linearised error
@@ -108,19 +114,7 @@ def test_a_target_beyond_a_range_ends_at_rest_on_the_constrained_minimum(name, s
 # 0.94 rad/s after 12 s.
 @pytest.mark.parametrize("seed", [0, 2, 3, 5])
 def test_a_posture_beside_a_joint_at_its_range_rests_on_the_reached_target(seed):
-    robot, q0, target, acceleration, jerk, narrowed = _case("panda", seed)
-    solver = sjt.make_solver("sjt", robot, dt=DT, task=sjt.PoseTask(length=LENGTH),
-                             posture=sjt.PostureTask(q0), acceleration_limits=acceleration,
-                             jerk_limits=jerk)
-    qs = [q0]
-    for _ in range(round(SECONDS / DT)):
-        qs.append(solver.step(qs[-1], target))
-    v, a, j = rates(robot.model, qs, DT)
-    assert np.abs(v / robot.velocity_limits).max() <= 1.0 + 1e-6
-    assert np.abs(a).max() <= acceleration * (1.0 + 1e-6)
-    assert np.abs(j).max() <= jerk * (1.0 + 1e-6)
-    q = np.array(qs)
-    assert np.all(q >= robot.lower_limits - 1e-12) and np.all(q <= robot.upper_limits + 1e-12)
+    solver, robot, target, qs, v, narrowed = _run("panda", seed, "sjt", True)
     assert np.abs(v[-1000:]).max() < 1e-6, np.abs(v[-1000:]).max()
     error, _ = _stationarity(robot, qs[-1], target)
     assert error < 1e-6, error

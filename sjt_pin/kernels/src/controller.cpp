@@ -917,6 +917,16 @@ void Controller::map_matrix(const Eigen::Ref<const RowMatrix>& J0, const double*
   given_gain = counted > 0 ? scale * k0.head(counted).mean() : 0.0;
 }
 
+// A joint a bounded displacement d holds at its range end (d at lo or hi) is held by the
+// range, whatever bound (the braking toward that displacement) is the tighter one at rest there.
+void Controller::held_by_ranges(const Vector& d, const Vector& lo, const Vector& hi) {
+  for (const PositionRange& r : bounds.ranges) {
+    const Index j = r.v;
+    if (d[j] >= hi[j] && box.hi_by[j] == kBraking) box.hi_by[j] = kPosition;
+    if (d[j] <= lo[j] && box.lo_by[j] == kBraking) box.lo_by[j] = kPosition;
+  }
+}
+
 int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const Vector>& e,
                     const double* ff_in, const double* q, Eigen::Ref<Vector> step,
                     const double* matrix, const double* user_lo,
@@ -1074,29 +1084,19 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
   rows_active.clear();
   for (Index i = 0; i < A.rows(); ++i)
     if (A.row(i).dot(holding) >= bk[i] - 1e-9 * (1.0 + std::abs(bk[i]))) rows_active.push_back(static_cast<int>(i));
-  // where range_goal replaced the first level's feedback, the step is reported against the
-  // method's own velocity: constrained, its share of the method's task motion, and the limits
-  // that hold it (StepInfo compares the velocity with `desired`)
+  // where range_goal (lower_goal) replaced the first (lower) levels' feedback, the step is
+  // reported against the method's own velocity: constrained, its share of the method's task
+  // motion, and the limits that hold it (StepInfo compares the velocity with `desired`)
   if (lower_replaced_) {
     status |= kConstrained;
     kept = false;
-    for (const PositionRange& r : bounds.ranges) {
-      const Index j = r.v;
-      if (lgoal_[j] >= lgoal_hi_[j] && box.hi_by[j] == kBraking) box.hi_by[j] = kPosition;
-      if (lgoal_[j] <= lgoal_lo_[j] && box.lo_by[j] == kBraking) box.lo_by[j] = kPosition;
-    }
+    held_by_ranges(lgoal_, lgoal_lo_, lgoal_hi_);
     desired = method_desired_;
   }
   if (replaced_) {
     status |= kConstrained;
     kept = false;
-    // a joint the displacement holds at its range end is held by the range, whatever bound
-    // (the braking toward that displacement) is the tighter one at rest there
-    for (const PositionRange& r : bounds.ranges) {
-      const Index j = r.v;
-      if (goal_[j] >= goal_hi_[j] && box.hi_by[j] == kBraking) box.hi_by[j] = kPosition;
-      if (goal_[j] <= goal_lo_[j] && box.lo_by[j] == kBraking) box.lo_by[j] = kPosition;
-    }
+    held_by_ranges(goal_, goal_lo_, goal_hi_);
     desired += method_top_ - desired_top;
     desired_top = method_top_;
   }

@@ -97,6 +97,7 @@ class Controller {
                 const Eigen::Ref<const Vector>& b, const Vector& lo, const Vector& hi) const;
   void lower_levels(const double* ffw, const double* q);
   double posture_share(const double* q);
+  void held_by_ranges(const Vector& d, const Vector& lo, const Vector& hi);
   void map_matrix(const Eigen::Ref<const RowMatrix>& J0, const double* matrix, bool with_ff);
   void extend_basis(const RowMatrix* rows, Index begin, Index count);
   void null_project(Vector& v);
