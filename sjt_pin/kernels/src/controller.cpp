@@ -16,7 +16,7 @@ constexpr double kHeldTol = 1e-9;
 // their largest row's norm is spanned by them (the former eigen-decomposition's relative
 // cutoff on the Gram matrix's eigenvalues, 1e-12, in singular values)
 constexpr double kRankFloor = 1e-6;
-// a posture's share of the self-motion, lock_: 0 where the Gram matrix of the first level's
+// a posture's share of the self-motion (posture_share): 0 where the Gram matrix of the first level's
 // target rows (of unit norm, over the joints free to move) has its least eigenvalue below
 // kLockLow of its largest, 1 above kLockHigh, a smoothstep between (posture_share). Where a
 // target is out of reach the arm rests at a singular configuration: its two nearly null
@@ -68,6 +68,12 @@ constexpr double kPostureShare = 1e-3;
 // lower_nearest's weight of a motion no lower task sees: a share of the posture's mean weight
 // (times kPostureShare), or without a posture of the task rows' mean squared column norm
 constexpr double kInvisible = 1e-2;
+
+// whether a displacement d from x takes a joint past its range r (by more than slack), further
+// out than it is (a joint outside its range counts only where d takes it further out)
+bool leaves_range(const PositionRange& r, double x, double d, double slack = 0.0) {
+  return (x + d > r.upper + slack && d > 0.0) || (x + d < r.lower - slack && d < 0.0);
+}
 
 }  // namespace
 
@@ -185,7 +191,6 @@ void Controller::extend_basis(const RowMatrix* rows, Index begin, Index count) {
       w /= norm;
       ++rank_;
     }
-
   }
 }
 
@@ -195,7 +200,7 @@ void Controller::null_project(Vector& v) {
   v.noalias() -= basis_.leftCols(rank_) * coef_.head(rank_);
 }
 
-// lock_ (kLockLow): the smoothstep of the least over the largest eigenvalue of the Gram matrix
+// A posture's share of the self-motion (kLockLow): the smoothstep of the least over the largest eigenvalue of the Gram matrix
 // of the first level's target rows, each of unit norm (a task weighted 1e-3 beside another
 // loses no rank), over the joints not held at a position range's end by the first level's own
 // velocity (at a constrained minimum against a range the joints left free are the singular
@@ -245,7 +250,7 @@ void Controller::lower_levels(const double* ffw, const double* q) {
   rank_ = 0;
   top_norm_ = 0.0;
   extend_basis(&Jw_, top_level.begin, top_level.end - top_level.begin);
-  lock_ = has_posture_ ? posture_share(q) : 1.0;
+  const double lock = has_posture_ ? posture_share(q) : 1.0;
   const double gain = method.p.auto_gain ? method.p.gain_factor / dt_ : 1.0;
   for (size_t index = 1; index < levels.size(); ++index) {
     const Level& level = levels[index];
@@ -257,10 +262,10 @@ void Controller::lower_levels(const double* ffw, const double* q) {
         tmp_[j] = gain * gains[row] * sqrt_weight[row] * ew_[row] - fb[j];
       }
       null_project(tmp_);
-      fb += lock_ * tmp_;
+      fb += lock * tmp_;
       tmp_ = -ff;
       null_project(tmp_);
-      ff += lock_ * tmp_;
+      ff += lock * tmp_;
       if (index + 1 < levels.size()) extend_basis(nullptr, 0, nv);
       continue;
     }
@@ -561,11 +566,10 @@ bool Controller::lower_goal(const Eigen::Ref<const RowMatrix>& J0, const double*
   bool crosses = false;
   for (const PositionRange& r : bounds.ranges) {
     if (moving[r.v] == 0.0) continue;
-    const double x = q[r.q], top = fb0_[r.v] / K, all = fb[r.v] / K;
-    const double slack = 1e-12 * (1.0 + std::abs(x));  // (range_goal's d0 lands on the bound)
-    if ((x + top > r.upper + slack && top > 0.0) || (x + top < r.lower - slack && top < 0.0))
-      return false;
-    crosses = crosses || (x + all > r.upper && all > 0.0) || (x + all < r.lower && all < 0.0);
+    const double x = q[r.q];
+    // (range_goal's d0 lands on the bound, to rounding)
+    if (leaves_range(r, x, fb0_[r.v] / K, 1e-12 * (1.0 + std::abs(x)))) return false;
+    crosses = crosses || leaves_range(r, x, fb[r.v] / K);
   }
   const Index k = rows ? A.rows() : 0;
   for (Index i = 0; i < k; ++i) {
@@ -577,13 +581,7 @@ bool Controller::lower_goal(const Eigen::Ref<const RowMatrix>& J0, const double*
   if (!crosses) return false;
   lgoal_base_ = fb0_ / K;
   lgoal_target_ = fb / K;
-  lgoal_lo_.setConstant(nv, -kInf);
-  lgoal_hi_.setConstant(nv, kInf);
-  for (const PositionRange& r : bounds.ranges) {
-    const double x = q[r.q];
-    lgoal_lo_[r.v] = std::min(r.lower - x, 0.0);
-    lgoal_hi_[r.v] = std::max(r.upper - x, 0.0);
-  }
+  range_box(q, lgoal_lo_, lgoal_hi_);
   lgoal_.resize(nv);
   const ProjectionReport r =
       k > 0 ? lower_nearest(J0, lgoal_base_, lgoal_target_, A, goal_room_, lgoal_lo_, lgoal_hi_,
@@ -701,11 +699,8 @@ bool Controller::range_goal(const Eigen::Ref<const RowMatrix>& J0, const double*
   // (a joint outside its range counts only where the displacement takes it further out; a
   // row already broken, only where the displacement breaks it further)
   bool crosses = false;
-  for (const PositionRange& r : bounds.ranges) {
-    if (moving[r.v] == 0.0) continue;
-    const double step = fb0_[r.v] / K, to = q[r.q] + step;
-    crosses = crosses || (to > r.upper && step > 0.0) || (to < r.lower && step < 0.0);
-  }
+  for (const PositionRange& r : bounds.ranges)
+    crosses = crosses || (moving[r.v] != 0.0 && leaves_range(r, q[r.q], fb0_[r.v] / K));
   const Index k = room ? A.rows() : 0;
   goal_room_.resize(k);
   for (Index i = 0; i < k; ++i) {
@@ -729,14 +724,8 @@ bool Controller::range_goal(const Eigen::Ref<const RowMatrix>& J0, const double*
   goal_y_ = goal_llt_.solve(goal_e_);
   goal_xb_.noalias() = J0.transpose() * goal_y_;
   goal_lam_.resize(nv);
-  goal_lo_.setConstant(nv, -kInf);
-  goal_hi_.setConstant(nv, kInf);
   for (Index j = 0; j < nv; ++j) goal_lam_[j] = moving[j] != 0.0 ? mu : kInf;
-  for (const PositionRange& r : bounds.ranges) {  // (the box holds 0: a joint outside its
-    const double x = q[r.q];                       // range returns by the position bounds)
-    goal_lo_[r.v] = std::min(r.lower - x, 0.0);
-    goal_hi_[r.v] = std::max(r.upper - x, 0.0);
-  }
+  range_box(q, goal_lo_, goal_hi_);
   // the held rows (contacts) keep the motion the method asks of them, as equalities
   const auto C = J0.middleRows(targets, held);
   goal_d_.noalias() = C * fb0_;
@@ -915,6 +904,17 @@ void Controller::map_matrix(const Eigen::Ref<const RowMatrix>& J0, const double*
   else ff0_.setZero();
   const Index counted = std::min<Index>(std::max<Index>(L0.targets, 1), r0);
   given_gain = counted > 0 ? scale * k0.head(counted).mean() : 0.0;
+}
+
+// The box of displacements within the position ranges from q, lower - q <= d <= upper - q, widened
+// to hold 0 (a joint outside its range returns by the position bounds); unbounded elsewhere.
+void Controller::range_box(const double* q, Vector& lo, Vector& hi) const {
+  lo.setConstant(nv, -kInf);
+  hi.setConstant(nv, kInf);
+  for (const PositionRange& r : bounds.ranges) {
+    lo[r.v] = std::min(r.lower - q[r.q], 0.0);
+    hi[r.v] = std::max(r.upper - q[r.q], 0.0);
+  }
 }
 
 // A joint a bounded displacement d holds at its range end (d at lo or hi) is held by the

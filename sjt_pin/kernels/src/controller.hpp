@@ -98,6 +98,7 @@ class Controller {
   void lower_levels(const double* ffw, const double* q);
   double posture_share(const double* q);
   void held_by_ranges(const Vector& d, const Vector& lo, const Vector& hi);
+  void range_box(const double* q, Vector& lo, Vector& hi) const;
   void map_matrix(const Eigen::Ref<const RowMatrix>& J0, const double* matrix, bool with_ff);
   void extend_basis(const RowMatrix* rows, Index begin, Index count);
   void null_project(Vector& v);
@@ -142,7 +143,6 @@ class Controller {
   Vector kew_;
   Index rank_ = 0;
   double top_norm_ = 0.0;
-  double lock_ = 1.0;  // a posture's share of the self-motion (kLockLow)
   bool has_posture_ = false;
   RowMatrix lock_rows_;
   Eigen::MatrixXd lock_gram_, lock_shift_;
