@@ -36,7 +36,10 @@ class LevelInfo:
     task units: a contact's slip counts; 0 for a posture level) and ``scale``, the share in
     [0, 1] of the motion its rows asked for that the step kept (the projection of the achieved
     task velocity onto the asked one, over the asked one's squared norm; 1 when the limits
-    left the level whole)."""
+    left the level whole). A posture level's scale also counts the share of its self-motion
+    that the first level's rank leaves it: it fades to 0 where the first level's task rows
+    lose rank (an arm stretched toward a target out of reach), so that it does not swing the
+    arm about a singular rest."""
 
     priority: int
     error_norm: float
@@ -165,6 +168,8 @@ def step_info(controller, stack, robot, J: np.ndarray, e: np.ndarray, q: np.ndar
         got = Jk @ dq
         size = float(asked @ asked)
         scale = 1.0 if size == 0.0 else min(max(float(got @ asked) / size, 0.0), 1.0)
+        if identity:
+            scale *= c.posture_share
         error = 0.0 if identity else float(np.linalg.norm(e[first:last]))
         levels.append(LevelInfo(k, error, scale))
     return StepInfo(

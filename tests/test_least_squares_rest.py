@@ -122,6 +122,20 @@ def _far_draw(robot, seed, distance=1.5):
 
 
 @pytest.mark.parametrize("method", ["dls", "jp", "sjt"])
+def test_a_posture_keeps_its_whole_share_beside_a_task_of_full_rank(robots, method):
+    """Away from singular configurations the posture's share is whole: its level keeps all
+    of the self-motion it asks (no limit acts), as the step reports."""
+    robot = robots["panda"]
+    q0 = 0.5 * (robot.lower_limits + robot.upper_limits)
+    target = robot.fk(q0 + 1e-3)
+    solver = sjt.make_solver(method, robot, dt=DT, posture=sjt.PostureTask(q0 + 1e-2))
+    solver.step(q0, target)
+    assert solver.last.active_limits == ()
+    assert solver.last.levels[1].scale == pytest.approx(1.0, abs=1e-12)
+    assert np.linalg.norm(solver.last.dq) > 0.0
+
+
+@pytest.mark.parametrize("method", ["dls", "jp", "sjt"])
 @pytest.mark.parametrize("seed", range(4))
 def test_a_posture_rests_with_the_arm_at_a_target_out_of_reach(robots, method, seed):
     """The arm rests stretched at a singular configuration there, whose two nearly null
@@ -140,4 +154,5 @@ def test_a_posture_rests_with_the_arm_at_a_target_out_of_reach(robots, method, s
     v = np.diff(qs[-1001:], axis=0) / DT
     assert np.abs(v).max() < max(1e-6, 2.0 * settling), (np.abs(v).max(), settling)
     assert solver.last.stalled
+    assert solver.last.levels[1].scale == 0.0  # (the step says the posture faded)
     assert solver.error_norm == pytest.approx(alone.error_norm, abs=1e-3)

@@ -43,6 +43,12 @@ struct PositionRange {
   double lower = 0.0, upper = 0.0, recovery = 1.0;
 };
 
+// whether a displacement d from x takes a joint past its range r (by more than slack), further
+// out than it is (a joint outside its range counts only where d takes it further out)
+inline bool leaves_range(const PositionRange& r, double x, double d, double slack = 0.0) {
+  return (x + d > r.upper + slack && d > 0.0) || (x + d < r.lower - slack && d < 0.0);
+}
+
 struct BoundsConfig {
   Index nv = 0;
   Vector speed;                        // (nv) inf: none

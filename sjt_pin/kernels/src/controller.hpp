@@ -82,6 +82,8 @@ class Controller {
   // -- the last step, for StepInfo
   MethodStep top;                 // level 0's analysis (alpha, gain, loop bound, ...)
   double e_sq = 0.0, ff_sq = 0.0, regular = 0.0, task_scale = 1.0;
+  // the share of a posture's self-motion the first level's rank leaves it (fade_posture)
+  double posture_share = 1.0;
   Vector desired, fb, ff, velocity;  // the method's velocity, its two parts, and the result
   Vector desired_top;                // the first level's own velocity (with the escape's)
   // the velocity whose bounds and rows StepInfo names as holding the arm: the result, or
@@ -93,15 +95,24 @@ class Controller {
   bool kept = true;
 
  private:
+  // the levels below the first (lower_levels.cpp)
+  void lower_levels(const double* ffw, const double* q);
+  double fade_posture(const double* q);
+  void extend_basis(const RowMatrix* rows, Index begin, Index count);
+  void null_project(Vector& v);
+  double lower_metric();
+  ProjectionReport lower_nearest(const Eigen::Ref<const RowMatrix>& J0, const Vector& base,
+                                 const Vector& target, const Eigen::Ref<const RowMatrix>& A,
+                                 const Eigen::Ref<const Vector>& b, const Vector& lo,
+                                 const Vector& hi, Vector& out);
+  bool lower_goal(const Eigen::Ref<const RowMatrix>& J0, const double* q, double K,
+                  const Eigen::Ref<const RowMatrix>& A, bool rows);
+  // the first level and the stage (controller.cpp)
   bool feasible(const Vector& x, const Eigen::Ref<const RowMatrix>& A,
                 const Eigen::Ref<const Vector>& b, const Vector& lo, const Vector& hi) const;
-  void lower_levels(const double* ffw, const double* q);
-  double posture_share(const double* q);
   void held_by_ranges(const Vector& d, const Vector& lo, const Vector& hi);
   void range_box(const double* q, Vector& lo, Vector& hi) const;
   void map_matrix(const Eigen::Ref<const RowMatrix>& J0, const double* matrix, bool with_ff);
-  void extend_basis(const RowMatrix* rows, Index begin, Index count);
-  void null_project(Vector& v);
   void sufficient_decrease(const Eigen::Ref<const RowMatrix>& J0,
                            const Eigen::Ref<const RowMatrix>& A,
                            const Eigen::Ref<const Vector>& b,
@@ -114,13 +125,6 @@ class Controller {
   void settle(const Eigen::Ref<const RowMatrix>& J0, const double* q,
               const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b,
               const double* user_lo, const double* user_hi);
-  double lower_metric();
-  ProjectionReport lower_nearest(const Eigen::Ref<const RowMatrix>& J0, const Vector& base,
-                                 const Vector& target, const Eigen::Ref<const RowMatrix>& A,
-                                 const Eigen::Ref<const Vector>& b, const Vector& lo,
-                                 const Vector& hi, Vector& out);
-  bool lower_goal(const Eigen::Ref<const RowMatrix>& J0, const double* q, double K,
-                  const Eigen::Ref<const RowMatrix>& A, bool rows);
   void keep_direction(const Eigen::Ref<const RowMatrix>& J0, const Eigen::Ref<const RowMatrix>& A,
                       const Eigen::Ref<const Vector>& b, const Vector& lo, const Vector& hi,
                       const Eigen::Ref<const RowMatrix>& H, const Eigen::Ref<const Vector>& hd);

@@ -204,6 +204,7 @@ void register_controller(nb::module_& m) {
       .def_prop_ro("trace", [](Controller& c) { return c.top.trace; })
       .def_prop_ro("regular", [](Controller& c) { return c.regular; })
       .def_prop_ro("task_scale", [](Controller& c) { return c.task_scale; })
+      .def_prop_ro("posture_share", [](Controller& c) { return c.posture_share; })
       .def_prop_ro("kept", [](Controller& c) { return c.kept; })
       .def_prop_rw(
           "warm_state",
