@@ -7,6 +7,7 @@ import pytest
 
 import sjt_pin as sjt
 from sjt_pin.bench.accuracy import saddle_problems
+from sjt_pin.escape import SaddleEscape
 
 TRANSPOSE = [("sjt", {}), ("sjt", {"feedback": "transpose"}), ("jt", {})]
 
@@ -175,3 +176,36 @@ def test_tiago_arm_and_torso_settle_at_a_target_out_of_reach():
     assert np.sqrt(np.mean(np.square(speeds[-1000:]))) < 1e-3
     assert np.linalg.norm(creeping.displacement) / creeping.dt > 1e-3  # the case under test
     assert settled.error_norm <= creeping.error_norm * (1 + 1e-9)
+
+
+def test_a_settling_step_starts_only_below_where_the_last_one_started():
+    """The settling steps' gate, on a quadratic f = 1/2 |b - A q|^2 whose two flattest
+    curvatures are slow: a settling step fires where f has a Newton step along them; back near
+    where it started (within MAX_TRAVEL) with f no lower, none fires again, however long the
+    step still is (the regular update bringing f back up each time cycled for good); once f is
+    below that start, or beyond MAX_TRAVEL, one does."""
+    model = pin.buildSampleModelManipulator()  # (6 revolute joints: q's differences are linear)
+    s = np.array([1.0, 1.0, 1.0, 1.0, 0.1, 0.05])  # curvatures s^2: two below SLOW of the top
+    b = np.array([0.2, -0.1, 0.3, 0.1, 0.0, 0.0])
+
+    def rows(q):
+        return np.diag(s), b - s * q
+
+    escape = SaddleEscape(model, np.ones(6, dtype=bool), np.ones(6))
+    start = np.concatenate([b[:4] / s[:4], [0.3, -0.3]])  # at the floor but along the slow two
+
+    def f(q):
+        e = rows(q)[1]
+        return 0.5 * float(e @ e)
+
+    assert escape.test(start, rows) and escape.settles == 1
+    assert np.allclose(escape.direction[4:], [-1.0, 1.0] / np.sqrt(2.0))  # (Newton: to 0, 0)
+    stiff = start + np.array([0.01, 0, 0, 0, 0, 0])  # f no lower than at the start: held
+    assert f(stiff) > f(start)
+    assert not escape.test(stiff, rows) and escape.settles == 1
+    lower = start + np.array([0, 0, 0, 0, -0.1, 0.1])  # a third of the way down: f lower
+    assert f(lower) < f(start)
+    assert escape.test(lower, rows) and escape.settles == 2
+    far = lower + np.array([0.0, 0.6, 0.0, 0.0, 0.0, 0.0])  # beyond MAX_TRAVEL: not held
+    assert f(far) > f(lower)
+    assert escape.test(far, rows) and escape.settles == 3
