@@ -224,7 +224,7 @@ class Solver:
             if status & _PYTHON or self._busy:
                 self._slow(status, q, J, [target] if targets is None else targets)
             # 4. integrate on the manifold; the record of the step (StepInfo) is built on demand
-            self._record, self._last = (J, e, q, ff, owners, status), None
+            self._record, self._last = (J, e, q, ff, owners), None
             self._returned = q_next = _integrate(self._model, q, self._step)
             return q_next
         finally:
@@ -291,12 +291,11 @@ class Solver:
     def last(self) -> StepInfo | None:
         """The :class:`StepInfo` of the last step (``None`` before the first)."""
         if self._last is None and self._record is not None:
-            J, e, q, ff, owners, status = self._record
-            gain = self._gain
+            J, e, q, ff, owners = self._record
+            fixed = self._gain.argument if isinstance(self._gain, FixedGain) else None
             self._last = step_info(
                 self._controller, self.stack, self.robot, J, e, q, ff, self._step, owners,
-                self._user,
-                self._speed_by, gain.argument if isinstance(gain, FixedGain) else None,
+                self._user, self._speed_by, fixed,
                 alpha=self.method.scaling_factors is not Method.scaling_factors,
                 escaped=self._escaped[1] and self._escaped[0] == self._count)
         return self._last
@@ -320,13 +319,13 @@ class Solver:
         timed within ``share`` of this solver's speed, acceleration and jerk limits.
 
         Step it like a solver, ``q = move.step(q)``, until ``move.done``: each step is a step of a
-        twin of this solver (the same method, options and limits, so every limit holds on every
-        step) tracking the frame's pose along the path, with a posture task pulling the joints
-        along it, stacked with the pose task (in a null space alone it would leave a non-redundant
-        arm free to change branch at a singularity on the path, and a redundant one to drift); this
-        solver's motion state follows, so it carries on from the move without a jump. Raises
-        ``ValueError`` when ``solve()`` finds no configuration within its tolerance, or when the
-        solver's task is not one frame's (a multi-task solver moves by its own targets)."""
+        twin of this solver (the same method, options and limits: every limit holds) tracking
+        the frame's pose along the path, with a posture task on the path stacked with the pose
+        task (in a null space alone it would let an arm change branch at a singularity, or
+        drift); this solver's motion state follows, so it carries on from the move without a
+        jump. Raises ``ValueError`` when ``solve()`` finds no configuration within its
+        tolerance, or when the task is not one frame's (a multi-task solver moves by its own
+        targets)."""
         q, result = move_goal(self, q, target, options)
         posture = PostureTask(q, weight=JointMove.POSTURE_WEIGHT, priority=0)
         twin = _rebuild(type(self), self.robot, self.method,
@@ -336,9 +335,8 @@ class Solver:
         return solver_move(self, twin, q, result.q, share)
 
     def continue_from(self, other: Solver) -> None:
-        """Carry on from ``other``'s motion state (the joint velocity and acceleration it
-        commanded last), as when one controller hands the arm to another: this solver's next
-        step starts from there, within its acceleration and jerk limits."""
+        """Carry on from ``other``'s motion state (its last commanded joint velocity and
+        acceleration), as when one controller hands the arm to another, within this one's limits."""
         if other.robot.nv != self.robot.nv:
             raise ValueError("continue_from needs a solver of a robot with the same joints")
         mine, theirs = self._controller, other._controller

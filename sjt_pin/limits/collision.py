@@ -50,32 +50,8 @@ the band ``influence - margin`` or when the pair leaves ``influence``, and a pai
 than that from its margin remembers nothing (its row binds nothing); nor does a pair with a
 sphere (or an ellipsoid), whose closest points are unique and move continuously.
 
-Moving obstacles. An obstacle moved with its velocity (:meth:`CollisionLimit.move`, twist
-``(v, w)`` in world axes) makes each of its pairs' rows bound the relative closing speed:
-
-    n^T (J_a(p_a) q_dot - v_b(p_b)) <= gain (d - margin) / dt,    v_b(p) = v + w x (p - o)
-
-(``o`` the obstacle's origin; the bound of ``A q_dot <= b`` rises by ``n^T v_b(p_b)``, falls
-where the obstacle comes closer). With ``u = -n^T v_b(p_b)`` the obstacle's approach speed
-and ``r = sum_j |A_ij| v_j`` the fastest the arm's speed limits ``v`` let the row's point
-retreat, the guarantee is:
-
-- without acceleration limits, where ``u <= r``: the step keeps its row, so per period the
-  excess ``d - margin`` shrinks by at most the fraction ``gain`` to first order in ``dt``, as
-  beside a still obstacle; without the velocity the row lags the obstacle by a period and
-  the pair settles about ``u dt / gain`` inside the margin;
-- with acceleration limits (``a = sum_j |A_ij| a_j`` along the row, ``BRAKING_SHARE`` of it
-  counted on), the row starts giving way while its excess still covers the retreat's ramp,
-  ``h >= (u + s) tau + (u + s)^2 / (2 share a)`` for a closing speed ``s`` and ``tau = dt +
-  a / j``: each pair with a moving obstacle is watched ``u (2 dt + T)`` farther out (``T``
-  the longest time a joint takes to reach its speed limit, at most 1 s, plus the jerk's
-  ramp: :meth:`CollisionLimit._lookahead`), and where the obstacle comes faster than the
-  limits can answer the acceleration and jerk limits yield to the row (``limit_conflicts``);
-- where ``u > r`` no motion within the speed limits keeps the row: the step breaks it by
-  the least the stage can, and ``StepInfo.rows_exceeded`` gives ``A q_dot - b`` (m/s; times
-  ``dt``, how much of the margin the step gave up).
-
-A moving obstacle is moved every step (its velocity holds until the next :meth:`move`).
+Moving obstacles: an obstacle moved with its velocity bounds each of its pairs' rows by the
+relative closing speed (``sjt_pin.limits.collision_moving`` states the guarantee).
 
 Distances and closest points come from coal on the shapes of Pinocchio's ``GeometryModel``:
 Pinocchio's ``computeDistance``, called back from the compiled step of the limit
@@ -139,7 +115,7 @@ class CollisionLimit(PairsMixin, TablesMixin, BroadPhaseMixin, MovingMixin, Rows
         obstacles: ``(coal shape, pin.SE3)`` pairs fixed in the world: ``coal.Sphere``, ``Box``,
             ``Capsule``, ``Cylinder``, ``Halfspace``, ``Plane``, ``Convex`` or a mesh
             (``BVHModel``; its convex hull with ``convex=True``). Move them with :meth:`move`,
-            with their velocity when they move (module docstring, "Moving obstacles").
+            with their velocity when they move (the collision guide, "Moving obstacles").
         self_collision: also check the robot's link pairs, except adjacent links (geometries on
             the same joint or on a joint and its parent) and the pairs the SRDF disables.
         margin: distance to keep, m.
@@ -289,7 +265,7 @@ class CollisionLimit(PairsMixin, TablesMixin, BroadPhaseMixin, MovingMixin, Rows
         ``LOCAL_WORLD_ALIGNED`` twist; a ``pin.Motion`` is read the same way); None for an
         obstacle at rest. It holds until the next ``move`` (move a moving obstacle every
         step); each row of its pairs then bounds the relative normal velocity of their closest
-        points (module docstring, "Moving obstacles")."""
+        points (the collision guide, "Moving obstacles")."""
         if isinstance(i, bool) or not isinstance(i, (int, np.integer)):
             raise TypeError(f"obstacle index must be an int, got {type(i).__name__}")
         if not 0 <= i < len(self._obstacle_ids):

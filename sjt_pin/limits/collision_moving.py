@@ -1,7 +1,33 @@
 """Moving obstacles of :class:`sjt_pin.limits.collision.CollisionLimit`: each pair's bound on
 its obstacle's speed, how long a pair with a moving obstacle is watched ahead, and the rows'
-bounds carried by the obstacles' velocities (module docstring of
-:mod:`sjt_pin.limits.collision`, "Moving obstacles").
+bounds carried by the obstacles' velocities.
+
+An obstacle moved with its velocity (:meth:`CollisionLimit.move`, twist
+``(v, w)`` in world axes) makes each of its pairs' rows bound the relative closing speed:
+
+    n^T (J_a(p_a) q_dot - v_b(p_b)) <= gain (d - margin) / dt,    v_b(p) = v + w x (p - o)
+
+(``o`` the obstacle's origin; the bound of ``A q_dot <= b`` rises by ``n^T v_b(p_b)``, falls
+where the obstacle comes closer). With ``u = -n^T v_b(p_b)`` the obstacle's approach speed
+and ``r = sum_j |A_ij| v_j`` the fastest the arm's speed limits ``v`` let the row's point
+retreat, the guarantee is:
+
+- without acceleration limits, where ``u <= r``: the step keeps its row, so per period the
+  excess ``d - margin`` shrinks by at most the fraction ``gain`` to first order in ``dt``, as
+  beside a still obstacle; without the velocity the row lags the obstacle by a period and
+  the pair settles about ``u dt / gain`` inside the margin;
+- with acceleration limits (``a = sum_j |A_ij| a_j`` along the row, ``BRAKING_SHARE`` of it
+  counted on), the row starts giving way while its excess still covers the retreat's ramp,
+  ``h >= (u + s) tau + (u + s)^2 / (2 share a)`` for a closing speed ``s`` and ``tau = dt +
+  a / j``: each pair with a moving obstacle is watched ``u (2 dt + T)`` farther out (``T``
+  the longest time a joint takes to reach its speed limit, at most 1 s, plus the jerk's
+  ramp: :meth:`CollisionLimit._lookahead`), and where the obstacle comes faster than the
+  limits can answer the acceleration and jerk limits yield to the row (``limit_conflicts``);
+- where ``u > r`` no motion within the speed limits keeps the row: the step breaks it by
+  the least the stage can, and ``StepInfo.rows_exceeded`` gives ``A q_dot - b`` (m/s; times
+  ``dt``, how much of the margin the step gave up).
+
+A moving obstacle is moved every step (its velocity holds until the next :meth:`move`).
 
 A part of the CollisionLimit (a mixin it inherits from), operating on its state."""
 
@@ -67,7 +93,7 @@ class MovingMixin(CollisionState):
         ``b_i + n^T (v_b(p_b) - v_a(p_a))`` with ``v_x(p) = v + w x (p - o)`` for an obstacle
         with twist ``(v, w)`` and origin ``o`` (0 for a link of the robot), so that the row
         bounds the pair's relative closing speed (:mod:`sjt_pin.limits.collision`'s
-        docstring, "Moving obstacles")."""
+        docstring)."""
         if out is None or not self._moving:
             return out
         A, b = out
