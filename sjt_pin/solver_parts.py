@@ -123,7 +123,8 @@ def make_controller(robot: Robot, stack: TaskStack, method: Method, dt: float,
         None if accel is None else accel.limits, None if jerk is None else jerk.limits,
         -1.0 if escape is None else SaddleEscape.STALL_RATIO,
         # converged, not stalled: |e_w| below ERROR_FLOOR times the first level's length
-        (SaddleEscape.ERROR_FLOOR * tasks_length(robot, stack.leading)) ** 2)
+        (SaddleEscape.ERROR_FLOOR * tasks_length(robot, stack.leading)) ** 2,
+        stack.rank_scale)
     #: the motion state a user's limits read is the controller's own
     motion.dq, motion.ddq = controller.dq, controller.ddq
     return controller, matrix_method

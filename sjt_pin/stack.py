@@ -80,7 +80,8 @@ class TaskStack:
     (:func:`ordered_by_level`); ``levels`` says which rows each priority level has:
     ``(begin, end, identity, targets)`` — ``identity`` for a level that is a posture task's
     rows alone, ``targets`` the level's leading rows of tasks that take targets.
-    ``sqrt_weight`` (m,) holds the weights' square roots; ``chain`` (nv,) is 1 for the joints
+    ``sqrt_weight`` (m,) holds the weights' square roots (``rank_scale``: one over each task's
+    largest); ``chain`` (nv,) is 1 for the joints
     that move at least one task (``Task.joints``; a posture task moves all). With a single
     task, :meth:`evaluate` returns that task's own arrays without copying.
     """
@@ -147,6 +148,12 @@ class TaskStack:
         self.ff = np.zeros(self.dim)
         self.sqrt_weight = np.concatenate([np.ones(t.dim) if t.sqrt_weight is None
                                            else t.sqrt_weight for t in self.tasks])
+        #: per row, 1 over its task's largest ``sqrt_weight``: the weighted rows times it are
+        #: each task's rows on one scale, whatever the tasks' weights (a posture's share)
+        self.rank_scale = np.concatenate([np.full(t.dim, 1.0 if t.sqrt_weight is None or not
+                                                  t.sqrt_weight.max() > 0.0
+                                                  else 1.0 / t.sqrt_weight.max())
+                                          for t in self.tasks])
         chain = np.zeros(nv)
         model = robot.model
         for t in self.tasks:

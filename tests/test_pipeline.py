@@ -133,6 +133,7 @@ def test_one_step_is_the_reference_formula(seed, joints, combination, method, fe
                        np.zeros(robot.nv)))
         sw.append(np.full(robot.nv, np.sqrt(0.03)))
     J, e, ff = (np.concatenate(part) for part in zip(*blocks, strict=True))
+    rank_scale = np.concatenate([np.full(w.size, 1.0 / w.max()) for w in sw[:len(tasks)]])
     sw = np.concatenate(sw)
     expected = reference_step(name, options, J[:target_rows], e[:target_rows],
                               ff[:target_rows], sw[:target_rows], k, mask, target_rows, floor,
@@ -144,11 +145,13 @@ def test_one_step_is_the_reference_formula(seed, joints, combination, method, fe
         null = np.eye(robot.nv) - np.linalg.pinv(Jw, rcond=1e-12) @ Jw
         wanted = DT * k * 0.03 * e[target_rows:]
         # (fading where the tasks' rows lose rank: a smoothstep of the least over the largest
-        # eigenvalue of their Gram matrix, each row of unit norm, from 1e-6 to 1e-4)
-        norms = np.linalg.norm(Jw, axis=1)
-        unit = Jw / np.where(norms > 0.0, norms, 1.0)[:, None]
-        gram = unit @ unit.T
-        gram[np.diag_indices_from(gram)] = np.where(norms > 0.0, np.diag(gram), 1.0)
+        # eigenvalue of their Gram matrix, each task's rows over its largest weight, from 1e-6
+        # to 1e-4; a row no joint moves counts as independent)
+        rows = rank_scale[:, None] * Jw
+        gram = rows @ rows.T
+        top = np.diag(gram).max()
+        gram[np.diag_indices_from(gram)] = np.where(np.diag(gram) > 1e-18 * top, np.diag(gram),
+                                                    top)
         gram = np.linalg.eigvalsh(gram)
         x = np.clip((max(gram[0], 0.0) / gram[-1] - 1e-6) / (1e-4 - 1e-6), 0.0, 1.0)
         expected = expected + x * x * (3.0 - 2.0 * x) * null @ (wanted - expected)

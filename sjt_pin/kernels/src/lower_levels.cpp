@@ -24,6 +24,9 @@ constexpr double kRankFloor = 1e-6;
 // left a posture pull along the nearly lost direction that DLS and SJT balanced and swung
 // about. (1e-4: a least singular value 1 % of the largest.)
 constexpr double kLockLow = 1e-6, kLockHigh = 1e-4;  // (posture_share)
+// a row whose squared norm over the free joints is below this share of the largest is one they
+// do not move (its rounding left): it counts as independent of the others (fade_posture)
+constexpr double kStill = 1e-18;
 // lower_nearest's weight of a posture's rows beside the tasks above it (the tasks' level comes
 // first: with the posture's full weight, TALOS-like humanoids rested 1e-5 m short of a hand
 // target, the posture pulling against the hand)
@@ -69,12 +72,16 @@ void Controller::null_project(Vector& v) {
 }
 
 // A posture's share of the self-motion (kLockLow): the smoothstep of the least over the largest
-// eigenvalue of the Gram matrix of the first level's target rows, each of unit norm (a task
-// weighted 1e-3 beside another loses no rank), over the joints not held at a position range's
-// end by the first level's own velocity (at a constrained minimum against a range the joints
-// left free are the singular ones; a joint the first level lets go the posture may pull off its
-// end). A row the free joints do not move counts as independent of the others (no motion
-// changes it). The eigenvalues are computed only where a Cholesky factorisation of
+// eigenvalue of the Gram matrix of the first level's target rows, each task's rows over its
+// largest weight (rank_scale: a task weighted 1e-3 beside another loses no rank), over the
+// joints not held at a position range's end by the first level's own velocity (at a
+// constrained minimum against a range the joints left free are the singular ones; a joint the
+// first level lets go the posture may pull off its end). A row the free joints do not move
+// (kStill) counts as independent of the others (no motion changes it). Rows of unit norm
+// instead hid a rank lost by a row that vanishes: Panda held by its joint 2 at its range below
+// a target out of reach, its free joints' vertical row 1e-2 of the others, had a unit-row ratio
+// of 2e-3 (the task's rows' 6e-7), and the posture swung joints 1 and 3 at their speed limits
+// for good. The eigenvalues are computed only where a Cholesky factorisation of
 // G - kLockHigh tr(G) I fails: elsewhere the least is above kLockHigh of the largest, and the
 // share is 1.
 double Controller::fade_posture(const double* q) {
@@ -87,14 +94,13 @@ double Controller::fade_posture(const double* q) {
     const double x = q[r.q], v = own[r.v];
     if ((x >= r.upper && v > 0.0) || (x <= r.lower && v < 0.0)) lock_free_[r.v] = 0.0;
   }
-  lock_rows_.noalias() = Jw_.middleRows(L0.begin, t) * lock_free_.asDiagonal();
-  for (Index i = 0; i < t; ++i) {
-    const double norm = lock_rows_.row(i).norm();
-    if (norm > 0.0) lock_rows_.row(i) /= norm;
-  }
+  lock_rows_.noalias() = rank_scale.segment(L0.begin, t).asDiagonal() *
+                         Jw_.middleRows(L0.begin, t) * lock_free_.asDiagonal();
   lock_gram_.noalias() = lock_rows_ * lock_rows_.transpose();
+  const double top = lock_gram_.diagonal().maxCoeff();
+  if (!(top > 0.0)) return 1.0;  // (no free joint moves the task: no motion disturbs it)
   for (Index i = 0; i < t; ++i)
-    if (lock_gram_(i, i) == 0.0) lock_gram_(i, i) = 1.0;
+    if (lock_gram_(i, i) <= kStill * top) lock_gram_(i, i) = top;
   const double trace = lock_gram_.trace();
   lock_shift_ = lock_gram_;
   lock_shift_.diagonal().array() -= kLockHigh * trace;
