@@ -231,8 +231,7 @@ class Solver:
             self._stepping = False
 
     def _slow(self, status, q, J, targets) -> None:
-        """What the fast path skips: errors, the first step's checks, the stability check, the
-        escape's state (its velocity for the next step)."""
+        """What the fast path skips: errors, first-step checks, stability, the escape's state."""
         c = self._controller
         if status & kernels.NON_FINITE:
             step_checks.raise_non_finite(self.robot, c.e_sq, q, targets)
@@ -341,6 +340,7 @@ class Solver:
             raise ValueError("continue_from needs a solver of a robot with the same joints")
         mine, theirs = self._controller, other._controller
         mine.dq[:], mine.ddq[:] = theirs.dq, theirs.ddq
+        mine.curvature_memory = (False, np.zeros(0))  # (their rows are not these)
 
     def search(self):
         """This solver's set-point IK state (:class:`~sjt_pin.ik.Search`, its own, made on use)."""
@@ -352,8 +352,7 @@ class Solver:
 
     @property
     def user_limits(self) -> UserLimits | None:
-        """The limits beyond the built-in ones (what ``solve()`` honours besides the URDF), or
-        ``None``."""
+        """The limits beyond the built-in ones (what ``solve()`` keeps beside the URDF), or None."""
         return self._user
 
     # -- copies --------------------------------------------------------------------------------
@@ -370,6 +369,7 @@ class Solver:
                  "escaping": c.escaping, "escape_velocity": c.escape_velocity.copy(),
                  "warned": self._stability.warned, "count": self._count, "first": self._first,
                  "stall": (c.stall_run, c.stall_wait), "warm": c.warm_state,
+                 "curvature": c.curvature_memory,
                  "held": [getattr(t, "held", None) for t in self.stack.tasks]}
         return (_rebuild, (type(self), self.robot, self.method, arguments), state)
 
@@ -381,7 +381,7 @@ class Solver:
         self._stability.warned, self._count, self._first = (state["warned"], state["count"],
                                                             state["first"])
         c.stall_run, c.stall_wait = state["stall"]
-        c.warm_state = state["warm"]
+        c.warm_state, c.curvature_memory = state["warm"], state["curvature"]
         for task, held in zip(self.stack.tasks, state["held"], strict=True):
             if held is not None:  # (a contact's)
                 task.held = held  # type: ignore[attr-defined]

@@ -61,6 +61,25 @@ def test_a_copy_made_mid_escape_escapes_alike():
     np.testing.assert_array_equal(a, b)
 
 
+@pytest.mark.parametrize("how", ["pickle", "deepcopy"])
+def test_a_copy_carries_the_curvature_the_last_step_measured(panda, how):
+    """Panda's JT sent 1.5 m below, its joint 2 at its range: each projected step is trusted
+    only as far as the curvature the last step measured allows (the stage's sufficient
+    decrease); a copy made while it settles carries that measurement and steps alike."""
+    q = panda.q0.copy()
+    target = panda.fk(q).translation + np.array([0.0, 0.0, -1.5])
+    solver = sjt.JTSolver(panda, task=sjt.PositionTask())
+    for _ in range(600):
+        q = solver.step(q, target)
+    ready, bent = solver._controller.curvature_memory
+    assert ready and bent.shape == (3,) and np.abs(bent).max() > 0.0
+    twin = pickle.loads(pickle.dumps(solver)) if how == "pickle" else copy.deepcopy(solver)
+    a, b = q, q
+    for _ in range(300):
+        a, b = solver.step(a, target), twin.step(b, target)
+    np.testing.assert_array_equal(a, b)
+
+
 def test_a_second_thread_stepping_a_busy_solver_is_told(ur5):
     """While one thread's step runs (held inside a limit of the constraint stage), another
     thread's step of the same solver raises ConcurrentStepError instead of sharing its

@@ -156,3 +156,40 @@ def test_a_posture_rests_with_the_arm_at_a_target_out_of_reach(robots, method, s
     assert solver.last.stalled
     assert solver.last.levels[1].scale == 0.0  # (the step says the posture faded)
     assert solver.error_norm == pytest.approx(alone.error_norm, abs=1e-3)
+
+
+@pytest.mark.parametrize("method", ["dls", "jp", "sjt", "jt"])
+def test_a_posture_rests_with_a_joint_at_its_range_below_a_target_out_of_reach(robots, method):
+    """Panda from ``q0`` sent 1.5 m straight down: its joint 2 stops at its range and the
+    joints left free could move the hand only across the error (their vertical row 1e-2 of the
+    others). Rows of unit norm hid that rank loss from the posture's share, and DLS and SJT
+    swung joints 1 and 3 at their speed limits from step to step for good. The posture fades,
+    the step says so, and the arm rests where the arm alone does."""
+    robot = robots["panda"]
+    q0 = robot.q0.copy()
+    target = robot.fk(q0).translation + np.array([0.0, 0.0, -1.5])
+    alone = sjt.make_solver(method, robot, dt=DT, task=sjt.PositionTask())
+    run(alone, q0, target, 10.0)
+    solver = sjt.make_solver(method, robot, dt=DT, task=sjt.PositionTask(),
+                             posture=sjt.PostureTask(q0))
+    _, qs = run(solver, q0, target, 10.0)
+    assert np.abs(np.diff(qs[-1001:], axis=0)).max() / DT < 1e-6
+    assert solver.last.levels[1].scale < 1e-6
+    assert solver.error_norm == pytest.approx(alone.error_norm, abs=1e-4)
+
+
+@pytest.mark.parametrize("method", ["dls", "jp", "sjt", "jt"])
+def test_an_arm_that_can_move_only_across_its_error_rests(robots, method):
+    """The same Panda, no posture: with joint 2 at its range the free joints move the hand
+    only across the error, where the Gauss-Newton model's neglected second-order term is as
+    large as its first-order decrease. JT's projected step moved the hand at 1.3 m/s (joints
+    at 2.3 rad/s), turning back every step, for good; the step the last one's measured
+    curvature trusts lets the error fall, and the arm rests at the constrained minimum."""
+    robot = robots["panda"]
+    q0 = robot.q0.copy()
+    target = robot.fk(q0).translation + np.array([0.0, 0.0, -1.5])
+    solver = sjt.make_solver(method, robot, dt=DT, task=sjt.PositionTask())
+    _, qs = run(solver, q0, target, 10.0)
+    assert np.abs(np.diff(qs[-1001:], axis=0)).max() / DT < 1e-6
+    assert solver.error_norm == pytest.approx(0.570208, abs=1e-5)
+    assert ("position", "panda_joint2") in solver.last.active_limits

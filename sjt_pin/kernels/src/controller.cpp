@@ -38,6 +38,9 @@ constexpr double kRestRate = 1e-4;
 // growing by 2e-4 per second, where the model promised a decrease of 1e-3 of |e_w| |J0 v|;
 // 3e-3 stopped xArm6's blocked seed 2 (SJT) at an error of 0.176 where 1e-3 lets it reach 0.107
 constexpr double kAligned = 1e-3;
+// the share of a step's first-order decrease of 1/2 |e_w|^2 that the measured second-order
+// term may take (trusted_share)
+constexpr double kTrust = 0.5;
 // range_goal's damping, relative to the first level's mean squared column norm: a floor, and
 // a Levenberg-Marquardt term that grows with |e_w| (per task unit). Measured on held targets
 // beyond a position range under jerk limits (30 runs on UR5, Panda, UR10, KUKA iiwa and
@@ -53,15 +56,16 @@ Controller::Controller(const MethodParameters& method_, Index rows, Index nv_, I
                        double dt, const Vector& sqrt_weight_, const Vector& gains_,
                        const Vector& moving_, Index error_rows_,
                        const std::vector<Level>& levels_, const BoundsConfig& bounds_,
-                       double stall_ratio_, double stall_floor_)
+                       double stall_ratio_, double stall_floor_, const Vector& rank_scale_)
     : m(rows), nv(nv_), nq(nq_), error_rows(error_rows_), sqrt_weight(sqrt_weight_),
-      gains(gains_), moving(moving_), levels(levels_), bounds(bounds_),
+      gains(gains_), moving(moving_), rank_scale(rank_scale_), levels(levels_), bounds(bounds_),
       stall_ratio(stall_ratio_), stall_floor(stall_floor_), dt_(dt) {
   method.p = method_;
   lower_.p = method_;
   lower_.p.damped_feedback = true;  // lower levels solve for their task velocity
   lower_.p.lm = 0.0;
-  if (sqrt_weight.size() != m || gains.size() != m) fail("sqrt_weight and gains must have one entry per row");
+  if (sqrt_weight.size() != m || gains.size() != m || rank_scale.size() != m)
+    fail("sqrt_weight, gains and rank_scale must have one entry per row");
   if (moving.size() != nv) fail("moving must have one entry per velocity coordinate");
   if (levels.empty()) levels.push_back(Level{0, m, false, error_rows});
   Index expect = 0;
@@ -126,6 +130,7 @@ void Controller::reset() {
   stall_run = -1.0;
   stall_wait = 1e300;
   nearest.forget();
+  bent_ready_ = false;
 }
 
 bool Controller::feasible(const Vector& x, const Eigen::Ref<const RowMatrix>& A,
@@ -177,11 +182,12 @@ void Controller::project(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<
   const Vector& lo = plo_;
   const Vector& hi = phi_;
   x0_ = desired_top;
-  bool inside = true;
+  bool inside = true;  // (projected_: whether it is not)
   for (Index j = 0; j < nv && inside; ++j)
     inside = desired_top[j] >= lo[j] - kBoundTol && desired_top[j] <= hi[j] + kBoundTol;
   for (Index i = 0; i < A.rows() && inside; ++i)
     inside = A.row(i).dot(desired_top) <= b[i] + kBoundTol * (1.0 + std::abs(b[i]));
+  projected_ = !inside;
   if (!inside || !lower) {
     method.forget();
     tstar_.noalias() = J0 * desired_top;
@@ -347,11 +353,14 @@ void Controller::sufficient_decrease(const Eigen::Ref<const RowMatrix>& J0,
     best = 0.0;
     cauchy_.setZero(nv);
   }
-  // x0_ no further along its own direction than the model's minimum there
+  // x0_ no further along its own direction than the model's minimum there, nor than its
+  // first-order decrease outweighs the second-order term the last step measured
   tmp2_.noalias() = J0 * x0_;
   const double along = wanted_.dot(tmp2_), curvature = tmp2_.squaredNorm();
-  if (along < curvature) {
-    xa_ = (std::max(along, 0.0) / curvature) * x0_;
+  const double share = std::min(along < curvature ? std::max(along, 0.0) / curvature : 1.0,
+                                trusted_share(J0, along, curvature, x0_.squaredNorm()));
+  if (share < 1.0) {
+    xa_ = share * x0_;
     if (feasible(xa_, A, b, plo_, phi_) && held_kept(xa_)) {
       x0_ = xa_;
       tmp2_.noalias() = J0 * x0_;
@@ -391,6 +400,30 @@ void Controller::sufficient_decrease(const Eigen::Ref<const RowMatrix>& J0,
   if (!held_kept(cauchy_)) return;
   const double w = progress > 0.0 ? progress / (kSufficient * best) : 0.0;
   x0_ = w * x0_ + (1.0 - w) * cauchy_;
+}
+
+// The share t in [0, 1] of a step x (a . J0 x = along, |J0 x|^2 = jj, |x|^2 = xx) whose
+// first-order decrease of 1/2 |e_w|^2 is at least twice the second-order term the
+// Gauss-Newton model leaves out, -1/2 e_w . d2x(x, x) dt^2 (the residual times the kinematics'
+// curvature). The last step measured it along its own velocity u: (J0 - J0_last) u =
+// d2x(u, u) dt to first order, and a step x is taken to bend as much per |x|^2. Far beyond
+// reach, with a joint at its position range, the joints left free could move the hand only
+// across the error, where that term is as large as the first-order decrease (xArm6 from
+// pybullet's URDF and Panda, targets 1.5 m straight out from q0: SJT, JP and JT moved the
+// hand at 0.3-1.3 m/s at the speed limits, turning back every step or two, for good; KUKA
+// iiwa's JT at 10 rad/s). Only a projected step (the method's own stands), and only where the
+// term raises the error:  2 t along - t^2 jj >= t^2 bend xx / kTrust.
+double Controller::trusted_share(const Eigen::Ref<const RowMatrix>& J0, double along,
+                                 double jj, double xx) {
+  if (!bent_ready_ || !projected_) return 1.0;
+  const double uu = dq.squaredNorm();
+  if (!(uu > 0.0) || bent_.size() != J0.rows()) return 1.0;
+  bent_now_.noalias() = J0 * dq;
+  const double bend =
+      -ew_.segment(levels[0].begin, J0.rows()).dot(bent_now_ - bent_) / (dt_ * uu);
+  if (!(bend > 0.0)) return 1.0;
+  const double second = bend * xx / kTrust + jj;
+  return second > 0.0 ? std::clamp(2.0 * along / second, 0.0, 1.0) : 1.0;
 }
 
 // Under acceleration limits each joint brakes so that it can stop at the displacement the
@@ -848,6 +881,8 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
   }
   ddq = (velocity - dq) / dt_;
   dq = velocity;
+  bent_.noalias() = J0 * dq;  // (trusted_share, next step)
+  bent_ready_ = true;
   return status;
 }
 

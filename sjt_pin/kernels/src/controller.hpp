@@ -38,7 +38,7 @@ class Controller {
   Controller(const MethodParameters& method, Index rows, Index nv, Index nq, double dt,
              const Vector& sqrt_weight, const Vector& gains, const Vector& moving,
              Index error_rows, const std::vector<Level>& levels, const BoundsConfig& bounds,
-             double stall_ratio, double stall_floor);
+             double stall_ratio, double stall_floor, const Vector& rank_scale);
 
   // One step: J (m x nv), e (m), ff (m) or none, q (nq); matrix: a user method's M (nv x r0,
   // row-major, r0 the first level's rows) mapping the first level instead of the built-in
@@ -61,6 +61,8 @@ class Controller {
   Method method;
   Index m, nv, nq, error_rows;
   Vector sqrt_weight, gains, moving;
+  // per row, 1 over its task's largest sqrt_weight (fade_posture: each task's rows on one scale)
+  Vector rank_scale;
   std::vector<Level> levels;
   BoundsConfig bounds;
   double stall_ratio, stall_floor;
@@ -93,6 +95,12 @@ class Controller {
   std::vector<int> rows_active;
   ProjectionReport report;
   bool kept = true;
+  // the last step's J0 dq and whether there is one (trusted_share): state copies carry
+  std::tuple<bool, Vector> curvature_memory() const { return {bent_ready_, bent_}; }
+  void set_curvature_memory(bool ready, const Vector& bent) {
+    bent_ready_ = ready;
+    bent_ = bent;
+  }
 
  private:
   // the levels below the first (lower_levels.cpp)
@@ -119,6 +127,8 @@ class Controller {
                            const Eigen::Ref<const RowMatrix>& H,
                            const Eigen::Ref<const Vector>& hd, double ball);
   void cauchy_point(const Eigen::Ref<const RowMatrix>& J0, double ball);
+  double trusted_share(const Eigen::Ref<const RowMatrix>& J0, double along, double jj,
+                       double xx);
   bool range_goal(const Eigen::Ref<const RowMatrix>& J0, const double* q, double K, bool user,
                   const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b,
                   const double* room);
@@ -165,6 +175,10 @@ class Controller {
   Vector low_p_, low_h_, low_r_, low_d_, low_dh_, low_dinv_, low_c_, anchor_;
   // lower_goal: the top level's displacement, the lower levels' one asked, its box and result
   Vector lgoal_base_, lgoal_target_, lgoal_lo_, lgoal_hi_, lgoal_;
+  // trusted_share: J0 dq at the end of the last step (its curvature, measured at this one),
+  // whether there is one, and whether this step's first level was projected
+  Vector bent_, bent_now_;
+  bool bent_ready_ = false, projected_ = false;
   bool lower_replaced_ = false;  // lower_goal replaced the lower levels' feedback this step
   Vector method_desired_;        // the method's velocity before it (StepInfo compares with it)
   Eigen::MatrixXd low_gram_;

@@ -41,7 +41,8 @@ Controller make(const MethodParameters& method, Index rows, Index nv, Index nq, 
                 const Vector& speed, const Eigen::Matrix<int64_t, Eigen::Dynamic, 1>& range_q,
                 const Eigen::Matrix<int64_t, Eigen::Dynamic, 1>& range_v, const Vector& lower,
                 const Vector& upper, const Vector& recovery, nb::object acceleration,
-                nb::object jerk, double stall_ratio, double stall_floor) {
+                nb::object jerk, double stall_ratio, double stall_floor,
+                const Vector& rank_scale) {
   if (!(dt > 0.0) || !std::isfinite(dt)) fail("dt must be a finite number > 0 (s)");
   if (nv <= 0 || rows < 0 || nq < nv) fail("rows, nv and nq do not fit");
   std::vector<Level> ls;
@@ -63,7 +64,7 @@ Controller make(const MethodParameters& method, Index rows, Index nv, Index nq, 
                                  : nb::cast<Vector>(jerk);
   }
   return Controller(method, rows, nv, nq, dt, sqrt_weight, gains, moving, error_rows, ls, bounds,
-                    stall_ratio, stall_floor);
+                    stall_ratio, stall_floor, rank_scale);
 }
 
 }  // namespace
@@ -96,7 +97,7 @@ void register_controller(nb::module_& m) {
            nb::arg("error_rows"), nb::arg("levels"), nb::arg("speed"), nb::arg("range_q"),
            nb::arg("range_v"), nb::arg("lower"), nb::arg("upper"), nb::arg("recovery"),
            nb::arg("acceleration").none(), nb::arg("jerk").none(), nb::arg("stall_ratio"),
-           nb::arg("stall_floor"))
+           nb::arg("stall_floor"), nb::arg("rank_scale"))
       .def(
           "run",
           [](Controller& c, nb::handle J, nb::handle e, nb::handle ff, nb::handle q,
@@ -227,6 +228,15 @@ void register_controller(nb::module_& m) {
           },
           "The first level's projection's warm start (dual point, working rows, shape), which "
           "copies carry.")
+      .def_prop_rw(
+          "curvature_memory", [](Controller& c) { return c.curvature_memory(); },
+          [](Controller& c, const std::tuple<bool, Vector>& state) {
+            const auto& [ready, bent] = state;
+            if (!bent.allFinite()) fail("curvature_memory: a finite vector");
+            c.set_curvature_memory(ready, bent);
+          },
+          "The last step's task motion J0 dq and whether there is one (the curvature the next "
+          "step measures), which copies carry.")
       .def_prop_ro("iterations", [](Controller& c) { return c.report.iterations; })
       .def_prop_ro("converged", [](Controller& c) { return c.report.converged; });
 }
