@@ -43,14 +43,19 @@ def warn_idle_outside(robot: Robot, chain: np.ndarray, q: np.ndarray) -> None:
 
 
 def weighted_rows(probe: TaskStack, stack: TaskStack, targets):
-    """``q -> (J_w, e_w)``: the weighted, masked task rows of ``stack`` for ``targets``,
-    evaluated on ``probe``, a copy of it (the step's buffers stay as they are)."""
-    sw, mask = stack.sqrt_weight, stack.chain
+    """``q -> (J_w, e_w)``: the weighted, masked rows of ``stack``'s first priority level for
+    ``targets``, evaluated on ``probe``, a copy of it (the step's buffers stay as they are).
+    Only the first level's: the escape acts on the error the method's step lowers. (With the
+    posture's rows counted, Panda stretched toward a target out of reach under acceleration
+    limits took a settling step back toward the posture every 0.25 s, which the first level
+    undid, swinging at up to 0.9 rad/s for good.)"""
+    begin, end = stack.levels[0][:2]
+    sw, mask = stack.sqrt_weight[begin:end], stack.chain
     targets = list(targets)
 
     def rows(q):
         J, e, _ = probe.evaluate(q, targets, None)
-        return sw[:, None] * J * mask, sw * e
+        return sw[:, None] * J[begin:end] * mask, sw * e[begin:end]
 
     return rows
 

@@ -193,3 +193,18 @@ def test_an_arm_that_can_move_only_across_its_error_rests(robots, method):
     assert np.abs(np.diff(qs[-1001:], axis=0)).max() / DT < 1e-6
     assert solver.error_norm == pytest.approx(0.570208, abs=1e-5)
     assert ("position", "panda_joint2") in solver.last.active_limits
+
+
+@pytest.mark.parametrize("seed", [3, 6, 7])
+def test_a_posture_rests_beside_sjt_under_acceleration_limits_out_of_reach(robots, seed):
+    """SJT's saddle escape tests the error of the first level, the one its step lowers. With
+    the posture's rows in its test, Panda stretched toward a target out of reach under
+    acceleration limits took a settling step back toward the posture every 0.25 s, which the
+    first level undid: these three draws swung at 0.13-0.8 rad/s after 20 s."""
+    robot = robots["panda"]
+    q0, target = _far_draw(robot, seed)
+    solver = sjt.make_solver("sjt", robot, dt=DT, acceleration_limits=20.0,
+                             posture=sjt.PostureTask(q0))
+    _, qs = run(solver, q0, target, 10.0)
+    assert np.abs(np.diff(qs[-1001:], axis=0)).max() / DT < 1e-6
+    assert solver.last.stalled
