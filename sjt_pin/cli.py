@@ -219,12 +219,19 @@ def bench(args: argparse.Namespace) -> int:
               + collision_moving.moving_table(moving))
         print("\nPanda's hand pulled over a plate of bumps (a mesh) with Franka-like limits:\n"
               + collision_mesh.mesh_table(mesh))
+        from .bench import collision_blocked
+
+        blocked = collision_blocked.blocked(progress=lambda r: print(
+            f"  blocked: {r.robot}, seed {r.seed}, {r.method}, jerk {r.jerk}", flush=True))
+        print("\nTargets behind an obstacle, 15 rad/s^2 (and 7,500 rad/s^3), 5 s:\n"
+              + collision_blocked.blocked_table(blocked))
         _write_json(args.json, {"machine": machine, "rows": [asdict(r) for r in rows],
                                 "idle_us": {"plain": plain, "limit": idle},
                                 "crowded": asdict(crowd),
                                 "stream": [asdict(r) for r in stream],
                                 "moving": [asdict(r) for r in moving],
-                                "mesh": [asdict(r) for r in mesh]})
+                                "mesh": [asdict(r) for r in mesh],
+                                "blocked": [asdict(r) for r in blocked]})
     elif args.kind == "accuracy":
         from .bench import accuracy
 
@@ -517,7 +524,7 @@ def build_parser() -> argparse.ArgumentParser:
                        "Ruckig), ik (TRAC-IK's "
                        "protocol on five arms), collision (three scenes with and without "
                        "CollisionLimit, and pink's barrier; a moving ball and a mesh, beside "
-                       "pink and mink).")
+                       "pink and mink; targets behind an obstacle under acceleration limits).")
     p.add_argument("kind", choices=["speed", "accuracy", "reach", "ik", "collision"],
                    help="which benchmark")
     p.add_argument("--peers", action="store_true",

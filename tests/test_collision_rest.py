@@ -4,15 +4,14 @@ with coal on the robot's meshes (the bench's checker, not the limit's numbers)."
 
 from __future__ import annotations
 
-import coal
 import numpy as np
 import pinocchio as pin
 import pytest
 
 import sjt_pin as sjt
 from sjt_pin.bench import collision as bench
+from sjt_pin.bench.collision_blocked import blocked_scene as _blocked_scene
 from sjt_pin.limits import CollisionLimit
-from sjt_pin.limits.collision import CollisionError
 
 pytestmark = pytest.mark.slow  # (seconds of simulated contact per scene; CI runs them)
 
@@ -64,32 +63,6 @@ def test_a_target_its_own_links_block_comes_to_rest(panda, method):
     qs = _run(panda, q0, target, limit, method, seconds=8.0)  # at rest (0 rad/s) from 4 s
     assert _rest(qs) < 1e-3  # (it slides along its links to 0.019 of the target)
     assert _closest(panda, [], limit, qs) >= MARGIN - 1e-3
-
-
-def _blocked_scene(robot, rng):
-    """A random start within the joint limits, a reachable end pose (a joint-space step of up to
-    0.8 rad per joint) and an obstacle of a random kind around that pose (its centre within a
-    few mm of the target's origin), at least 2 cm from the robot at the start."""
-    model = robot.model
-    lower, upper = model.lowerPositionLimit, model.upperPositionLimit
-    middle, half = (lower + upper) / 2, np.minimum((upper - lower) / 2, np.pi)
-    while True:
-        q0 = middle + rng.uniform(-0.5, 0.5, model.nq) * half
-        q1 = np.clip(q0 + rng.uniform(-0.8, 0.8, model.nq), lower, upper)
-        start, end = robot.fk(q0), robot.fk(q1)
-        kinds = [coal.Sphere(rng.uniform(0.04, 0.08)), coal.Box(*rng.uniform(0.06, 0.16, 3)),
-                 coal.Capsule(rng.uniform(0.03, 0.05), rng.uniform(0.05, 0.15)),
-                 coal.Cylinder(rng.uniform(0.03, 0.06), rng.uniform(0.05, 0.15))]
-        shape = kinds[rng.integers(len(kinds))]
-        pose = pin.SE3(pin.exp3(rng.normal(size=3)),
-                       end.translation + rng.normal(size=3) * 0.01)
-        try:
-            probe = CollisionLimit(robot, [(shape, pose)], self_collision=True)
-            probe.check(q0)
-        except CollisionError:
-            continue
-        if min(d.distance for d in probe.distances(q0)) >= 0.02:
-            return q0, end, bench.line_path(start, end, 1.0), (shape, pose)
 
 
 # seeds of _blocked_scene where both methods come to rest. Panda seed 14 chattered (SJT and DLS,
