@@ -48,7 +48,8 @@ def weighted_rows(probe: TaskStack, stack: TaskStack, targets):
     Only the first level's: the escape acts on the error the method's step lowers. (With the
     posture's rows counted, Panda stretched toward a target out of reach under acceleration
     limits took a settling step back toward the posture every 0.25 s, which the first level
-    undid, swinging at up to 0.9 rad/s for good.)"""
+    undid, swinging at up to 0.8 rad/s for good.) A contact's rows and a posture given
+    ``priority=0`` are rows of that level, and stay in it."""
     begin, end = stack.levels[0][:2]
     sw, mask = stack.sqrt_weight[begin:end], stack.chain
     targets = list(targets)
