@@ -222,7 +222,8 @@ def bench(args: argparse.Namespace) -> int:
         from .bench import collision_blocked
 
         blocked = collision_blocked.blocked(progress=lambda r: print(
-            f"  blocked: {r.robot}, seed {r.seed}, {r.method}, jerk {r.jerk}", flush=True))
+            f"  blocked: {r.robot}, seed {r.seed}, {r.method}, jerk limit "
+            f"{collision.dash(r.jerk, '.0f')}", flush=True))
         print("\nTargets behind an obstacle, 15 rad/s^2 (and 7,500 rad/s^3), 8 s:\n"
               + collision_blocked.blocked_table(blocked))
         _write_json(args.json, {"machine": machine, "rows": [asdict(r) for r in rows],
