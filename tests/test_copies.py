@@ -62,6 +62,29 @@ def test_a_copy_made_mid_escape_escapes_alike():
 
 
 @pytest.mark.parametrize("how", ["pickle", "deepcopy"])
+def test_a_copy_made_during_a_curvature_test_finishes_it_alike(how):
+    """The same saddle: a copy made while the escape's curvature test is spread over the
+    steps (a few row evaluations in) replays what the original had evaluated, and finds and
+    escapes alike, bitwise."""
+    from sjt_pin.bench.accuracy import saddle_problems
+
+    _, robot, q, target = saddle_problems()[0]
+    solver = sjt.SJTSolver(robot, dt=2e-3, feedback="transpose")
+    for _ in range(5000):
+        q = solver.step(q, target)
+        if solver.escape.testing:
+            break
+    q = solver.step(solver.step(q, target), target)  # two more of the test's evaluations
+    assert solver.escape.testing and not solver.escape.active
+    twin = pickle.loads(pickle.dumps(solver)) if how == "pickle" else copy.deepcopy(solver)
+    a, b = q, q
+    for _ in range(300):
+        a, b = solver.step(a, target), twin.step(b, target)
+    assert solver.escape.escapes == twin.escape.escapes == 1
+    np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("how", ["pickle", "deepcopy"])
 def test_a_copy_carries_the_curvature_the_last_step_measured(panda, how):
     """Panda's JT sent 1.5 m below, its joint 2 at its range: each projected step is trusted
     only as far as the curvature the last step measured allows (the stage's sufficient
