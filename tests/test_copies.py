@@ -42,44 +42,44 @@ def test_a_copy_steps_as_the_original(ur5, rng, how, name, options):
     assert twin.error_norm == original.error_norm  # its own buffers, bound to its own arrays
 
 
-def test_a_copy_made_mid_escape_escapes_alike():
-    """UR5 at q = 0 asked to roll its tool about the lost axis: a saddle, where the transpose
-    feedback needs its escape; a copy made during the escape escapes alike."""
+def at_the_saddle(until):
+    """UR5 at q = 0 asked to roll its tool about the lost axis (a saddle, where the transpose
+    feedback needs its escape), stepped until ``until(solver.escape)``: (solver, q, target)."""
     from sjt_pin.bench.accuracy import saddle_problems
 
     _, robot, q, target = saddle_problems()[0]
     solver = sjt.SJTSolver(robot, dt=2e-3, feedback="transpose")
     for _ in range(5000):
         q = solver.step(q, target)
-        if solver.escape.active:
+        if until(solver.escape):
             break
-    assert solver.escape.active
-    twin = copy.deepcopy(solver)
+    return solver, q, target
+
+
+def run_both(solver, twin, q, target, steps=300):
     a, b = q, q
-    for _ in range(300):
+    for _ in range(steps):
         a, b = solver.step(a, target), twin.step(b, target)
-    np.testing.assert_array_equal(a, b)
+    return a, b
+
+
+def test_a_copy_made_mid_escape_escapes_alike():
+    """A copy made during the escape escapes alike."""
+    solver, q, target = at_the_saddle(lambda escape: escape.active)
+    assert solver.escape.active
+    np.testing.assert_array_equal(*run_both(solver, copy.deepcopy(solver), q, target))
 
 
 @pytest.mark.parametrize("how", ["pickle", "deepcopy"])
 def test_a_copy_made_during_a_curvature_test_finishes_it_alike(how):
-    """The same saddle: a copy made while the escape's curvature test is spread over the
-    steps (a few row evaluations in) replays what the original had evaluated, and finds and
-    escapes alike, bitwise."""
-    from sjt_pin.bench.accuracy import saddle_problems
-
-    _, robot, q, target = saddle_problems()[0]
-    solver = sjt.SJTSolver(robot, dt=2e-3, feedback="transpose")
-    for _ in range(5000):
-        q = solver.step(q, target)
-        if solver.escape.testing:
-            break
+    """A copy made while the escape's curvature test is spread over the steps (a few row
+    evaluations in) replays what the original had evaluated, and finds and escapes alike,
+    bitwise."""
+    solver, q, target = at_the_saddle(lambda escape: escape.testing)
     q = solver.step(solver.step(q, target), target)  # two more of the test's evaluations
     assert solver.escape.testing and not solver.escape.active
     twin = pickle.loads(pickle.dumps(solver)) if how == "pickle" else copy.deepcopy(solver)
-    a, b = q, q
-    for _ in range(300):
-        a, b = solver.step(a, target), twin.step(b, target)
+    a, b = run_both(solver, twin, q, target)
     assert solver.escape.escapes == twin.escape.escapes == 1
     np.testing.assert_array_equal(a, b)
 
