@@ -13,8 +13,9 @@ orders of magnitude, the Newton step along the flattest ones is the settling ste
 
 :meth:`~CurvatureTest.run` is a generator that pauses after each evaluation of the rows (and
 after the eigen-decomposition) and returns a :class:`Finding`: a solver advances it by one
-pause per step, so that no step evaluates the rows more than once beyond its own (UR5 with two
-frames: a test of 15 evaluations was one step of 0.3–0.6 ms, 30–50 times the median step). It
+pause per step, so that no step evaluates the rows more than once beyond its own (the
+two-frame paths of ``sjt-pin bench speed``: a test of 13–18 evaluations on UR5 was one step of
+0.33–0.6 ms, 24–53 times the median step). It
 reads nothing that changes before it returns, so the same arguments run it again to the same
 pause, bitwise: a copy of a solver taken during a test replays it.
 """

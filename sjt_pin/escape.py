@@ -55,7 +55,9 @@ class SaddleEscape:
     SPEED = 0.5  #: escape speed as a fraction of the URDF speed limits
     DEFAULT_SPEED = 1.0  #: rad/s or m/s for joints without a URDF speed limit
     RAMP = 0.1  #: s to ramp the escape velocity up, and down
-    MAX_TRAVEL = 0.5  #: rad: an escape ends after moving this far along its direction
+    #: rad: an escape ends after moving this far along its direction (the settling steps'
+    #: longest, too)
+    MAX_TRAVEL = CurvatureTest.MAX_TRAVEL
     #: an escape ramps down once |e| exceeds its value at the start by this fraction, and
     #: stops at once past twice that: it never raises the error by more than about 10 %
     GROWTH = 0.05
@@ -125,10 +127,17 @@ class SaddleEscape:
         """Whether a curvature test is under way (one evaluation of the task rows a step)."""
         return self._pending is not None
 
+    @property
+    def busy(self) -> bool:
+        """Whether the solver must call :meth:`follow` on its next step (an escape is added or
+        a test is under way)."""
+        return self.direction is not None or self._pending is not None
+
     def test(self, q: np.ndarray, rows: Rows) -> bool:
-        """Test the curvature of ``f = 1/2 |e_w|^2`` at ``q`` at once, ``rows(q) -> (J_w,
-        e_w)`` giving the weighted task rows; start an escape (or a settling step) if it finds
-        one. True when it does."""
+        """Test the curvature of ``f = 1/2 |e_w|^2`` at ``q`` at once (not spread over steps),
+        ``rows(q) -> (J_w, e_w)`` giving the weighted task rows; start an escape (or a settling
+        step) if it finds one. True when it does. (A solver spreads its tests over its steps;
+        it tests at once only where its targets cannot be copied.)"""
         run = self.curvature.run(q, rows, self._tested, self._settled_at)
         while True:
             try:
@@ -146,7 +155,9 @@ class SaddleEscape:
         if finding.direction is None:
             return False
         if finding.kind == "settle":
-            direction, distance = self.curvature.toward(now, q, finding)
+            direction, distance = finding.direction, finding.distance
+            if now is not q and not np.array_equal(now, q):
+                direction, distance = self.curvature.toward(now, q, finding)
             if distance < self.curvature.SETTLE:
                 return False
             self._start(direction, 0.5 * distance, distance / self.RAMP)
@@ -158,27 +169,38 @@ class SaddleEscape:
             self.escapes += 1
         return True
 
-    def _begin(self, q: np.ndarray, targets: list) -> None:
-        """Start a test at ``q`` for ``targets``, spread over the next steps."""
-        self._pending = (q.copy(), copy.deepcopy(targets), 0)
-        self._run = None
+    def _begin(self, q: np.ndarray, targets: list, rows_for: Callable[[list], Rows]) -> None:
+        """Start a test at ``q`` for ``targets``, spread over the next steps; where the targets
+        cannot be copied (a task of one's own), at once."""
+        try:
+            kept = copy.deepcopy(targets)
+        except Exception:  # noqa: BLE001 - any failure to copy: test here, at once
+            self.test(q, rows_for(targets))
+            return
+        self._pending, self._run = (q.copy(), kept, 0), None
+        self._advance(rows_for, q)
 
     def _advance(self, rows_for: Callable[[list], Rows], now: np.ndarray) -> bool:
         """One pause of the test under way, the arm at ``now`` (a copy first replays the pauses
-        its original had taken); True when it has finished, and what it found has been
-        started."""
+        its original had taken); True when the test has ended (what it found, if anything,
+        started). An error raised meanwhile (by a task's rows) ends the test and is raised."""
         assert self._pending is not None
         q, targets, done = self._pending
-        if self._run is None:
-            self._run = self.curvature.run(q, rows_for(targets), self._tested, self._settled_at)
-            for _ in range(done):
-                next(self._run)
         try:
+            if self._run is None:
+                self._run = self.curvature.run(q, rows_for(targets), self._tested,
+                                               self._settled_at)
+                for _ in range(done):
+                    next(self._run)
             next(self._run)
         except StopIteration as finished:
             self._pending = self._run = None
-            self._apply(q, finished.value, now)
+            if finished.value is not None:  # (None: a replay that ended early; nothing found)
+                self._apply(q, finished.value, now)
             return True
+        except BaseException:
+            self._pending = self._run = None
+            raise
         self._pending = (q, targets, done + 1)
         return False
 
@@ -254,25 +276,33 @@ class SaddleEscape:
         """One step of a solver's compiled ``controller`` (``sjt_pin.kernels.Controller``)
         seen by the escape: a stall run (``stalled``) observed, a curvature test begun at ``q``
         for ``targets`` or advanced by one evaluation of the rows ``rows_for(targets)``
-        (dropped if the stall ended first); then the escape's velocity for the next step
-        written into the controller, or its end cleared. The solver calls it on every step
-        while :attr:`active` or :attr:`testing`."""
+        (dropped if the stall ends first); then the
+        escape's velocity for the next step written into the controller, or its end cleared.
+        The solver calls it on every step while :attr:`busy`."""
         c = controller
         if self._pending is not None:
-            if c.stall_run < 0.0:  # the stall ended: the test no longer describes the arm
+            # a test no longer describes the arm once its stall ends. (Targets that move while
+            # the arm stays stalled keep the test's: on two frames' circles the error grows by
+            # 1 % a step during a test, and dropping a test once it had moved by 10 % dropped
+            # every one; what the test finds yields by itself if the error grows.)
+            if c.stall_run < 0.0:
                 self._pending = self._run = None
                 c.stall_wait = self.wait
-            elif self._advance(rows_for, q):  # the next window starts when the test ended
-                c.stall_run, c.stall_wait = 0.0, self.wait
+            else:
+                try:
+                    self._advance(rows_for, q)
+                finally:  # ended, or a task's rows raised: the kernel counts a new window
+                    if self._pending is None:
+                        c.stall_run, c.stall_wait = 0.0, self.wait
         elif stalled and not self.active:
             run = c.stall_run
-            if self.observe(run, c.ew_sq):
-                self._begin(q, targets)
-                self._advance(rows_for, q)
             if run > 1.0:  # a window ended: the kernel counts the next one
                 c.stall_run = 0.0
-            # (no window ends while a test is under way)
-            c.stall_wait = self.wait if self._pending is None else float("inf")
+            try:
+                if self.observe(run, c.ew_sq):
+                    self._begin(q, targets, rows_for)
+            finally:  # (no window ends while a test is under way)
+                c.stall_wait = self.wait if self._pending is None else float("inf")
         velocity = None if not self.active else self.velocity(c.regular, dt, c.ew_sq)
         if velocity is None:
             if c.escaping:  # an escape ended: a stall after it is a new run

@@ -124,7 +124,7 @@ class Solver:
         c.set_speed(np.where(moving, speeds, 0.0))
         self._motion.velocity_limits = np.where(moving, speeds, 0.0)
         self._busy = self._first or self._stability.armed or (
-            self.escape is not None and (self.escape.active or self.escape.testing))
+            self.escape is not None and self.escape.busy)
 
     # -- settings ------------------------------------------------------------------------------
     @property
@@ -251,8 +251,7 @@ class Solver:
         if escape is not None:
             escape.follow(c, bool(status & kernels.STALLED), q, self._dt, targets,
                           self._weighted_rows)
-        self._busy = self._stability.armed or (escape is not None
-                                               and (escape.active or escape.testing))
+        self._busy = self._stability.armed or (escape is not None and escape.busy)
 
     def _weighted_rows(self, targets):
         """The escape's test rows for ``targets`` (:func:`~sjt_pin.step_checks.weighted_rows`),

@@ -49,10 +49,14 @@ def weighted_rows(probe: TaskStack, stack: TaskStack, targets):
     posture's rows counted, Panda stretched toward a target out of reach under acceleration
     limits took a settling step back toward the posture every 0.25 s, which the first level
     undid, swinging at up to 0.8 rad/s for good.) A contact's rows and a posture given
-    ``priority=0`` are rows of that level, and stay in it."""
+    ``priority=0`` are rows of that level, and stay in it; a contact holds the pose the step
+    holds now (``held``; after ``release()`` the probe's copy would keep the old one)."""
     begin, end = stack.levels[0][:2]
     sw, mask = stack.sqrt_weight[begin:end], stack.chain
     targets = list(targets)
+    for mine, theirs in zip(probe.tasks, stack.tasks, strict=True):
+        if hasattr(theirs, "held"):
+            mine.held = theirs.held  # type: ignore[attr-defined]
 
     def rows(q):
         J, e, _ = probe.evaluate(q, targets, None)

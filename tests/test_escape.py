@@ -243,3 +243,34 @@ def test_a_curvature_test_evaluates_the_rows_once_a_step_at_most(monkeypatch):
     assert max(per_step) == 1
     assert sum(per_step) >= 2 * 2 * robot.model.nv  # two tests at least, spread
     assert solver.escape.settles >= 2
+
+
+def test_a_test_whose_rows_raise_ends_and_the_next_one_runs():
+    """An error raised by the task rows during a curvature test (a task's own ``compute``
+    failing at a displaced q, or Ctrl-C) comes out of that step; the test ends there, the
+    next steps run as usual, and the stall is tested again and escaped."""
+    _, robot, q, target = saddle_problems()[0]
+    solver = sjt.SJTSolver(robot, dt=2e-3, feedback="transpose")
+    made, calls = solver._weighted_rows, [0]
+
+    def failing(targets):
+        rows = made(targets)
+
+        def each(x):
+            calls[0] += 1
+            if calls[0] == 4:
+                raise RuntimeError("a task's rows failed")
+            return rows(x)
+        return each
+
+    solver._weighted_rows = failing
+    raised = False
+    for _ in range(5000):
+        try:
+            q = solver.step(q, target)
+        except RuntimeError:
+            raised = True
+            assert not solver.escape.testing
+        if solver.escape.escapes:
+            break
+    assert raised and solver.escape.escapes == 1

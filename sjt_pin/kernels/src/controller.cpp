@@ -29,7 +29,8 @@ constexpr double kStallRate = 1e-6;
 // the projection's answer there lowered it by 3e-7 to 2.2e-5 of itself per second while the
 // elbow slid at 3e-3 to 8e-2 rad/s and the true error stayed or grew (Panda's seed 7 by 5e-4
 // per second); any step that makes progress worth the name does far more (the method's own
-// gain is 1 to 100 per second)
+// gain is 1 to 100 per second). Not while the saddle escape adds a velocity (its own test
+// found the error lower along it, and it yields if the error grows)
 constexpr double kRestRate = 1e-4;
 // settle: a motion whose first-order decrease of the error is below this share of
 // |e_w| |J0 v| is one the model cannot tell from an increase (the pose error's log bends the
@@ -837,7 +838,8 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
     }
     if (!report.converged) status |= kUnconverged;
   }
-  if (replaced_ && goal_rows_ && !rested_) settle(J0, q, A, bk, user_lo, user_hi);
+  if (replaced_ && goal_rows_ && !rested_ && !escaping)  // (an escape: see kRestRate)
+    settle(J0, q, A, bk, user_lo, user_hi);
   if (!rested_) holding = velocity;
   rows_active.clear();
   for (Index i = 0; i < A.rows(); ++i)
