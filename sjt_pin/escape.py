@@ -180,10 +180,11 @@ class SaddleEscape:
         self._pending, self._run = (q.copy(), kept, 0), None
         self._advance(rows_for, q)
 
-    def _advance(self, rows_for: Callable[[list], Rows], now: np.ndarray) -> bool:
+    def _advance(self, rows_for: Callable[[list], Rows], now: np.ndarray) -> None:
         """One pause of the test under way, the arm at ``now`` (a copy first replays the pauses
-        its original had taken); True when the test has ended (what it found, if anything,
-        started). An error raised meanwhile (by a task's rows) ends the test and is raised."""
+        its original had taken); where the test ends, what it found (if anything) is started
+        and :attr:`testing` turns false. An error raised meanwhile (by a task's rows) ends the
+        test and is raised."""
         assert self._pending is not None
         q, targets, done = self._pending
         try:
@@ -197,12 +198,11 @@ class SaddleEscape:
             self._pending = self._run = None
             if finished.value is not None:  # (None: a replay that ended early; nothing found)
                 self._apply(q, finished.value, now)
-            return True
+            return
         except BaseException:
             self._pending = self._run = None
             raise
         self._pending = (q, targets, done + 1)
-        return False
 
     def __getstate__(self) -> dict:
         state = self.__dict__.copy()
@@ -276,9 +276,9 @@ class SaddleEscape:
         """One step of a solver's compiled ``controller`` (``sjt_pin.kernels.Controller``)
         seen by the escape: a stall run (``stalled``) observed, a curvature test begun at ``q``
         for ``targets`` or advanced by one evaluation of the rows ``rows_for(targets)``
-        (dropped if the stall ends first); then the
-        escape's velocity for the next step written into the controller, or its end cleared.
-        The solver calls it on every step while :attr:`busy`."""
+        (dropped if the stall ends first); then the escape's velocity for the next step written
+        into the controller, or its end cleared. The solver calls it on every step while
+        :attr:`busy`."""
         c = controller
         if self._pending is not None:
             # a test no longer describes the arm once its stall ends. (Targets that move while

@@ -211,27 +211,38 @@ def test_a_settling_step_starts_only_below_where_the_last_one_started():
     assert escape.test(far, rows) and escape.settles == 3
 
 
+def on_each_evaluation(monkeypatch, hook):
+    """Call ``hook()`` before each evaluation of the escape's test rows
+    (:func:`~sjt_pin.step_checks.weighted_rows`)."""
+    from sjt_pin import step_checks
+
+    made = step_checks.weighted_rows
+
+    def wrapped(*args):
+        rows = made(*args)
+
+        def each(q):
+            hook()
+            return rows(q)
+        return each
+
+    monkeypatch.setattr(step_checks, "weighted_rows", wrapped)
+
+
 def test_a_curvature_test_evaluates_the_rows_once_a_step_at_most(monkeypatch):
     """The curvature test (2 n evaluations of the task rows, and a few more) is spread over
     the steps, one evaluation a step: UR5 on two frames' 1 cm circles stalls at the tasks'
     least-squares compromise and tests again and again; no step evaluates the rows more than
     once beyond its own (all at once, a test was one step of 0.3-0.6 ms), and the tests still
     find their settling steps."""
-    from sjt_pin import step_checks
     from sjt_pin.bench.speed import TWO_FRAMES, _targets
 
-    made = step_checks.weighted_rows
     count = [0]
 
-    def counted(*args):
-        rows = made(*args)
+    def tally():
+        count[0] += 1
 
-        def each(q):
-            count[0] += 1
-            return rows(q)
-        return each
-
-    monkeypatch.setattr(step_checks, "weighted_rows", counted)
+    on_each_evaluation(monkeypatch, tally)
     robot = sjt.Robot.from_example("ur5")
     frames = TWO_FRAMES["ur5"]
     solver = sjt.SJTSolver(robot, task={f: sjt.PoseTask() for f in frames})
@@ -245,25 +256,20 @@ def test_a_curvature_test_evaluates_the_rows_once_a_step_at_most(monkeypatch):
     assert solver.escape.settles >= 2
 
 
-def test_a_test_whose_rows_raise_ends_and_the_next_one_runs():
+def test_a_test_whose_rows_raise_ends_and_the_next_one_runs(monkeypatch):
     """An error raised by the task rows during a curvature test (a task's own ``compute``
     failing at a displaced q, or Ctrl-C) comes out of that step; the test ends there, the
     next steps run as usual, and the stall is tested again and escaped."""
+    calls = [0]
+
+    def fail_the_fourth():
+        calls[0] += 1
+        if calls[0] == 4:
+            raise RuntimeError("a task's rows failed")
+
+    on_each_evaluation(monkeypatch, fail_the_fourth)
     _, robot, q, target = saddle_problems()[0]
     solver = sjt.SJTSolver(robot, dt=2e-3, feedback="transpose")
-    made, calls = solver._weighted_rows, [0]
-
-    def failing(targets):
-        rows = made(targets)
-
-        def each(x):
-            calls[0] += 1
-            if calls[0] == 4:
-                raise RuntimeError("a task's rows failed")
-            return rows(x)
-        return each
-
-    solver._weighted_rows = failing
     raised = False
     for _ in range(5000):
         try:
