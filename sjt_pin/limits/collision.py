@@ -21,11 +21,17 @@ more than an arm with acceleration limits can stop from in the gap left, so a so
 acceleration limits (``Motion.acceleration_limits``) also bounds each row's closing speed by
 what half of those limits can still brake within ``d - margin`` (a braking-distance bound,
 the discrete form of ``d_dot >= -sqrt(2 a (d - margin))``; ``kernels.stoppable_rows``): the
-arm slows as it nears the margin instead of stopping at it in one period. A row whose closing
-speed jumps (a contact's closest points slide onto another feature, a witness row appears)
-eases in: it asks that speed to drop no faster than the limits allow from the previous step's
-velocity and acceleration, as long as the pair, braking at its whole acceleration, stays
-``margin - EASING_SLACK`` apart. A row that appears at ``influence`` could not stop a pair
+arm slows as it nears the margin instead of stopping at it in one period. Under a jerk limit
+that bound also counts the row's acceleration toward the margin: a closing speed the row
+reaches by speeding up is allowed only if, from that speed and that acceleration, the jerk-
+limited braking still stops within ``d - margin`` (``largest_stoppable``, the joints' own
+position braking; a pair sliding 0.1 mm from its margin and speeding up at 6 m/s^2 otherwise
+reached it at 21 mm/s). A row whose closing speed jumps (a contact's closest points slide onto
+another feature, a witness row appears) eases in: it asks that speed to drop no faster than
+the limits allow from the previous step's velocity and acceleration (the share of the row's
+acceleration and jerk, and never more than the joints' acceleration and jerk boxes give it
+this period: a joint already braking at its limit gives nothing more), as long as the pair,
+braking at its whole acceleration, stays ``margin - EASING_SLACK`` apart. A row that appears at ``influence`` could not stop a pair
 closing at arm speeds (a link at 1.5 m/s needs some 14 cm at 10 rad/s^2), so each pair's
 influence grows to the distance within which the row may have to start braking it: its
 joints' speeds after this step bound its closing speed ``s`` (the levers of the broad phase's

@@ -7,6 +7,7 @@
 #include <sstream>
 
 #include "array.hpp"
+#include "braking.hpp"
 #include "registry.hpp"
 
 namespace sjt {
@@ -74,8 +75,36 @@ void register_collision_braking(nb::module_& m) {
           if (!(a > 0.0) || !std::isfinite(a)) continue;  // no joint moves it, or no limit
           double ramp = jerk && j > 0.0 && std::isfinite(j) ? a / j : 0.0;  // s to reach a
           double h = bound[i] / rate, v = stoppable_speed(h, share * a, dt + ramp);
+          // a bound above the closing speed lets the row accelerate toward its margin, and
+          // under a jerk limit that acceleration takes time to ramp out: the fastest closing
+          // speed this step can reach (its acceleration up by at most j dt) is kept only if
+          // the pair, braking at the share of the limits from there, still stops within h
+          if (jerk && j > 0.0 && std::isfinite(j) && h >= 0.0 && v > s) {
+            double top = std::min(v, s + dt * std::min(a, sd + j * dt));
+            if (top > s) {
+              double x = largest_stoppable(s, top, s, h, dt, share * a, share * j);
+              if (x < top) v = x;
+            }
+          }
           double r = jerk && std::isfinite(j) ? std::max(-share * a, sd - share * j * dt)
                                               : -share * a;
+          // nor faster than the joints' boxes let it this step (a joint at its acceleration
+          // limit, or whose jerk limit holds it, gives less than its share): the least row
+          // acceleration within them. (UR5's wrist braking for a box under jerk limits: the
+          // share asked 7.1 m/s^2 of a row whose joints could give 6.8, and the limits
+          // yielded to a row 11 mm from its margin.)
+          if (jerk) {
+            double least = 0.0;
+            const auto& jl = limits.jerks->vector();
+            for (Index c = 0; c < N; ++c) {
+              double w = rows(i, c);
+              if (w == 0.0) continue;
+              double lo = std::max(-acc[c], ddq.data()[c] - jl[c] * dt);
+              double hi = std::min(acc[c], ddq.data()[c] + jl[c] * dt);
+              least += w > 0.0 ? w * lo : w * hi;
+            }
+            if (std::isfinite(least)) r = std::max(r, least);
+          }
           bound[i] = h >= 0.0 ? std::min(bound[i], v) : std::max(bound[i], v);
           bound[i] = std::max(bound[i],
                               std::min(s + r * dt, stoppable_speed(h + slack, a, dt + ramp)));
@@ -95,12 +124,15 @@ void register_collision_braking(nb::module_& m) {
       "gain / dt):\n"
       "  - b_i = min(b_i, v(h)), v the closing speed that, held for tau = dt + a / j and then\n"
       "    braked at a = share a_i (j = share j_i), covers h: v tau + v^2 / (2 a) = h (a row\n"
-      "    inside its margin separates no faster than v(|h|));\n"
-      "  - b_i = max(b_i, min(s_i + r dt, V(h + slack))), s_i = A_i dq and r = max(-a, A_i ddq\n"
-      "    - j dt) from the previous step's velocity dq and acceleration ddq, V as v at the\n"
-      "    whole a_i: a row whose closing speed jumps asks it to drop no faster than its share\n"
-      "    of the limits allows, while its pair, braking at a_i, stays at least margin - slack\n"
-      "    apart;\n"
+      "    inside its margin separates no faster than v(|h|)); with jerks, where v > s_i =\n"
+      "    A_i dq, the closing speed x this step reaches (at most s_i + dt min(a_i, A_i ddq +\n"
+      "    j_i dt)) must stop within h from acceleration (x - s_i) / dt too: largest_stoppable;\n"
+      "  - b_i = max(b_i, min(s_i + r dt, V(h + slack))), r = max(-a, A_i ddq - j dt) from the\n"
+      "    previous step's velocity dq and acceleration ddq, with jerks also at least the row's\n"
+      "    least acceleration within the joints' boxes [max(-acc, ddq - jerks dt), min(acc,\n"
+      "    ddq + jerks dt)], V as v at the whole a_i: a row whose closing speed jumps asks it\n"
+      "    to drop no faster than its share of the limits (and the boxes) allows, while its\n"
+      "    pair, braking at a_i, stays at least margin - slack apart;\n"
       "  - b_i = max(b_i, s_i + r dt) inside the margin (h < 0): the pair separates as fast as\n"
       "    that share lets its closing speed drop.\n"
       "A (k, N), b (k,), dq, ddq, accelerations and jerks (N,).");
