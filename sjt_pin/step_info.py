@@ -94,7 +94,7 @@ class StepInfo:
             target's own velocity, lowers ``1/2 |e_w|^2`` by less than :data:`STALL_RATE` of
             itself per second. The stage never stops an arm that some admissible velocity
             would bring closer (its step is a descent direction of the error whenever one
-            exists; a projected step that lowers ``1/2 |e_w|^2`` by less than 1e-4 of
+            exists; a projected step that lowers ``1/2 |e_w|^2`` by less than 1e-3 of
             ``|e_w|^2`` per second gives way to rest, unless the escape adds it), so the arm
             is at a stationary point of its error: with ``active_limits`` naming the limits
             that hold it, a minimum against them (``solver.move_to()`` reaches such targets by
