@@ -81,13 +81,14 @@ def test_a_copy_carries_the_warm_start(ur5):
 
 def test_beside_an_obstacle_a_warm_start_comes_to_the_cold_start_s_rest():
     """The collision rows join and leave the projection's working set. Sliding along the
-    ball, the arm amplifies the starts' rounding (1.1e-5 rad at most, measured); both rest at
-    the same configuration, in less than half the Newton steps warm."""
+    ball, the arm amplifies the starts' rounding (1.5e-4 rad at most, measured, while the
+    rest rule blends the step toward rest); both rest at the same configuration, in less than
+    half the Newton steps warm."""
     scene, inputs, limit = ball_scene()
     warm, cold = (sjt.make_solver("sjt", scene.robot, limits=[limit()]) for _ in range(2))
     qw, qc, worst, newton, held = side_by_side(warm, cold, scene.q0, inputs)
     assert held > 1000  # (the rows or the limits held the step)
-    assert worst < 1e-4
+    assert worst < 3e-4
     np.testing.assert_allclose(qw, qc, rtol=0.0, atol=1e-9)
     assert newton["warm"] < 0.5 * newton["cold"]
 

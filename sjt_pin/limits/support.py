@@ -165,7 +165,8 @@ class SupportLimit(Limit):
             held, share = self._held(kinematics, A, motion.acceleration_limits)
             jerks = None if motion.jerk_limits is None else share * motion.jerk_limits
             stoppable_rows(held, b, motion.dq, motion.ddq, share * motion.acceleration_limits,
-                           jerks, rate, motion.dt, BRAKING_SHARE, EASING_SLACK)
+                           jerks, rate, motion.dt, BRAKING_SHARE, EASING_SLACK,
+                           motion.acceleration_limits, motion.jerk_limits)
         return A, b
 
     def _held(self, kinematics, A: np.ndarray, accelerations: np.ndarray

@@ -46,7 +46,7 @@ void register_collision_braking(nb::module_& m) {
       "stoppable_rows",
       [](nb::handle A_obj, nb::handle b_obj, nb::handle dq_obj, nb::handle ddq_obj,
          nb::handle accelerations, nb::handle jerks, double rate, double dt, double share,
-         double slack) {
+         double slack, nb::handle reach_accelerations, nb::handle reach_jerks) {
         if (!(rate > 0.0 && dt > 0.0 && share > 0.0 && share <= 1.0 && slack >= 0.0))
           fail("stoppable_rows: rate and dt must be > 0, share in (0, 1], slack >= 0");
         const Array A(A_obj, "A", 2);
@@ -63,48 +63,62 @@ void register_collision_braking(nb::module_& m) {
         }
         ArmLimits limits = arm_limits(accelerations, jerks, N, "stoppable_rows");
         const bool jerk = limits.jerks.has_value();
+        // the joints' own limits, which bound what this step can reach (the budget above may
+        // be a share of them)
+        std::optional<ArmLimits> own;
+        if (!reach_accelerations.is_none())
+          own.emplace(arm_limits(reach_accelerations,
+                                 reach_jerks.is_none() ? jerks : reach_jerks, N,
+                                 "stoppable_rows (reach)"));
+        const ArmLimits& reach = own ? *own : limits;
+        const bool boxes = jerk && reach.jerks.has_value();
         auto rows = A.matrix();
-        auto acc = limits.accelerations.vector();
+        const double* acc = limits.accelerations.data();
+        const double* jl = jerk ? limits.jerks->data() : nullptr;
+        const double* racc = reach.accelerations.data();
+        const double* rjl = boxes ? reach.jerks->data() : nullptr;
+        const double* v0 = dq.data();
+        const double* a0 = ddq.data();
         auto bound = b.vector();
         for (Index i = 0; i < k; ++i) {
-          // along row i the closing speed s changes at up to a (m/s^2), that rate at up to j
-          auto magnitude = rows.row(i).cwiseAbs();
-          double a = magnitude.dot(acc);
-          double j = jerk ? magnitude.dot(limits.jerks->vector()) : 0.0;
-          double s = rows.row(i).dot(dq.vector()), sd = rows.row(i).dot(ddq.vector());
+          // along row i the closing speed s changes at up to a (m/s^2), that rate at up to j;
+          // within the joints' acceleration and jerk boxes this step, its acceleration lies
+          // in [least, most]
+          double a = 0.0, j = 0.0, s = 0.0, sd = 0.0, least = 0.0, most = 0.0;
+          for (Index c = 0; c < N; ++c) {
+            const double w = rows(i, c);
+            if (w == 0.0) continue;
+            a += std::fabs(w) * acc[c];
+            if (jerk) j += std::fabs(w) * jl[c];
+            s += w * v0[c];
+            sd += w * a0[c];
+            if (boxes) {
+              // (an empty box, the limits having yielded last step, counts as its nearer end)
+              const double lo = std::max(-racc[c], a0[c] - rjl[c] * dt);
+              const double hi = std::min(racc[c], a0[c] + rjl[c] * dt);
+              least += w > 0.0 ? w * std::min(lo, hi) : w * std::max(lo, hi);
+              most += w > 0.0 ? w * std::max(lo, hi) : w * std::min(lo, hi);
+            }
+          }
           if (!(a > 0.0) || !std::isfinite(a)) continue;  // no joint moves it, or no limit
-          double ramp = jerk && j > 0.0 && std::isfinite(j) ? a / j : 0.0;  // s to reach a
+          const bool jerk_row = jerk && j > 0.0 && std::isfinite(j);
+          double ramp = jerk_row ? a / j : 0.0;  // s to reach a
           double h = bound[i] / rate, v = stoppable_speed(h, share * a, dt + ramp);
-          // a bound above the closing speed lets the row accelerate toward its margin, and
-          // under a jerk limit that acceleration takes time to ramp out: the fastest closing
-          // speed this step can reach (its acceleration up by at most j dt) is kept only if
-          // the pair, braking at the share of the limits from there, still stops within h
-          if (jerk && j > 0.0 && std::isfinite(j) && h >= 0.0 && v > s) {
-            double top = std::min(v, s + dt * std::min(a, sd + j * dt));
+          // a bound above the closing speed lets the row speed up toward its margin, and under
+          // a jerk limit that acceleration takes time to ramp out: the fastest closing speed
+          // this step can reach is kept only if, from it and the acceleration that reaching it
+          // takes, the pair braking at the share of the limits still stops within h
+          if (jerk_row && boxes && std::isfinite(most) && h >= 0.0 && v > s) {
+            const double top = std::min(v, s + dt * most);
             if (top > s) {
-              double x = largest_stoppable(s, top, s, h, dt, share * a, share * j);
+              const double x = largest_stoppable(s, top, s, h, dt, share * a, share * j);
               if (x < top) v = x;
             }
           }
-          double r = jerk && std::isfinite(j) ? std::max(-share * a, sd - share * j * dt)
-                                              : -share * a;
-          // nor faster than the joints' boxes let it this step (a joint at its acceleration
-          // limit, or whose jerk limit holds it, gives less than its share): the least row
-          // acceleration within them. (UR5's wrist braking for a box under jerk limits: the
-          // share asked 7.1 m/s^2 of a row whose joints could give 6.8, and the limits
-          // yielded to a row 11 mm from its margin.)
-          if (jerk) {
-            double least = 0.0;
-            const auto& jl = limits.jerks->vector();
-            for (Index c = 0; c < N; ++c) {
-              double w = rows(i, c);
-              if (w == 0.0) continue;
-              double lo = std::max(-acc[c], ddq.data()[c] - jl[c] * dt);
-              double hi = std::min(acc[c], ddq.data()[c] + jl[c] * dt);
-              least += w > 0.0 ? w * lo : w * hi;
-            }
-            if (std::isfinite(least)) r = std::max(r, least);
-          }
+          double r = jerk_row ? std::max(-share * a, sd - share * j * dt) : -share * a;
+          // nor faster than the joints' boxes let it drop this step (a joint at its
+          // acceleration limit, or held by its jerk limit, gives less than its share)
+          if (boxes && std::isfinite(least)) r = std::max(r, least);
           bound[i] = h >= 0.0 ? std::min(bound[i], v) : std::max(bound[i], v);
           bound[i] = std::max(bound[i],
                               std::min(s + r * dt, stoppable_speed(h + slack, a, dt + ramp)));
@@ -115,8 +129,10 @@ void register_collision_braking(nb::module_& m) {
       },
       nb::arg("A"), nb::arg("b"), nb::arg("dq"), nb::arg("ddq"), nb::arg("accelerations"),
       nb::arg("jerks").none(), nb::arg("rate"), nb::arg("dt"), nb::arg("share"),
-      nb::arg("slack"),
-      "stoppable_rows(A, b, dq, ddq, accelerations, jerks, rate, dt, share, slack): the damper\n"
+      nb::arg("slack"), nb::arg("reach_accelerations").none() = nb::none(),
+      nb::arg("reach_jerks").none() = nb::none(),
+      "stoppable_rows(A, b, dq, ddq, accelerations, jerks, rate, dt, share, slack,\n"
+      "reach_accelerations=None, reach_jerks=None): the damper\n"
       "rows' bounds (in place) made ones an arm with acceleration (and jerk) limits can keep.\n"
       "Along row i the closing speed s_i = A_i q_dot changes at up to a_i = sum_j |A_ij|\n"
       "accelerations_j (m/s^2), and that rate at up to j_i = sum_j |A_ij| jerks_j (m/s^3;\n"
@@ -125,17 +141,22 @@ void register_collision_braking(nb::module_& m) {
       "  - b_i = min(b_i, v(h)), v the closing speed that, held for tau = dt + a / j and then\n"
       "    braked at a = share a_i (j = share j_i), covers h: v tau + v^2 / (2 a) = h (a row\n"
       "    inside its margin separates no faster than v(|h|)); with jerks, where v > s_i =\n"
-      "    A_i dq, the closing speed x this step reaches (at most s_i + dt min(a_i, A_i ddq +\n"
-      "    j_i dt)) must stop within h from acceleration (x - s_i) / dt too: largest_stoppable;\n"
+      "    A_i dq, the fastest closing speed x this step can reach (its acceleration at most\n"
+      "    the row's largest within the joints' boxes [max(-R, ddq - Rj dt), min(R, ddq + Rj\n"
+      "    dt)], R, Rj the reach limits) must also stop within h from the acceleration (x -\n"
+      "    s_i) / dt that reaching it takes: x dt + stopping_distance(x, (x - s_i) / dt,\n"
+      "    share a_i, share j_i) <= h, else v = largest_stoppable(...);\n"
       "  - b_i = max(b_i, min(s_i + r dt, V(h + slack))), r = max(-a, A_i ddq - j dt) from the\n"
       "    previous step's velocity dq and acceleration ddq, with jerks also at least the row's\n"
-      "    least acceleration within the joints' boxes [max(-acc, ddq - jerks dt), min(acc,\n"
-      "    ddq + jerks dt)], V as v at the whole a_i: a row whose closing speed jumps asks it\n"
-      "    to drop no faster than its share of the limits (and the boxes) allows, while its\n"
-      "    pair, braking at a_i, stays at least margin - slack apart;\n"
+      "    least acceleration within the joints' boxes, V as v at the whole a_i: a row whose\n"
+      "    closing speed jumps asks it to drop no faster than its share of the limits (and the\n"
+      "    boxes) allows, while its pair, braking at a_i, stays at least margin - slack apart;\n"
       "  - b_i = max(b_i, s_i + r dt) inside the margin (h < 0): the pair separates as fast as\n"
       "    that share lets its closing speed drop.\n"
-      "A (k, N), b (k,), dq, ddq, accelerations and jerks (N,).");
+      "The row's j_i assumes its joints ramp together, as tau does. reach_accelerations and\n"
+      "reach_jerks (None: accelerations and jerks) are the joints' own limits where the\n"
+      "budget given is a share of them.\n"
+      "A (k, N), b (k,), dq, ddq, accelerations, jerks and the reach limits (N,).");
 
   m.def(
       "braking_reach",
