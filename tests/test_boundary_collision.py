@@ -172,9 +172,11 @@ def stoppable_case(jerks: bool = True) -> Case:
                 dict(A=RNG.normal(size=(k, N)), b=RNG.uniform(-1, 5, k), dq=RNG.normal(size=N),
                      ddq=RNG.normal(size=N), accelerations=RNG.uniform(5, 10, N),
                      jerks=RNG.uniform(1e3, 5e3, N) if jerks else None, rate=500.0, dt=1e-3,
-                     share=0.5, slack=5e-4),
+                     share=0.5, slack=5e-4, reach_accelerations=RNG.uniform(10, 20, N),
+                     reach_jerks=RNG.uniform(5e3, 1e4, N) if jerks else None),
                 dict(A=Arg(), b=Arg(written=True), dq=Arg(), ddq=Arg(), accelerations=Arg(),
-                     jerks=Arg(optional=True)))
+                     jerks=Arg(optional=True), reach_accelerations=Arg(optional=True),
+                     reach_jerks=Arg(optional=True)))
 
 
 def braking_case() -> Case:
@@ -367,6 +369,10 @@ def test_braking_reach_refuses_numbers_out_of_their_range(name, value):
 
 def test_stoppable_rows_and_braking_reach_take_no_jerk_limit():
     stoppable_case(jerks=False).run()
+    case = stoppable_case()
+    case.run(reach_accelerations=None, reach_jerks=None)
+    with pytest.raises(ValueError, match="reach_jerks must hold one number per joint"):
+        case.run(reach_accelerations=None, reach_jerks=np.ones(3))
     case = braking_case()
     case.run(jerks=None)
 

@@ -27,13 +27,16 @@ struct ArmLimits {
   std::optional<Array> jerks;
 };
 
-ArmLimits arm_limits(nb::handle accelerations, nb::handle jerks, Index N, const char* who) {
-  ArmLimits limits{Array(accelerations, "accelerations", 1), std::nullopt};
-  if (!jerks.is_none()) limits.jerks.emplace(jerks, "jerks", 1);
+ArmLimits arm_limits(nb::handle accelerations, nb::handle jerks, Index N, const char* who,
+                     const char* accelerations_name = "accelerations",
+                     const char* jerks_name = "jerks") {
+  ArmLimits limits{Array(accelerations, accelerations_name, 1), std::nullopt};
+  if (!jerks.is_none()) limits.jerks.emplace(jerks, jerks_name, 1);
   if (limits.accelerations.size() != N || (limits.jerks && limits.jerks->size() != N)) {
     std::ostringstream out;
-    out << who << ": accelerations and jerks must hold one number per joint (" << N
-        << "): they do not fit (accelerations " << limits.accelerations.size() << ")";
+    out << who << ": " << accelerations_name << " and " << jerks_name
+        << " must hold one number per joint (" << N << "): they do not fit ("
+        << accelerations_name << " " << limits.accelerations.size() << ")";
     fail(out.str());
   }
   return limits;
@@ -66,10 +69,14 @@ void register_collision_braking(nb::module_& m) {
         // the joints' own limits, which bound what this step can reach (the budget above may
         // be a share of them)
         std::optional<ArmLimits> own;
-        if (!reach_accelerations.is_none())
-          own.emplace(arm_limits(reach_accelerations,
-                                 reach_jerks.is_none() ? jerks : reach_jerks, N,
-                                 "stoppable_rows (reach)"));
+        if (!reach_accelerations.is_none() || !reach_jerks.is_none()) {
+          const bool acc_own = !reach_accelerations.is_none();
+          const bool jerk_own = !reach_jerks.is_none();
+          own.emplace(arm_limits(acc_own ? reach_accelerations : accelerations,
+                                 jerk_own ? reach_jerks : jerks, N, "stoppable_rows (reach)",
+                                 acc_own ? "reach_accelerations" : "accelerations",
+                                 jerk_own ? "reach_jerks" : "jerks"));
+        }
         const ArmLimits& reach = own ? *own : limits;
         const bool boxes = jerk && reach.jerks.has_value();
         auto rows = A.matrix();
@@ -154,7 +161,7 @@ void register_collision_braking(nb::module_& m) {
       "  - b_i = max(b_i, s_i + r dt) inside the margin (h < 0): the pair separates as fast as\n"
       "    that share lets its closing speed drop.\n"
       "The row's j_i assumes its joints ramp together, as tau does. reach_accelerations and\n"
-      "reach_jerks (None: accelerations and jerks) are the joints' own limits where the\n"
+      "reach_jerks (each None: accelerations, jerks) are the joints' own limits where the\n"
       "budget given is a share of them.\n"
       "A (k, N), b (k,), dq, ddq, accelerations, jerks and the reach limits (N,).");
 
