@@ -37,10 +37,9 @@ at ``influence`` could not stop a pair closing at arm speeds (a link at 1.5 m/s 
 have to start braking it: its joints' speeds after this step bound its closing speed ``s``
 (the levers of the broad phase's skip, below), the time ``T`` the joints take to stop at their
 limits bounds ``s`` over the row's acceleration, and ``s (dt + ramp + T / (2 share))`` covers
-what the row needs
-(``kernels.braking_reach``; a robot whose joints give no such bound, Euler angles or a
-translation without a range, keeps ``influence``). The acceleration limit still yields where
-the rows ask more than its share at once (several contacts, a row that jumps);
+what the row needs (``kernels.braking_reach``; a robot whose joints give no such bound, Euler
+angles or a translation without a range, keeps ``influence``). The acceleration limit still
+yields where the rows ask more than its share at once (several contacts, a row that jumps);
 ``StepInfo.limit_conflicts`` says so on those steps.
 
 Witnesses. Where two hulls touch along a face or an edge their closest points are not unique,
