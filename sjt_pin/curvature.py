@@ -28,6 +28,8 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
+from . import kernels
+
 Rows = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
 
 
@@ -104,13 +106,15 @@ class CurvatureTest:
         h, nv = self.FD_STEP, J_w.shape[1]
         H = np.empty((columns.size, columns.size))
         dv = np.zeros(nv)
+        yield
         for a, j in enumerate(columns):
             dv[j] = h
             Jp, ep = yield from _evaluated(rows, pin.integrate(self.model, q, dv))
             Jm, em = yield from _evaluated(rows, pin.integrate(self.model, q, -dv))
             dv[j] = 0.0
             H[:, a] = -(ep @ Jp - em @ Jm)[columns] / (2.0 * h)  # d(grad f)/dq_j
-        curvatures, vectors = np.linalg.eigh(0.5 * (H + H.T))
+        curvatures, vectors = np.empty(columns.size), np.empty((columns.size, columns.size))
+        kernels.symmetric_eigen(H, curvatures, vectors)
         yield
         if curvatures[0] < -self.CURVATURE * 2.0 * f0:
             direction = np.zeros(nv)
@@ -128,6 +132,7 @@ class CurvatureTest:
         found = yield from self._flat_descent(q, rows, columns, curvatures, vectors, f0)
         if found is not None:
             return Finding("escape", f0, found)
+        yield
         return (yield from self._settle(q, rows, J_w, e_w, columns, curvatures, vectors, f0,
                                         settled_at))
 
@@ -187,6 +192,7 @@ class CurvatureTest:
             _, e_at = yield from _evaluated(rows, settled_at)
             if f0 > (1.0 - self.SETTLED) * 0.5 * float(e_at @ e_at):
                 return minimum  # not below where the last one started: the arm is held there
+        yield
         gradient = -(e_w @ J_w)[columns]
         projected = vectors[:, slow].T @ gradient
         step = -vectors[:, slow] @ (projected / curvatures[slow])

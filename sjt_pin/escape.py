@@ -170,15 +170,15 @@ class SaddleEscape:
         return True
 
     def _begin(self, q: np.ndarray, targets: list, rows_for: Callable[[list], Rows]) -> None:
-        """Start a test at ``q`` for ``targets``, spread over the next steps; where the targets
-        cannot be copied (a task of one's own), at once."""
+        """Start a test at ``q`` for ``targets``, spread over the next steps (its first
+        evaluation on the next: this step copied the targets); where the targets cannot be
+        copied (a task of one's own), at once."""
         try:
             kept = copy.deepcopy(targets)
         except Exception:  # noqa: BLE001 - any failure to copy: test here, at once
             self.test(q, rows_for(targets))
             return
         self._pending, self._run = (q.copy(), kept, 0), None
-        self._advance(rows_for, q)
 
     def _advance(self, rows_for: Callable[[list], Rows], now: np.ndarray) -> None:
         """One pause of the test under way, the arm at ``now`` (a copy first replays the pauses

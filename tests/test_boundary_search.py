@@ -1,10 +1,11 @@
 """The boundary of the search's and the tasks' compiled entries (the module _core: src/search.cpp,
-search_pose.cpp, lie.cpp, transforms.cpp): every array argument in every layout, dtype and
-length the kernels do not read (strided, reversed, a stride-12 view of a byte buffer, unaligned,
-Fortran-ordered, short, read-only where written, of another dtype or rank, indices out of range)
-raises TypeError or ValueError naming the argument, before anything is read; NaN is refused
-where it would index or weigh, and elsewhere flows into the result. Run under AddressSanitizer
-(the CI's sanitizer job) these calls also show that nothing is read outside an array."""
+search_pose.cpp, lie.cpp, symmetric_eigen.cpp, transforms.cpp): every array argument in every
+layout, dtype and length the kernels do not read (strided, reversed, a stride-12 view of a byte
+buffer, unaligned, Fortran-ordered, short, read-only where written, of another dtype or rank,
+indices out of range) raises TypeError or ValueError naming the argument, before anything is
+read; NaN is refused where it would index or weigh, and elsewhere flows into the result. Run
+under AddressSanitizer (the CI's sanitizer job) these calls also show that nothing is read
+outside an array."""
 
 import numpy as np
 import pinocchio as pin
@@ -56,6 +57,10 @@ ENTRIES = {
     "jlog6_inverse": (
         lambda: {"xi": RNG.normal(size=6), "out": np.zeros((6, 6))},
         lambda a: K.jlog6_inverse(a["xi"], a["out"]), {"out"}, {"xi", "out"}, {}, set()),
+    "symmetric_eigen": (
+        lambda: {"H": RNG.normal(size=(N, N)), "values": np.zeros(N), "vectors": np.zeros((N, N))},
+        lambda a: K.symmetric_eigen(a["H"], a["values"], a["vectors"]), {"values", "vectors"},
+        {"H", "values", "vectors"}, {}, {"H"}),
     "frame_velocity": (
         lambda: {"oMf": pin.SE3.Random().np, "oMd": pin.SE3.Random().np,
                  "velocity": RNG.normal(size=6), "out": np.zeros(6)},

@@ -151,6 +151,26 @@ def test_jlog6_inverse_is_pinocchio_s(angle):
         np.testing.assert_allclose(G, pin.Jlog6(N.inverse()), rtol=0, atol=1e-12)
 
 
+@pytest.mark.parametrize("n", [1, 2, 6, 7, 30])
+def test_symmetric_eigen_decomposes_the_symmetric_part(n):
+    """symmetric_eigen(H) holds the eigenvalues of (H + H^T) / 2 ascending, as numpy's eigh
+    gives them, and orthonormal eigenvectors that diagonalise it; repeated eigenvalues (a
+    projector's) and an empty matrix included."""
+    from sjt_pin.kernels import symmetric_eigen
+
+    rng = np.random.default_rng(n)
+    Q = np.linalg.qr(rng.normal(size=(n, n)))[0]
+    for H in (rng.normal(size=(n, n)), Q[:, : n // 2 + 1] @ Q[:, : n // 2 + 1].T,
+              np.zeros((n, n))):
+        values, vectors = np.empty(n), np.empty((n, n))
+        symmetric_eigen(H, values, vectors)
+        S = 0.5 * (H + H.T)
+        np.testing.assert_allclose(values, np.linalg.eigvalsh(S), rtol=0, atol=1e-12)
+        np.testing.assert_allclose(vectors.T @ vectors, np.eye(n), rtol=0, atol=1e-12)
+        np.testing.assert_allclose(vectors.T @ S @ vectors, np.diag(values), rtol=0, atol=1e-12)
+    symmetric_eigen(np.zeros((0, 0)), np.empty(0), np.empty((0, 0)))
+
+
 @pytest.mark.parametrize("m, n, posture", [(6, 7, False), (3, 3, False), (9, 4, False),
                                            (6 + 7, 7, True), (3 + 30, 30, True),
                                            (12 + 4, 4, True)])

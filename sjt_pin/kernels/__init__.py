@@ -29,6 +29,8 @@ vector. The numpy references that pin them are in ``tests/``.
   ``SEARCH_STALLED``: what an iteration reports;
 - ``jlog6_inverse(xi, out)`` (``src/lie.cpp``): ``Jlog6(N^-1)`` from ``xi = log6(N)``, the
   exact derivative of a pose error in the rows of its Jacobian (the search's model);
+- ``symmetric_eigen(H, values, vectors)`` (``src/symmetric_eigen.cpp``): the eigenvalues and
+  eigenvectors of H's symmetric part (the saddle escape's curvature test);
 - ``frame_velocity``, ``position_rows``, ``rotation_defect``, ``unit_defect``
   (``src/transforms.cpp``): the tasks' small transforms and the door's manifold check of q;
 - the collision limit's kernels (:mod:`sjt_pin.limits.collision`, ``src/collision.hpp``):
@@ -74,6 +76,7 @@ from ._core import (  # noqa: F401
     sphere_gaps,
     stoppable_rows,
     stopping_distance,
+    symmetric_eigen,
     unit_defect,
     witness_rows,
 )

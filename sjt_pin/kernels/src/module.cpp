@@ -17,6 +17,7 @@ NB_MODULE(_core, m) {
   sjt::register_transforms(m);
   sjt::register_search(m);
   sjt::register_search_pose(m);
+  sjt::register_symmetric_eigen(m);
   sjt::register_dampers(m);
   sjt::register_collision_braking(m);
   sjt::register_witnesses(m);

@@ -14,6 +14,7 @@ void register_lie(nanobind::module_& m);
 void register_transforms(nanobind::module_& m);
 void register_search(nanobind::module_& m);
 void register_search_pose(nanobind::module_& m);
+void register_symmetric_eigen(nanobind::module_& m);
 // the collision limit's kernels (sjt_pin/limits/collision.py)
 void register_dampers(nanobind::module_& m);             // dampers.cpp
 void register_collision_braking(nanobind::module_& m);   // collision_braking.cpp
