@@ -1,7 +1,8 @@
-"""CollisionLimit with moving obstacles: ``move(i, pose, velocity=)`` makes each row bound the
-relative closing speed of its pair (the obstacle's normal velocity at its closest point is
-added to the bound), so an arm gives way to an obstacle driven at it as far as its limits
-allow, and ``StepInfo.rows_exceeded`` says by how much it could not."""
+"""CollisionLimit with moving obstacles: ``move(i, pose, velocity=)`` (or time-stamped poses,
+``time=``) makes each row bound the relative closing speed of its pair (the obstacle's normal
+velocity at its closest point is added to the bound), so an arm gives way to an obstacle
+driven at it as far as its limits allow, and ``StepInfo.rows_exceeded`` says by how much it
+could not."""
 
 from __future__ import annotations
 
@@ -82,6 +83,42 @@ def test_velocity_is_checked_and_copied(panda):
     np.testing.assert_array_equal(limit.velocities, np.zeros((1, 6)))
 
 
+def test_time_stamped_poses_give_the_velocity(panda):
+    """``move(i, pose, time=t)`` without a velocity: the twist is the backward difference of
+    the time-stamped poses (a constant twist's translation exactly, its rotation to rounding
+    here), at rest on the first stamp; a velocity given wins; a ``move`` without ``time``
+    starts the differences anew; times that do not increase, or are not numbers, are
+    refused before anything changes; copies carry the last stamp."""
+    start = pin.SE3(pin.exp3(np.array([0.2, -0.1, 0.3])), np.array([0.4, 0.3, 0.5]))
+    limit = CollisionLimit(panda, [(coal.Sphere(0.05), start)])
+    twist = np.array([0.3, -0.5, 0.1, 0.4, -0.2, 0.6])
+
+    def at(t):
+        return pin.SE3(pin.exp3(twist[3:] * t) @ start.rotation, start.translation + twist[:3] * t)
+
+    limit.move(0, at(0.0), time=0.0)
+    np.testing.assert_array_equal(limit.velocities, np.zeros((1, 6)))
+    for k in range(1, 4):
+        limit.move(0, at(k * 0.01), time=k * 0.01)
+        np.testing.assert_allclose(limit.velocities[0], twist, rtol=0, atol=1e-12)
+    for other in (copy.deepcopy(limit), pickle.loads(pickle.dumps(limit))):
+        other.move(0, at(0.05), time=0.05)  # (differenced from the copied stamp at 0.03)
+        np.testing.assert_allclose(other.velocities[0], twist, rtol=0, atol=1e-12)
+    given = np.array([1.0, 2.0, 3.0, 0.0, 0.0, 0.0])
+    limit.move(0, at(0.04), velocity=given, time=0.04)
+    np.testing.assert_array_equal(limit.velocities[0], given)
+    for bad, error in ((0.04, ValueError), (0.01, ValueError), (np.nan, ValueError),
+                       ("now", TypeError), (True, TypeError)):
+        with pytest.raises(error, match="time of obstacle 0"):
+            limit.move(0, at(0.1), time=bad)
+    np.testing.assert_array_equal(limit.velocities[0], given)  # (refused: nothing changed)
+    limit.move(0, at(0.05), time=0.05)
+    np.testing.assert_allclose(limit.velocities[0], twist, rtol=0, atol=1e-12)
+    limit.move(0, at(0.06))  # no time: at rest, and the next stamp is a first one
+    limit.move(0, at(0.07), time=0.07)
+    np.testing.assert_array_equal(limit.velocities, np.zeros((1, 6)))
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("name, speed, dt, smooth", [
     ("panda", 1.0, 1e-3, False), ("panda", 0.5, 1e-2, False), ("panda", 0.5, 1e-3, True),
@@ -101,6 +138,11 @@ def test_an_arm_gives_way_to_an_obstacle_driven_at_it(name, speed, dt, smooth):
     if name == "panda" and dt == 1e-3:
         blind = moving.drive(robot, speed, dt, smooth, told=False)
         assert blind.closest < MARGIN - 1e-3
+    if smooth:  # its poses time-stamped instead of its velocity: as safe
+        stamped = moving.drive(robot, speed, dt, smooth, told="time")
+        assert stamped.closest >= MARGIN - 1e-3, f"{stamped.closest * 1e3:.2f} mm"
+        assert max(stamped.speed_ratio, stamped.acceleration_ratio, stamped.jerk_ratio) <= 1.01
+        assert stamped.exceeded == 0
 
 
 def test_an_obstacle_faster_than_the_arm_is_reported(panda):

@@ -4,7 +4,8 @@ A 5 cm ball starts 45 cm beside the hand and is driven at it at 0.5 or 1 m/s unt
 where the hand was; the arm holds its start pose (SJT, the solver's defaults), at 1 kHz and
 100 Hz, with the robot's speed limits alone or with Franka-like acceleration and jerk limits
 (:data:`ACCELERATION`, :data:`JERK`), and with the ball's velocity given to
-``CollisionLimit.move`` or not. Each run reports the least distance of the ball to the robot
+``CollisionLimit.move``, its poses time-stamped instead (the limit differentiates them), or
+neither. Each run reports the least distance of the ball to the robot
 over the run, measured independently at every step (:class:`.collision.Checker`: coal on the
 meshes, the ball where it is when the step starts), the steps below ``margin - 1 mm``, the
 largest ratio of the returned speeds, accelerations and jerks (finite differences) to their
@@ -42,7 +43,7 @@ class MovingRow:
     speed: float  # m/s of the ball
     rate: float  # Hz
     smooth: bool  # Franka-like acceleration and jerk limits (pink: its acceleration limit)
-    told: bool  # the ball's velocity given to move()
+    told: bool | str  # the ball's velocity given to move() (True), "time": its time stamps
     closest: float  # m, the least distance of the ball to the robot, meshes, independent
     below: int  # steps below margin - 1 mm
     speed_ratio: float  # the largest joint speed over its limit
@@ -93,10 +94,12 @@ def ball(robot: Robot, speed: float, dt: float, travel: float = TRAVEL) -> Ball:
     return Ball(speed, path, hand, coal.Sphere(0.05))
 
 
-def drive(robot: Robot, speed: float, dt: float, smooth: bool = False, told: bool = True,
-          travel: float = TRAVEL) -> MovingRow:
+def drive(robot: Robot, speed: float, dt: float, smooth: bool = False,
+          told: bool | str = True, travel: float = TRAVEL) -> MovingRow:
     """One run: the ball driven from ``travel`` (m) beside the hand of ``robot`` at its ``q0``
-    at ``speed`` (m/s), at period ``dt`` (s)."""
+    at ``speed`` (m/s), at period ``dt`` (s); ``told``: its velocity given to ``move``
+    (True), its poses time-stamped (``"time"``: the limit differentiates them) or neither
+    (False)."""
     driven = ball(robot, speed, dt, travel)
     limit = CollisionLimit(robot, driven.obstacles, margin=MARGIN)
     driven.checker = Checker(robot, driven.obstacles, limit.pair_names)
@@ -106,9 +109,14 @@ def drive(robot: Robot, speed: float, dt: float, smooth: bool = False, told: boo
         options = dict(acceleration_limits=accelerations, jerk_limits=jerks)
     solver = make_solver("sjt", robot, dt=dt, limits=[limit], **options)
     exceeded: list[bool] = []
+    steps = [0]
 
     def step(q, pose, velocity):
-        limit.move(0, pose, velocity=velocity if told else None)
+        if told == "time":
+            limit.move(0, pose, time=steps[0] * dt)
+            steps[0] += 1
+        else:
+            limit.move(0, pose, velocity=velocity if told else None)
         return solver.step(q, driven.hand)
 
     qs, us = run_steps(robot.q0, driven.path, step,
@@ -116,7 +124,7 @@ def drive(robot: Robot, speed: float, dt: float, smooth: bool = False, told: boo
     return moving_row(robot, driven, dt, smooth, told, qs, us, sum(exceeded), "SJT")
 
 
-def moving_row(robot: Robot, driven: Ball, dt: float, smooth: bool, told: bool,
+def moving_row(robot: Robot, driven: Ball, dt: float, smooth: bool, told: bool | str,
                qs: np.ndarray, us: float, exceeded: int | None, method: str) -> MovingRow:
     """The row of a run whose configurations are ``qs`` (at most one more than the ball's
     path: fewer if the solver failed) and CPU time ``us`` per step: the distances are checked
@@ -159,10 +167,11 @@ def sweep(robots: Sequence[str], settings: Sequence[tuple],
 
 def moving(robots=("panda", "ur5"), progress=None) -> list[MovingRow]:
     """Every robot at 0.5 and 1 m/s: at 1 kHz and 100 Hz with speed limits alone, at 1 kHz
-    with Franka-like limits, each with the velocity told; and the 1 kHz runs without it
-    (``(dt, smooth, told)`` of :func:`drive`)."""
+    with Franka-like limits, each with the velocity told; the last with time-stamped poses
+    instead; and the 1 kHz runs without either (``(dt, smooth, told)`` of :func:`drive`)."""
     return sweep(robots, ((1e-3, False, True), (1e-2, False, True), (1e-3, True, True),
-                          (1e-3, False, False), (1e-3, True, False)), drive, progress)
+                          (1e-3, True, "time"), (1e-3, False, False), (1e-3, True, False)),
+                 drive, progress)
 
 
 def moving_table(rows: list[MovingRow]) -> str:
@@ -173,7 +182,8 @@ def moving_table(rows: list[MovingRow]) -> str:
             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n")
     body = "".join(
         f"| {r.robot} | {r.method} | {r.speed:g} | {r.rate:g} "
-        f"| {'Franka-like' if r.smooth else 'speed'} | {'yes' if r.told else 'no'} "
+        f"| {'Franka-like' if r.smooth else 'speed'} "
+        f"| {'time stamps' if r.told == 'time' else 'yes' if r.told else 'no'} "
         f"| {1e3 * r.closest:.2f} | {r.below} | {r.speed_ratio:.3f} "
         f"| {dash(r.acceleration_ratio)} | {dash(r.jerk_ratio)} "
         f"| {dash(r.exceeded, 'd')} | {dash(r.failed_at)} "

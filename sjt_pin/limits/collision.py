@@ -83,10 +83,8 @@ from .collision_geometry import (
     ClosestPoints,
     CollisionError,
     PairDistance,
-    check_pose,
     coal,
     collision_model_of,
-    obstacle_twist,
     srdf_of,
     to_hulls,
 )
@@ -196,6 +194,7 @@ class CollisionLimit(PairsMixin, TablesMixin, BroadPhaseMixin, MovingMixin, Rows
         #: each obstacle's velocity (m/s and rad/s, world axes: its origin's linear velocity,
         #: then its angular velocity), set by :meth:`move`
         self._velocity = np.zeros((len(self._obstacle_ids), 6))
+        self._stamps: list = [None] * len(self._obstacle_ids)  # (time, pose) moved at (move)
         self._obstacle_of = np.full(self.geometry.ngeoms, -1, dtype=np.int64)  # (-1: robot's)
         self._obstacle_of[self._obstacle_ids] = np.arange(len(self._obstacle_ids))
         self._choose_pairs(self_collision, list(pairs), list(ignore),
@@ -218,12 +217,14 @@ class CollisionLimit(PairsMixin, TablesMixin, BroadPhaseMixin, MovingMixin, Rows
         collision geometry (the robot pickles without it; coal's hulls do not pickle, they
         are built again)."""
         return {"args": {**self._args, "obstacles": self.obstacles},
-                "geometry": self._source.copy(), "velocity": self._velocity.copy()}
+                "geometry": self._source.copy(), "velocity": self._velocity.copy(),
+                "stamps": [None if s is None else (s[0], s[1].copy()) for s in self._stamps]}
 
     def __setstate__(self, state: dict) -> None:
         self._restored_geometry = state["geometry"]
         self.__init__(**state["args"])  # type: ignore[misc]
         self._velocity[:] = state.get("velocity", 0.0)
+        self._stamps = state.get("stamps", self._stamps)
         self._moving_speeds()
 
     def bounds(self, kinematics, motion: Motion) -> tuple[np.ndarray, np.ndarray] | None:
@@ -263,35 +264,6 @@ class CollisionLimit(PairsMixin, TablesMixin, BroadPhaseMixin, MovingMixin, Rows
         return cap
 
     # -- obstacles ---------------------------------------------------------------------------
-    def move(self, i: int, pose: pin.SE3, velocity=None) -> None:
-        """Move obstacle ``i`` (its index in ``obstacles``) to ``pose`` before the next step.
-
-        ``velocity``: the obstacle's velocity at ``pose`` (6,): the linear velocity of its
-        origin (m/s) then its angular velocity (rad/s), both in world axes (Pinocchio's
-        ``LOCAL_WORLD_ALIGNED`` twist; a ``pin.Motion`` is read the same way); None for an
-        obstacle at rest. It holds until the next ``move`` (move a moving obstacle every
-        step); each row of its pairs then bounds the relative normal velocity of their closest
-        points (the collision guide, "Moving obstacles")."""
-        if isinstance(i, bool) or not isinstance(i, (int, np.integer)):
-            raise TypeError(f"obstacle index must be an int, got {type(i).__name__}")
-        if not 0 <= i < len(self._obstacle_ids):
-            raise IndexError(f"obstacle {i} does not exist ({len(self._obstacle_ids)} obstacles)")
-        check_pose(pose, f"pose of obstacle {i}")
-        twist = obstacle_twist(velocity, f"velocity of obstacle {i}")
-        g = self._obstacle_ids[i]
-        changed = bool(np.any(twist != self._velocity[i]))
-        obj = self.geometry.geometryObjects[g]
-        obj.placement = pose
-        H = self._placement[g] = pose.homogeneous
-        self._center_local[g, :3] = self._centers_in[:3, g] = (H[:3, :3] @ self._box_center[g]
-                                                              + H[:3, 3])
-        if changed:
-            self._velocity[i] = twist
-            self._moving_speeds()
-        self._version += 1
-        self._skip = None  # (its broad phase is of the old scene)
-        self._tick += 2.0  # the remembered points on the obstacle moved: forget every one
-
     @property
     def obstacles(self) -> list[tuple]:
         """The obstacles as ``(coal shape, pin.SE3)`` pairs, at their current poses."""

@@ -27,20 +27,79 @@ retreat, the guarantee is:
   the least the stage can, and ``StepInfo.rows_exceeded`` gives ``A q_dot - b`` (m/s; times
   ``dt``, how much of the margin the step gave up).
 
-A moving obstacle is moved every step (its velocity holds until the next :meth:`move`).
+A moving obstacle is moved every step (its velocity holds until the next :meth:`move`); given
+time-stamped poses instead (``move(i, pose, time=t)``), its twist is their backward difference,
+``((p - p0) / h, log3(R R0^T) / h)`` with ``h = t - t0`` (exact for a constant twist's
+translation, to first order in ``h`` for its rotation).
 
 A part of the CollisionLimit (a mixin it inherits from), operating on its state."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+import pinocchio as pin
 
 from .base import Motion
+from .collision_geometry import check_pose, obstacle_twist
 from .collision_state import CollisionState
 
 
 class MovingMixin(CollisionState):
     """The moving obstacles of a :class:`~sjt_pin.limits.collision.CollisionLimit`."""
+
+    def move(self, i: int, pose: pin.SE3, velocity=None, time: float | None = None) -> None:
+        """Move obstacle ``i`` (its index in ``obstacles``) to ``pose`` before the next step.
+
+        ``velocity``: the obstacle's velocity at ``pose`` (6,): the linear velocity of its
+        origin (m/s) then its angular velocity (rad/s), both in world axes (Pinocchio's
+        ``LOCAL_WORLD_ALIGNED`` twist; a ``pin.Motion`` is read the same way). ``time``: the
+        pose's time stamp (s, increasing from one ``move`` of this obstacle to the next):
+        without ``velocity``, the velocity is the backward difference from the last
+        time-stamped pose (at rest on the first; a ``move`` without ``time`` starts the
+        differences anew). Neither: an obstacle at rest. The velocity holds until the next
+        ``move`` (move a moving obstacle every step); each row of its pairs then bounds the
+        relative normal velocity of their closest points (the collision guide, "Moving
+        obstacles")."""
+        if isinstance(i, bool) or not isinstance(i, (int, np.integer)):
+            raise TypeError(f"obstacle index must be an int, got {type(i).__name__}")
+        if not 0 <= i < len(self._obstacle_ids):
+            raise IndexError(f"obstacle {i} does not exist ({len(self._obstacle_ids)} obstacles)")
+        check_pose(pose, f"pose of obstacle {i}")
+        twist = obstacle_twist(velocity, f"velocity of obstacle {i}")
+        stamp = self._stamps[i]
+        if time is None:
+            self._stamps[i] = None
+        else:
+            if isinstance(time, bool) or not isinstance(time, (int, float, np.integer,
+                                                                np.floating)):
+                raise TypeError(f"time of obstacle {i} must be a number (s), got "
+                                f"{type(time).__name__}")
+            if not math.isfinite(time) or (stamp is not None and not time > stamp[0]):
+                raise ValueError(f"time of obstacle {i} must be finite and increase from one "
+                                 f"move to the next (s): {time!r} after "
+                                 f"{None if stamp is None else stamp[0]!r}")
+            if velocity is None and stamp is not None:
+                h, before = float(time) - stamp[0], stamp[1]
+                twist = np.concatenate([(pose.translation - before.translation) / h,
+                                        pin.log3(pose.rotation @ before.rotation.T) / h])
+                if not np.all(np.isfinite(twist)):
+                    raise ValueError(f"the velocity of obstacle {i} over {h!r} s is not "
+                                     f"finite: {twist}")
+            self._stamps[i] = (float(time), pose.copy())
+        g = self._obstacle_ids[i]
+        changed = bool(np.any(twist != self._velocity[i]))
+        self.geometry.geometryObjects[g].placement = pose
+        H = self._placement[g] = pose.homogeneous
+        self._center_local[g, :3] = self._centers_in[:3, g] = (H[:3, :3] @ self._box_center[g]
+                                                              + H[:3, 3])
+        if changed:
+            self._velocity[i] = twist
+            self._moving_speeds()
+        self._version += 1
+        self._skip = None  # (its broad phase is of the old scene)
+        self._tick += 2.0  # the remembered points on the obstacle moved: forget every one
 
     def _moving_speeds(self) -> None:
         """Each pair's bound on its obstacle's speed (m/s) at any point of the obstacle's

@@ -20,6 +20,7 @@ class CollisionState:
     within: list[int]
     _witness_count: int
     _tick: float
+    _version: int  # the obstacles' poses' version, raised by each move()
     #: the last broad phase: (obstacles' version, q, its pairs, each pair's gap, its pairs)
     _reference: tuple[int, np.ndarray, np.ndarray, np.ndarray, list] | None
     _floor_q: np.ndarray | None
