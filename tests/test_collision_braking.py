@@ -73,7 +73,14 @@ def test_stoppable_rows_brake_within_the_excess_and_ease_in(jerk):
     if jerk:  # nor faster than the joints' boxes let it: the row's least acceleration in them
         assert np.sum(least > r) >= 5  # (rows where the boxes give less than the share)
         r = np.maximum(r, least)
-    floor = np.minimum(s + r * dt, _speed(h + EASING_SLACK, a_row, tau))
+    drop, held = s + r * dt, _speed(h + EASING_SLACK, a_row, tau)
+    floor = np.minimum(drop, held)
+    if jerk:  # the margin's guard braking at the whole limits from the acceleration the drop
+        # leaves, jerk-limited (not held for the whole ramp first)
+        floor = np.array([kernels.largest_stoppable(min(drop[i], held[i]), drop[i], s[i],
+                                                    h[i] + EASING_SLACK, dt, a_row[i],
+                                                    j_row[i]) for i in range(k)])
+        assert np.sum(floor > np.minimum(drop, held) + 1e-9) >= 5  # (where the ramp counts)
     cut = np.where(h >= 0.0, np.minimum(damper, brake), np.maximum(damper, brake))
     expected = np.maximum(cut, floor)
     inside = h < 0.0  # (a pair inside its margin separates as the share lets it)
@@ -91,12 +98,19 @@ def test_stoppable_rows_brake_within_the_excess_and_ease_in(jerk):
             x = min(b[i], s[i] + dt * most[i])  # (the fastest it can reach)
             stop = kernels.stopping_distance(x, (x - s[i]) / dt, share_a[i], share_j[i])
             assert x * dt + stop <= h[i] * (1 + 1e-9) + 1e-12, i
-    # and a row eased in still brakes, at the row's whole acceleration, short of margin - slack
+    # and a row eased in still brakes, at the row's whole limits, short of margin - slack
+    # (under a jerk limit from the acceleration its speed leaves, else held for a period),
+    # or is at the hardest braking the guard allows where no speed stops there
     eased = (b > cut + 1e-12) & (h >= 0.0)
     assert eased.any()
-    v, a = b[eased], a_row[eased]
-    assert np.all(v * tau[eased] + v * np.abs(v) / (2.0 * a)
-                  <= h[eased] + EASING_SLACK + 1e-12)
+    for i in np.flatnonzero(eased):
+        v = b[i]
+        if jerk:
+            stop = v * dt + kernels.stopping_distance(v, (v - s[i]) / dt, a_row[i], j_row[i])
+        else:
+            stop = v * tau[i] + v * abs(v) / (2.0 * a_row[i])
+        assert stop <= (h[i] + EASING_SLACK) * (1 + 1e-9) + 1e-12 or v == pytest.approx(
+            min(drop[i], held[i]), rel=1e-12), i
 
 
 def test_a_row_accelerating_toward_its_margin_under_a_jerk_limit_can_still_stop():
@@ -157,11 +171,14 @@ def test_a_row_asks_no_faster_drop_than_its_joints_boxes_give():
         kernels.stoppable_rows(row, b, dq, ddq, acc, jerks, rate, dt, BRAKING_SHARE,
                                EASING_SLACK)
         cut = min(rate * h, float(_speed(np.array(h), BRAKING_SHARE * a, dt + a / j)))
-        # the pair would come closer than margin - slack braking at all its joints can: the
-        # margin wins, the row asks more than the boxes give (the limits yield, and say so)
+        # the pair would come closer than margin - slack braking at all its joints can (from
+        # the acceleration the drop leaves, jerk-limited): the margin wins, the row asks more
+        # than the boxes give (the limits yield, and say so)
+        s = row[0] @ dq
         late = float(_speed(np.array(h + EASING_SLACK), a, dt + a / j))
-        assert b[0] == pytest.approx(max(cut, min(least, late)), rel=1e-12)
-        held += bool(cut < least <= late and b[0] == pytest.approx(least, rel=1e-12))
+        guard = kernels.largest_stoppable(min(least, late), least, s, h + EASING_SLACK, dt, a, j)
+        assert b[0] == pytest.approx(max(cut, guard), rel=1e-12)
+        held += bool(cut < least and b[0] == pytest.approx(least, rel=1e-12))
     assert held >= 1
 
 

@@ -31,7 +31,8 @@ another feature, a witness row appears) eases in: it asks that speed to drop no 
 the limits allow from the previous step's velocity and acceleration (the share of the row's
 acceleration and jerk, and never more than the joints' acceleration and jerk boxes give it
 this period: a joint already braking at its limit gives nothing more), as long as the pair,
-braking at its whole acceleration, stays ``margin - EASING_SLACK`` apart. A row that appears
+braking at its whole acceleration (under a jerk limit ramped to it from the acceleration the
+step leaves, ``largest_stoppable``), stays ``margin - EASING_SLACK`` apart. A row that appears
 at ``influence`` could not stop a pair closing at arm speeds (a link at 1.5 m/s needs some
 14 cm at 10 rad/s^2), so each pair's influence grows to the distance within which the row may
 have to start braking it: its joints' speeds after this step bound its closing speed ``s``
