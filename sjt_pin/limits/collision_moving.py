@@ -29,8 +29,8 @@ retreat, the guarantee is:
 
 A moving obstacle is moved every step (its velocity holds until the next :meth:`move`); given
 time-stamped poses instead (``move(i, pose, time=t)``), its twist is their backward difference,
-``((p - p0) / h, log3(R R0^T) / h)`` with ``h = t - t0`` (exact for a constant twist's
-translation, to first order in ``h`` for its rotation).
+``((p - p0) / h, log3(R R0^T) / h)`` with ``h = t - t0`` (exact where the origin's velocity
+and the angular velocity are constant over ``h``; else their mean over it, to first order).
 
 A part of the CollisionLimit (a mixin it inherits from), operating on its state."""
 
