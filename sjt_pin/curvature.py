@@ -11,13 +11,16 @@ is probed further out (:meth:`CurvatureTest._flat_descent`); at a minimum whose 
 orders of magnitude, the Newton step along the flattest ones is the settling step
 (:meth:`CurvatureTest._settle`).
 
-:meth:`~CurvatureTest.run` is a generator that pauses after each evaluation of the rows (and
-after the eigen-decomposition) and returns a :class:`Finding`: a solver advances it by one
-pause per step, so that no step evaluates the rows more than once beyond its own (the
+:meth:`~CurvatureTest.run` is a generator that pauses after each evaluation of the rows, after
+its setup (the free joints), after the eigen-decomposition (a compiled call:
+``kernels.symmetric_eigen``) and before the settling step's model, and returns a
+:class:`Finding`: a solver advances it by one pause per step, so that no step evaluates the
+rows more than once beyond its own, nor runs more than a few of the test's numpy calls (the
 two-frame paths of ``sjt-pin bench speed``: a test of 13–18 evaluations on UR5 was one step of
-0.33–0.6 ms, 24–53 times the median step). It
-reads nothing that changes before it returns, so the same arguments run it again to the same
-pause, bitwise: a copy of a solver taken during a test replays it.
+0.33–0.6 ms, 24–53 times the median step; its code is cold after hundreds of steps, where
+numpy's ``eigh`` of 6 x 6 took 33–82 us). It reads nothing that changes before it returns, so
+the same arguments run it again to the same pause, bitwise: a copy of a solver taken during a
+test replays it.
 """
 
 from __future__ import annotations

@@ -59,6 +59,11 @@ def page(package: str, name: str) -> str:
     elif inspect.isclass(obj):
         body = (f".. autoclass:: {title}\n   :members:\n   :show-inheritance:\n"
                 "   :special-members: __call__\n")
+        # a class built from mixins (CollisionLimit's parts) documents their public members
+        # as its own: those of its first public base (and object) stay on that base's page
+        public = [b for b in obj.__bases__ if not b.__name__.endswith("Mixin")]
+        if len(public) < len(obj.__bases__):
+            body += f"   :inherited-members: {public[0].__name__ if public else 'object'}\n"
     elif callable(obj):
         body = f".. autofunction:: {title}\n"
     else:  # data: documented where its ``#:`` comment is, in the module that defines it

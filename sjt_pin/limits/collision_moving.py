@@ -58,10 +58,10 @@ class MovingMixin(CollisionState):
         pose's time stamp (s, increasing from one ``move`` of this obstacle to the next):
         without ``velocity``, the velocity is the backward difference from the last
         time-stamped pose (at rest on the first; a ``move`` without ``time`` starts the
-        differences anew). Neither: an obstacle at rest. The velocity holds until the next
-        ``move`` (move a moving obstacle every step); each row of its pairs then bounds the
-        relative normal velocity of their closest points (the collision guide, "Moving
-        obstacles")."""
+        differences anew; each interval must turn the obstacle by less than pi). Neither: an
+        obstacle at rest. The velocity holds until the next ``move`` (move a moving obstacle
+        every step); each row of its pairs then bounds the relative normal velocity of their
+        closest points (the collision guide, "Moving obstacles")."""
         if isinstance(i, bool) or not isinstance(i, (int, np.integer)):
             raise TypeError(f"obstacle index must be an int, got {type(i).__name__}")
         if not 0 <= i < len(self._obstacle_ids):
