@@ -16,6 +16,7 @@ runs beside the same ball are in :mod:`.collision_peers` and :mod:`.collision_mi
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -109,12 +110,11 @@ def drive(robot: Robot, speed: float, dt: float, smooth: bool = False,
         options = dict(acceleration_limits=accelerations, jerk_limits=jerks)
     solver = make_solver("sjt", robot, dt=dt, limits=[limit], **options)
     exceeded: list[bool] = []
-    steps = [0]
+    ticks = itertools.count()  # (the step's index: its pose's time stamp over dt)
 
     def step(q, pose, velocity):
         if told == "time":
-            limit.move(0, pose, time=steps[0] * dt)
-            steps[0] += 1
+            limit.move(0, pose, time=next(ticks) * dt)
         else:
             limit.move(0, pose, velocity=velocity if told else None)
         return solver.step(q, driven.hand)

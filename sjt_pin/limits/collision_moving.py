@@ -41,6 +41,7 @@ import math
 import numpy as np
 import pinocchio as pin
 
+from ..validation import real_number
 from .base import Motion
 from .collision_geometry import check_pose, obstacle_twist
 from .collision_state import CollisionState
@@ -72,22 +73,19 @@ class MovingMixin(CollisionState):
         if time is None:
             self._stamps[i] = None
         else:
-            if isinstance(time, bool) or not isinstance(time, (int, float, np.integer,
-                                                                np.floating)):
-                raise TypeError(f"time of obstacle {i} must be a number (s), got "
-                                f"{type(time).__name__}")
+            time = real_number(time, f"time of obstacle {i}", "s")
             if not math.isfinite(time) or (stamp is not None and not time > stamp[0]):
                 raise ValueError(f"time of obstacle {i} must be finite and increase from one "
                                  f"move to the next (s): {time!r} after "
                                  f"{None if stamp is None else stamp[0]!r}")
             if velocity is None and stamp is not None:
-                h, before = float(time) - stamp[0], stamp[1]
+                h, before = time - stamp[0], stamp[1]
                 twist = np.concatenate([(pose.translation - before.translation) / h,
                                         pin.log3(pose.rotation @ before.rotation.T) / h])
                 if not np.all(np.isfinite(twist)):
                     raise ValueError(f"the velocity of obstacle {i} over {h!r} s is not "
                                      f"finite: {twist}")
-            self._stamps[i] = (float(time), pose.copy())
+            self._stamps[i] = (time, pose.copy())
         g = self._obstacle_ids[i]
         changed = bool(np.any(twist != self._velocity[i]))
         self.geometry.geometryObjects[g].placement = pose
