@@ -1,11 +1,11 @@
 """The boundary of the search's and the tasks' compiled entries (the module _core: src/search.cpp,
-search_pose.cpp, lie.cpp, symmetric_eigen.cpp, transforms.cpp): every array argument in every
-layout, dtype and length the kernels do not read (strided, reversed, a stride-12 view of a byte
-buffer, unaligned, Fortran-ordered, short, read-only where written, of another dtype or rank,
-indices out of range) raises TypeError or ValueError naming the argument, before anything is
-read; NaN is refused where it would index or weigh, and elsewhere flows into the result. Run
-under AddressSanitizer (the CI's sanitizer job) these calls also show that nothing is read
-outside an array."""
+search_pose.cpp, lie.cpp, symmetric_eigen.cpp, transforms.cpp) and of bounds.cpp's
+least_widening: every array argument in every layout, dtype and length the kernels do not read
+(strided, reversed, a stride-12 view of a byte buffer, unaligned, Fortran-ordered, short,
+read-only where written, of another dtype or rank, indices out of range) raises TypeError or
+ValueError naming the argument, before anything is read; NaN is refused where it would index or
+weigh, and elsewhere flows into the result. Run under AddressSanitizer (the CI's sanitizer job)
+these calls also show that nothing is read outside an array."""
 
 import numpy as np
 import pinocchio as pin
@@ -61,6 +61,13 @@ ENTRIES = {
         lambda: {"H": RNG.normal(size=(N, N)), "values": np.zeros(N), "vectors": np.zeros((N, N))},
         lambda a: K.symmetric_eigen(a["H"], a["values"], a["vectors"]), {"values", "vectors"},
         {"H", "values", "vectors"}, {}, {"H"}),
+    "least_widening": (
+        lambda: {"cap_lo": -np.ones(N), "cap_hi": np.ones(N), "hard_lo": np.full(N, -5.0),
+                 "hard_hi": np.full(N, 5.0), "a": RNG.normal(size=N)},
+        lambda a: K.least_widening(a["cap_lo"], a["cap_hi"], a["hard_lo"], a["hard_hi"], a["a"],
+                                   -3.0),
+        set(), {"cap_lo", "cap_hi", "hard_lo", "hard_hi"}, {},
+        {"cap_lo", "cap_hi", "hard_lo", "hard_hi", "a"}),
     "frame_velocity": (
         lambda: {"oMf": pin.SE3.Random().np, "oMd": pin.SE3.Random().np,
                  "velocity": RNG.normal(size=6), "out": np.zeros(6)},

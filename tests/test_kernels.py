@@ -201,3 +201,44 @@ def test_the_search_step_is_the_damped_formula(m, n, posture, scaled):
     expected = alpha * (Jw.T @ np.linalg.solve((Jw * alpha) @ Jw.T + damping * np.eye(m), sw * e))
     np.testing.assert_allclose(search.step, expected, rtol=1e-9,
                                atol=1e-12 * np.abs(expected).max())
+
+
+def _least_value(cap_lo, cap_hi, hard_lo, hard_hi, a, s):
+    """min a x over the acceleration/jerk box widened s times about its centre, within the hard
+    box (numpy, as the stage widens it)."""
+    c, h = 0.5 * (cap_lo + cap_hi), 0.5 * (cap_hi - cap_lo)
+    with np.errstate(invalid="ignore", over="ignore"):
+        lo = np.maximum(hard_lo, np.minimum(c - s * h, hard_hi))
+        hi = np.minimum(hard_hi, np.maximum(c + s * h, hard_lo))
+        finite = np.isfinite(c) & np.isfinite(h)
+        lo, hi = np.where(finite, lo, hard_lo), np.where(finite, hi, hard_hi)
+        terms = np.where(a > 0, a * lo, np.where(a < 0, a * hi, 0.0))
+    return float(np.sum(terms))
+
+
+@settings(max_examples=200, deadline=None)
+@given(n=st.integers(1, 8), seed=st.integers(0, 2**32 - 1))
+def test_least_widening_is_the_least_factor_that_meets_the_row(n, seed):
+    """``least_widening``: 1 where the acceleration/jerk box already meets the row, inf where the
+    hard box cannot, else the least s (to 1e-9) at which the box widened s times meets it: the
+    row's least value there is at most b, and just below s it is above b."""
+    rng = np.random.default_rng(seed)
+    centre, half = rng.normal(size=n), rng.uniform(0.0, 1.0, n)
+    cap_lo, cap_hi = centre - half, centre + half
+    hard_lo, hard_hi = -rng.uniform(1.0, 20.0, n), rng.uniform(1.0, 20.0, n)
+    hard_lo[rng.random(n) < 0.2] = -np.inf
+    hard_hi[rng.random(n) < 0.2] = np.inf
+    cap_lo[rng.random(n) < 0.1] = -np.inf  # (a joint without acceleration limits)
+    a = rng.normal(size=n) * (rng.random(n) < 0.8)
+    at_one = _least_value(cap_lo, cap_hi, hard_lo, hard_hi, a, 1.0)
+    widest = _least_value(cap_lo, cap_hi, hard_lo, hard_hi, a, 1e300)
+    for b in (at_one + 1.0, at_one - rng.uniform(0.0, 5.0), widest - 1.0, widest + 1e-3):
+        s = K.least_widening(cap_lo, cap_hi, hard_lo, hard_hi, a, b)
+        if at_one <= b:
+            assert s == 1.0
+        elif not widest <= b:
+            assert s == np.inf
+        else:
+            assert 1.0 <= s < np.inf
+            assert _least_value(cap_lo, cap_hi, hard_lo, hard_hi, a, s) <= b
+            assert _least_value(cap_lo, cap_hi, hard_lo, hard_hi, a, s * (1 - 2e-9)) > b

@@ -16,7 +16,8 @@ vector. The numpy references that pin them are in ``tests/``.
   :func:`mapping_matrix`, :func:`scaling_factors`: the method's M(J) and SJT's alpha_i;
 - :func:`project`: the stage's projection on its own (tests, ``solve()``'s user limits);
 - :func:`stopping_distance`, :func:`largest_stoppable`, :func:`approach_top`: the jerk-limited
-  braking of one joint;
+  braking of one joint; :func:`least_widening`: how far the acceleration and jerk limits yield
+  to a row no velocity within them meets (``src/bounds.hpp``);
 - :func:`check_array`: the boundary's check, on its own;
 - :class:`SetPointSearch` (``src/search.hpp``): the set-point search of ``solve()``, one object
   per search holding its parameters (the damping, the method's column tolerance, SJT's floor
@@ -64,6 +65,7 @@ from ._core import (  # noqa: F401
     frame_velocity,
     jlog6_inverse,
     largest_stoppable,
+    least_widening,
     mapping_matrix,
     near_pairs,
     position_rows,

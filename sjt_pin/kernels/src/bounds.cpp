@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <utility>
 
 #include "braking.hpp"
 
@@ -181,6 +182,73 @@ void joint_box(const BoundsConfig& config, double dt, const double* q, const Vec
     }
     out.lo[j] = lo, out.hi[j] = hi, out.lo_by[j] = lo_by, out.hi_by[j] = hi_by;
   }
+}
+
+namespace {
+
+// the least value of a x over the boxes widened s times
+double least_value(const JointBox& box, const Eigen::Ref<const Vector>& a, double s) {
+  double least = 0.0;
+  for (Index j = 0; j < a.size(); ++j) {
+    if (a[j] == 0.0) continue;
+    double lo, hi;
+    widened(box, j, s, lo, hi);
+    least += a[j] > 0.0 ? a[j] * lo : a[j] * hi;
+  }
+  return least;
+}
+
+}  // namespace
+
+double least_widening(const JointBox& box, const Eigen::Ref<const Vector>& a, double b) {
+  constexpr double kHuge = 1e300;  // (beyond it, the hard box)
+  if (least_value(box, a, 1.0) <= b) return 1.0;
+  if (!(least_value(box, a, kHuge) <= b)) return std::numeric_limits<double>::infinity();
+  double low = 1.0, high = 2.0;  // (the least value falls as s grows: doubled, then bisected)
+  while (high < kHuge && !(least_value(box, a, high) <= b)) {
+    low = high;
+    high *= 2.0;
+  }
+  while (high - low > 1e-9 * high) {
+    const double s = 0.5 * (low + high);
+    (least_value(box, a, s) <= b ? high : low) = s;
+  }
+  return high;
+}
+
+}  // namespace sjt
+
+// -- Python entry, for the tests (tests/test_kernels.py checks it against a numpy search)
+#include "registry.hpp"
+
+namespace sjt {
+
+void register_bounds(nb::module_& m) {
+  m.def(
+      "least_widening",
+      [](nb::handle cap_lo, nb::handle cap_hi, nb::handle hard_lo, nb::handle hard_hi,
+         nb::handle a, double b) {
+        Array row(a, "a", 1);
+        const Index n = row.size();
+        row.finite();
+        JointBox box;
+        box.resize(n);
+        const std::pair<const char*, nb::handle> given[] = {
+            {"cap_lo", cap_lo}, {"cap_hi", cap_hi}, {"hard_lo", hard_lo}, {"hard_hi", hard_hi}};
+        Vector* into[] = {&box.cap_lo, &box.cap_hi, &box.hard_lo, &box.hard_hi};
+        for (int i = 0; i < 4; ++i) {
+          Array bound(given[i].second, given[i].first, 1);
+          bound.length(n).no_nan();
+          *into[i] = bound.vector();
+        }
+        if (std::isnan(b)) fail("least_widening: b is NaN");
+        return least_widening(box, row.vector(), b);
+      },
+      nb::arg("cap_lo").none(), nb::arg("cap_hi").none(), nb::arg("hard_lo").none(),
+      nb::arg("hard_hi").none(), nb::arg("a").none(), nb::arg("b"),
+      "least_widening(cap_lo, cap_hi, hard_lo, hard_hi, a, b) -> float: the least s >= 1 at "
+      "which some velocity within the acceleration/jerk box [cap_lo, cap_hi] widened s times "
+      "about its centre, within the hard box [hard_lo, hard_hi], meets a x <= b (inf: none).");
 }
 
 }  // namespace sjt

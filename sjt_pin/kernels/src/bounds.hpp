@@ -19,6 +19,8 @@
 // the time-optimal (Ruckig's) duration, never above a limit.
 #pragma once
 
+#include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <vector>
 
@@ -82,5 +84,23 @@ void capability(const BoundsConfig& config, double dt, const Vector& v, const Ve
 void joint_box(const BoundsConfig& config, double dt, const double* q, const Vector& v,
                const Vector& fb, const Vector& ff, const Vector& delta, const double* user_lo,
                const double* user_hi, JointBox& out);
+
+// Joint j's acceleration/jerk box widened s times about its centre, within the hard box (its
+// nearer side where the two are apart); the hard box where the smooth one is unbounded.
+inline void widened(const JointBox& box, Index j, double s, double& lo, double& hi) {
+  const double c = 0.5 * (box.cap_lo[j] + box.cap_hi[j]);
+  const double h = 0.5 * (box.cap_hi[j] - box.cap_lo[j]);
+  lo = box.hard_lo[j];
+  hi = box.hard_hi[j];
+  if (std::isfinite(c) && std::isfinite(h)) {
+    lo = std::max(box.hard_lo[j], std::min(c - s * h, box.hard_hi[j]));
+    hi = std::min(box.hard_hi[j], std::max(c + s * h, box.hard_lo[j]));
+  }
+}
+
+// The least s >= 1 (to a relative 1e-9) at which some velocity within the boxes widened s times
+// (widened) meets the row a x <= b; inf where the hard box cannot. Each row alone: over several
+// rows, the largest is a lower bound of what they need together.
+double least_widening(const JointBox& box, const Eigen::Ref<const Vector>& a, double b);
 
 }  // namespace sjt

@@ -11,6 +11,7 @@ NB_MODULE(_core, m) {
   sjt::register_boundary(m);
   sjt::register_controller(m);
   sjt::register_braking(m);
+  sjt::register_bounds(m);
   sjt::register_projection(m);
   sjt::register_method(m);
   sjt::register_lie(m);

@@ -8,6 +8,7 @@ namespace sjt {
 void register_boundary(nanobind::module_& m);
 void register_controller(nanobind::module_& m);
 void register_braking(nanobind::module_& m);
+void register_bounds(nanobind::module_& m);
 void register_projection(nanobind::module_& m);
 void register_method(nanobind::module_& m);
 void register_lie(nanobind::module_& m);
