@@ -111,9 +111,6 @@ class TaskStack:
         self.posture_dim = self.dim - self.target_dim
         bounds = np.cumsum([0, *self.dims])
         self.slices = [slice(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
-        #: each logarithmic error's first row and kind (6: log6, 3: log3; Task.log_rows)
-        self.log_blocks = [(s.start, t.log_rows) for t, s in zip(self.tasks, self.slices,
-                                                                 strict=True) if t.log_rows]
         #: the priority levels: (begin, end, identity, targets) rows of each, top first
         self.levels: list[tuple[int, int, bool, int]] = []
         #: each level's rows that are an error to report (every task's but a posture's: a

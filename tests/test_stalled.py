@@ -39,10 +39,9 @@ def test_an_arm_at_rest_short_of_a_target_out_of_reach_says_it_stalled(method, o
     info = solver.last
     assert info.error_norm > 1.0  # metres short of the target
     assert np.abs(info.dq).max() < 1e-6  # at rest
-    # why: no limit holds it, no escape: a minimum of the error (the stage holds the arm there
-    # where the method's step, on the CLIK rows, would leave it: task_scale 0)
+    # why: no limit holds it (the whole task, no bound), no escape: a minimum of the error
     assert info.stalled and not info.escaped
-    assert info.active_limits == ()
+    assert info.task_scale == 1.0 and info.active_limits == ()
 
 
 @pytest.mark.parametrize("method", ["sjt", "jt", "dls", "jp"])

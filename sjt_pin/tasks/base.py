@@ -80,10 +80,6 @@ class Task(ABC):
     #: whether the task is on a frame (a centre-of-mass or posture task is not: ``frame`` is
     #: then ``None``, and the task's key is its ``label``)
     has_frame: ClassVar[bool] = True
-    #: 6 where the error is a pose's ``log6(N)``, 3 an orientation's ``log3(N)`` (its exact
-    #: rows are then ``Jlog6(N^-1) J`` or ``Jlog3(N^-1) J``, which the compiled stage forms
-    #: itself to judge progress: see :meth:`error_jacobian`); 0 where ``J`` is exact
-    log_rows: ClassVar[int] = 0
 
     def __init__(self, frame: str | None = None, weight=None, priority: int | None = 0):
         if frame is not None and not isinstance(frame, str):

@@ -29,7 +29,6 @@ class OrientationTask(Task):
     """
 
     dim = 3
-    log_rows = 3
 
     def __init__(self, frame: str | None = None, weight=None, length: float | None = None,
                  priority: int | None = 0):

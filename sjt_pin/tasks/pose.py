@@ -94,7 +94,6 @@ class PoseTask(Task):
     """
 
     dim = 6
-    log_rows = 6
 
     def __init__(self, frame: str | None = None, weight=None, length: float | None = None,
                  priority: int | None = 0):

@@ -31,7 +31,6 @@ class RelativePoseTask(Task):
     """
 
     dim = 6
-    log_rows = 6
 
     def __init__(self, frame: str, reference: str, weight=None, name: str | None = None,
                  priority: int | None = 0):

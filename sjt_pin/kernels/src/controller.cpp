@@ -1,8 +1,6 @@
 // One CLIK step after the tasks (controller.hpp).
 #include "controller.hpp"
 
-#include "lie.hpp"
-
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -124,58 +122,6 @@ void Controller::set_gains(const Vector& gains_, bool auto_gain, double factor) 
   method.p.gain_factor = lower_.p.gain_factor = factor;
 }
 
-void Controller::set_log_blocks(const std::vector<std::pair<Index, int>>& blocks) {
-  for (const auto& [begin, kind] : blocks)
-    if ((kind != 3 && kind != 6) || begin < 0 || begin + kind > m)
-      fail("log_blocks: (begin, 3 or 6) pairs of rows within the stacked rows");
-  log_blocks_ = blocks;
-}
-
-// The first level's rows of the stage's model of the error: the exact rows -de/dq of each
-// logarithmic error (a pose's log6, an orientation's log3), G J with G = Jlog6(N^-1) or
-// Jlog3(N^-1) from the error itself, weighted as the rows; the others' rows as they are. The
-// CLIK rows J are the error's first order near the target only: far from it, with joints at
-// their ranges, the arm stopped where J^T e_w has no feasible descent while the error itself
-// still fell (UR10 0.657 from a pose it could come within 0.643 of, its first-order rate 0.56
-// |e_w|^2 per second). The method's step stays the method's (on J); the stage's judgement of
-// progress (sufficient_decrease: the rest, the fallback toward the steepest descent, the
-// measured curvature) uses these. Not under acceleration limits: each joint brakes there
-// toward the method's own displacement (or range_goal's, on J), and judged in other rows than
-// those the arm wandered about the two models' minima at 0.3 rad/s for good (UR5 and Panda
-// beyond reach, UR3 against two ranges). Into exact_; false where level 0 has no such block.
-bool Controller::exact_rows(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const Vector>& e) {
-  const Level& L0 = levels[0];
-  bool any = false;
-  for (const auto& [begin, kind] : log_blocks_) {
-    if (begin < L0.begin || begin + kind > L0.end) continue;
-    if (!any) {
-      exact_ = Jw_.middleRows(L0.begin, L0.end - L0.begin);
-      any = true;
-    }
-    // (W G W^-1 on the weighted rows J0 = W J, column by column: the weights are > 0)
-    const auto w = sqrt_weight.segment(begin, kind);
-    auto rows = exact_.middleRows(begin - L0.begin, kind);
-    if (kind == 6) {
-      Eigen::Matrix<double, 6, 6, Eigen::RowMajor> G;
-      jlog6_inverse(e.data() + begin, MatrixMap(G.data(), 6, 6));
-      G = w.asDiagonal() * G * w.cwiseInverse().asDiagonal();
-      for (Index j = 0; j < nv; ++j) {
-        const Eigen::Matrix<double, 6, 1> column = rows.col(j);
-        rows.col(j).noalias() = G * column;
-      }
-    } else {
-      Eigen::Matrix<double, 3, 3, Eigen::RowMajor> G;
-      jlog3_inverse(e.data() + begin, MatrixMap(G.data(), 3, 3));
-      G = w.asDiagonal() * G * w.cwiseInverse().asDiagonal();
-      for (Index j = 0; j < nv; ++j) {
-        const Eigen::Vector3d column = rows.col(j);
-        rows.col(j).noalias() = G * column;
-      }
-    }
-  }
-  return any;
-}
-
 void Controller::set_speed(const Vector& speed) {
   if (speed.size() != nv) fail("speed must have one entry per velocity coordinate");
   for (Index j = 0; j < nv; ++j)
@@ -266,10 +212,7 @@ void Controller::project(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<
       report.iterations += r.iterations;
       report.converged = report.converged && r.converged;
     }
-    // (in the error's exact rows where there are such, exact_rows)
-    if (exact_ready_)
-      sufficient_decrease(exact_, A, b, H, hd, desired_top.norm());
-    else sufficient_decrease(J0, A, b, H, hd, desired_top.norm());
+    sufficient_decrease(J0, A, b, H, hd, desired_top.norm());
   }
   if (!lower) {
     velocity = x0_;
@@ -785,7 +728,6 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
   const Level& L0 = levels[0];
   const Index r0 = L0.end - L0.begin;
   const auto J0 = Jw_.middleRows(L0.begin, r0);
-  exact_ready_ = !bounds.smooth && exact_rows(J, e);
   method.prepare(J0, ew_.segment(L0.begin, r0), gains.segment(L0.begin, r0), L0.targets, dt_, top);
   if (matrix) {
     map_matrix(J0, matrix, ff_in != nullptr);
@@ -962,9 +904,7 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
   }
   ddq = (velocity - dq) / dt_;
   dq = velocity;
-  // (trusted_share, next step: in the rows sufficient_decrease judges by)
-  if (exact_ready_) bent_.noalias() = exact_ * dq;
-  else bent_.noalias() = J0 * dq;
+  bent_.noalias() = J0 * dq;  // (trusted_share, next step)
   bent_ready_ = true;
   return status;
 }

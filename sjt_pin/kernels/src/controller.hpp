@@ -55,9 +55,6 @@ class Controller {
   double dt() const { return dt_; }
   void set_gains(const Vector& gains, bool auto_gain, double factor);
   void set_speed(const Vector& speed);
-  // the first rows of each logarithmic error's block (begin, 6: a pose's log6, 3: an
-  // orientation's log3): the stage's model of the error uses their exact rows (exact_rows)
-  void set_log_blocks(const std::vector<std::pair<Index, int>>& blocks);
   void reset();
 
   // -- parameters
@@ -130,7 +127,6 @@ class Controller {
                            const Eigen::Ref<const RowMatrix>& H,
                            const Eigen::Ref<const Vector>& hd, double ball);
   void cauchy_point(const Eigen::Ref<const RowMatrix>& J0, double ball);
-  bool exact_rows(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const Vector>& e);
   double trusted_share(const Eigen::Ref<const RowMatrix>& J0, double along, double jj,
                        double xx);
   bool range_goal(const Eigen::Ref<const RowMatrix>& J0, const double* q, double K, bool user,
@@ -179,11 +175,7 @@ class Controller {
   Vector low_p_, low_h_, low_r_, low_d_, low_dh_, low_dinv_, low_c_, anchor_;
   // lower_goal: the top level's displacement, the lower levels' one asked, its box and result
   Vector lgoal_base_, lgoal_target_, lgoal_lo_, lgoal_hi_, lgoal_;
-  // exact_rows: the logarithmic errors' blocks, and level 0's exact rows where it has one
-  std::vector<std::pair<Index, int>> log_blocks_;
-  RowMatrix exact_;
-  bool exact_ready_ = false;
-  // trusted_share: X0 dq (exact_rows) at the end of the last step (its curvature, measured at this one),
+  // trusted_share: J0 dq at the end of the last step (its curvature, measured at this one),
   // whether there is one, and whether this step's first level was projected
   Vector bent_, bent_now_;
   bool bent_ready_ = false, projected_ = false;

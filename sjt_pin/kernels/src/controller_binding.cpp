@@ -2,7 +2,6 @@
 // parameters (MethodParameters) and its state and results as named numpy views.
 #include <nanobind/eigen/dense.h>
 #include <nanobind/ndarray.h>
-#include <nanobind/stl/pair.h>
 #include <nanobind/stl/tuple.h>
 #include <nanobind/stl/vector.h>
 
@@ -155,9 +154,6 @@ void register_controller(nb::module_& m) {
       .def("set_gains", &Controller::set_gains, nb::arg("gains"), nb::arg("auto_gain"),
            nb::arg("factor"))
       .def("set_speed", &Controller::set_speed, nb::arg("speed"))
-      .def("set_log_blocks", &Controller::set_log_blocks, nb::arg("blocks"),
-           "set_log_blocks([(begin, 6 or 3), ...]): the rows of each pose (log6) and orientation "
-           "(log3) error, whose exact rows the stage's model of the error uses")
       .def("reset", &Controller::reset)
       .def_prop_ro("dt", &Controller::dt)
       .def_prop_ro("dq", [](Controller& c) { return view<WriteView>(c, c.dq.data(), c.nv); },

@@ -3,7 +3,7 @@
 // target (the set-point search's model on its general path, Task.error_jacobian).
 #include <cmath>
 
-#include "lie.hpp"
+#include "array.hpp"
 #include "registry.hpp"
 
 namespace sjt {
@@ -46,27 +46,18 @@ Coupling coupling(double t) {
   return c;
 }
 
-// A = Jlog3(-w) = I - W/2 + k W^2, k = 1/t^2 - cot(t/2)/(2t), t = |w|, W = [w]x
-Matrix3 jlog3_of(const Vector3& w) {
-  const Matrix3 W = skew(w);
-  const double t = w.norm();
-  const double k = t < 1e-2 ? 1.0 / 12 + t * t / 720 + t * t * t * t / 30240
-                            : 1.0 / (t * t) - 1.0 / (2.0 * t * std::tan(0.5 * t));
-  return Matrix3::Identity() - 0.5 * W + k * (W * W);
-}
-
-}  // namespace
-
 // G = Jlog6(N^-1) (6 x 6, [linear; angular]) from xi = (v, w) = log6(N):
-// [[A, -A Q(v, w) A], [0, A]] with A = Jlog3(-w) (jlog3_of), and Q the coupling block of
-// SE(3)'s left Jacobian at (v, w).
+// [[A, -A Q(v, w) A], [0, A]] with A = Jlog3(-w) = I - W/2 + k W^2, k = 1/t^2 - cot(t/2)/(2t),
+// and Q the coupling block of SE(3)'s left Jacobian at (v, w).
 void jlog6_inverse(const double* xi, MatrixMap G) {
   Vector3 v(xi[0], xi[1], xi[2]), w(xi[3], xi[4], xi[5]);
   Matrix3 V = skew(v), W = skew(w);
   double t = w.norm();
+  double k = t < 1e-2 ? 1.0 / 12 + t * t / 720 + t * t * t * t / 30240
+                      : 1.0 / (t * t) - 1.0 / (2.0 * t * std::tan(0.5 * t));
   Coupling c = coupling(t);
-  Matrix3 WV = W * V, VW = V * W, WVW = WV * W;
-  Matrix3 A = jlog3_of(w);
+  Matrix3 WW = W * W, WV = W * V, VW = V * W, WVW = WV * W;
+  Matrix3 A = Matrix3::Identity() - 0.5 * W + k * WW;
   Matrix3 Q = 0.5 * V + c.c1 * (WV + VW + WVW) + 3.0 * c.c2 * WVW - c.c2 * (W * WV) -
               c.c2 * (VW * W) - c.c3 * (WVW * W) - c.c3 * (W * WVW);
   G.topLeftCorner<3, 3>() = A;
@@ -75,7 +66,7 @@ void jlog6_inverse(const double* xi, MatrixMap G) {
   G.bottomLeftCorner<3, 3>().setZero();
 }
 
-void jlog3_inverse(const double* w, MatrixMap A) { A = jlog3_of(Vector3(w[0], w[1], w[2])); }
+}  // namespace
 
 void register_lie(nb::module_& m) {
   m.def(
