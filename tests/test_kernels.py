@@ -206,8 +206,8 @@ def test_the_search_step_is_the_damped_formula(m, n, posture, scaled):
 def _least_value(cap_lo, cap_hi, hard_lo, hard_hi, a, s):
     """min a x over the acceleration/jerk box widened s times about its centre, within the hard
     box (numpy, as the stage widens it)."""
-    c, h = 0.5 * (cap_lo + cap_hi), 0.5 * (cap_hi - cap_lo)
     with np.errstate(invalid="ignore", over="ignore"):
+        c, h = 0.5 * (cap_lo + cap_hi), 0.5 * (cap_hi - cap_lo)
         lo = np.maximum(hard_lo, np.minimum(c - s * h, hard_hi))
         hi = np.minimum(hard_hi, np.maximum(c + s * h, hard_lo))
         finite = np.isfinite(c) & np.isfinite(h)
@@ -224,11 +224,13 @@ def test_least_widening_is_the_least_factor_that_meets_the_row(n, seed):
     row's least value there is at most b, and just below s it is above b."""
     rng = np.random.default_rng(seed)
     centre, half = rng.normal(size=n), rng.uniform(0.0, 1.0, n)
+    half[rng.random(n) < 0.15] = 0.0  # (a box of zero width: no widening moves it)
     cap_lo, cap_hi = centre - half, centre + half
     hard_lo, hard_hi = -rng.uniform(1.0, 20.0, n), rng.uniform(1.0, 20.0, n)
     hard_lo[rng.random(n) < 0.2] = -np.inf
     hard_hi[rng.random(n) < 0.2] = np.inf
-    cap_lo[rng.random(n) < 0.1] = -np.inf  # (a joint without acceleration limits)
+    cap_lo[rng.random(n) < 0.1] = -np.inf  # (joints without acceleration limits)
+    cap_hi[rng.random(n) < 0.1] = np.inf
     a = rng.normal(size=n) * (rng.random(n) < 0.8)
     at_one = _least_value(cap_lo, cap_hi, hard_lo, hard_hi, a, 1.0)
     widest = _least_value(cap_lo, cap_hi, hard_lo, hard_hi, a, 1e300)
@@ -242,3 +244,11 @@ def test_least_widening_is_the_least_factor_that_meets_the_row(n, seed):
             assert 1.0 <= s < np.inf
             assert _least_value(cap_lo, cap_hi, hard_lo, hard_hi, a, s) <= b
             assert _least_value(cap_lo, cap_hi, hard_lo, hard_hi, a, s * (1 - 2e-9)) > b
+
+
+def test_least_widening_refuses_boxes_inside_out():
+    one, two = np.ones(2), 2 * np.ones(2)
+    with pytest.raises(ValueError, match="lo <= hi"):
+        K.least_widening(two, one, -two, two, one, 0.0)
+    with pytest.raises(ValueError, match="lo <= hi"):
+        K.least_widening(-one, one, two, -two, one, 0.0)

@@ -264,7 +264,8 @@ def test_the_smoothness_limits_yield_only_as_far_as_the_rows_need(panda, need):
     """A cap that asks joint 2 to slow by ``need`` times its acceleration limit in one period,
     while the task drives every joint at its acceleration limit: the row holds, the step that
     yields names the joints, and no joint accelerates by more than the cap needs (the box widened
-    around its centre, bisected between rounds: 1 % of the need, not the next power of two)."""
+    around its centre by the least factor the row needs, to 0.1 %: the factor one row needs
+    alone is found first, before any bisection)."""
     accel = np.full(panda.nv, 10.0)
     cap = JointCap(panda.nv, 1)
     solver = sjt.make_solver("dls", panda, dt=DT, acceleration_limits=accel, limits=[cap])
@@ -283,7 +284,7 @@ def test_the_smoothness_limits_yield_only_as_far_as_the_rows_need(panda, need):
     assert solver.last.limit_conflicts
     ratio = np.abs(after - before) / (accel * DT)
     assert ratio[1] >= need * (1 - 1e-9)
-    assert ratio.max() <= need * 1.01 + 1e-9, ratio
+    assert ratio.max() <= need * 1.0011 + 1e-9, ratio
 
 
 class SpeedRows(Limit):

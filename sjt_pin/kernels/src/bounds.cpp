@@ -242,13 +242,17 @@ void register_bounds(nb::module_& m) {
           *into[i] = bound.vector();
         }
         if (std::isnan(b)) fail("least_widening: b is NaN");
+        for (Index j = 0; j < n; ++j)
+          if (box.cap_lo[j] > box.cap_hi[j] || box.hard_lo[j] > box.hard_hi[j])
+            fail("least_widening: each box needs lo <= hi (cap_lo, cap_hi; hard_lo, hard_hi)");
         return least_widening(box, row.vector(), b);
       },
       nb::arg("cap_lo").none(), nb::arg("cap_hi").none(), nb::arg("hard_lo").none(),
       nb::arg("hard_hi").none(), nb::arg("a").none(), nb::arg("b"),
       "least_widening(cap_lo, cap_hi, hard_lo, hard_hi, a, b) -> float: the least s >= 1 at "
       "which some velocity within the acceleration/jerk box [cap_lo, cap_hi] widened s times "
-      "about its centre, within the hard box [hard_lo, hard_hi], meets a x <= b (inf: none).");
+      "about its centre, within the hard box [hard_lo, hard_hi], meets a x <= b (inf: no widening "
+      "does).");
 }
 
 }  // namespace sjt

@@ -99,8 +99,9 @@ inline void widened(const JointBox& box, Index j, double s, double& lo, double& 
 }
 
 // The least s >= 1 (to a relative 1e-9) at which some velocity within the boxes widened s times
-// (widened) meets the row a x <= b; inf where the hard box cannot. Each row alone: over several
-// rows, the largest is a lower bound of what they need together.
+// (widened) meets the row a x <= b; inf where no widening does (the hard box cannot, or a
+// joint the row needs has a box of zero width). Each row alone: over several rows, the largest
+// is a lower bound of what they need together.
 double least_widening(const JointBox& box, const Eigen::Ref<const Vector>& a, double b);
 
 }  // namespace sjt

@@ -54,8 +54,10 @@ constexpr double kTrust = 0.5;
 // 0.5, 3 with 2 (the two left converging slowly along a shallow valley, the error falling)
 constexpr double kGoalFloor = 1e-6;
 constexpr double kGoalDamping = 0.5;
-// yield_smoothness: the factor tried first, above the least one each row needs alone
+// yield_smoothness: the factor tried first, above the least one each row needs alone; beyond
+// the largest factor the hard box alone is taken (2 4^23, as far as the widening ever went)
 constexpr double kWideningSlack = 1e-3;
+constexpr double kWideningMost = 2.0 * 70368744177664.0;
 
 }  // namespace
 
@@ -340,7 +342,9 @@ bool Controller::held_kept(const Vector& x) {
 // limits (the decision no longer turns on whether that decrease rounds to 0 or to 1e-16 of
 // |a|^2, which gave the same motion in mm and in m different steps). A Cauchy point that
 // breaks a row or lets a held row go is not taken (the projection's own rows stand), nor is
-// one where the box does not hold 0 (a joint returning into its range). Before that, an x0_
+// one where the box does not hold 0 (a joint returning into its range). The Cauchy point is
+// cut by the measured curvature as a projected step is (trusted_share), and the decrease the
+// stall rule judges is the cut point's. Before that, an x0_
 // that lowers the model by less than a resting arm does (kRestRate) gives way to rest; H, hd:
 // the held rows and their motion, which the rest keeps.
 void Controller::sufficient_decrease(const Eigen::Ref<const RowMatrix>& J0,
@@ -630,7 +634,7 @@ void Controller::yield_smoothness(const Eigen::Ref<const RowMatrix>& A,
   double need = 1.0;
   for (Index i = 0; i < A.rows(); ++i)
     need = std::max(need, least_widening(box, A.row(i).transpose(), b[i]));
-  if (std::isinf(need)) {  // (a row the hard box cannot meet)
+  if (!(need <= kWideningMost)) {  // (no widening meets a row, or none short of the hard box)
     project(A, b, box.hard_lo, box.hard_hi, true);
     return;
   }
@@ -638,7 +642,7 @@ void Controller::yield_smoothness(const Eigen::Ref<const RowMatrix>& A,
   if (rows_hold_within(need * (1.0 + kWideningSlack), A, b)) return;
   double low = need * (1.0 + kWideningSlack), high = 2.0 * low;
   bool found = false;
-  for (int k = 0; k < 24 && !found; ++k) {
+  for (int k = 0; k < 24 && !found && high <= kWideningMost; ++k) {
     found = rows_hold_within(high, A, b);
     if (!found) {
       low = high;
