@@ -13,7 +13,7 @@ void register_projection(nanobind::module_& m);
 void register_method(nanobind::module_& m);
 void register_lie(nanobind::module_& m);
 void register_transforms(nanobind::module_& m);
-void register_search(nanobind::module_& m);
+void register_search(nanobind::module_& m);  // search_binding.cpp
 void register_search_pose(nanobind::module_& m);
 void register_symmetric_eigen(nanobind::module_& m);
 // the collision limit's kernels (sjt_pin/limits/collision.py)

@@ -1,7 +1,8 @@
 // The set-point search of solve() (sjt_pin/ik.py): Levenberg-Marquardt iterations on SJT's
 // normalised columns within the joint limits, its parameters and state named fields of one
-// object per search. search.cpp runs an iteration; search_pose.cpp runs every iteration of a
-// start on one pose task in one call, and the restart table's starts.
+// object per search. search.cpp runs an iteration (search_binding.cpp: its Python side);
+// search_pose.cpp runs every iteration of a start on one pose task in one call, and the restart
+// table's starts.
 #pragma once
 
 #include <Eigen/Cholesky>
