@@ -145,6 +145,7 @@ class Controller {
   void cauchy_point(const Eigen::Ref<const RowMatrix>& J0, double ball);
   double trusted_share(const Eigen::Ref<const RowMatrix>& J0, double along, double jj,
                        double xx);
+  double measured_bend(const Eigen::Ref<const RowMatrix>& J0);
   bool range_goal(const Eigen::Ref<const RowMatrix>& J0, const double* q, double K, bool user,
                   const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b,
                   const double* room);
