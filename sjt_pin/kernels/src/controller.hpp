@@ -204,6 +204,7 @@ class Controller {
   Vector wide_lo_, wide_hi_, delta_, aim_, bk_;
   Vector held_, held_res_;  // hold_rows: the held rows' motion, their residual
   // range_goal: the least-squares displacement (its Gram matrix and factor), its box, result
+  RowMatrix goal_model_;  // J0 and the measured curvature's row
   Eigen::MatrixXd goal_gram_;
   Eigen::LLT<Eigen::MatrixXd> goal_llt_;
   Vector goal_xb_, goal_lam_, goal_lo_, goal_hi_, goal_, goal_y_, goal_e_, goal_d_, goal_room_,
