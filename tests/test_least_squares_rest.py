@@ -236,8 +236,9 @@ def test_the_bounded_displacement_rests_where_the_error_bends_more_than_its_mode
     least-squares displacement (Gauss-Newton, J^T J) passed the constrained minimum along the
     free joints, whose error bends about 2.3 times as much as the model says, and the next
     step's came back: every method flipped the shoulder-pan and wrist-1 joints every step at
-    1e-3 rad/s for good (a held-out survey's run). Damped by the curvature the last step
-    measured, each rests there, at the error's constrained minimum, within 3 s."""
+    1e-3 rad/s for good (a held-out survey's run). With the curvature the last step measured
+    along its own motion in the displacement's model, each rests there, at the error's
+    constrained minimum, within 3 s."""
     robot = sjt.Robot.from_example("ur10_limited")
     q0 = np.array([1.052134154603551, 1.0389815965005873, -3.14159265359, 3.14159265359,
                    0.4069966469478188, -0.19869091645815784])

@@ -317,7 +317,7 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
   }
   ddq = (velocity - dq) / dt_;
   dq = velocity;
-  bent_.noalias() = J0 * dq;  // (trusted_share, next step)
+  bent_.noalias() = J0 * dq;  // (measured_bend, next step)
   bent_ready_ = true;
   return status;
 }

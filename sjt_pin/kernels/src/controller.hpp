@@ -95,7 +95,7 @@ class Controller {
   std::vector<int> rows_active;
   ProjectionReport report;
   bool kept = true;
-  // the last step's J0 dq and whether there is one (trusted_share): state copies carry
+  // the last step's J0 dq and whether there is one (measured_bend): state copies carry
   std::tuple<bool, Vector> curvature_memory() const { return {bent_ready_, bent_}; }
   void set_curvature_memory(bool ready, const Vector& bent) {
     bent_ready_ = ready;
@@ -192,7 +192,7 @@ class Controller {
   Vector low_p_, low_h_, low_r_, low_d_, low_dh_, low_dinv_, low_c_, anchor_;
   // lower_goal: the top level's displacement, the lower levels' one asked, its box and result
   Vector lgoal_base_, lgoal_target_, lgoal_lo_, lgoal_hi_, lgoal_;
-  // trusted_share: J0 dq at the end of the last step (its curvature, measured at this one),
+  // measured_bend: J0 dq at the end of the last step (its curvature, measured at this one),
   // whether there is one, and whether this step's first level was projected
   Vector bent_, bent_now_;
   bool bent_ready_ = false, projected_ = false;

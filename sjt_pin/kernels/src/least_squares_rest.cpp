@@ -227,9 +227,10 @@ bool Controller::range_goal(const Eigen::Ref<const RowMatrix>& J0, const double*
                     std::max(J0.squaredNorm() / static_cast<double>(nv), 1e-300);
   // the curvature the last step measured along its own velocity u, as a row sqrt(bend) u^T / |u|
   // with no error of its own: the model's curvature along u is then the error's (a secant
-  // update of the Gauss-Newton model along the last step). Not where a row's room bounds the
-  // displacement: Panda driven fast past a ball (DLS, acceleration and jerk limits) came within
-  // 9.25 mm of its 10 mm margin with it (tests/test_collision_braking.py holds it to 9.9 mm)
+  // update of the Gauss-Newton model along the last step). Not where a limit gives rows with
+  // room (a collision limit's pairs within range): Panda driven fast past a ball (DLS,
+  // acceleration and jerk limits) came within 9.25 mm of its 10 mm margin with it
+  // (tests/test_collision_braking.py holds it to 9.9 mm)
   const double bend = k > 0 ? 0.0 : measured_bend(J0);
   const Index extra = bend > 0.0 ? 1 : 0;
   goal_model_.resize(r0 + extra, nv);
