@@ -1,25 +1,32 @@
 """The ``sjt-pin`` command: ``demo``, ``reproduce`` (the paper's simulations), ``bench``,
 ``robots`` (the names ``Robot.from_example`` takes).
 
-Every argument is checked while the command line is parsed, before any work: numbers by their
-``type=`` (:func:`positive_int`, :func:`non_negative_float`), output paths by
-:func:`output_file` and :func:`output_folder`, which try to write there. A bad argument is one
-line on stderr (``sjt-pin demo: error: ...``) and exit code 2, never a traceback.
+Every argument is checked while the command line is parsed, before any work, by its ``type=``
+(:mod:`sjt_pin.cli_arguments`: numbers by their value, output paths by trying to write there). A
+bad argument is one line on stderr (``sjt-pin demo: error: ...``) and exit code 2, never a
+traceback. Each command's work is imported when it runs (``bench``'s from
+:mod:`sjt_pin.bench.command`).
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
-import math
-import os
 import sys
-import tempfile
 import time
 import webbrowser
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 
+from .cli_arguments import (
+    Parser,
+    _grid_step,
+    at_least,
+    non_negative_float,
+    output_file,
+    output_folder,
+    positive_int,
+)
 from .exceptions import FrameNotFound
 from .paper import scenarios
 from .solvers import SOLVERS, make_solver
@@ -149,282 +156,12 @@ def robots(args: argparse.Namespace) -> int:
     return 0
 
 
-def _write_json(path: str | None, payload) -> None:
-    if path:
-        import json
-
-        with open(path, "w") as f:
-            json.dump(payload, f, indent=1, default=float)
-        print(f"wrote {path}")
-
-
 def bench(args: argparse.Namespace) -> int:
     """``sjt-pin bench speed|accuracy|reach|ik|collision``: the tables of the documentation's
-    Benchmarks page (docs/benchmarks.md)."""
-    from dataclasses import asdict
+    Benchmarks page (docs/benchmarks.md); :func:`sjt_pin.bench.command.bench`."""
+    from .bench.command import bench as run
 
-    from .bench import speed as speed_bench
-
-    machine = speed_bench.machine()
-    print(f"{machine.get('cpu') or machine['machine']}; Python {machine['python']}, "
-          f"Pinocchio {machine['pinocchio']}, NumPy {machine['numpy']}", flush=True)
-    if args.kind == "speed":
-        def show(row):
-            print(f"  {row.robot:6s} {row.path:44s} {row.step.median:7.2f} us  "
-                  f"{row.ratio:5.2f} x floor  p90/median {row.step.jitter:4.2f}", flush=True)
-
-        cold = speed_bench.cold_start("ur5", peers=args.peers)
-        print("Cold start, fresh process (s): " + ", ".join(f"{k} {v:.3f}"
-                                                          for k, v in cold.items()), flush=True)
-        report = speed_bench.speed(steps=args.steps, peers=args.peers, progress=show)
-        print(speed_bench.speed_table(report))
-        for robot, ratio in sorted(speed_bench.peer_ratios(report).items()):
-            print(f"pink / SJT with a target velocity on {robot}: {ratio:.1f}x")
-        _write_json(args.json, report.to_dict() | {"cold_start": cold})
-    elif args.kind == "collision":
-        from .bench import collision, collision_peers
-
-        peer = None if args.no_peers else collision_peers.pink_scene
-        rows = collision.collision(peer=peer, progress=lambda r: print(
-            f"  {r.scene}, {r.method}, limit {'on' if r.limit else 'off'}", flush=True))
-        print("\nCollision avoidance (margin 10 mm; distances checked with coal on the meshes):\n"
-              + collision.collision_table(rows))
-        plain, idle = collision.idle()
-        print(f"\nSJT on Panda, self-collision, nothing within influence: {idle:.1f} us/step "
-              f"against {plain:.1f} without the limit ({idle / plain:.1f}x)")
-        crowd = collision.crowded()
-        print(f"SJT on Panda passing the ball among 19 more obstacles, self-collision "
-              f"({crowd.pairs} pairs): "
-              f"{crowd.median_us:.1f} us/step median (p99 {crowd.p99_us:.1f}) against "
-              f"{crowd.plain_us:.1f} without the limit ({crowd.median_us / crowd.plain_us:.1f}x), "
-              f"closest {crowd.min_distance * 1e3:.1f} mm")
-        from .bench import collision_stream
-
-        stream = collision_stream.stream()
-        print("\nxArm7 with self-collision beside 10 rad/s^2 and 5,000 rad/s^3, targets jumping "
-              "every 0.5 s:\n" + collision_stream.stream_table(stream))
-        from .bench import collision_mesh, collision_mink, collision_moving, collision_peers
-
-        moving = collision_moving.moving()
-        mesh = [collision_mesh.pull(convex) for convex in (True, False)]
-        if not args.no_peers:  # (pink's and mink's rows, where they are installed)
-            def said(row):
-                print(f"  {row.method}, {row.robot}, ball {row.speed:g} m/s, {row.rate:g} Hz",
-                      flush=True)
-
-            moving += collision_peers.pink_moving(progress=said)
-            moving += collision_mink.mink_moving(progress=said)
-            mesh += collision_peers.pink_mesh() + collision_mink.mink_mesh()
-        print("\nA 5 cm ball driven at the hand (margin 10 mm; distances on the meshes):\n"
-              + collision_moving.moving_table(moving))
-        print("\nPanda's hand pulled over a plate of bumps (a mesh) with Franka-like limits:\n"
-              + collision_mesh.mesh_table(mesh))
-        from .bench import collision_blocked
-
-        blocked = collision_blocked.blocked(progress=lambda r: print(
-            f"  blocked: {r.robot}, seed {r.seed}, {r.method}, jerk limit "
-            f"{collision.dash(r.jerk, '.0f')}", flush=True))
-        print("\nTargets behind an obstacle, 15 rad/s^2 (and 7,500 rad/s^3), 8 s:\n"
-              + collision_blocked.blocked_table(blocked))
-        _write_json(args.json, {"machine": machine, "rows": [asdict(r) for r in rows],
-                                "idle_us": {"plain": plain, "limit": idle},
-                                "crowded": asdict(crowd),
-                                "stream": [asdict(r) for r in stream],
-                                "moving": [asdict(r) for r in moving],
-                                "mesh": [asdict(r) for r in mesh],
-                                "blocked": [asdict(r) for r in blocked]})
-    elif args.kind == "accuracy":
-        from .bench import accuracy
-
-        def show(row):
-            what = getattr(row, "path", None) or getattr(row, "saddle", None) or row.robot
-            print(f"  {what}, {row.variant}, dt = {1e3 * row.dt:g} ms", flush=True)
-
-        tracking = accuracy.tracking(progress=show)
-        rest = accuracy.rest(progress=show)
-        saddles = accuracy.saddles(progress=show)
-        units = accuracy.units(progress=show)
-        print("\nMax task error (m and rad) along the paths:\n" + accuracy.tracking_table(tracking))
-        print("\nRMS joint speed (rad/s) over the last second at a target 0.3 m beyond reach:\n"
-              + accuracy.rest_table(rest))
-        print("\nSteps to 1 % of the start error from an exact saddle (peak joint speed / URDF "
-              "limit):\n" + accuracy.saddle_table(saddles))
-        print("\nThe same runs in mm and in m (URDF and paths x 1000): max |q_mm - q_m| (rad) "
-              "(max position error mm/1000 over m, max orientation error mm over m):\n"
-              + accuracy.unit_table(units))
-        from .bench import limits
-
-        def shown(row):
-            print(f"  {row.path}, {row.method}", flush=True)
-
-        saturating = limits.saturating(progress=shown)
-        franka = limits.franka(progress=shown)
-        print("\nOne joint saturates (TIAGo's torso lift, 0.07 m/s), every limit on:\n"
-              + limits.saturating_table(saturating))
-        print("\nTargets jumping every 0.5 s for 20 s, then one held 8 s, at 1 kHz: Panda with "
-              "Franka's acceleration and jerk limits, three more arms with limits of their "
-              "class:\n" + limits.franka_table(franka))
-        from .bench import whole_body
-
-        posture = whole_body.posture_rows(progress=lambda r: print(
-            f"  {r.robot}, {r.method}, posture", flush=True))
-        body = whole_body.whole_body_rows(peers=not args.no_peers, progress=lambda r: print(
-            f"  TALOS, {r.solver}", flush=True))
-        print("\nPosture at the lowest level: max error on an 8 cm pose circle (m and rad), and "
-              "the joints' drift over 60 s of a periodic circle (rad):\n"
-              + whole_body.posture_table(posture))
-        print("\nTALOS reaching with both hands over its held soles, beside pink's weighted "
-              "solution of the same tasks:\n" + whole_body.whole_body_table(body))
-        _write_json(args.json, {"machine": machine,
-                                "tracking": [asdict(r) for r in tracking],
-                                "rest": [asdict(r) for r in rest],
-                                "saddles": [asdict(r) for r in saddles],
-                                "units": [asdict(r) for r in units],
-                                "saturating": [asdict(r) for r in saturating],
-                                "franka": [asdict(r) for r in franka],
-                                "posture": [asdict(r) for r in posture],
-                                "whole_body": [asdict(r) for r in body]})
-    elif args.kind == "reach":
-        from .bench import reach
-
-        def told(row):
-            print(f"  {row.robot}, {getattr(row, 'method', 'SJT')}", flush=True)
-
-        random_rows = reach.random_reaches(pairs=args.pairs, peers=not args.no_peers,
-                                           progress=told)
-        print(f"\nRandom full-range reaches ({args.pairs} pairs a robot, 5 s at 1 kHz):\n"
-              + reach.reach_table(random_rows))
-        jerk_rows = reach.jerk_grid(trials=args.trials, progress=told)
-        print("\nThe jerk grid (SJT; at rest on the target, beside Ruckig's time-optimal "
-              "duration):\n" + reach.jerk_table(jerk_rows))
-        _write_json(args.json, {"machine": machine,
-                                "random": [asdict(r) for r in random_rows],
-                                "jerk": [asdict(r) for r in jerk_rows]})
-    else:
-        from .bench.ik import ik_benchmark, ik_table, many_line, many_throughput
-
-        rows = ik_benchmark(poses=args.poses, peers=not args.no_peers,
-                            progress=lambda r: print(f"  {r.robot} {r.method}: "
-                                                     f"{100 * r.success:.1f} %", flush=True))
-        print(ik_table(rows))
-        many = [many_throughput(name, poses=20 * args.poses) for name in ("ur5", "panda")]
-        for m in many:
-            print(many_line(m), flush=True)
-        from .bench.random_robots import random_robots, random_table
-
-        random_rows = random_robots()
-        print("\nsolve() with defaults on 200 seeded random robots (1-40 joints, every joint "
-              "type), 5 poses each:\n" + random_table(random_rows))
-        _write_json(args.json, {"machine": machine, "rows": [asdict(r) for r in rows],
-                                "solve_many": [asdict(m) for m in many],
-                                "random_robots": [asdict(r) for r in random_rows]})
-    return 0
-
-
-class Parser(argparse.ArgumentParser):
-    """An argument parser whose errors are one line (``prog: error: message``), exit code 2."""
-
-    def error(self, message: str):
-        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
-
-
-def positive_int(text: str) -> int:
-    """``type=`` for counts: an integer >= 1."""
-    return _integer_at_least(text, 1, "a positive integer")
-
-
-def _integer_at_least(text: str, low: int, what: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
-    if value < low:
-        raise argparse.ArgumentTypeError(f"expected {what}, got {value}")
-    return value
-
-
-def at_least(low: int) -> Callable[[str], int]:
-    """``type=`` for counts of at least ``low``."""
-    def parse(text: str) -> int:
-        return _integer_at_least(text, low, f"an integer >= {low}")
-
-    parse.__name__ = f"integer >= {low}"
-    return parse
-
-
-def non_negative_float(text: str) -> float:
-    """``type=`` for durations: a finite number >= 0."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number >= 0, got {text!r}") from None
-    if not math.isfinite(value) or value < 0:
-        raise argparse.ArgumentTypeError(f"expected a finite number >= 0, got {text}")
-    return value
-
-
-def _can_write_in(folder: Path) -> None:
-    """Raise ArgumentTypeError unless a file can be created in the existing ``folder``."""
-    try:
-        with tempfile.TemporaryFile(dir=folder):
-            pass
-    except OSError as error:
-        raise argparse.ArgumentTypeError(
-            f"cannot write in {str(folder)!r}: {error.strerror or error}") from None
-
-
-def _existing_ancestor(path: Path) -> Path:
-    """The nearest of ``path``'s parents that exists; it must be a folder."""
-    for parent in path.absolute().parents:
-        if parent.exists():
-            if not parent.is_dir():
-                raise argparse.ArgumentTypeError(f"{str(parent)!r} is a file, not a folder")
-            return parent
-    return Path(path.absolute().anchor)
-
-
-def output_file(parents: bool) -> Callable[[str], Path]:
-    """``type=`` for a file to write: not '', not a folder, in a folder where one can write.
-
-    With ``parents``, missing folders on the way are fine (the command creates them); without,
-    the file's folder must exist. An existing file must be writable (it is not changed here).
-    """
-    def parse(text: str) -> Path:
-        if not text.strip():
-            raise argparse.ArgumentTypeError("expected a file path, got ''")
-        path = Path(text).expanduser()
-        if path.is_dir():
-            raise argparse.ArgumentTypeError(f"{text!r} is a folder; give a file path")
-        if path.exists():
-            if not os.access(path, os.W_OK):
-                raise argparse.ArgumentTypeError(f"cannot write {text!r}: permission denied")
-            folder = path.absolute().parent
-        elif parents:
-            folder = _existing_ancestor(path)
-        else:
-            folder = path.absolute().parent
-            if not folder.is_dir():
-                what = "is a file" if folder.exists() else "does not exist"
-                raise argparse.ArgumentTypeError(f"the folder of {text!r} {what}")
-        _can_write_in(folder)
-        return path
-
-    parse.__name__ = "output file"
-    return parse
-
-
-def output_folder(text: str) -> Path:
-    """``type=`` for a folder to write into: not '', not a file; it may not exist yet."""
-    if not text.strip():
-        raise argparse.ArgumentTypeError("expected a folder path, got ''")
-    path = Path(text).expanduser()
-    if path.exists() and not path.is_dir():
-        raise argparse.ArgumentTypeError(f"{text!r} is a file, not a folder")
-    _can_write_in(path if path.is_dir() else _existing_ancestor(path))
-    return path
-
-
-output_folder.__name__ = "output folder"
+    return run(args)
 
 
 def reach(args: argparse.Namespace) -> int:
@@ -439,17 +176,6 @@ def reach(args: argparse.Namespace) -> int:
         print(f"sjt-pin reach: error: {exc}", file=sys.stderr)
         return 2
     return 0
-
-
-def _grid_step(text: str) -> float:
-    """``type=`` for reach's grid spacing: a finite number of metres > 0."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a length in m > 0, got {text!r}") from None
-    if not math.isfinite(value) or value <= 0:
-        raise argparse.ArgumentTypeError(f"expected a length in m > 0, got {text}")
-    return value
 
 
 def _reach_parser(sub) -> None:
