@@ -125,6 +125,7 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
   // 1. the weighted rows of the moving joints
   Jw_.noalias() = sqrt_weight.asDiagonal() * J * moving.asDiagonal();
   ew_ = sqrt_weight.cwiseProduct(e);
+  bend_ = -1.0;
   // |e|^2 of the target rows, summed in order (as the logs' norms are)
   e_sq = 0.0;
   for (const Level& l : levels)

@@ -196,6 +196,7 @@ class Controller {
   // whether there is one, and whether this step's first level was projected
   Vector bent_, bent_now_;
   bool bent_ready_ = false, projected_ = false;
+  double bend_ = -1.0;  // this step's measured_bend (-1: not measured yet)
   bool lower_replaced_ = false;  // lower_goal replaced the lower levels' feedback this step
   Vector method_desired_;        // the method's velocity before it (StepInfo compares with it)
   Eigen::MatrixXd low_gram_;

@@ -170,13 +170,16 @@ double Controller::trusted_share(const Eigen::Ref<const RowMatrix>& J0, double a
 // the last step's velocity u, -e_w . d2x(u, u) / |u|^2, measured as (J0 - J0_last) u = d2x(u, u)
 // dt; 0 where there is no last step or the term lowers the error.
 double Controller::measured_bend(const Eigen::Ref<const RowMatrix>& J0) {
-  if (!bent_ready_) return 0.0;
+  if (bend_ >= 0.0) return bend_;  // (measured once a step: run resets it)
+  bend_ = 0.0;
+  if (!bent_ready_) return bend_;
   const double uu = dq.squaredNorm();
-  if (!(uu > 0.0) || bent_.size() != J0.rows()) return 0.0;
+  if (!(uu > 0.0) || bent_.size() != J0.rows()) return bend_;
   bent_now_.noalias() = J0 * dq;
   const double bend =
       -ew_.segment(levels[0].begin, J0.rows()).dot(bent_now_ - bent_) / (dt_ * uu);
-  return bend > 0.0 ? bend : 0.0;
+  if (bend > 0.0) bend_ = bend;
+  return bend_;
 }
 
 // Under acceleration limits each joint brakes so that it can stop at the displacement the
