@@ -20,8 +20,8 @@ from pathlib import Path
 
 from .cli_arguments import (
     Parser,
-    _grid_step,
     at_least,
+    grid_step,
     non_negative_float,
     output_file,
     output_folder,
@@ -185,7 +185,7 @@ def _reach_parser(sub) -> None:
     p.add_argument("robot", help="an example-robot-data robot, e.g. panda, ur5")
     p.add_argument("--frame", default=None, help="the frame placed (default: the robot's "
                    "end effector; needed for robots without one, e.g. baxter)")
-    p.add_argument("--step", type=_grid_step, default=0.05,
+    p.add_argument("--step", type=grid_step, default=0.05,
                    help="grid spacing in m (default 0.05)")
     p.add_argument("--orientations", type=positive_int, default=20,
                    help="orientations per point (default 20)")

@@ -3,7 +3,7 @@ with a message naming the argument, and :class:`Parser` makes that message one l
 (``sjt-pin demo: error: argument --keep: ...``) with exit code 2, before any work.
 
 Numbers are checked by their value (:func:`positive_int`, :func:`at_least`,
-:func:`non_negative_float`, the grid step of ``reach``); output paths by :func:`output_file` and
+:func:`non_negative_float`, :func:`grid_step`); output paths by :func:`output_file` and
 :func:`output_folder`, which try to write there.
 """
 
@@ -123,7 +123,7 @@ def output_folder(text: str) -> Path:
 output_folder.__name__ = "output folder"
 
 
-def _grid_step(text: str) -> float:
+def grid_step(text: str) -> float:
     """``type=`` for reach's grid spacing: a finite number of metres > 0."""
     try:
         value = float(text)
