@@ -263,9 +263,10 @@ def test_a_folded_arm_with_joints_of_unequal_limits_rests_beyond_reach(method):
     bounded least-squares displacement asks pan and wrist 1 to turn together, but each joint
     brakes toward its own share at its own limits, so the pan runs ahead alone, uphill, and the
     arm swings at the pan's 2.16 rad/s speed limit for good (a held-out survey's run). Expected
-    to fail until the joints move along the displacement together; the prototype branch
-    ``prototype/synchronised-goal`` rests it at the constrained minimum, 0.248587263 m, in
-    1.3-3.2 s with every method, but settles other runs too slowly to land."""
+    to fail until the joints move along the displacement together: measured, each speeding up
+    at its share of the slowest joint's limits, with a proportional zone before the
+    displacement, every method rests at the constrained minimum, 0.248587263 m, in 1.3-3.2 s,
+    but other runs then settled too slowly for it to land (CHANGELOG)."""
     robot = sjt.Robot.from_example("ur3_limited")
     q0 = np.array([0.89, -np.pi, np.pi, 0.501, 1.813, -1.229])
     target = np.array([-0.07116328179566639, -0.00739453026520089, -0.21222505620584883])
