@@ -31,6 +31,12 @@ class CoMTask(Task):
 
     def __init__(self, axes: str = "xyz", weight=None, priority: int | None = 0):
         self._rows = axis_rows(axes)
+        #: the rows as a slice where they are consecutive ("xy", "yz", ...): a slice's copy
+        #: is cheaper than a gather's, and the values are the same
+        first = int(self._rows[0])
+        self._take = (slice(first, first + len(axes))
+                      if self._rows.tolist() == list(range(first, first + len(axes)))
+                      else self._rows)
         self.axes, self.dim = axes, len(axes)
         super().__init__(None, weight, priority)
         self.label = "com"
@@ -41,6 +47,9 @@ class CoMTask(Task):
         bound._J, bound._e, bound._ff = np.zeros((d, n)), np.zeros(d), np.zeros(d)
         bound.placement = pin.SE3.Identity()
         return bound
+
+    def write_into(self, J, e, ff):
+        self._J, self._e, self._ff = J, e, ff  # (the rows are computed straight into them)
 
     def joints(self, model):
         return list(range(1, model.njoints))  # every body with mass moves the centre of mass
@@ -60,13 +69,13 @@ class CoMTask(Task):
     def compute(self, kinematics, target, velocity):
         c, Jc = kinematics.center_of_mass()
         self.placement.translation = c
-        rows = self._rows
-        np.take(Jc, rows, axis=0, out=self._J)
+        rows = self._take
+        self._J[...] = Jc[rows]
         if target is not None:
             np.subtract(target[rows], c[rows], out=self._e)
         if velocity is None:
             return self._J, self._e, None
-        np.take(velocity, rows, out=self._ff)
+        self._ff[...] = velocity[rows]
         return self._J, self._e, self._ff
 
     def __repr__(self) -> str:
