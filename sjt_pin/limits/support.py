@@ -122,11 +122,17 @@ class SupportLimit(Limit):
         self._contact_rows = 3 if not np.any(sole) else 6  # a point foot holds its position
         self._frames: list[int] | None = None
         self.polygon: np.ndarray | None = None
-        self.distance = np.nan
         # the edges' inward and outward unit normals (k, 2) and offsets, the rows' buffers
         self._normals = self._outward = np.zeros((0, 2))
         self._offsets = self._b = self._d = np.zeros(0)
         self._A = np.zeros((0, 0))
+
+    @property
+    def distance(self) -> float:
+        """The centre of mass's projection's least distance (m, negative outside) to the
+        polygon's edges at the last :meth:`rows` (NaN before it): taken when read, not at
+        every step."""
+        return self._d.min() if self._d.size else np.nan
 
     def update(self) -> None:
         """Take the polygon again from the contacts' poses at the next step."""
@@ -152,7 +158,6 @@ class SupportLimit(Limit):
         c, Jc = kinematics.center_of_mass()
         d = np.matmul(self._normals, c[:2], out=self._d)
         d -= self._offsets
-        self.distance = d.min()
         if first and self.distance < self.margin:
             warnings.warn(f"the centre of mass starts {self.distance:.4g} m inside the support "
                           f"polygon of {self.contacts}, less than the margin {self.margin:g} m: "
