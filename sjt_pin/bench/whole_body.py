@@ -31,8 +31,9 @@ the tasks above it, and a humanoid's whole-body scene beside pink's solution of 
   projection's distance to the soles' support polygon, taken from the soles' corners at the
   start as ``SupportLimit`` takes it, minus the 0.02 m margin; m, negative: inside the
   margin), the largest joint-limit violation (rad), and the time per step (µs: median, p90,
-  max over every step after the first, which binds the tasks). For sjt ``solver.step``
-  alone is timed; for pink ``solve_ik`` + ``integrate`` + ``Configuration.update`` (its
+  max over every step after the first, which binds the tasks). The hands' targets of every
+  step are made before the runs. For sjt ``solver.step`` alone is timed; for pink the hand
+  tasks' ``set_target``, ``solve_ik``, ``integrate`` and ``Configuration.update`` (its
   kinematics for the next step). Each step is followed on the same configuration by the
   *Pinocchio floor* of these tasks, timed the same way: ``computeJointJacobians``, each of
   the four frames' placement and Jacobian, and ``jacobianCenterOfMass``. Targets: slip at
@@ -207,6 +208,9 @@ class _Scene:
                                                         SOLES)
         self.steps = round((reach_seconds + hold_seconds) / dt)
         self.reach_steps = round(reach_seconds / dt)
+        #: the hands' targets of every step, made before the runs: a step's time is the
+        #: solver's alone, not that of the minimum-jerk path's arithmetic (6 us a step)
+        self.targets = [self.hand_targets(k) for k in range(self.steps)]
         self.data = robot.model.createData()
         self.lower, self.upper = robot.lower_limits, robot.upper_limits
         ids = [robot.frame_id(f) for f in (*SOLES, *HANDS)]
@@ -263,10 +267,10 @@ def _sjt_run(scene: _Scene, method: str) -> WholeBodyRow:
     solver = make_solver(method, scene.robot, dt=scene.dt, task=tasks, limits=[support],
                          posture=PostureTask())
 
+    targets = [{**hands, "com": scene.com} for hands in scene.targets]
+
     def step(q, k):
-        target = scene.hand_targets(k)
-        target["com"] = scene.com
-        return solver.step(q, target)
+        return solver.step(q, targets[k])
 
     return scene.run(method.upper(), step)
 
@@ -304,7 +308,7 @@ def _pink_run(scene: _Scene, constrained: bool) -> WholeBodyRow:
     rotations = {h: configuration.get_transform_frame_to_world(h).rotation for h in HANDS}
 
     def step(q, k):
-        for h, p in scene.hand_targets(k).items():
+        for h, p in scene.targets[k].items():
             hands[h].set_target(pin.SE3(rotations[h], p))
         velocity = pink.solve_ik(configuration, tasks, scene.dt, solver=qp,
                                  constraints=constraints)
