@@ -68,6 +68,11 @@ class UserLimits:
         #: limit gives one
         self.room: np.ndarray | None = None
         self._blocks: list[tuple[Limit, np.ndarray, np.ndarray]] = []
+        # per limit: whether it has bounds of its own (the base class's say nothing, and are
+        # not called each step); whether any limit has a room of its own (the same)
+        self._plan = [(k, limit, type(limit).bounds is not Limit.bounds)
+                      for k, limit in enumerate(self.limits)]
+        self._any_room = any(type(limit).room is not Limit.room for limit in self.limits)
 
     def evaluate(self, kinematics, motion: Motion):
         """``(lower, upper, A, b, owners)`` at this step: the intersection of the limits'
@@ -77,8 +82,8 @@ class UserLimits:
         lower = upper = A = b = None
         blocks: list[tuple[Limit, np.ndarray, np.ndarray]] = []
         owners: list[str] = []
-        for k, limit in enumerate(self.limits):
-            if k not in self.capped:
+        for k, limit, bounded in self._plan:
+            if bounded and k not in self.capped:
                 bounds = limit.bounds(kinematics, motion)
                 if bounds is not None:
                     lo, hi = _checked_bounds(limit, bounds, n)
@@ -108,7 +113,7 @@ class UserLimits:
             else:
                 A = np.vstack([a for _, a, _ in blocks])
                 b = np.concatenate([c for _, _, c in blocks])
-            room = self._room(blocks)
+            room = self._room(blocks) if self._any_room else None
         self.room = room
         self._blocks = blocks
         self.last_rows = None if A is None or b is None else (A, b, owners)
