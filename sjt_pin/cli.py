@@ -157,7 +157,7 @@ def robots(args: argparse.Namespace) -> int:
 
 
 def bench(args: argparse.Namespace) -> int:
-    """``sjt-pin bench speed|accuracy|reach|ik|collision``: the tables of the documentation's
+    """``sjt-pin bench speed|accuracy|reach|settle|ik|collision``: the tables of the documentation's
     Benchmarks page (docs/benchmarks.md); :func:`sjt_pin.bench.command.bench`."""
     from .bench.command import bench as run
 
@@ -248,11 +248,12 @@ def build_parser() -> argparse.ArgumentParser:
                        "path against its Pinocchio floor), accuracy (tracking near singularities, "
                        "rest at unreachable targets, exits from saddles), reach (random "
                        "full-range reaches beside pink, settling under jerk limits beside "
-                       "Ruckig), ik (TRAC-IK's "
+                       "Ruckig), settle (rest and swing from starts against the ranges under "
+                       "random acceleration and jerk limits, on nine arms), ik (TRAC-IK's "
                        "protocol on five arms), collision (three scenes with and without "
                        "CollisionLimit, and pink's barrier; a moving ball and a mesh, beside "
                        "pink and mink; targets behind an obstacle under acceleration limits).")
-    p.add_argument("kind", choices=["speed", "accuracy", "reach", "ik", "collision"],
+    p.add_argument("kind", choices=["speed", "accuracy", "reach", "settle", "ik", "collision"],
                    help="which benchmark")
     p.add_argument("--peers", action="store_true",
                    help="speed: add pink's solve_ik (pip install -e '.[bench]')")
@@ -267,6 +268,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "target) pairs per robot (default: 50)")
     p.add_argument("--trials", type=positive_int, default=30, help="reach: runs of the jerk "
                    "grid (default: 30)")
+    p.add_argument("--seeds", type=positive_int, default=40, help="settle: draws per arm "
+                   "(default: 40, 1,440 runs)")
     p.add_argument("--json", default=None, metavar="PATH", type=output_file(parents=False),
                    help="also write the results as JSON (its folder must exist)")
     p.set_defaults(func=bench)

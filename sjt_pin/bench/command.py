@@ -21,7 +21,7 @@ def _write_json(path: str | None, payload) -> None:
 
 
 def bench(args: argparse.Namespace) -> int:
-    """``sjt-pin bench speed|accuracy|reach|ik|collision``: the tables of the documentation's
+    """``sjt-pin bench speed|accuracy|reach|settle|ik|collision``: the tables of the documentation's
     Benchmarks page (docs/benchmarks.md)."""
     from dataclasses import asdict
 
@@ -162,6 +162,16 @@ def bench(args: argparse.Namespace) -> int:
         _write_json(args.json, {"machine": machine,
                                 "random": [asdict(r) for r in random_rows],
                                 "jerk": [asdict(r) for r in jerk_rows]})
+    elif args.kind == "settle":
+        from . import settle
+
+        rows = settle.settle(seeds=args.seeds, progress=lambda r: print(
+            f"  {r.robot}, seed {r.seed}, {r.method}: {r.state}", flush=True))
+        print(f"\nRest and swing ({args.seeds} draws an arm, four methods; random starts against "
+              "the ranges, random acceleration and jerk limits):\n" + settle.settle_table(rows))
+        _write_json(args.json, {"machine": machine, "arms": settle.settle_summary(rows),
+                                "unsettled": [asdict(r) | {"state": r.state} for r in rows
+                                              if r.state != "rest"]})
     else:
         from .ik import ik_benchmark, ik_table, many_line, many_throughput
 

@@ -35,18 +35,15 @@ constexpr double kTrust = 0.5;
 // own share at its own limits: a joint ten times quicker than the others ran ahead of them,
 // uphill, and the arm swung at its speed limit for good. The larger the damping, the shorter
 // the displacement and the nearer the gradient J0^T e_w, whose every share lowers the error by
-// itself. Measured on 1,440 held-out runs (UR3, UR5 and UR10 limited, UR5 with gripper,
-// Kinova, xArm7, Z1, Bravo 7, TALOS's arm; random starts with a quarter of the joints at their
-// ranges; reachable targets, targets 0.1-1 m beyond reach, and 4 s of jumping targets before a
-// reachable one; per joint acceleration limits 1-50 rad/s^2 or none, jerk 10-10,000 times
-// those or none; 4 methods; 10 s, 30 s where not at rest), for a term of 0.5 / 1 / 2 / 3 / 4 /
-// 8: swinging for good (a joint reversing 4 times or more in the last 2 s) 37 / 15 / 3 / 1 /
-// 3 / 2 runs, at rest at the end 1,317 / 1,363 / 1,370 / 1,372 / 1,366 / 1,351, reachable
-// targets reached 536 / 531 / 538 / 539 / 527 / 525 of 972; at 3 the run left swinging is
-// Bravo 7's, whose continuous joints have no speed limit, and the median time to rest is
-// 5.0 s (2 at 4.95 s, 8 at 5.5 s). Before, on 30 runs (UR5, Panda, UR10, KUKA iiwa and xArm6,
-// DLS, jerk limits): still moving after 12 s in 6 runs with the floor alone (near a
-// singularity the displacement's huge self-motion share sent the arm to and fro).
+// itself. Measured by `sjt-pin bench settle` (1,440 runs: nine arms, random starts with a
+// quarter of the joints at their ranges, reachable targets, targets beyond reach and target
+// streams, random per-joint acceleration and jerk limits, four methods), 0.5 against 3:
+// swinging for good 36 -> 1 (Bravo 7, whose continuous joints have no speed limit), at rest at
+// the end 1,292 -> 1,353, reachable targets reached 537 -> 538 of 972, the median time to
+// rest 4.7 -> 5.2 s. On an earlier draw of the same kind 1, 2, 4 and 8 left 15, 3, 3 and 2
+// runs swinging; with 8 the arms came to rest later still (a median 5.5 s against 5.0). Before, on 30 runs (UR5, Panda, UR10,
+// KUKA iiwa and xArm6, DLS, jerk limits): still moving after 12 s in 6 runs with the floor
+// alone (near a singularity the displacement's huge self-motion share sent the arm to and fro).
 // Beside it, the curvature the last step measured along its own velocity (measured_bend): far
 // beyond reach the error bends more than the Gauss-Newton model J0^T J0 says (a hand swung on
 // a circle of radius r toward a point e beyond it: r^2 + r e against r^2), and where that is
