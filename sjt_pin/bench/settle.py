@@ -71,8 +71,8 @@ class SettleRow:
     rest_s: float
     reach_s: float | None
     ratio_v: float
-    ratio_a: float
-    ratio_j: float
+    ratio_a: float  # NaN without an acceleration limit
+    ratio_j: float  # NaN without a jerk limit
 
     @property
     def state(self) -> str:
@@ -207,8 +207,8 @@ def run(robot: Robot, seed: int, method: str) -> SettleRow:
     speed_limit = robot.model.velocityLimit
     ratio_v = float(np.max(np.abs(v) / np.where(speed_limit > 0, speed_limit, np.inf)))
     ratio_a = (float(np.max(np.abs(a[held:]) / draw.acceleration))
-               if draw.acceleration is not None else 0.0)
-    ratio_j = float(np.max(np.abs(j[held:]) / draw.jerk)) if draw.jerk is not None else 0.0
+               if draw.acceleration is not None else np.nan)
+    ratio_j = float(np.max(np.abs(j[held:]) / draw.jerk)) if draw.jerk is not None else np.nan
     last = v[-2000:]
     peak = np.abs(last).max(axis=0)
     fastest = last[:, int(np.argmax(peak))]
@@ -242,10 +242,15 @@ def settle(seeds: int = 40, arms=ARMS, methods=METHODS,
     return rows
 
 
+def _largest(values: list[float]) -> float:
+    given = [v for v in values if not np.isnan(v)]
+    return max(given) if given else float("nan")
+
+
 def settle_summary(rows: list[SettleRow]) -> list[dict]:
     """Per arm, then ``all``: runs; at rest, swinging, moving and creeping at the end;
     reachable targets and those reached; the median time to rest (s) of the runs at rest; the
-    largest speed, acceleration and jerk ratios."""
+    largest speed, acceleration and jerk ratios (NaN where no run had that limit)."""
     groups: dict[str, list[SettleRow]] = {}
     for row in rows:
         groups.setdefault(row.robot, []).append(row)
@@ -261,8 +266,8 @@ def settle_summary(rows: list[SettleRow]) -> list[dict]:
                     "reached": sum(r.error < REACHED for r in reachable),
                     "median_rest": float(np.median(rest)) if rest else float("nan"),
                     "ratio_v": max(r.ratio_v for r in group),
-                    "ratio_a": max(r.ratio_a for r in group),
-                    "ratio_j": max(r.ratio_j for r in group)})
+                    "ratio_a": _largest([r.ratio_a for r in group]),
+                    "ratio_j": _largest([r.ratio_j for r in group])})
     return out
 
 
