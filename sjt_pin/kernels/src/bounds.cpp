@@ -188,14 +188,7 @@ namespace {
 
 // the least value of a x over the boxes widened s times
 double least_value(const JointBox& box, const Eigen::Ref<const Vector>& a, double s) {
-  double least = 0.0;
-  for (Index j = 0; j < a.size(); ++j) {
-    if (a[j] == 0.0) continue;
-    double lo, hi;
-    widened(box, j, s, lo, hi);
-    least += a[j] > 0.0 ? a[j] * lo : a[j] * hi;
-  }
-  return least;
+  return least_over(a, [&](Index j, double& lo, double& hi) { widened(box, j, s, lo, hi); });
 }
 
 }  // namespace

@@ -98,6 +98,20 @@ inline void widened(const JointBox& box, Index j, double s, double& lo, double& 
   }
 }
 
+// The least value of a . x over the box whose joint j spans [lo, hi] = bounds(j, lo, hi); a
+// joint the row leaves out (a_j = 0) adds nothing, even where its box is unbounded.
+template <class Bounds>
+double least_over(const Eigen::Ref<const Vector>& a, Bounds&& bounds) {
+  double least = 0.0;
+  for (Index j = 0; j < a.size(); ++j) {
+    if (a[j] == 0.0) continue;
+    double lo, hi;
+    bounds(j, lo, hi);
+    least += a[j] > 0.0 ? a[j] * lo : a[j] * hi;
+  }
+  return least;
+}
+
 // The least s >= 1 (to a relative 1e-9) at which some velocity within the boxes widened s times
 // (widened) meets the row a x <= b; inf where no widening does (the hard box cannot, or a
 // joint the row needs has a box of zero width). Each row alone: over several rows, the largest

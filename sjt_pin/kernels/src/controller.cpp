@@ -213,14 +213,11 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
   // given)
   const Index k = A.rows();
   bk_.resize(k);
-  for (Index i = 0; i < k; ++i) {
-    double best = 0.0;
-    for (Index j = 0; j < n; ++j) {
-      const double a = A(i, j);
-      if (a != 0.0) best += a * (a > 0.0 ? box.hard_lo[j] : box.hard_hi[j]);
-    }
-    bk_[i] = std::max(b[i], best);
-  }
+  const auto hard = [this](Index j, double& lo, double& hi) {
+    lo = box.hard_lo[j];
+    hi = box.hard_hi[j];
+  };
+  for (Index i = 0; i < k; ++i) bk_[i] = std::max(b[i], least_over(A.row(i).transpose(), hard));
   const Vector& bk = bk_;
   // 5. the method's step where it is within every limit; else first the hard limits (position,
   // speed, a user's bounds and rows) by the projection, where joints held at a bound leave the
