@@ -142,7 +142,9 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
   const Level& L0 = levels[0];
   const Index r0 = L0.end - L0.begin;
   const auto J0 = Jw_.middleRows(L0.begin, r0);
-  method.prepare(J0, ew_.segment(L0.begin, r0), gains.segment(L0.begin, r0), L0.targets, dt_, top);
+  // (a user's matrix: map_matrix takes the gain and its bound from J0 M, not the method's)
+  method.prepare(J0, ew_.segment(L0.begin, r0), gains.segment(L0.begin, r0), L0.targets, dt_, top,
+                 matrix == nullptr);
   if (matrix) {
     map_matrix(J0, matrix, ff_in != nullptr);
   } else {

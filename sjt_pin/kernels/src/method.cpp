@@ -47,7 +47,7 @@ Method::Method() {
 
 void Method::prepare(const Eigen::Ref<const RowMatrix>& Jw, const Eigen::Ref<const Vector>& ew,
                      const Eigen::Ref<const Vector>& k, Index error_rows, double dt,
-                     MethodStep& out) {
+                     MethodStep& out, bool gain) {
   const Index m = Jw.rows(), n = Jw.cols();
   out.alpha.setZero(n);
   out.s.resize(n);
@@ -76,7 +76,7 @@ void Method::prepare(const Eigen::Ref<const RowMatrix>& Jw, const Eigen::Ref<con
     out.trace = trace;
     out.stall = kew_sq > 0.0 && trace > 0.0 ? stall / (kew_sq * trace) : 0.0;
     out.loop_bound = 1.0;
-    if (!p.auto_gain) {
+    if (!p.auto_gain || !gain) {
       out.gain = 1.0;
     } else if (p.damped_feedback) {
       out.gain = p.gain_factor / dt;

@@ -67,9 +67,11 @@ class Method {
 
   // Analyse the weighted, masked rows Jw (m x n) at this step: scales, gain, damping, metric.
   // ew: the weighted error (m), error_rows: how many of the rows are the tasks' error (their
-  // |e|^2 is reported), k: the rows' gains, dt: the period.
+  // |e|^2 is reported), k: the rows' gains, dt: the period; gain: false where the caller sets
+  // the gain and the loop bound itself (a user's matrix: both are 1 here then)
   void prepare(const Eigen::Ref<const RowMatrix>& Jw, const Eigen::Ref<const Vector>& ew,
-               const Eigen::Ref<const Vector>& k, Index error_rows, double dt, MethodStep& out);
+               const Eigen::Ref<const Vector>& k, Index error_rows, double dt, MethodStep& out,
+               bool gain = true);
   // The feedback q_dot (n) for the weighted error ew with gains k (K e_w), and the feed-forward
   // q_dot for the weighted task velocity ffw: after prepare() on the same rows.
   void feedback(const Eigen::Ref<const RowMatrix>& Jw, const Eigen::Ref<const Vector>& ew,
