@@ -13,7 +13,8 @@ limits — runs the same stages:
 2. limits: a user's limits (:mod:`~sjt_pin.limits`) give their bounds and rows at ``q``
    (:class:`~sjt_pin.constraints.UserLimits`);
 3. method and stage, in one compiled call (:class:`sjt_pin.kernels.Controller`): the gain and
-   the mapping M (for a method of your own, its matrix, mapped here), the lower priority levels
+   the mapping M (for a method of your own, its ``matrix`` called from there on the first
+   level's weighted rows, its result checked and mapped there), the lower priority levels
    in the null space of the higher ones, the saddle escape's velocity, each joint's box from
    the position, speed, acceleration and jerk limits, and the projection that keeps the
    method's step where it is feasible and returns the feasible velocity nearest it in the
@@ -210,9 +211,8 @@ class Solver:
                 self._motion.q = q
                 lower, upper, A, b, owners = self._user.evaluate(stack.kinematics, self._motion)
                 room = self._user.room
-            # 3. method and stage, compiled
-            M = (step_checks.method_matrix(self.method, stack, J) if self._matrix_method
-                 else None)
+            # 3. method and stage, compiled (a method of your own: its matrix called there)
+            M = self.method.matrix if self._matrix_method else None
             try:
                 status = self._controller.run(J, e, ff, q, self._step, M, lower, upper, A, b,
                                               room)

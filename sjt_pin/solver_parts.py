@@ -103,8 +103,9 @@ def make_controller(robot: Robot, stack: TaskStack, method: Method, dt: float,
                     jerk: JerkLimit | None, escape: SaddleEscape | None, motion: Motion
                     ) -> tuple[kernels.Controller, bool]:
     """The compiled controller of a solver, and whether its method is one of the user's (the
-    step passes its matrix M(J), :func:`sjt_pin.step_checks.method_matrix`); the ``motion``
-    state a user's limits read is bound to the controller's own."""
+    step passes its ``matrix`` function, which the controller calls with the first level's
+    weighted rows); the ``motion`` state a user's limits read is bound to the controller's
+    own."""
     params = method.parameters()
     matrix_method = params is None  # a method of your own: its matrix M(J) at each step
     if params is None:

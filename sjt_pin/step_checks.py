@@ -1,7 +1,7 @@
 """What a :class:`~sjt_pin.solver.Solver`'s step does in Python, off its compiled path: the
-matrix of a method of the user's (:func:`method_matrix`), the first step's warning about
-joints outside their range that no task moves, the error for a non-finite step, and the task
-rows the saddle escape's curvature test evaluates."""
+first step's warning about joints outside their range that no task moves, the error for a
+non-finite step, and the task rows the saddle escape's curvature test evaluates. (A method of
+the user's has its matrix called by the compiled step itself, ``kernels.Controller.run``.)"""
 
 from __future__ import annotations
 
@@ -12,19 +12,9 @@ import numpy as np
 
 from .exceptions import ConcurrentStepError
 from .joint_ranges import outside
-from .methods import Method
 from .robot import Robot
 from .stack import TaskStack
 from .validation import raise_non_finite_targets
-
-
-def method_matrix(method: Method, stack: TaskStack, J: np.ndarray) -> np.ndarray:
-    """A method of your own: its matrix M(J_w) of the first level's weighted, masked rows J_w,
-    C-ordered float64 for the compiled step (which takes the gain, the feedback and the
-    feed-forward from it, and checks its shape and that it is finite)."""
-    begin, end = stack.levels[0][:2]
-    Jw = stack.sqrt_weight[begin:end, None] * J[begin:end] * stack.chain
-    return np.ascontiguousarray(method.matrix(Jw), dtype=float)
 
 
 def warn_idle_outside(robot: Robot, chain: np.ndarray, q: np.ndarray) -> None:

@@ -112,6 +112,8 @@ def test_an_own_pseudoinverse_reaches_the_target(ur5):
     (np.zeros(6), "M\\(J\\)"),
     (np.full((6, 6), np.nan), "NaN or inf"),
     (np.full((6, 6), np.inf), "NaN or inf"),
+    (None, "M\\(J\\) must be a 2-D array of floats, got NoneType"),  # (a forgotten return)
+    ("abc", "M\\(J\\) must be a 2-D array of floats, got str"),
 ])
 def test_a_matrix_the_step_cannot_use_is_refused(ur5, value, message):
     method = Given()
@@ -119,3 +121,102 @@ def test_a_matrix_the_step_cannot_use_is_refused(ur5, value, message):
     solver = sjt.Solver(ur5, method)
     with pytest.raises((ValueError, TypeError), match=message):
         solver.step(Q, _target(ur5, Q))
+
+
+class Scribbling(Method):
+    """J^T, then writes over the rows it was given and keeps them (they are its own)."""
+
+    name = "scribbling"
+
+    def __init__(self):
+        self.given = []
+
+    def matrix(self, J):
+        M = J.T.copy()
+        self.given.append(J)
+        J[:] = np.nan
+        return M
+
+
+def test_the_method_gets_a_new_array_of_its_rows_each_step(ur5):
+    """The rows are a new C-ordered float64 array on each call, the method's to keep or write:
+    the step is the one a method that leaves them alone takes."""
+    method = Scribbling()
+    scribbled, plain = sjt.Solver(ur5, method), sjt.Solver(ur5, Transpose())
+    target = _target(ur5, Q)
+    q_a = q_b = Q
+    for _ in range(3):
+        q_a, q_b = scribbled.step(q_a, target), plain.step(q_b, target)
+        np.testing.assert_array_equal(q_a, q_b)
+    first, second = method.given[0], method.given[1]
+    assert first is not second and not np.shares_memory(first, second)
+    assert first.flags.c_contiguous and first.flags.writeable and first.dtype == np.float64
+    assert np.isnan(first).all()
+
+
+@pytest.mark.parametrize("convert", [lambda M: M.tolist(), np.ascontiguousarray,
+                                     lambda M: np.zeros((M.shape[0], 2 * M.shape[1]))[:, ::2] + M])
+def test_a_matrix_of_another_layout_is_read_as_its_values(ur5, convert):
+    """A list, a C-ordered copy or a strided view of J^T: the same steps as J^T itself."""
+    class Converted(Transpose):
+        def matrix(self, J):
+            return convert(super().matrix(J))
+
+    target = _target(ur5, Q)
+    own, reference = sjt.Solver(ur5, Converted()), sjt.Solver(ur5, Transpose())
+    q_a = q_b = Q
+    for _ in range(5):
+        q_a, q_b = own.step(q_a, target), reference.step(q_b, target)
+        np.testing.assert_array_equal(q_a, q_b)
+
+
+def test_an_error_of_the_method_reaches_the_caller_and_changes_nothing(ur5):
+    class Failing(Transpose):
+        fail = False
+
+        def matrix(self, J):
+            if self.fail:
+                raise RuntimeError("the method's own error")
+            return super().matrix(J)
+
+    method = Failing()
+    solver, reference = sjt.Solver(ur5, method), sjt.Solver(ur5, Transpose())
+    target = _target(ur5, Q)
+    q = solver.step(Q, target)
+    q_ref = reference.step(Q, target)
+    method.fail = True
+    with pytest.raises(RuntimeError, match="the method's own error"):
+        solver.step(q, target)
+    method.fail = False
+    np.testing.assert_array_equal(solver.step(q, target), reference.step(q_ref, target))
+
+
+def test_the_compiled_call_takes_the_matrix_or_the_function_that_gives_it(ur5):
+    """``Controller.run``'s ``matrix``: M as an array of C or Fortran order, or the method's
+    function, called with the first level's weighted rows (sqrt(w) J on the moving joints):
+    the same step; an array of another dtype given directly is refused at the boundary (only
+    what the function returns is converted)."""
+    solver = sjt.Solver(ur5, Transpose())
+    stack, controller = solver.stack, solver._controller
+    kinematics = stack.kinematics
+    kinematics.update(Q)
+    J, e, _ = stack.task.compute(kinematics, stack.task.target(_target(ur5, Q)), None)
+    Jw = stack.sqrt_weight[:, None] * J * stack.chain
+    seen = []
+
+    def function(rows):
+        seen.append(rows.copy())
+        return rows.T
+
+    steps = []
+    for matrix in (function, np.ascontiguousarray(Jw.T), np.asfortranarray(Jw.T)):
+        controller.reset()
+        step = np.zeros(ur5.nv)
+        controller.run(J, e, None, Q, step, matrix, None, None, None, None)
+        steps.append(step)
+    np.testing.assert_array_equal(seen[0], Jw)
+    np.testing.assert_array_equal(steps[0], steps[1])
+    np.testing.assert_array_equal(steps[0], steps[2])
+    with pytest.raises(TypeError, match="M\\(J\\)"):
+        controller.run(J, e, None, Q, np.zeros(ur5.nv), Jw.T.astype(np.float32), None, None,
+                       None, None)

@@ -5,9 +5,10 @@ A built-in method (:class:`~sjt_pin.methods.SJT`, :class:`~sjt_pin.methods.JT`,
 compiled step (:meth:`Method.parameters`): the kernel maps the stacked task rows without
 forming M, and gives the constraint stage the method's metric (see
 ``sjt_pin/kernels/src/method.hpp``). A method of your own is a subclass with ``name`` and
-:meth:`Method.matrix`: the solver maps the rows through your matrix and the same compiled stage
-enforces every limit on the result, in the metric of JT (your step unchanged where it is within
-the limits). Limits are none of a method's business.
+:meth:`Method.matrix`: the compiled step calls it with the first level's weighted rows, maps
+them through your matrix and enforces every limit on the result in the same stage, in the
+metric of JT (your step unchanged where it is within the limits). Limits are none of a
+method's business.
 """
 
 from __future__ import annotations
@@ -47,9 +48,15 @@ class Method:
         return None
 
     def matrix(self, J: np.ndarray) -> np.ndarray:
-        """M(J) as an (n, m) matrix of the weighted, masked rows ``J`` (m, n): for a built-in
-        method, the compiled mapping applied to the columns of the identity (analysis, tests);
-        a method of your own overrides it."""
+        """M(J) as an (n, m) matrix of the weighted, masked rows ``J`` (m, n; task units per
+        joint unit, rad or m): for a built-in method, the compiled mapping applied to the
+        columns of the identity (analysis, tests); a method of your own overrides it.
+
+        The step calls a method of your own once per step, from its compiled stage, with ``J``
+        a new C-ordered float64 array (yours to keep). It reads a returned float64 array of C
+        or Fortran order (``J.T``) as it is and converts anything else as
+        ``numpy.ascontiguousarray(M, dtype=float)`` does; a result of another shape or with
+        NaN or inf raises ``ValueError`` naming M(J)."""
         params = self.parameters()
         if params is None:
             raise NotImplementedError(f"{type(self).__name__} must define matrix(J)")

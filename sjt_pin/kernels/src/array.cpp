@@ -78,6 +78,15 @@ Array::Array(nb::handle object, const char* name, int ndim, Access access, Order
   col_step_ = c_order ? 1 : rows_;
 }
 
+bool plain_array(nb::handle object, int ndim, Order order) {
+  if (!PyArray_Check(object.ptr())) return false;
+  auto* array = reinterpret_cast<PyArrayObject*>(object.ptr());
+  return PyArray_TYPE(array) == NPY_DOUBLE && PyArray_ISNOTSWAPPED(array) &&
+         PyArray_NDIM(array) == ndim && PyArray_ISALIGNED(array) &&
+         (PyArray_IS_C_CONTIGUOUS(array) ||
+          (order == Order::any && PyArray_IS_F_CONTIGUOUS(array)));
+}
+
 const Array& Array::length(Index n) const {
   if (size_ != n) {
     std::ostringstream out;

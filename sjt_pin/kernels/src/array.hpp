@@ -73,6 +73,8 @@ class Array {
                             Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>(row_step_, col_step_));
   }
   double operator()(Index r, Index c) const { return data_[r * row_step_ + c * col_step_]; }
+  // whether matrix() reads it (C order), not only strided()
+  bool row_major() const { return col_step_ == 1 && row_step_ == cols_; }
 
   // ValueError unless the array has `n` entries (1-D) / this shape (2-D)
   const Array& length(Index n) const;
@@ -133,6 +135,11 @@ struct NewArray {
 };
 NewArray new_array(Index rows, Index cols = -1);
 void freeze(nb::handle array);
+
+// Whether Array(object, name, ndim, Access::read, order) takes `object` as it is: a numpy array
+// of native, aligned float64, of ndim dimensions and that order (a kernel that converts what
+// it may, as numpy.ascontiguousarray does, converts only the rest).
+bool plain_array(nb::handle object, int ndim, Order order);
 
 // The number of dimensions of a numpy array, -1 for any other object (for a kernel that
 // takes a vector or a matrix in one place).

@@ -51,6 +51,7 @@ Controller::Controller(const MethodParameters& method_, Index rows, Index nv_, I
   basis_.setZero(nv, nv);
   const Index r0 = levels[0].end - levels[0].begin;
   loop_.setZero(r0, r0);
+  user_matrix.setZero(nv, r0);
   kew_.setZero(r0);
   Jw_.resize(m, nv);
   ew_.resize(m);
@@ -88,6 +89,15 @@ void Controller::reset() {
   stall_wait = 1e300;
   nearest.forget();
   bent_ready_ = false;
+}
+
+void Controller::first_rows(const Eigen::Ref<const RowMatrix>& J, double* rows) const {
+  const Level& L0 = levels[0];
+  const Index r0 = L0.end - L0.begin;
+  // (run()'s Jw_: the same products, entry by entry)
+  Eigen::Map<RowMatrix>(rows, r0, nv).noalias() =
+      sqrt_weight.segment(L0.begin, r0).asDiagonal() * J.middleRows(L0.begin, r0) *
+      moving.asDiagonal();
 }
 
 // A method of the user's: q_dot = M (k e_w scaled + ff_w) on the first level's weighted rows

@@ -51,6 +51,12 @@ class Controller {
           const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b,
           const double* room = nullptr);
 
+  // A user method's matrix, before run(): the first level's weighted rows of J (m x nv), as
+  // the step weighs them, into `rows` (r0 x nv, row-major: the rows the method is given).
+  void first_rows(const Eigen::Ref<const RowMatrix>& J, double* rows) const;
+  // its M of Fortran order (numpy's J.T), copied row-major for run()'s products (nv x r0)
+  RowMatrix user_matrix;
+
   void set_dt(double dt) { dt_ = dt; }
   double dt() const { return dt_; }
   void set_gains(const Vector& gains, bool auto_gain, double factor);

@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <array>
 #include <optional>
+#include <string>
 
 #include "controller.hpp"
 #include "registry.hpp"
@@ -33,6 +34,45 @@ const double* optional(nb::handle object, const char* name, Index n, std::option
   storage.emplace(object, name, 1);
   storage->length(n);
   return storage->data();
+}
+
+// run()'s `matrix`: a user method's M (nv x r0) of the first level's weighted rows, row-major.
+// `matrix` is M (a float64 array of C or Fortran order, as the boundary takes arrays), or the
+// method's function, called here with those rows (a new (r0, nv) array, first_rows): this
+// call is then the door for what the user's function returns, and takes it as the solver
+// always has, a float64 array of C or Fortran order (J.T) as it is and anything else through
+// numpy.ascontiguousarray(M, dtype=float) (a list, float32). Its shape and that it is finite
+// are checked (ValueError naming it); Fortran order is copied into the controller's row-major
+// buffer. `keep` and `storage` hold what the returned pointer reads.
+const double* user_matrix(Controller& c, const Array& J, nb::handle matrix, nb::object& keep,
+                          std::optional<Array>& storage) {
+  keep = nb::borrow(matrix);
+  if (PyCallable_Check(matrix.ptr())) {
+    NewArray rows = new_array(c.levels[0].end - c.levels[0].begin, c.nv);
+    c.first_rows(J.matrix(), rows.data);
+    keep = matrix(rows.array);
+    if (!plain_array(keep, 2, Order::any)) {
+      const bool array = ndim_of(keep) >= 0;
+      const std::string type = nb::type_name(keep.type()).c_str();
+      try {
+        keep = nb::module_::import_("numpy").attr("ascontiguousarray")(
+            keep, nb::arg("dtype") = nb::handle(reinterpret_cast<PyObject*>(&PyFloat_Type)));
+      } catch (nb::python_error& error) {
+        nb::raise_from(error, PyExc_TypeError,
+                       "the method's matrix M(J) must be a 2-D array of floats, got %s",
+                       type.c_str());
+      }
+      if (!array && ndim_of(keep) != 2)  // (an array's own shape is named below)
+        throw nb::type_error(("the method's matrix M(J) must be a 2-D array of floats, got " +
+                              type).c_str());
+    }
+  }
+  storage.emplace(keep, "the method's matrix M(J)", 2, Access::read, Order::any);
+  storage->shape(c.nv, c.levels[0].end - c.levels[0].begin);
+  storage->finite();
+  if (storage->row_major()) return storage->data();
+  c.user_matrix = storage->strided();  // (the same size: no allocation)
+  return c.user_matrix.data();
 }
 
 Controller make(const MethodParameters& method, Index rows, Index nv, Index nq, double dt,
@@ -111,12 +151,8 @@ void register_controller(nb::module_& m) {
             std::optional<Array> s1, s2, s3, s4;
             const double* ffp = optional(ff, "ff", c.m, s1);
             const double* mp = nullptr;
-            if (!matrix.is_none()) {
-              s2.emplace(matrix, "the method's matrix M(J)", 2);
-              s2->shape(c.nv, c.levels[0].end - c.levels[0].begin);
-              s2->finite();
-              mp = s2->data();
-            }
+            nb::object given;
+            if (!matrix.is_none()) mp = user_matrix(c, Ja, matrix, given, s2);
             const double* lo = optional(lower, "lower", c.nv, s3);
             const double* hi = optional(upper, "upper", c.nv, s4);
             if ((lo == nullptr) != (hi == nullptr)) fail("lower and upper come together");
@@ -147,7 +183,8 @@ void register_controller(nb::module_& m) {
           nb::arg("upper").none(), nb::arg("A").none(), nb::arg("b").none(),
           nb::arg("room").none() = nb::none(),
           "run(J, e, ff, q, step, matrix, lower, upper, A, b, room=None) -> status: one step "
-          "(matrix: a user method's M(J) of the first level's weighted rows; room: the "
+          "(matrix: a user method's M(J) of the first level's weighted rows, or its function "
+          "of those rows, called with a new array of them; room: the "
           "displacement each row allows, A d <= room, NaN where a row bounds velocity only); "
           "None for what a step does not have.")
       .def("set_dt", &Controller::set_dt)
