@@ -41,9 +41,10 @@ constexpr double kTrust = 0.5;
 // swinging for good 36 -> 1 (Bravo 7, whose continuous joints have no speed limit), at rest at
 // the end 1,292 -> 1,353, reachable targets reached 537 -> 538 of 972, the median time to
 // rest 4.7 -> 5.2 s. On an earlier draw of the same kind 1, 2, 4 and 8 left 15, 3, 3 and 2
-// runs swinging; with 8 the arms came to rest later still (a median 5.5 s against 5.0). Before, on 30 runs (UR5, Panda, UR10,
-// KUKA iiwa and xArm6, DLS, jerk limits): still moving after 12 s in 6 runs with the floor
-// alone (near a singularity the displacement's huge self-motion share sent the arm to and fro).
+// runs swinging; with 8 the arms came to rest later still (a median 5.5 s against 5.0).
+// Before, on 30 runs (UR5, Panda, UR10, KUKA iiwa and xArm6, DLS, jerk limits): still moving
+// after 12 s in 6 runs with the floor alone (near a singularity the displacement's huge
+// self-motion share sent the arm to and fro).
 // Beside it, the curvature the last step measured along its own velocity (measured_bend): far
 // beyond reach the error bends more than the Gauss-Newton model J0^T J0 says (a hand swung on
 // a circle of radius r toward a point e beyond it: r^2 + r e against r^2), and where that is
