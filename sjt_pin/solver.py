@@ -94,9 +94,10 @@ class Solver:
         self.escape = (SaddleEscape(robot.model, stack.chain, robot.velocity_limits,
                                     self.position_limit) if opts.escape and method.stalls
                        else None)
-        self._controller, self._matrix_method = solver_parts.make_controller(
+        self._controller, matrix_method = solver_parts.make_controller(
             robot, stack, method, self._dt, self.position_limit, self.acceleration_limit,
             self.jerk_limit, self.escape, self._motion)
+        self._matrix = method.matrix if matrix_method else None  # (a method of your own's M(J))
         self._stability = StabilityCheck(method, stack.n_chain, opts.check_stability)
         self._step = np.zeros(robot.nv)
         self._probe: TaskStack | None = None
@@ -212,10 +213,9 @@ class Solver:
                 lower, upper, A, b, owners = self._user.evaluate(stack.kinematics, self._motion)
                 room = self._user.room
             # 3. method and stage, compiled (a method of your own: its matrix called there)
-            M = self.method.matrix if self._matrix_method else None
             try:
-                status = self._controller.run(J, e, ff, q, self._step, M, lower, upper, A, b,
-                                              room)
+                status = self._controller.run(J, e, ff, q, self._step, self._matrix, lower,
+                                              upper, A, b, room)
             except ValueError:
                 if self._user is not None:  # (a limit's rows the stage refused: name it)
                     self._user.raise_non_finite_rows()

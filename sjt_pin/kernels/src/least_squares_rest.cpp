@@ -226,6 +226,9 @@ bool Controller::range_goal(const Eigen::Ref<const RowMatrix>& J0, const double*
   for (const PositionRange& r : bounds.ranges)
     crosses = crosses || (moving[r.v] != 0.0 && leaves_range(r, q[r.q], fb0_[r.v] / K));
   const Index k = room ? A.rows() : 0;
+  // rows with room (a collision limit's pairs within range) keep the lighter damping and leave
+  // the measured curvature out (both said why where they are set)
+  const bool rows_with_room = k > 0;
   goal_room_.resize(k);
   for (Index i = 0; i < k; ++i) {
     goal_room_[i] = std::isfinite(room[i]) ? std::max(std::min(room[i], b[i] / K), 0.0) : kInf;
@@ -240,7 +243,7 @@ bool Controller::range_goal(const Eigen::Ref<const RowMatrix>& J0, const double*
   // the rows' own gains weigh them as in the method's feedback (K e_w, over the mean gain)
   goal_e_ = ew_.segment(L0.begin, r0);
   if (!user) goal_e_.array() *= gains.segment(L0.begin, r0).array() * (top.gain / K);
-  const double mu = (kGoalFloor + (k > 0 ? kGoalDampingRows : kGoalDamping) *
+  const double mu = (kGoalFloor + (rows_with_room ? kGoalDampingRows : kGoalDamping) *
                                      goal_e_.head(targets).norm()) *
                     std::max(J0.squaredNorm() / static_cast<double>(nv), 1e-300);
   // the curvature the last step measured along its own velocity u, as a row sqrt(bend) u^T / |u|
@@ -249,7 +252,7 @@ bool Controller::range_goal(const Eigen::Ref<const RowMatrix>& J0, const double*
   // room (a collision limit's pairs within range): Panda driven fast past a ball (DLS,
   // acceleration and jerk limits) came within 9.25 mm of its 10 mm margin with it
   // (tests/test_collision_braking.py holds it to 9.9 mm)
-  const double bend = k > 0 ? 0.0 : measured_bend(J0);
+  const double bend = rows_with_room ? 0.0 : measured_bend(J0);
   const Index extra = bend > 0.0 ? 1 : 0;
   goal_model_.resize(r0 + extra, nv);
   goal_model_.topRows(r0) = J0;
@@ -272,10 +275,11 @@ bool Controller::range_goal(const Eigen::Ref<const RowMatrix>& J0, const double*
   goal_d_ /= K;
   goal_.resize(nv);
   const ProjectionReport report_goal =
-      k > 0 ? projection_.solve(goal_xb_, goal_lam_, goal_model_, goal_lo_, goal_hi_, A,
-                                goal_room_, C, goal_d_, goal_)
-            : projection_.solve(goal_xb_, goal_lam_, goal_model_, goal_lo_, goal_hi_, Bnone_,
-                                goal_y_.head(0), C, goal_d_, goal_);
+      rows_with_room
+          ? projection_.solve(goal_xb_, goal_lam_, goal_model_, goal_lo_, goal_hi_, A, goal_room_,
+                              C, goal_d_, goal_)
+          : projection_.solve(goal_xb_, goal_lam_, goal_model_, goal_lo_, goal_hi_, Bnone_,
+                              goal_y_.head(0), C, goal_d_, goal_);
   if (!report_goal.converged || !goal_.allFinite()) return false;
   goal_rows_ = report_goal.rows_active > 0;
   method_top_ = fb0_ + ff0_;
@@ -288,8 +292,9 @@ bool Controller::range_goal(const Eigen::Ref<const RowMatrix>& J0, const double*
 // for (kAligned), gives way to braking to rest, as a projected step does
 // (sufficient_decrease): fully at that rate, not at all at twice it (both velocities keep the
 // rows, and so does their blend; the progress counts the feed-forward's motion too: judging
-// the feedback's share alone stopped UR3 while its target still moved). Each joint brakes toward its own share of the displacement, which bends the motion
-// away from it; against an obstacle, whose rows' room is linearised anew each step, Panda's
+// the feedback's share alone stopped UR3 while its target still moved). Each joint brakes
+// toward its own share of the displacement, which bends the motion away from it; against an
+// obstacle, whose rows' room is linearised anew each step, Panda's
 // arm slid along it at 0.045 rad/s for seconds while lowering its error by 6e-7 of itself per
 // second (blocked seed 11 under acceleration limits), where the displacement promised 30
 // times more. (Not where the ranges alone bind it: those rates also fall while the arm closes
