@@ -176,3 +176,53 @@ def test_an_arm_held_far_from_its_target_by_its_limits_comes_to_rest(name, pair,
     assert max(speeds[-1000:]) < 1e-9  # at rest over the last second
     info = solver.last
     assert info.error_norm > 0.05 and info.stalled and info.active_limits
+
+
+def _descent_rate(robot, q, target, sqrt_weight) -> tuple[float, float]:
+    """f = 1/2 |W e|^2 of the pose error e = log6(oMf^-1 oMd) at q, and its rate of change
+    (per radian, by a forward difference of f itself) along the steepest descent of its exact
+    rows (Pinocchio's Jlog6 J) that the position ranges leave free."""
+    model, data = robot.model, robot.model.createData()
+    fid = robot.ee_frame_id
+
+    def f(x):
+        pin.framesForwardKinematics(model, data, x)
+        e = pin.log6(data.oMf[fid].actInv(target)).vector
+        return 0.5 * float(np.sum((sqrt_weight * e) ** 2))
+
+    pin.framesForwardKinematics(model, data, q)
+    oMf = data.oMf[fid]
+    e = pin.log6(oMf.actInv(target)).vector
+    rows = pin.Jlog6(target.actInv(oMf)) @ pin.computeFrameJacobian(model, data, q, fid,
+                                                                    pin.LOCAL)
+    g = rows.T @ (sqrt_weight**2 * e)  # (the descent: the rows are -de/dq)
+    g[(q >= robot.upper_limits - 1e-12) & (g > 0)] = 0.0
+    g[(q <= robot.lower_limits + 1e-12) & (g < 0)] = 0.0
+    h = 1e-6
+    step = np.clip(q + h * g / np.linalg.norm(g), robot.lower_limits, robot.upper_limits)
+    return f(q), (f(step) - f(q)) / h
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "the stage judges progress in the CLIK model (the frame's J for a pose error), not in the "
+    "exact rows Jlog6 J: far from the target, with joints at their ranges, it rests where the "
+    "true error still falls along the free joints"))
+def test_a_pose_task_rests_only_where_the_true_error_cannot_fall():
+    """Panda, random full-range reaches (starts and targets drawn as ``bench reach`` draws
+    them, seed 3): where the arm comes to rest short of its target, no direction the ranges
+    leave free lowers the weighted pose error faster than 1e-3 of itself per radian.
+    Measured on this build: at 40 of 40 such rests of 100 pairs a direction lowered it at 1e-3
+    to 3e-2 per radian (pairs 61, 62 and 86: 0.13, 0.10 and 0.32 of itself)."""
+    panda = sjt.Robot.from_example("panda")
+    rng = np.random.default_rng(3)
+    draws = [(panda.random_configuration(rng), panda.random_configuration(rng))
+             for _ in range(87)]
+    for pair in (61, 62, 86):
+        q, goal = draws[pair]
+        target = panda.fk(goal)
+        solver = sjt.make_solver("sjt", panda)
+        for _ in range(5000):
+            q = solver.step(q, target)
+        assert solver.error_norm > 1e-3 and np.abs(solver.last.dq).max() == 0.0  # at rest
+        f, rate = _descent_rate(panda, q, target, solver.stack.sqrt_weight)
+        assert rate > -1e-3 * f, (pair, f, rate)
