@@ -226,8 +226,8 @@ bool Controller::range_goal(const Eigen::Ref<const RowMatrix>& J0, const double*
   for (const PositionRange& r : bounds.ranges)
     crosses = crosses || (moving[r.v] != 0.0 && leaves_range(r, q[r.q], fb0_[r.v] / K));
   const Index k = room ? A.rows() : 0;
-  // rows with room (a collision limit's pairs within range) keep the lighter damping and leave
-  // the measured curvature out (both said why where they are set)
+  // rows with room (a collision limit's pairs within range) bound the displacement, keep the
+  // lighter damping and leave the measured curvature out (the last two said why where set)
   const bool rows_with_room = k > 0;
   goal_room_.resize(k);
   for (Index i = 0; i < k; ++i) {
@@ -294,10 +294,9 @@ bool Controller::range_goal(const Eigen::Ref<const RowMatrix>& J0, const double*
 // rows, and so does their blend; the progress counts the feed-forward's motion too: judging
 // the feedback's share alone stopped UR3 while its target still moved). Each joint brakes
 // toward its own share of the displacement, which bends the motion away from it; against an
-// obstacle, whose rows' room is linearised anew each step, Panda's
-// arm slid along it at 0.045 rad/s for seconds while lowering its error by 6e-7 of itself per
-// second (blocked seed 11 under acceleration limits), where the displacement promised 30
-// times more. (Not where the ranges alone bind it: those rates also fall while the arm closes
+// obstacle, whose rows' room is linearised anew each step, Panda's arm slid along it at
+// 0.045 rad/s for seconds while lowering its error by 6e-7 of itself per second (blocked
+// seed 11 under acceleration limits), where the displacement promised 30 times more. (Not where the ranges alone bind it: those rates also fall while the arm closes
 // in on the constrained minimum, and it stopped 1e-4 short of stationarity on UR5, UR10 and
 // Panda, and 3.5e-3 short of xArm7's final target in the stream of `bench accuracy`.)
 void Controller::settle(const Eigen::Ref<const RowMatrix>& J0, const double* q,
