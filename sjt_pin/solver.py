@@ -222,7 +222,7 @@ class Solver:
                 raise
             self._count += 1
             if status & _PYTHON or self._busy:
-                self._slow(status, q, J, [target] if targets is None else targets)
+                self._slow(status, q, J, e, [target] if targets is None else targets)
             # 4. integrate on the manifold; the record of the step (StepInfo) is built on demand
             self._record, self._last = (J, e, q, ff, owners), None
             self._returned = q_next = _integrate(self._model, q, self._step)
@@ -230,7 +230,7 @@ class Solver:
         finally:
             self._stepping = False
 
-    def _slow(self, status, q, J, targets) -> None:
+    def _slow(self, status, q, J, e, targets) -> None:
         """What the fast path skips: errors, first-step checks, stability, the escape's state."""
         c = self._controller
         if status & kernels.NON_FINITE:
@@ -244,8 +244,8 @@ class Solver:
             step_checks.warn_idle_outside(self.robot, self.stack.chain, q)
         if self._stability.armed:
             stack = self.stack
-            self._stability.check(stack.sqrt_weight[:, None] * J * stack.chain, c.trace,
-                                  self._gain.largest, self._dt)
+            self._stability.check(stack.sqrt_weight[:, None] * stack.step_rows(J, e, c.exact_step)
+                                  * stack.chain, c.trace, self._gain.largest, self._dt)
         escape = self.escape
         self._escaped = (self._count, escape is not None and escape.active)
         if escape is not None:
@@ -258,7 +258,7 @@ class Solver:
         on a stack of their own, made on first use."""
         if self._probe is None:
             self._probe = self.stack.copy()
-        return step_checks.weighted_rows(self._probe, self.stack, targets)
+        return step_checks.weighted_rows(self._probe, self.stack, targets, self._controller.exact)
 
     # -- what the step did ----------------------------------------------------------------------
     @property
@@ -359,16 +359,16 @@ class Solver:
     def __reduce__(self):
         """A copy (``pickle``, ``copy.deepcopy``, another process) is the same solver made anew,
         carrying this one's state: gain and period as set now, the commanded velocity and
-        acceleration, the saddle escape, the stability warning, the contacts' held poses and the
-        projection's warm start. Its next steps are this one's, bitwise; it has no :attr:`last`
-        until it steps."""
+        acceleration, the saddle escape, the rows a pose error takes, the stability warning, the
+        contacts' held poses and the projection's warm start. Its next steps are this one's,
+        bitwise; it has no :attr:`last` until it steps."""
         arguments = self.options.replace(gain=self._gain, dt=self._dt,
                                          check_stability=self._stability.enabled)
         c = self._controller
         state = {"motion": (c.dq.copy(), c.ddq.copy()), "escape": self.escape,
                  "escaping": c.escaping, "escape_velocity": c.escape_velocity.copy(),
                  "warned": self._stability.warned, "count": self._count, "first": self._first,
-                 "stall": (c.stall_run, c.stall_wait), "warm": c.warm_state,
+                 "stall": (c.stall_run, c.stall_wait, c.exact, c.still), "warm": c.warm_state,
                  "curvature": c.curvature_memory,
                  "held": [getattr(t, "held", None) for t in self.stack.tasks]}
         return (_rebuild, (type(self), self.robot, self.method, arguments), state)
@@ -380,7 +380,7 @@ class Solver:
         c.escape_velocity[:] = state["escape_velocity"]
         self._stability.warned, self._count, self._first = (state["warned"], state["count"],
                                                             state["first"])
-        c.stall_run, c.stall_wait = state["stall"]
+        c.stall_run, c.stall_wait, c.exact, c.still = state["stall"]
         c.warm_state, c.curvature_memory = state["warm"], state["curvature"]
         for task, held in zip(self.stack.tasks, state["held"], strict=True):
             if held is not None:  # (a contact's)

@@ -126,6 +126,7 @@ def make_controller(robot: Robot, stack: TaskStack, method: Method, dt: float,
         # converged, not stalled: |e_w| below ERROR_FLOOR times the first level's length
         (SaddleEscape.ERROR_FLOOR * tasks_length(robot, stack.leading)) ** 2,
         stack.rank_scale)
+    controller.set_log6_rows(stack.log6_rows)
     #: the motion state a user's limits read is the controller's own
     motion.dq, motion.ddq = controller.dq, controller.ddq
     return controller, matrix_method

@@ -10,6 +10,7 @@ import pinocchio as pin
 
 from .kinematics import Kinematics
 from .tasks import ContactTask, PoseTask, PostureTask, Task
+from .tasks.base import jlog6_rows
 
 #: the usual target types, which are no mappings (isinstance against Mapping costs 0.2 us)
 _NOT_MAPPINGS = (pin.SE3, np.ndarray, list, tuple)
@@ -126,6 +127,13 @@ class TaskStack:
                         and isinstance(self.tasks[members[0]], PostureTask))
             self.levels.append((begin, end, identity, targets))
             self.level_errors.append((begin, begin + kept))
+        #: the first rows of the first level's target tasks whose error is a ``log6``
+        #: (``Task.log6_error``), whose exact rows the step takes from a rest short of the
+        #: target on (:meth:`step_rows`)
+        first_end = self.levels[0][0] + self.levels[0][3]
+        self.log6_rows = np.array([s.start for t, s in zip(self.tasks, self.slices, strict=True)
+                                   if t.takes_target and t.log6_error and s.stop <= first_end],
+                                  dtype=np.int64)
         #: trailing rows that are rows of the identity (a posture task's, last): the set-point
         #: search solves the stacked system as diagonal plus low rank, linear in nv
         self.identity_rows = (nv if self.tasks and isinstance(self.tasks[-1], PostureTask)
@@ -279,6 +287,16 @@ class TaskStack:
         return targets, self._align(velocities)
 
     # -- rows --------------------------------------------------------------------------------
+    def step_rows(self, J: np.ndarray, e: np.ndarray, exact: bool) -> np.ndarray:
+        """The rows a step took: ``J`` itself, or where the step took ``exact`` rows, ``J`` with
+        the first level's ``log6`` errors' rows ``Jlog6 J`` (a copy)."""
+        if not (exact and self.log6_rows.size):
+            return J
+        J = J.copy()
+        for r in self.log6_rows:
+            J[r:r + 6] = jlog6_rows(e[r:r + 6], J[r:r + 6])
+        return J
+
     def evaluate(self, q: np.ndarray, targets: list, velocities: list | None,
                  motion: tuple[np.ndarray, float] | None = None
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:

@@ -32,7 +32,7 @@ def warn_idle_outside(robot: Robot, chain: np.ndarray, q: np.ndarray) -> None:
                       "to bring them back)", UserWarning, stacklevel=4)
 
 
-def weighted_rows(probe: TaskStack, stack: TaskStack, targets):
+def weighted_rows(probe: TaskStack, stack: TaskStack, targets, exact: bool):
     """``q -> (J_w, e_w)``: the weighted, masked rows of ``stack``'s first priority level for
     ``targets``, evaluated on ``probe``, a copy of it (the step's buffers stay as they are).
     Only the first level's: the escape acts on the error the method's step lowers. (With the
@@ -50,6 +50,7 @@ def weighted_rows(probe: TaskStack, stack: TaskStack, targets):
 
     def rows(q):
         J, e, _ = probe.evaluate(q, targets, None)
+        J = probe.step_rows(J, e, exact)  # (the rows the step takes)
         return sw[:, None] * J[begin:end] * mask, sw * e[begin:end]
 
     return rows

@@ -154,6 +154,7 @@ def step_info(controller, stack, robot, J: np.ndarray, e: np.ndarray, q: np.ndar
     c = controller
     names = robot.velocity_names
     sw, chain = stack.sqrt_weight, stack.chain
+    J = stack.step_rows(J, e, c.exact_step)  # (the rows the step took)
     Jw = sw[:, None] * J * chain
     dq = step / c.dt
     active = active_limits(c, names, user, speed_by)

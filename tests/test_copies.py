@@ -169,3 +169,23 @@ def test_copies_step_as_the_original_on_random_robots(seed, joints, cut, how, me
     for target in targets[cut:]:
         qa, qb = solver.step(qa, target), twin.step(qb, target)
         np.testing.assert_array_equal(qa, qb)
+
+
+@pytest.mark.parametrize("how", ["pickle", "deepcopy"])
+def test_a_copy_at_a_rest_takes_the_rows_the_original_takes(how):
+    """Panda held by its ranges short of a far pose target (a random full-range reach) takes
+    the pose error's exact rows from that rest on: a copy made after it carries that, and goes
+    on as the original does, bitwise; a solver made anew at the same q and motion would not."""
+    panda = sjt.Robot.from_example("panda")
+    rng = np.random.default_rng(3)
+    draws = [(panda.random_configuration(rng), panda.random_configuration(rng))
+             for _ in range(62)]
+    q, goal = draws[61]
+    target = panda.fk(goal)
+    original = sjt.make_solver("sjt", panda)
+    q = run(original, q, [target] * 1150)[-1]  # (at rest with them from about 1,100 steps)
+    twin = pickle.loads(pickle.dumps(original)) if how == "pickle" else copy.deepcopy(original)
+    ahead = run(original, q, [target] * 200)
+    np.testing.assert_array_equal(run(twin, q, [target] * 200), ahead)
+    fresh = sjt.make_solver("sjt", panda)
+    assert not np.array_equal(run(fresh, q, [target] * 200), ahead)  # (the case under test)

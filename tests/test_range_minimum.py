@@ -1,6 +1,6 @@
 """A held target beyond a joint's position range, under acceleration and jerk limits: the arm
 comes to rest at a constrained stationary point of its task error (no velocity within the
-ranges lowers the linearised error), never above a limit.
+ranges lowers it to first order), never above a limit.
 
 Before the first level's feedback became the bounded least-squares displacement wherever the
 method's own displacement leaves a range (``Controller::range_goal``), 23 of the 24 runs
@@ -47,14 +47,15 @@ def _case(name: str, seed: int):
 def _stationarity(robot, q, target) -> tuple[float, float]:
     """``|e_w|`` at q and the part of the weighted error's steepest descent ``g = J^T W^2 e``
     that the ranges leave free, over ``|J| |e_w|`` (0 at a constrained stationary point of
-    1/2 |e_w|^2 in the CLIK model e(q + dq) = e - J dq): e = log6(oMf^-1 oMd), J the frame's
-    LOCAL Jacobian, W = diag(1, 1, 1, L, L, L). A joint at its upper (lower) bound keeps only
-    a negative (positive) share of g."""
+    1/2 |e_w|^2): e = log6(oMf^-1 oMd), J its exact rows Jlog6(oMd^-1 oMf) J_f (Pinocchio's
+    Jlog6; J_f the frame's LOCAL Jacobian), W = diag(1, 1, 1, L, L, L). A joint at its upper
+    (lower) bound keeps only a negative (positive) share of g."""
     model, data = robot.model, robot.model.createData()
     fid = robot.ee_frame_id
     pin.framesForwardKinematics(model, data, q)
-    J = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL)
-    e = pin.log6(data.oMf[fid].actInv(target)).vector
+    oMf = data.oMf[fid]
+    J = pin.Jlog6(target.actInv(oMf)) @ pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL)
+    e = pin.log6(oMf.actInv(target)).vector
     w = np.array([1.0, 1.0, 1.0, LENGTH, LENGTH, LENGTH])
     g = J.T @ (w**2 * e)
     at_upper = q >= robot.upper_limits - 1e-9

@@ -203,26 +203,29 @@ def _descent_rate(robot, q, target, sqrt_weight) -> tuple[float, float]:
     return f(q), (f(step) - f(q)) / h
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "the stage judges progress in the CLIK model (the frame's J for a pose error), not in the "
-    "exact rows Jlog6 J: far from the target, with joints at their ranges, it rests where the "
-    "true error still falls along the free joints"))
 def test_a_pose_task_rests_only_where_the_true_error_cannot_fall():
     """Panda, random full-range reaches (starts and targets drawn as ``bench reach`` draws
     them, seed 3): where the arm comes to rest short of its target, no direction the ranges
-    leave free lowers the weighted pose error faster than 1e-3 of itself per radian.
-    Measured on this build: at 40 of 40 such rests of 100 pairs a direction lowered it at 1e-3
-    to 3e-2 per radian (pairs 61, 62 and 86: 0.13, 0.10 and 0.32 of itself)."""
+    leave free lowers the weighted pose error faster than 1e-3 of itself per radian. In the
+    CLIK model alone (the frame's J for the pose error) the stage rested at 40 of 40 such rests
+    of 100 pairs where a direction lowered it at 1e-3 to 3e-2 per radian (pairs 61, 62 and 86:
+    0.13, 0.10 and 0.32 of itself); from such a rest the step takes the exact rows Jlog6 J, and
+    pair 62 goes on to its target."""
     panda = sjt.Robot.from_example("panda")
     rng = np.random.default_rng(3)
     draws = [(panda.random_configuration(rng), panda.random_configuration(rng))
              for _ in range(87)]
+    reached = 0
     for pair in (61, 62, 86):
         q, goal = draws[pair]
         target = panda.fk(goal)
         solver = sjt.make_solver("sjt", panda)
         for _ in range(5000):
             q = solver.step(q, target)
-        assert solver.error_norm > 1e-3 and np.abs(solver.last.dq).max() == 0.0  # at rest
+        if solver.error_norm < 1e-9:
+            reached += 1
+            continue
+        assert np.abs(solver.last.dq).max() == 0.0 and solver.last.stalled  # at rest
         f, rate = _descent_rate(panda, q, target, solver.stack.sqrt_weight)
         assert rate > -1e-3 * f, (pair, f, rate)
+    assert reached == 1  # (pair 62; the others rest short: the case under test)

@@ -80,6 +80,10 @@ class Task(ABC):
     #: whether the task is on a frame (a centre-of-mass or posture task is not: ``frame`` is
     #: then ``None``, and the task's key is its ``label``)
     has_frame: ClassVar[bool] = True
+    #: whether the error is SE(3)'s logarithm ``log6`` (6 rows, as :class:`PoseTask`'s): its
+    #: exact rows are then ``Jlog6 J`` (:meth:`error_jacobian`), which the step's constraint
+    #: stage takes for the first level's model (the method's step keeps the rows ``J``)
+    log6_error: ClassVar[bool] = False
 
     def __init__(self, frame: str | None = None, weight=None, priority: int | None = 0):
         if frame is not None and not isinstance(frame, str):

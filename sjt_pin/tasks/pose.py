@@ -94,6 +94,7 @@ class PoseTask(Task):
     """
 
     dim = 6
+    log6_error = True
 
     def __init__(self, frame: str | None = None, weight=None, length: float | None = None,
                  priority: int | None = 0):

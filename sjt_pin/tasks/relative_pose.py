@@ -31,6 +31,7 @@ class RelativePoseTask(Task):
     """
 
     dim = 6
+    log6_error = True
 
     def __init__(self, frame: str, reference: str, weight=None, name: str | None = None,
                  priority: int | None = 0):

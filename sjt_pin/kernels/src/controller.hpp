@@ -53,7 +53,8 @@ class Controller {
 
   // A user method's matrix, before run(): the first level's weighted rows of J (m x nv), as
   // the step weighs them, into `rows` (r0 x nv, row-major: the rows the method is given).
-  void first_rows(const Eigen::Ref<const RowMatrix>& J, double* rows) const;
+  void first_rows(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const Vector>& e,
+                  double* rows);
   // its M of Fortran order (numpy's J.T), copied row-major for run()'s products (nv x r0)
   RowMatrix user_matrix;
 
@@ -61,6 +62,8 @@ class Controller {
   double dt() const { return dt_; }
   void set_gains(const Vector& gains, bool auto_gain, double factor);
   void set_speed(const Vector& speed);
+  // the first rows of the first level's pose errors (log6 blocks of 6 target rows, see run)
+  void set_log6_rows(const Eigen::Matrix<int64_t, Eigen::Dynamic, 1>& rows);
   void reset();
 
   // -- parameters
@@ -78,6 +81,10 @@ class Controller {
   bool escaping = false;
   double given_gain = 1.0;  // K of a user method's last feedback (its fb / K is the displacement)
   double stall_run = -1.0, stall_wait = 1e300;
+  // the first level's pose errors take their exact rows (exact_rows; set after `still`
+  // consecutive steps at rest short of the target, cleared near it)
+  bool exact = false;
+  double still = 0.0;
   // the first level's nearest feasible velocity (without acceleration limits) starts from the
   // last step's dual point: along a path the set of joints at a bound rarely changes, and one
   // Newton step then solves it (Kinova's 1 cm circle beyond its speed limits: 6.6 Newton
@@ -101,6 +108,7 @@ class Controller {
   std::vector<int> rows_active;
   ProjectionReport report;
   bool kept = true;
+  bool exact_step = false;  // this step's pose errors took their exact rows
   // the last step's J0 dq and whether there is one (measured_bend): state copies carry
   std::tuple<bool, Vector> curvature_memory() const { return {bent_ready_, bent_}; }
   void set_curvature_memory(bool ready, const Vector& bent) {
@@ -123,6 +131,13 @@ class Controller {
   // Not while the saddle escape adds a velocity (its own test found the error lower along it,
   // and it yields if the error grows)
   static constexpr double kRestRate = 1e-3;
+  // the exact rows of a pose error (run, exact_rows): taken after this many consecutive steps
+  // held by a limit short of the target, lowering 1/2 |e_w|^2 by less than kRestRate of it a
+  // second, with |e_w| above kExactFrom times the converged floor; given back once |e_w| is
+  // below kExactTo times it (1e-4 of the tasks' length: the two models' rows then agree to
+  // that share)
+  static constexpr double kStillSteps = 10.0;
+  static constexpr double kExactFrom = 1e3, kExactTo = 1e2;
 
   // the levels below the first (lower_levels.cpp)
   void lower_levels(const double* ffw, const double* q);
@@ -201,6 +216,12 @@ class Controller {
   // measured_bend: J0 dq at the end of the last step (its curvature, measured at this one),
   // whether there is one, and whether this step's first level was projected
   Vector bent_, bent_now_;
+  // the first level's pose errors: their first rows, and G = Jlog6 and G J (exact_rows)
+  std::vector<Index> log6_rows_;
+  RowMatrix jlog6_, exact6_;
+  void exact_rows(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const Vector>& e,
+                  const double* ff_in, Eigen::Ref<RowMatrix> out, Index first);
+  void watch_rest(int status);
   bool bent_ready_ = false, projected_ = false;
   double bend_ = -1.0;  // this step's measured_bend (-1: not measured yet)
   bool lower_replaced_ = false;  // lower_goal replaced the lower levels' feedback this step

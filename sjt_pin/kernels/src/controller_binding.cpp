@@ -44,12 +44,12 @@ const double* optional(nb::handle object, const char* name, Index n, std::option
 // numpy.ascontiguousarray(M, dtype=float) (a list, float32). Its shape and that it is finite
 // are checked (ValueError naming it); Fortran order is copied into the controller's row-major
 // buffer. `keep` and `storage` hold what the returned pointer reads.
-const double* user_matrix(Controller& c, const Array& J, nb::handle matrix, nb::object& keep,
-                          std::optional<Array>& storage) {
+const double* user_matrix(Controller& c, const Array& J, const Array& e, nb::handle matrix,
+                          nb::object& keep, std::optional<Array>& storage) {
   keep = nb::borrow(matrix);
   if (PyCallable_Check(matrix.ptr())) {
     NewArray rows = new_array(c.levels[0].end - c.levels[0].begin, c.nv);
-    c.first_rows(J.matrix(), rows.data);
+    c.first_rows(J.matrix(), e.vector(), rows.data);
     keep = matrix(rows.array);
     if (!plain_array(keep, 2, Order::any)) {
       const bool array = ndim_of(keep) >= 0;
@@ -152,7 +152,7 @@ void register_controller(nb::module_& m) {
             const double* ffp = optional(ff, "ff", c.m, s1);
             const double* mp = nullptr;
             nb::object given;
-            if (!matrix.is_none()) mp = user_matrix(c, Ja, matrix, given, s2);
+            if (!matrix.is_none()) mp = user_matrix(c, Ja, ea, matrix, given, s2);
             const double* lo = optional(lower, "lower", c.nv, s3);
             const double* hi = optional(upper, "upper", c.nv, s4);
             if ((lo == nullptr) != (hi == nullptr)) fail("lower and upper come together");
@@ -191,6 +191,9 @@ void register_controller(nb::module_& m) {
       .def("set_gains", &Controller::set_gains, nb::arg("gains"), nb::arg("auto_gain"),
            nb::arg("factor"))
       .def("set_speed", &Controller::set_speed, nb::arg("speed"))
+      .def("set_log6_rows", &Controller::set_log6_rows, nb::arg("rows"),
+           "the first rows of the first level's pose errors (log6, 6 target rows each), whose "
+           "exact rows Jlog6 J the step takes from a rest held by a limit short of the target")
       .def("reset", &Controller::reset)
       .def_prop_ro("dt", &Controller::dt)
       .def_prop_ro("dq", [](Controller& c) { return view<WriteView>(c, c.dq.data(), c.nv); },
@@ -203,6 +206,9 @@ void register_controller(nb::module_& m) {
       .def_rw("escaping", &Controller::escaping)
       .def_rw("stall_run", &Controller::stall_run)
       .def_rw("stall_wait", &Controller::stall_wait)
+      .def_rw("exact", &Controller::exact)
+      .def_rw("still", &Controller::still)
+      .def_prop_ro("exact_step", [](Controller& c) { return c.exact_step; })
       .def_prop_ro("desired", [](Controller& c) { return view<ReadView>(c, c.desired.data(), c.nv); },
                    nb::rv_policy::reference_internal)
       .def_prop_ro("desired_top",

@@ -3,7 +3,7 @@
 // target (the set-point search's model on its general path, Task.error_jacobian).
 #include <cmath>
 
-#include "array.hpp"
+#include "lie.hpp"
 #include "registry.hpp"
 
 namespace sjt {
@@ -46,7 +46,9 @@ Coupling coupling(double t) {
   return c;
 }
 
-// G = Jlog6(N^-1) (6 x 6, [linear; angular]) from xi = (v, w) = log6(N):
+}  // namespace
+
+// G = Jlog6(N^-1) (lie.hpp) is
 // [[A, -A Q(v, w) A], [0, A]] with A = Jlog3(-w) = I - W/2 + k W^2, k = 1/t^2 - cot(t/2)/(2t),
 // and Q the coupling block of SE(3)'s left Jacobian at (v, w).
 void jlog6_inverse(const double* xi, MatrixMap G) {
@@ -65,8 +67,6 @@ void jlog6_inverse(const double* xi, MatrixMap G) {
   G.topRightCorner<3, 3>() = -(A * Q) * A;
   G.bottomLeftCorner<3, 3>().setZero();
 }
-
-}  // namespace
 
 void register_lie(nb::module_& m) {
   m.def(
