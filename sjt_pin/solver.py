@@ -368,8 +368,8 @@ class Solver:
         state = {"motion": (c.dq.copy(), c.ddq.copy()), "escape": self.escape,
                  "escaping": c.escaping, "escape_velocity": c.escape_velocity.copy(),
                  "warned": self._stability.warned, "count": self._count, "first": self._first,
-                 "stall": (c.stall_run, c.stall_wait, c.exact, c.still), "warm": c.warm_state,
-                 "curvature": c.curvature_memory,
+                 "stall": (c.stall_run, c.stall_wait, c.exact, c.still, c.expected.copy()),
+                 "warm": c.warm_state, "curvature": c.curvature_memory,
                  "held": [getattr(t, "held", None) for t in self.stack.tasks]}
         return (_rebuild, (type(self), self.robot, self.method, arguments), state)
 
@@ -380,7 +380,7 @@ class Solver:
         c.escape_velocity[:] = state["escape_velocity"]
         self._stability.warned, self._count, self._first = (state["warned"], state["count"],
                                                             state["first"])
-        c.stall_run, c.stall_wait, c.exact, c.still = state["stall"]
+        c.stall_run, c.stall_wait, c.exact, c.still, c.expected[:] = state["stall"]
         c.warm_state, c.curvature_memory = state["warm"], state["curvature"]
         for task, held in zip(self.stack.tasks, state["held"], strict=True):
             if held is not None:  # (a contact's)

@@ -97,14 +97,15 @@ class StepInfo:
             descent direction of that model whenever one exists; a projected step that
             lowers ``1/2 |e_w|^2`` by less than 1e-3 of ``|e_w|^2`` per second gives way to
             rest, unless the escape adds it), so the arm is at a stationary point of that
-            model (for a pose error far from its target, not always of the error itself:
-            its exact rows are Jlog6 J, see docs/limits.md): with ``active_limits`` naming
-            the limits that hold it, a minimum against them (``solver.move_to()`` reaches such
-            targets by another way); without, a minimum of the error itself — a target out of
-            reach, or one reachable only on another branch of the inverse kinematics — or, for
-            JT and SJT, a saddle that the escape tests after a window of stalled steps, over
-            the next 2 n steps or so (one evaluation of the task rows a step; ``escaped`` is
-            true on the steps of an escape it starts).
+            model (for a pose error far from its target the CLIK rows are not the error's
+            gradient: a rest held by a limit switches them to the exact rows Jlog6 J, and the
+            arm rests where the true error cannot fall, see docs/limits.md): with
+            ``active_limits`` naming the limits that hold it, a minimum against them
+            (``solver.move_to()`` reaches such targets by another way); without, a minimum of
+            the error itself — a target out of reach, or one reachable only on another branch
+            of the inverse kinematics — or, for JT and SJT, a saddle that the escape tests
+            after a window of stalled steps, over the next 2 n steps or so (one evaluation of
+            the task rows a step; ``escaped`` is true on the steps of an escape it starts).
         levels: one :class:`LevelInfo` per priority level, top first: its error norm and
             the share of its task motion the step kept.
         velocity_scale: the same as ``task_scale`` (its former name).

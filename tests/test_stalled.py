@@ -229,3 +229,25 @@ def test_a_pose_task_rests_only_where_the_true_error_cannot_fall():
         f, rate = _descent_rate(panda, q, target, solver.stack.sqrt_weight)
         assert rate > -1e-3 * f, (pair, f, rate)
     assert reached == 1  # (pair 62; the others rest short: the case under test)
+
+
+def test_the_exact_rows_of_a_rest_belong_to_its_target():
+    """From a rest short of its target (Panda, seed-3 pair 61, above) the step takes the pose
+    error's exact rows; sent to a new target it starts again in the CLIK rows, as a solver
+    made anew at that rest does (the basins of the targets that follow stay the CLIK law's)."""
+    panda = sjt.Robot.from_example("panda")
+    rng = np.random.default_rng(3)
+    draws = [(panda.random_configuration(rng), panda.random_configuration(rng))
+             for _ in range(87)]
+    q, goal = draws[61]
+    solver = sjt.make_solver("sjt", panda)
+    for _ in range(2000):
+        q = solver.step(q, panda.fk(goal))
+    assert solver.error_norm > 0.5 and np.abs(solver.last.dq).max() == 0.0  # at rest
+    target = panda.fk(draws[40][1])
+    fresh = sjt.make_solver("sjt", panda)
+    a, b = q.copy(), q.copy()
+    for _ in range(300):
+        a, b = solver.step(a, target), fresh.step(b, target)
+    np.testing.assert_allclose(a, b, rtol=0.0, atol=1e-9)
+    assert np.abs(a - q).max() > 0.1  # (it went somewhere)

@@ -85,6 +85,7 @@ class Controller {
   // consecutive steps at rest short of the target, cleared near it)
   bool exact = false;
   double still = 0.0;
+  Vector expected;  // the first level's weighted target error the next step expects (exact)
   // the first level's nearest feasible velocity (without acceleration limits) starts from the
   // last step's dual point: along a path the set of joints at a bound rarely changes, and one
   // Newton step then solves it (Kinova's 1 cm circle beyond its speed limits: 6.6 Newton
@@ -137,7 +138,7 @@ class Controller {
   // below kExactTo times it (1e-4 of the tasks' length: the two models' rows then agree to
   // that share)
   static constexpr double kStillSteps = 10.0;
-  static constexpr double kExactFrom = 1e3, kExactTo = 1e2;
+  static constexpr double kExactFrom = 1e3, kExactTo = 1e2, kJump = 0.1;
 
   // the levels below the first (lower_levels.cpp)
   void lower_levels(const double* ffw, const double* q);
@@ -222,6 +223,7 @@ class Controller {
   void exact_rows(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const Vector>& e,
                   const double* ff_in, Eigen::Ref<RowMatrix> out, Index first);
   void watch_rest(int status);
+  bool keeps_exact(const Eigen::Ref<const Vector>& e);
   bool bent_ready_ = false, projected_ = false;
   double bend_ = -1.0;  // this step's measured_bend (-1: not measured yet)
   bool lower_replaced_ = false;  // lower_goal replaced the lower levels' feedback this step

@@ -208,6 +208,9 @@ void register_controller(nb::module_& m) {
       .def_rw("stall_wait", &Controller::stall_wait)
       .def_rw("exact", &Controller::exact)
       .def_rw("still", &Controller::still)
+      .def_prop_ro("expected",
+                   [](Controller& c) { return view<WriteView>(c, c.expected.data(), c.expected.size()); },
+                   nb::rv_policy::reference_internal)
       .def_prop_ro("exact_step", [](Controller& c) { return c.exact_step; })
       .def_prop_ro("desired", [](Controller& c) { return view<ReadView>(c, c.desired.data(), c.nv); },
                    nb::rv_policy::reference_internal)
