@@ -98,8 +98,8 @@ class StepInfo:
             lowers ``1/2 |e_w|^2`` by less than 1e-3 of ``|e_w|^2`` per second gives way to
             rest, unless the escape adds it), so the arm is at a stationary point of that
             model (for a pose error far from its target the CLIK rows are not the error's
-            gradient: a rest held by a limit switches them to the exact rows Jlog6 J, and the
-            arm rests where the true error cannot fall, see docs/limits.md): with
+            gradient: a rest at a position range switches them to the exact rows Jlog6 J,
+            and the arm rests where the true error cannot fall, see docs/limits.md): with
             ``active_limits`` naming the limits that hold it, a minimum against them
             (``solver.move_to()`` reaches such targets by another way); without, a minimum of
             the error itself — a target out of reach, or one reachable only on another branch

@@ -100,18 +100,10 @@ void Controller::set_log6_rows(const Eigen::Matrix<int64_t, Eigen::Dynamic, 1>& 
 // their feed-forward G ff (the frame's twist that follows the target, in LOCAL axes: then
 // e_dot = -G (J q_dot - ff) exactly), into `out` (run: Jw_, first = 0; first_rows: the first
 // level's rows, first = its first row). The CLIK rows J give the error's rate only to first
-// order near the target, and the paper's Lyapunov argument for D J^T (eq. 22) needs
-// e_dot = -J q_dot: far from the target SE(3)'s logarithm couples the position rows with the
-// rotation, J^T e is not the error's gradient, and the stage, reasoning in the CLIK model,
-// rested arms held by a limit where the true error still fell (Panda, random full-range
-// reaches: at 40 of 40 rests short of the target a direction within the limits lowered
-// 1/2 |e_w|^2 at 1e-3 to 3e-2 per radian). run() takes these rows from such a rest on
-// (`exact`), the method's and the stage's alike, until the error is small. Taken on every
-// step the exact rows change the paths from their first step: other basins (Baxter's arm at
-// its singular configuration turns its elbow into its range instead of out of the saddle; the
-// settle bench reached 511 of 972 targets where the CLIK rows reach 538); taken in the stage
-// alone, each joint braking toward the method's displacement, arms swung between the two
-// models' minima under acceleration limits.
+// order near the target (the paper's Lyapunov argument for D J^T, eq. 22, takes
+// e_dot = -J q_dot): far from it SE(3)'s logarithm couples the position rows with the
+// rotation, and J^T e is not the error's gradient. run() takes these rows from a rest held by
+// a limit on (watch_rest), where the CLIK model can be stationary while the error still falls.
 void Controller::exact_rows(const Eigen::Ref<const RowMatrix>& J,
                             const Eigen::Ref<const Vector>& e, const double* ff_in,
                             Eigen::Ref<RowMatrix> out, Index first) {
@@ -383,38 +375,43 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
   dq = velocity;
   bent_.noalias() = J0 * dq;  // (measured_bend, next step)
   bent_ready_ = true;
-  if (!log6_rows_.empty()) watch_rest(status);
+  if (!log6_rows_.empty()) watch_rest(status, q, step);
   return status;
 }
 
 // Whether the next steps take the pose errors' exact rows (exact_rows): from a rest held by a
-// limit (the stage changed the method's step, and the step lowered 1/2 |e_w|^2 by less than
-// kRestRate of it a second) kStillSteps steps long, short of the target, outside the saddle
-// escape's watch (a stall of the method's own, which its curvature test answers in the CLIK
-// model); until |e_w| is below kExactTo times the converged floor.
-void Controller::watch_rest(int status) {
+// position range (the stage changed the method's step, a joint ends the step within
+// kRangeTol of its range, and the step lowered 1/2 |e_w|^2 by less than kRestRate of it a
+// second) kStillSteps steps long, short of the target, outside the saddle escape's watch (a
+// stall of the method's own, which its curvature test answers in the CLIK model); until |e_w|
+// is below kExactTo times the converged floor. (Not at a rest held by collision rows alone:
+// there the arm slid on along the obstacle, xArm7 behind one resting at 7.8 s instead of 1.6.)
+void Controller::watch_rest(int status, const double* q, const Eigen::Ref<const Vector>& step) {
   const Level& L0 = levels[0];
   const auto ew0 = ew_.segment(L0.begin, L0.targets);
   const double sq = ew0.squaredNorm();
   if (exact) {
-    if (sq < kExactTo * kExactTo * stall_floor) {
-      exact = false;
-    } else {  // (the error the next step expects, keeps_exact)
-      expected = ew0 - dt_ * bent_.head(L0.targets);
-      if (ff_sq > 0.0) expected += dt_ * ffw_.segment(L0.begin, L0.targets);
+    exact = sq >= kExactTo * kExactTo * stall_floor;
+  } else {
+    double rate = ew0.dot(bent_.head(L0.targets));
+    if (ff_sq > 0.0) rate -= ew0.dot(ffw_.segment(L0.begin, L0.targets));
+    bool resting = (status & kConstrained) && !escaping && stall_run < 0.0 &&
+                   sq > kExactFrom * kExactFrom * stall_floor && std::abs(rate) < kRestRate * sq;
+    if (resting) {
+      bool at_range = false;
+      for (const PositionRange& r : bounds.ranges) {
+        const double x = q[r.q] + step[r.v];
+        at_range = at_range || x <= r.lower + kRangeTol || x >= r.upper - kRangeTol;
+      }
+      resting = at_range;
     }
-    return;
+    still = resting ? still + 1.0 : 0.0;
+    exact = still >= kStillSteps;
+    if (exact) still = 0.0;
   }
-  double rate = ew0.dot(bent_.head(L0.targets));
-  if (ff_sq > 0.0) rate -= ew0.dot(ffw_.segment(L0.begin, L0.targets));
-  const bool resting = (status & kConstrained) && !escaping && stall_run < 0.0 &&
-                       sq > kExactFrom * kExactFrom * stall_floor &&
-                       std::abs(rate) < kRestRate * sq;
-  still = resting ? still + 1.0 : 0.0;
-  if (still >= kStillSteps) {
-    exact = true;
-    still = 0.0;
-    expected = ew0;  // (at rest)
+  if (exact) {  // the error the next step expects of this one's motion (keeps_exact)
+    expected = ew0 - dt_ * bent_.head(L0.targets);
+    if (ff_sq > 0.0) expected += dt_ * ffw_.segment(L0.begin, L0.targets);
   }
 }
 

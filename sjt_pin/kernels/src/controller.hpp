@@ -133,12 +133,13 @@ class Controller {
   // and it yields if the error grows)
   static constexpr double kRestRate = 1e-3;
   // the exact rows of a pose error (run, exact_rows): taken after this many consecutive steps
-  // held by a limit short of the target, lowering 1/2 |e_w|^2 by less than kRestRate of it a
-  // second, with |e_w| above kExactFrom times the converged floor; given back once |e_w| is
-  // below kExactTo times it (1e-4 of the tasks' length: the two models' rows then agree to
-  // that share)
+  // held by a position range short of the target, lowering 1/2 |e_w|^2 by less than kRestRate
+  // of it a second, with |e_w| above kExactFrom times the converged floor; given back once
+  // |e_w| is below kExactTo times it (1e-4 of the tasks' length: the two models' rows then
+  // agree to that share) or the target jumps (kJump, keeps_exact)
   static constexpr double kStillSteps = 10.0;
   static constexpr double kExactFrom = 1e3, kExactTo = 1e2, kJump = 0.1;
+  static constexpr double kRangeTol = 1e-6;  // rad, m: a joint this close to its range is on it
 
   // the levels below the first (lower_levels.cpp)
   void lower_levels(const double* ffw, const double* q);
@@ -222,7 +223,7 @@ class Controller {
   RowMatrix jlog6_, exact6_;
   void exact_rows(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const Vector>& e,
                   const double* ff_in, Eigen::Ref<RowMatrix> out, Index first);
-  void watch_rest(int status);
+  void watch_rest(int status, const double* q, const Eigen::Ref<const Vector>& step);
   bool keeps_exact(const Eigen::Ref<const Vector>& e);
   bool bent_ready_ = false, projected_ = false;
   double bend_ = -1.0;  // this step's measured_bend (-1: not measured yet)
