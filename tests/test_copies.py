@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 
 import sjt_pin as sjt
 
+from .helpers import full_range_pair
 from .test_random_urdfs import random_semantic_robot
 
 
@@ -177,10 +178,7 @@ def test_a_copy_at_a_rest_takes_the_rows_the_original_takes(how):
     the pose error's exact rows from that rest on: a copy made after it carries that, and goes
     on as the original does, bitwise; a solver made anew at the same q and motion would not."""
     panda = sjt.Robot.from_example("panda")
-    rng = np.random.default_rng(3)
-    draws = [(panda.random_configuration(rng), panda.random_configuration(rng))
-             for _ in range(62)]
-    q, goal = draws[61]
+    q, goal = full_range_pair(panda, 3, 61)
     target = panda.fk(goal)
     original = sjt.make_solver("sjt", panda)
     q = run(original, q, [target] * 1150)[-1]  # (at rest with them from about 1,100 steps)

@@ -6,6 +6,8 @@ import pytest
 
 import sjt_pin as sjt
 
+from .helpers import full_range_pair
+
 
 @pytest.mark.parametrize("method", ["sjt", "dls", "jp"])
 def test_random_targets_never_violate_panda_limits(panda, method, rng):
@@ -156,10 +158,7 @@ def test_a_far_reach_under_speed_limits_arrives_as_fast_as_pinks():
     proportion, and the hand was still 2.1 cm away after 5 s (pink's QP arrives in 3.3 s);
     the nearest feasible velocity drives the other joints too and arrives in about 3.5 s."""
     kinova = sjt.Robot.from_example("kinova")
-    rng = np.random.default_rng(0)
-    draws = [(kinova.random_configuration(rng), kinova.random_configuration(rng))
-             for _ in range(9)]
-    q, goal = draws[8]
+    q, goal = full_range_pair(kinova, 0, 8)
     target = kinova.fk(goal)
     solver = sjt.SJTSolver(kinova)
     for _ in range(4000):

@@ -9,6 +9,8 @@ import pytest
 
 import sjt_pin as sjt
 
+from .helpers import full_range_pair
+
 FIXTURES = Path(__file__).resolve().parent / "fixtures" / "urdf"
 
 #: UR10 with its elbow exactly straight, and a pose 6.6 cm off along the direction the
@@ -212,12 +214,9 @@ def test_a_pose_task_rests_only_where_the_true_error_cannot_fall():
     0.13, 0.10 and 0.32 of itself); from such a rest the step takes the exact rows Jlog6 J, and
     pair 62 goes on to its target."""
     panda = sjt.Robot.from_example("panda")
-    rng = np.random.default_rng(3)
-    draws = [(panda.random_configuration(rng), panda.random_configuration(rng))
-             for _ in range(87)]
     reached = 0
     for pair in (61, 62, 86):
-        q, goal = draws[pair]
+        q, goal = full_range_pair(panda, 3, pair)
         target = panda.fk(goal)
         solver = sjt.make_solver("sjt", panda)
         for _ in range(5000):
@@ -236,15 +235,12 @@ def test_the_exact_rows_of_a_rest_belong_to_its_target():
     error's exact rows; sent to a new target it starts again in the CLIK rows, as a solver
     made anew at that rest does (the basins of the targets that follow stay the CLIK law's)."""
     panda = sjt.Robot.from_example("panda")
-    rng = np.random.default_rng(3)
-    draws = [(panda.random_configuration(rng), panda.random_configuration(rng))
-             for _ in range(87)]
-    q, goal = draws[61]
+    q, goal = full_range_pair(panda, 3, 61)
     solver = sjt.make_solver("sjt", panda)
     for _ in range(2000):
         q = solver.step(q, panda.fk(goal))
     assert solver.error_norm > 0.5 and np.abs(solver.last.dq).max() == 0.0  # at rest
-    target = panda.fk(draws[40][1])
+    target = panda.fk(full_range_pair(panda, 3, 40)[1])
     fresh = sjt.make_solver("sjt", panda)
     a, b = q.copy(), q.copy()
     for _ in range(300):
