@@ -81,8 +81,9 @@ class Task(ABC):
     #: then ``None``, and the task's key is its ``label``)
     has_frame: ClassVar[bool] = True
     #: whether the error is SE(3)'s logarithm ``log6`` (6 rows, as :class:`PoseTask`'s): its
-    #: exact rows are then ``Jlog6 J`` (:meth:`error_jacobian`), which the step's constraint
-    #: stage takes for the first level's model (the method's step keeps the rows ``J``)
+    #: exact rows are then ``Jlog6 J`` (:meth:`error_jacobian`), which the step takes on the
+    #: first level (the method's and the stage's model) from a rest at a position range short
+    #: of the target on (docs/limits.md)
     log6_error: ClassVar[bool] = False
 
     def __init__(self, frame: str | None = None, weight=None, priority: int | None = 0):

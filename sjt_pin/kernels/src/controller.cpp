@@ -102,8 +102,9 @@ void Controller::set_log6_rows(const Eigen::Matrix<int64_t, Eigen::Dynamic, 1>& 
 // level's rows, first = its first row). The CLIK rows J give the error's rate only to first
 // order near the target (the paper's Lyapunov argument for D J^T, eq. 22, takes
 // e_dot = -J q_dot): far from it SE(3)'s logarithm couples the position rows with the
-// rotation, and J^T e is not the error's gradient. run() takes these rows from a rest held by
-// a limit on (watch_rest), where the CLIK model can be stationary while the error still falls.
+// rotation, and J^T e is not the error's gradient. run() takes these rows from a rest at a
+// position range on (watch_rest), where the CLIK model can be stationary while the error still
+// falls.
 void Controller::exact_rows(const Eigen::Ref<const RowMatrix>& J,
                             const Eigen::Ref<const Vector>& e, const double* ff_in,
                             Eigen::Ref<RowMatrix> out, Index first) {

@@ -82,7 +82,8 @@ class Controller {
   double given_gain = 1.0;  // K of a user method's last feedback (its fb / K is the displacement)
   double stall_run = -1.0, stall_wait = 1e300;
   // the first level's pose errors take their exact rows (exact_rows; set after `still`
-  // consecutive steps at rest short of the target, cleared near it)
+  // consecutive steps at rest at a position range short of the target, cleared near it or
+  // when the target jumps)
   bool exact = false;
   double still = 0.0;
   Vector expected;  // the first level's weighted target error the next step expects (exact)

@@ -193,7 +193,8 @@ void register_controller(nb::module_& m) {
       .def("set_speed", &Controller::set_speed, nb::arg("speed"))
       .def("set_log6_rows", &Controller::set_log6_rows, nb::arg("rows"),
            "the first rows of the first level's pose errors (log6, 6 target rows each), whose "
-           "exact rows Jlog6 J the step takes from a rest held by a limit short of the target")
+           "exact rows Jlog6 J the step takes from a rest at a position range short of the "
+           "target")
       .def("reset", &Controller::reset)
       .def_prop_ro("dt", &Controller::dt)
       .def_prop_ro("dq", [](Controller& c) { return view<WriteView>(c, c.dq.data(), c.nv); },
