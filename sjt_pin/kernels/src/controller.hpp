@@ -219,7 +219,7 @@ class Controller {
   // measured_bend: J0 dq at the end of the last step (its curvature, measured at this one),
   // whether there is one, and whether this step's first level was projected
   Vector bent_, bent_now_;
-  // the first level's pose errors: their first rows, and G = Jlog6 and G J (exact_rows)
+  // the first level's pose errors: their first rows, and G = Jlog6 and G J (exact_rows.cpp)
   std::vector<Index> log6_rows_;
   RowMatrix jlog6_, exact6_;
   void exact_rows(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const Vector>& e,
