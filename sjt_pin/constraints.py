@@ -63,6 +63,10 @@ class UserLimits:
         self.capped: set[int] = set()
         #: the last evaluation's rows ``(A, b, owners)`` (None without rows)
         self.last_rows: tuple[np.ndarray, np.ndarray, list[str]] | None = None
+        #: what the last evaluation's rows need (k,; :meth:`Limit.needs
+        #: <sjt_pin.limits.Limit.needs>`, NaN for a row whose bound is what it needs), None
+        #: where no row is given up
+        self.needs: np.ndarray | None = None
         #: the room (k,) the last evaluation's rows leave a displacement (:meth:`Limit.room
         #: <sjt_pin.limits.Limit.room>`; NaN for rows that bound velocity only), None where no
         #: limit gives one
@@ -73,6 +77,7 @@ class UserLimits:
         self._plan = [(k, limit, type(limit).bounds is not Limit.bounds)
                       for k, limit in enumerate(self.limits)]
         self._any_room = any(type(limit).room is not Limit.room for limit in self.limits)
+        self._any_needs = any(type(limit).needs is not Limit.needs for limit in self.limits)
 
     def evaluate(self, kinematics, motion: Motion):
         """``(lower, upper, A, b, owners)`` at this step: the intersection of the limits'
@@ -115,6 +120,7 @@ class UserLimits:
                 b = np.concatenate([c for _, _, c in blocks])
             room = self._room(blocks) if self._any_room else None
         self.room = room
+        self.needs = self._needs(blocks) if self._any_needs and blocks else None
         self._blocks = blocks
         self.last_rows = None if A is None or b is None else (A, b, owners)
         return lower, upper, A, b, owners
@@ -138,6 +144,25 @@ class UserLimits:
         return np.concatenate([np.full(bk.size, np.nan) if room is None else room
                                for room, (_, _, bk) in zip(rooms, blocks, strict=True)])
 
+    @staticmethod
+    def _needs(blocks: list[tuple[Limit, np.ndarray, np.ndarray]]) -> np.ndarray | None:
+        """The rows' needs stacked (NaN for a row not given up); None where none is."""
+        parts = []
+        for limit, _, bk in blocks:
+            needs = limit.needs()
+            if needs is not None:
+                needs = np.asarray(needs, dtype=float)
+                if needs.shape != bk.shape:
+                    raise ValueError(f"{limit!r}.needs() must return one value per row of its "
+                                     f"rows(), shape {bk.shape}, got {needs.shape}")
+            parts.append(needs)
+        if all(needs is None for needs in parts):
+            return None
+        if len(parts) == 1:
+            return parts[0]
+        return np.concatenate([np.full(bk.size, np.nan) if needs is None else needs
+                               for needs, (_, _, bk) in zip(parts, blocks, strict=True)])
+
     def raise_non_finite_rows(self) -> None:
         """ValueError naming the limit whose last rows hold NaN or inf in ``A`` or NaN in
         ``b``, if one does (a row that bounds nothing would let the joints move freely)."""
@@ -149,11 +174,14 @@ class UserLimits:
     def exceeded(self, dq: np.ndarray, tol: float = 1e-9) -> tuple[tuple[str, float], ...]:
         """The limits whose rows of the last evaluation ``dq`` does not keep, each with the
         largest excess ``A_i dq - b_i`` of its rows (their units: m/s for the collision
-        limit's), in the order of the limits; ``()`` where every row holds (to ``tol`` times
-        the row's scale)."""
+        limit's; ``b`` as the limit needs it, :meth:`Limit.needs
+        <sjt_pin.limits.Limit.needs>`), in the order of the limits; ``()`` where every row
+        holds (to ``tol`` times the row's scale)."""
         if self.last_rows is None:
             return ()
         A, b, owners = self.last_rows
+        if self.needs is not None:
+            b = np.where(np.isnan(self.needs), b, self.needs)
         excess = A @ dq - b
         scale = 1.0 + np.abs(A) @ np.abs(dq) + np.abs(b)
         out: dict[str, float] = {}

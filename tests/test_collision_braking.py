@@ -394,9 +394,9 @@ def test_every_step_above_a_limit_says_so(method):
     ``limit_conflicts``: xArm7's stream beside a ball (``sjt_pin.bench.collision_stream``,
     seeds 0-2; a few did not, when after a step the rows made break the acceleration limit the
     stage took the middle of its contradicting acceleration and jerk bounds for several steps),
-    and a ball driven at Panda's hand at 1 m/s, faster than Franka's acceleration limits let
-    the arm retreat (``sjt_pin.bench.collision_moving``), where the margin wins and the limits
-    yield."""
+    and a ball driven at Panda's hand at 2 m/s, faster than Franka's acceleration limits let
+    the arm retreat but not its speed limits (``sjt_pin.bench.collision_moving``), where the
+    margin wins and the limits yield."""
     from sjt_pin.bench import collision_moving as moving
     from sjt_pin.bench import collision_stream as stream
 
@@ -408,13 +408,13 @@ def test_every_step_above_a_limit_says_so(method):
                                               np.full(n, stream.JERK), stream.DT)
         assert unreported.size == 0, unreported
     panda = sjt.Robot.from_example("panda")
-    driven = moving.ball(panda, 1.0, DT)
+    driven = moving.ball(panda, 2.0, DT)
     limit = CollisionLimit(panda, driven.obstacles, margin=MARGIN)
     accelerations, jerks = moving.franka_like(panda.nv)
     solver = sjt.make_solver(method, panda, dt=DT, limits=[limit],
                              acceleration_limits=accelerations, jerk_limits=jerks)
     q, qs, reported = panda.q0.copy(), [panda.q0.copy()], []
-    for pose, velocity in driven.path[:int(moving.TRAVEL / DT) + 200]:  # (to its stop)
+    for pose, velocity in driven.path[:int(moving.TRAVEL / 2.0 / DT) + 200]:  # (to its stop)
         limit.move(0, pose, velocity=velocity)
         q = solver.step(q, driven.hand)
         qs.append(q)

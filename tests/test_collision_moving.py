@@ -15,9 +15,11 @@ import pinocchio as pin
 import pytest
 
 import sjt_pin as sjt
+from sjt_pin import kernels
 from sjt_pin.bench import collision_moving as moving
 from sjt_pin.limits import CollisionLimit
 from sjt_pin.limits.base import Motion
+from sjt_pin.limits.collision import BRAKING_SHARE, EASING_SLACK
 
 MARGIN = 0.01
 
@@ -151,3 +153,80 @@ def test_an_obstacle_faster_than_the_arm_is_reported(panda):
     row = moving.drive(panda, 3.0, 1e-3, travel=0.25)
     assert row.exceeded > 0
     assert row.closest < MARGIN  # (what the report is for)
+
+
+@pytest.mark.parametrize("jerk", [False, True])
+def test_a_moving_obstacles_rows_brake_the_relative_speed_and_give_up_what_it_outruns(jerk):
+    """``kernels.stoppable_rows`` with ``carried`` (the obstacle's normal velocity away,
+    -u): a row is the still obstacle's row of an arm that closes u faster, less u (it is the
+    arm's speed that brakes, the obstacle's stays); with ``speeds``, a row whose obstacle comes
+    faster than the row's retreat within them (u > sum_j |A_ij| v_j) counts u only up to that
+    retreat, and ``needs`` holds the bound it would need (below the one given), NaN for the
+    other rows."""
+    rng = np.random.default_rng(11 + jerk)
+    n, k, dt = 6, 120, 1e-3
+    rate = 0.5 / dt
+    A = rng.normal(size=(k, n)) * rng.uniform(0.01, 0.5, (k, 1))
+    damper = rate * rng.uniform(-0.004, 0.3, k)
+    dq, ddq = rng.normal(size=n) * 0.5, rng.normal(size=n) * 3.0
+    acc = rng.uniform(5.0, 20.0, n)
+    jerks = rng.uniform(2000.0, 8000.0, n) if jerk else None
+    speeds = rng.uniform(1.0, 3.0, n)
+    u = rng.uniform(-0.5, 2.0, k)
+
+    def cut(b, dq_arm, carried=None, speeds=None, needs=None):
+        b = b.copy()
+        kernels.stoppable_rows(A, b, dq_arm, ddq, acc, jerks, rate, dt, BRAKING_SHARE,
+                               EASING_SLACK, None, None, carried, speeds, needs)
+        return b
+
+    moving = cut(damper, dq, carried=-u)
+    for i in range(k):  # (one row at a time: the arm's closing speed along it raised by u_i)
+        shifted = dq + u[i] * A[i] / (A[i] @ A[i])
+        still = cut(damper, shifted)[i]
+        assert moving[i] == pytest.approx(still - u[i], rel=1e-9, abs=1e-9)
+    retreat = np.abs(A) @ speeds
+    needs = np.empty(k)
+    given = cut(damper, dq, carried=-u, speeds=speeds, needs=needs)
+    outrun = u > retreat
+    assert 0 < outrun.sum() < k
+    np.testing.assert_array_equal(np.isnan(needs), ~outrun)
+    np.testing.assert_array_equal(needs[outrun], moving[outrun])
+    np.testing.assert_allclose(given, cut(damper, dq, carried=-np.minimum(u, retreat)),
+                               rtol=0, atol=1e-12)
+    assert np.all(needs[outrun] <= given[outrun] + 1e-12)
+
+
+def test_a_ball_that_outruns_a_link_leaves_the_acceleration_limits_whole(panda):
+    """A 5 cm ball at 1 m/s at Panda's second link, which its joints can move away at a few
+    cm/s: no step keeps that link's margin plan, so the row is given up (``needs`` below its
+    bound) and the step keeps every acceleration and jerk limit (yielding them, as for a row
+    the arm can keep, would throw every joint to its speed limit each period, the margin
+    lost all the same), while ``StepInfo.rows_exceeded`` says the rows are not kept."""
+    dt, speed = 1e-3, 1.0
+    accelerations, jerks = moving.franka_like(panda.nv)
+    data = panda.model.createData()
+    pin.forwardKinematics(panda.model, data, panda.q0)
+    start = data.oMi[panda.model.getJointId("panda_joint2")].translation + [0.0, 0.45, 0.0]
+    limit = CollisionLimit(panda, [(coal.Sphere(0.05), pin.SE3(np.eye(3), start))],
+                           margin=MARGIN)
+    solver = sjt.make_solver("sjt", panda, dt=dt, limits=[limit],
+                             acceleration_limits=accelerations, jerk_limits=jerks)
+    q, qs, target = panda.q0.copy(), [panda.q0.copy()], panda.fk(panda.q0)
+    exceeded = given_up = 0
+    for k in range(300):
+        moved = min(speed * k * dt, 0.25)
+        velocity = np.r_[0.0, -speed if moved < 0.25 else 0.0, 0.0, 0.0, 0.0, 0.0]
+        limit.move(0, pin.SE3(np.eye(3), start - [0.0, moved, 0.0]), velocity=velocity)
+        q = solver.step(q, target)
+        qs.append(q)
+        exceeded += bool(solver.last.rows_exceeded)
+        needs = limit.needs()
+        given_up += needs is not None and bool(np.any(~np.isnan(needs)))
+    v = np.diff(qs, axis=0) / dt
+    a = np.diff(v, axis=0) / dt
+    j = np.diff(a, axis=0) / dt
+    assert np.all(np.abs(a) <= 1.01 * accelerations)
+    assert np.all(np.abs(j) <= 1.01 * jerks)
+    assert np.all(np.abs(v) <= 1.01 * panda.velocity_limits)
+    assert given_up > 0 and exceeded > 0

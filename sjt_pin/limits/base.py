@@ -83,6 +83,16 @@ class Limit:
         at the constrained minimum of its task error rather than sliding along the bound."""
         return None
 
+    def needs(self) -> np.ndarray | None:
+        """For the rows of the last :meth:`rows` this limit gives up (no step within the
+        solver's limits keeps them, whatever the acceleration and jerk limits yield: a
+        collision row whose obstacle comes faster than the arm can retreat), the bound each
+        would need, below the bound returned (k,; NaN for every other row); ``None`` (the
+        default) where no row is given up. The stage keeps a given-up row's bound only as far
+        as the acceleration and jerk limits allow (its best within them, never yielding them
+        for it), and ``StepInfo.rows_exceeded`` measures the step against what it needs."""
+        return None
+
     def speed_caps(self, dt: float) -> np.ndarray | None:
         """Speeds (nv,; rad/s or m/s, ``inf`` where none) this limit's :meth:`bounds` never go
         below at period ``dt`` (s), which the solver may hold with its speed limits instead of

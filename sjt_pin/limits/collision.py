@@ -211,6 +211,7 @@ class CollisionLimit(PairsMixin, TablesMixin, BroadPhaseMixin, MovingMixin, Rows
         self.within: list[int] = []
         self._witness_count = 0  # the witness rows of the last rows() (_owners holds their pairs)
         self._room: np.ndarray | None = None  # room() of the last rows()
+        self._needs: np.ndarray | None = None  # needs() of the last rows()
         self._prepare_broad_phase()
 
     def __getstate__(self) -> dict:
@@ -298,7 +299,7 @@ class CollisionLimit(PairsMixin, TablesMixin, BroadPhaseMixin, MovingMixin, Rows
             if listed == []:
                 if self.active or self.within:
                     self.active, self.within = [], []
-                self._witness_count, self._room = 0, None
+                self._witness_count, self._room, self._needs = 0, None, None
                 return None
             views, speeds = self._views, motion.velocity_limits
             if listed and views[0] is kinematics.data and self._reaches[0] is speeds \
@@ -306,21 +307,23 @@ class CollisionLimit(PairsMixin, TablesMixin, BroadPhaseMixin, MovingMixin, Rows
                 here = self._key(q, motion)
                 cache = self._cache
                 if cache is not None and cache[0] is views[0] and cache[1] == here:
-                    self.active, self.within, self._witness_count, self._room = cache[2]
+                    (self.active, self.within, self._witness_count, self._room,
+                     self._needs) = cache[2]
                 else:
                     out = self._queried(views, listed, self._influence, self._reaches[1],
                                         motion.dt)
-                    self._room = self._room_of(out)
+                    self._room, self._needs = self._room_of(out), None
                     cache = self._cache = (views[0], here, (self.active, self.within,
-                                                            self._witness_count, self._room),
-                                           out)
+                                                            self._witness_count, self._room,
+                                                            None), out)
                 return cache[3]
         data, dt = kinematics.data, motion.dt
         accelerations, jerks = motion.acceleration_limits, motion.jerk_limits
         key = self._key(q, motion)
         cache = self._cache
         if cache is not None and q is not None and cache[0] is data and cache[1] == key:
-            self.active, self.within, self._witness_count, self._room = cache[2]
+            (self.active, self.within, self._witness_count, self._room,
+             self._needs) = cache[2]
             return cache[3]
         if not dt > 0:
             raise ValueError(f"dt must be a period > 0 (s), got {dt!r}")
@@ -341,16 +344,29 @@ class CollisionLimit(PairsMixin, TablesMixin, BroadPhaseMixin, MovingMixin, Rows
             if reach is not None:
                 reach = reach + self._pair_speed
         out = self._rows(data, dt, q, influence, reach, listed)
+        carried = self._carried(out)
+        needs = None
         if out is not None and accelerations is not None:
-            b = out[1]
+            A, b = out
             b.setflags(write=True)  # (its own data: the rows' bounds, cut in place)
-            stoppable_rows(out[0], b, motion.dq, motion.ddq, accelerations, jerks,
-                           self.gain / dt, dt, BRAKING_SHARE, EASING_SLACK)
+            if carried is not None:  # (what the margin needs where an obstacle outruns)
+                needs = np.empty_like(b)
+            stoppable_rows(A, b, motion.dq, motion.ddq, accelerations, jerks, self.gain / dt,
+                           dt, BRAKING_SHARE, EASING_SLACK, None, None, carried,
+                           motion.velocity_limits, needs)
             b.setflags(write=False)
-        out = self._carried(out)
-        self._room = self._room_of(out)
-        self._cache = (data, key, (self.active, self.within, self._witness_count, self._room),
-                       out)
+            if needs is not None:
+                if np.isnan(needs).all():
+                    needs = None
+                else:
+                    needs.setflags(write=False)
+        elif out is not None and carried is not None:
+            b = out[1] + carried
+            b.setflags(write=False)
+            out = out[0], b
+        self._room, self._needs = self._room_of(out), needs
+        self._cache = (data, key, (self.active, self.within, self._witness_count, self._room,
+                                   needs), out)
         return out
 
     def room(self) -> np.ndarray | None:
@@ -358,6 +374,15 @@ class CollisionLimit(PairsMixin, TablesMixin, BroadPhaseMixin, MovingMixin, Rows
         ``margin`` (m; a displacement ``d`` of the joints keeps the linearised distance at
         least ``margin`` where ``A d`` stays within it), None without rows."""
         return self._room
+
+    def needs(self) -> np.ndarray | None:
+        """For each row of the last :meth:`rows` given up, the bound the margin would need
+        (:meth:`Limit.needs <sjt_pin.limits.Limit.needs>`; NaN for the others): beside
+        acceleration limits, a row whose moving obstacle comes faster than the arm can retreat
+        along it within its speed limits (``u > sum_j |A_ij| v_j``) counts the obstacle's
+        approach only up to that retreat (``kernels.stoppable_rows``). None where no row is
+        given up."""
+        return self._needs
 
     def _room_of(self, out: tuple[np.ndarray, np.ndarray] | None) -> np.ndarray | None:
         """The room of the rows ``out`` just made (:meth:`room`), from their pair rows."""

@@ -17,15 +17,22 @@ retreat, the guarantee is:
   beside a still obstacle; without the velocity the row lags the obstacle by a period and
   the pair settles about ``u dt / gain`` inside the margin;
 - with acceleration limits (``a = sum_j |A_ij| a_j`` along the row, ``BRAKING_SHARE`` of it
-  counted on), the row starts giving way while its excess still covers the retreat's ramp,
-  ``h >= (u + s) tau + (u + s)^2 / (2 share a)`` for a closing speed ``s`` and ``tau = dt +
-  a / j``: each pair with a moving obstacle is watched ``u (2 dt + T)`` farther out (``T``
-  the longest time a joint takes to reach its speed limit, at most 1 s, plus the jerk's
-  ramp: :meth:`CollisionLimit._lookahead`), and where the obstacle comes faster than the
-  limits can answer the acceleration and jerk limits yield to the row (``limit_conflicts``);
-- where ``u > r`` no motion within the speed limits keeps the row: the step breaks it by
-  the least the stage can, and ``StepInfo.rows_exceeded`` gives ``A q_dot - b`` (m/s; times
-  ``dt``, how much of the margin the step gave up).
+  counted on), the row brakes the relative closing speed ``c = s + u`` (``s`` the arm's): it
+  starts giving way while its excess still covers the retreat's ramp, ``h >= c tau + c^2 /
+  (2 share a)``, ``tau = dt + a / j``, and eases in at what the limits allow from the arm's
+  last velocity and acceleration (the obstacle's speed is not the arm's to brake); each pair
+  with a moving obstacle is watched ``u (2 dt + T)`` farther out (``T`` the longest time a
+  joint takes to reach its speed limit, at most 1 s, plus the jerk's ramp:
+  :meth:`CollisionLimit._lookahead`); where the obstacle comes faster than the acceleration
+  limits can answer but no faster than the speed limits, the acceleration and jerk limits
+  yield to the row (``limit_conflicts``): the margin wins;
+- where ``u > r`` no motion within the speed limits keeps the row, and yielding the
+  acceleration and jerk limits would not keep it either: beside acceleration limits the row
+  counts the obstacle's approach only up to ``r`` and the stage keeps it only as far as those
+  limits allow (``CollisionLimit.needs`` gives the bound the margin would need); without them
+  the step breaks the row by the least the stage can. Either way ``StepInfo.rows_exceeded``
+  gives ``A q_dot - b`` against the bound the margin needs (m/s; times ``dt``, how much of the
+  margin the step gave up).
 
 A moving obstacle is moved every step (its velocity holds until the next :meth:`move`); given
 time-stamped poses instead (``move(i, pose, time=t)``), its twist is their backward difference,
@@ -143,17 +150,15 @@ class MovingMixin(CollisionState):
                 time += float(ramp.max()) if ramp.size else 0.0
         return time
 
-    def _carried(self, out: tuple[np.ndarray, np.ndarray] | None
-                 ) -> tuple[np.ndarray, np.ndarray] | None:
-        """``out``, the rows of this step, with each bound raised by the normal velocity of the
-        moving obstacle's closest point away from the robot (lowered where it comes closer):
-        ``b_i + n^T (v_b(p_b) - v_a(p_a))`` with ``v_x(p) = v + w x (p - o)`` for an obstacle
-        with twist ``(v, w)`` and origin ``o`` (0 for a link of the robot), so that the row
-        bounds the pair's relative closing speed (:mod:`sjt_pin.limits.collision`'s
-        docstring)."""
+    def _carried(self, out: tuple[np.ndarray, np.ndarray] | None) -> np.ndarray | None:
+        """How much each bound of ``out``, the rows of this step, rises by the normal velocity
+        of the moving obstacle's closest point away from the robot (falls where it comes
+        closer): ``n^T (v_b(p_b) - v_a(p_a))`` with ``v_x(p) = v + w x (p - o)`` for an
+        obstacle with twist ``(v, w)`` and origin ``o`` (0 for a link of the robot), so that
+        the row bounds the pair's relative closing speed (:mod:`sjt_pin.limits.collision`'s
+        docstring); None without a moving obstacle."""
         if out is None or not self._moving:
-            return out
-        A, b = out
+            return None
         count = len(self.active)
         owners = np.concatenate([np.asarray(self.active, dtype=np.int64),
                                  self._owners[:self._witness_count].astype(np.int64)])
@@ -171,6 +176,4 @@ class MovingMixin(CollisionState):
                 origin = self._placement[self.pairs[owners[mine], side], :3, 3]
                 velocity = velocity + np.cross(twist[:, 3:], points[mine] - origin)
             shift[mine] += sign * np.einsum("ij,ij->i", normal[mine], velocity)
-        carried = b + shift
-        carried.setflags(write=False)
-        return A, carried
+        return shift

@@ -3,6 +3,7 @@
 // influence grown to the distance within which a row may have to start braking (braking_reach).
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <optional>
 #include <sstream>
 
@@ -49,7 +50,8 @@ void register_collision_braking(nb::module_& m) {
       "stoppable_rows",
       [](nb::handle A_obj, nb::handle b_obj, nb::handle dq_obj, nb::handle ddq_obj,
          nb::handle accelerations, nb::handle jerks, double rate, double dt, double share,
-         double slack, nb::handle reach_accelerations, nb::handle reach_jerks) {
+         double slack, nb::handle reach_accelerations, nb::handle reach_jerks,
+         nb::handle carried_obj, nb::handle speeds_obj, nb::handle needs_obj) {
         if (!(rate > 0.0 && dt > 0.0 && share > 0.0 && share <= 1.0 && slack >= 0.0))
           fail("stoppable_rows: rate and dt must be > 0, share in (0, 1], slack >= 0");
         const Array A(A_obj, "A", 2);
@@ -62,6 +64,17 @@ void register_collision_braking(nb::module_& m) {
           out << "stoppable_rows: A (k, N), b (k,), dq, ddq, accelerations and jerks (N,) do "
               << "not fit: A (" << k << ", " << N << "), b (" << b.size() << ",), dq ("
               << dq.size() << ",), ddq (" << ddq.size() << ",)";
+          fail(out.str());
+        }
+        std::optional<Array> carried, speeds, needs;
+        if (!carried_obj.is_none()) carried.emplace(carried_obj, "carried", 1);
+        if (!speeds_obj.is_none()) speeds.emplace(speeds_obj, "speeds", 1);
+        if (!needs_obj.is_none()) needs.emplace(needs_obj, "needs", 1, Access::write);
+        if ((carried && carried->size() != k) || (needs && needs->size() != k) ||
+            (speeds && speeds->size() != N)) {
+          std::ostringstream out;
+          out << "stoppable_rows: carried and needs must hold one number per row (" << k
+              << ") and speeds one per joint (" << N << "): they do not fit";
           fail(out.str());
         }
         ArmLimits limits = arm_limits(accelerations, jerks, N, "stoppable_rows");
@@ -86,17 +99,19 @@ void register_collision_braking(nb::module_& m) {
         const double* rjl = boxes ? reach.jerks->data() : nullptr;
         const double* v0 = dq.data();
         const double* a0 = ddq.data();
+        const double* vmax = speeds ? speeds->data() : nullptr;
         auto bound = b.vector();
         for (Index i = 0; i < k; ++i) {
           // along row i the closing speed s changes at up to a (m/s^2), that rate at up to j;
           // within the joints' acceleration and jerk boxes this step, its acceleration lies
-          // in [least, most]
-          double a = 0.0, j = 0.0, s = 0.0, sd = 0.0, least = 0.0, most = 0.0;
+          // in [least, most]; the joints' speed limits let it retreat at up to retreat (m/s)
+          double a = 0.0, j = 0.0, s = 0.0, sd = 0.0, least = 0.0, most = 0.0, retreat = 0.0;
           for (Index c = 0; c < N; ++c) {
             const double w = rows(i, c);
             if (w == 0.0) continue;
             a += std::fabs(w) * acc[c];
             if (jerk) j += std::fabs(w) * jl[c];
+            if (vmax) retreat += std::fabs(w) * vmax[c];
             s += w * v0[c];
             sd += w * a0[c];
             if (boxes) {
@@ -107,76 +122,111 @@ void register_collision_braking(nb::module_& m) {
               most += w > 0.0 ? w * std::max(lo, hi) : w * std::min(lo, hi);
             }
           }
-          if (!(a > 0.0) || !std::isfinite(a)) continue;  // no joint moves it, or no limit
-          const bool jerk_row = jerk && j > 0.0 && std::isfinite(j);
-          double ramp = jerk_row ? a / j : 0.0;  // s to reach a
-          double h = bound[i] / rate, v = stoppable_speed(h, share * a, dt + ramp);
-          // a bound above the closing speed lets the row speed up toward its margin, and under
-          // a jerk limit that acceleration takes time to ramp out: the fastest closing speed
-          // this step can reach is kept only if, from it and the acceleration that reaching it
-          // takes, the pair braking at the share of the limits still stops within h
-          if (jerk_row && boxes && std::isfinite(most) && h >= 0.0 && v > s) {
-            const double top = std::min(v, s + dt * most);
-            if (top > s) {
-              const double x = largest_stoppable(s, top, s, h, dt, share * a, share * j);
-              if (x < top) v = x;
-            }
+          // the bound rises by what the pair's other side moves away (carried: an obstacle's
+          // normal velocity; the row bounds the relative closing speed s + u, u = -carried)
+          const double shift = carried ? carried->data()[i] : 0.0;
+          if (needs) needs->data()[i] = std::numeric_limits<double>::quiet_NaN();
+          if (!(a > 0.0) || !std::isfinite(a)) {  // no joint moves it, or no limit
+            bound[i] += shift;
+            continue;
           }
-          double r = jerk_row ? std::max(-share * a, sd - share * j * dt) : -share * a;
+          const bool jerk_row = jerk && j > 0.0 && std::isfinite(j);
+          const double ramp = jerk_row ? a / j : 0.0;  // s to reach a
+          const double damper = bound[i], h = damper / rate;
+          const double r0 = jerk_row ? std::max(-share * a, sd - share * j * dt) : -share * a;
           // nor faster than the joints' boxes let it drop this step (a joint at its
           // acceleration limit, or held by its jerk limit, gives less than its share)
-          if (boxes && std::isfinite(least)) r = std::max(r, least);
-          bound[i] = h >= 0.0 ? std::min(bound[i], v) : std::max(bound[i], v);
-          // ... as long as the pair, braking at the whole limits, stops margin - slack apart:
-          // under a jerk limit from the acceleration this step's speed leaves (x - s) / dt,
-          // ramped to a_i at j_i (largest_stoppable), not as if held for the whole ramp a_i /
-          // j_i first (with a ramp of 20 ms, a pair closing at 95 mm/s 2 mm from its margin
-          // and already braking could stop within 1.3 mm, the held model said 2.1: the row
-          // asked more than the boxes give and the jerk limit yielded, 4.1 times); else the
-          // fastest speed from which it does (the margin wins)
-          const double drop = s + r * dt, held = stoppable_speed(h + slack, a, dt + ramp);
-          bound[i] = std::max(bound[i],
-                              jerk_row ? largest_stoppable(std::min(drop, held), drop, s,
-                                                           h + slack, dt, a, j)
-                                       : std::min(drop, held));
-          // inside the margin (a start there): the pair separates as fast as the share of the
-          // limits lets its closing speed drop, not at once
-          if (h < 0.0) bound[i] = std::max(bound[i], s + r * dt);
+          const double r = boxes && std::isfinite(least) ? std::max(r0, least) : r0;
+          // the bound on the closing speed of the arm's side of a pair whose other side comes
+          // at u: it is the arm's speed that brakes, the obstacle's stays (the relative
+          // closing speed s + u)
+          const auto cut = [&](double u) {
+            const double s_rel = s + u;
+            double v = stoppable_speed(h, share * a, dt + ramp);
+            // a bound above the closing speed lets the row speed up toward its margin, and
+            // under a jerk limit that acceleration takes time to ramp out: the fastest
+            // closing speed this step can reach is kept only if, from it and the acceleration
+            // that reaching it takes, the pair braking at the share of the limits still
+            // stops within h
+            if (jerk_row && boxes && std::isfinite(most) && h >= 0.0 && v > s_rel) {
+              const double top = std::min(v, s_rel + dt * most);
+              if (top > s_rel) {
+                const double x =
+                    largest_stoppable(s_rel, top, s_rel, h, dt, share * a, share * j);
+                if (x < top) v = x;
+              }
+            }
+            double out = h >= 0.0 ? std::min(damper, v) : std::max(damper, v);
+            // ... as long as the pair, braking at the whole limits, stops margin - slack
+            // apart: under a jerk limit from the acceleration this step's speed leaves (x -
+            // s) / dt, ramped to a_i at j_i (largest_stoppable), not as if held for the whole
+            // ramp a_i / j_i first (with a ramp of 20 ms, a pair closing at 95 mm/s 2 mm from
+            // its margin and already braking could stop within 1.3 mm, the held model said
+            // 2.1: the row asked more than the boxes give and the jerk limit yielded, 4.1
+            // times); else the fastest speed from which it does (the margin wins)
+            const double drop = s_rel + r * dt, held = stoppable_speed(h + slack, a, dt + ramp);
+            out = std::max(out, jerk_row ? largest_stoppable(std::min(drop, held), drop, s_rel,
+                                                             h + slack, dt, a, j)
+                                         : std::min(drop, held));
+            // inside the margin (a start there): the pair separates as fast as the share of
+            // the limits lets its closing speed drop, not at once
+            if (h < 0.0) out = std::max(out, drop);
+            return out - u;  // (the arm's closing speed)
+          };
+          const double u = -shift;
+          if (vmax && u > retreat) {
+            // outrun: the obstacle comes faster than the arm can retreat along the row within
+            // its speed limits, so no yielding of the acceleration and jerk limits holds the
+            // margin: its approach counts up to that retreat, and needs says what the margin
+            // would need (below the bound: the stage keeps the row within those limits)
+            bound[i] = cut(retreat);
+            if (needs) needs->data()[i] = cut(u);
+          } else {
+            bound[i] = cut(u);
+          }
         }
       },
       nb::arg("A"), nb::arg("b"), nb::arg("dq"), nb::arg("ddq"), nb::arg("accelerations"),
       nb::arg("jerks").none(), nb::arg("rate"), nb::arg("dt"), nb::arg("share"),
       nb::arg("slack"), nb::arg("reach_accelerations").none() = nb::none(),
-      nb::arg("reach_jerks").none() = nb::none(),
+      nb::arg("reach_jerks").none() = nb::none(), nb::arg("carried").none() = nb::none(),
+      nb::arg("speeds").none() = nb::none(), nb::arg("needs").none() = nb::none(),
       "stoppable_rows(A, b, dq, ddq, accelerations, jerks, rate, dt, share, slack,\n"
-      "reach_accelerations=None, reach_jerks=None): the damper\n"
-      "rows' bounds (in place) made ones an arm with acceleration (and jerk) limits can keep.\n"
-      "Along row i the closing speed s_i = A_i q_dot changes at up to a_i = sum_j |A_ij|\n"
-      "accelerations_j (m/s^2), and that rate at up to j_i = sum_j |A_ij| jerks_j (m/s^3;\n"
+      "reach_accelerations=None, reach_jerks=None, carried=None, speeds=None, needs=None):\n"
+      "the damper rows' bounds (in place) made ones an arm with acceleration (and jerk) limits\n"
+      "can keep. Along row i the closing speed s_i = A_i q_dot changes at up to a_i = sum_j\n"
+      "|A_ij| accelerations_j (m/s^2), and that rate at up to j_i = sum_j |A_ij| jerks_j (m/s^3;\n"
       "jerks None: no limit). With h = b_i / rate the row's excess over its margin (m; rate =\n"
-      "gain / dt):\n"
-      "  - b_i = min(b_i, v(h)), v the closing speed that, held for tau = dt + a / j and then\n"
-      "    braked at a = share a_i (j = share j_i), covers h: v tau + v^2 / (2 a) = h (a row\n"
-      "    inside its margin separates no faster than v(|h|)); with jerks, where v > s_i =\n"
-      "    A_i dq, the fastest closing speed x this step can reach (its acceleration at most\n"
-      "    the row's largest within the joints' boxes [max(-R, ddq - Rj dt), min(R, ddq + Rj\n"
-      "    dt)], R, Rj the reach limits) must also stop within h from the acceleration (x -\n"
-      "    s_i) / dt that reaching it takes: x dt + stopping_distance(x, (x - s_i) / dt,\n"
-      "    share a_i, share j_i) <= h, else v = largest_stoppable(...);\n"
-      "  - b_i = max(b_i, min(s_i + r dt, V(h + slack))), r = max(-a, A_i ddq - j dt) from the\n"
-      "    previous step's velocity dq and acceleration ddq, with jerks also at least the row's\n"
-      "    least acceleration within the joints' boxes, V as v at the whole a_i (with jerks:\n"
-      "    the largest x <= s_i + r dt whose stop from the acceleration (x - s_i) / dt at the\n"
-      "    whole a_i and j_i fits, largest_stoppable, at least min(s_i + r dt, v(h + slack)) at\n"
-      "    the whole a_i): a row whose closing speed jumps asks it to drop no faster than its\n"
-      "    share of the limits (and the boxes) allows, while its pair, braking at a_i, stays at\n"
-      "    least margin - slack apart;\n"
-      "  - b_i = max(b_i, s_i + r dt) inside the margin (h < 0): the pair separates as fast as\n"
-      "    that share lets its closing speed drop.\n"
-      "The row's j_i assumes its joints ramp together, as tau does. reach_accelerations and\n"
-      "reach_jerks (each None: accelerations, jerks) are the joints' own limits where the\n"
-      "budget given is a share of them.\n"
-      "A (k, N), b (k,), dq, ddq, accelerations, jerks and the reach limits (N,).");
+      "gain / dt), in the relative closing speed c_i = s_i + u_i of a pair whose other side\n"
+      "comes at u_i = -carried_i (m/s; carried None: 0), and the bound returned on s_i:\n"
+      "  - b_i = min(b_i, v(h)) - u_i, v the closing speed that, held for tau = dt + a / j and\n"
+      "    then braked at a = share a_i (j = share j_i), covers h: v tau + v^2 / (2 a) = h (a\n"
+      "    row inside its margin separates no faster than v(|h|)); with jerks, where v > c_i,\n"
+      "    the fastest closing speed x this step can reach (its acceleration at most the row's\n"
+      "    largest within the joints' boxes [max(-R, ddq - Rj dt), min(R, ddq + Rj dt)], R, Rj\n"
+      "    the reach limits) must also stop within h from the acceleration (x - c_i) / dt that\n"
+      "    reaching it takes: x dt + stopping_distance(x, (x - c_i) / dt, share a_i, share\n"
+      "    j_i) <= h, else v = largest_stoppable(...);\n"
+      "  - b_i = max(b_i, min(c_i + r dt, V(h + slack)) - u_i), r = max(-a, A_i ddq - j dt)\n"
+      "    from the previous step's velocity dq and acceleration ddq, with jerks also at least\n"
+      "    the row's least acceleration within the joints' boxes, V as v at the whole a_i (with\n"
+      "    jerks: the largest x <= c_i + r dt whose stop from the acceleration (x - c_i) / dt at\n"
+      "    the whole a_i and j_i fits, largest_stoppable, at least min(c_i + r dt, v(h + slack))\n"
+      "    at the whole a_i): a row whose closing speed jumps asks it to drop no faster than\n"
+      "    its share of the limits (and the boxes) allows, while its pair, braking at a_i,\n"
+      "    stays at least margin - slack apart;\n"
+      "  - b_i = max(b_i, c_i + r dt - u_i) inside the margin (h < 0): the pair separates as\n"
+      "    fast as that share lets its closing speed drop;\n"
+      "  - outrun (speeds given, u_i > sum_j |A_ij| speeds_j: no retreat within the speed\n"
+      "    limits keeps the margin, whatever the acceleration and jerk limits give): the bound\n"
+      "    as above with u_i cut to that retreat, and needs_i (needs (k,), if given; NaN for\n"
+      "    every other row) the bound as above, below it: the row is given up, the stage keeps\n"
+      "    it within the acceleration and jerk limits, never yielding them for it.\n"
+      "The row's j_i assumes its joints ramp together, as tau does.\n"
+      "reach_accelerations and reach_jerks (each None: accelerations, jerks) are the joints' own\n"
+      "limits where the budget given is a share of them.\n"
+      "A (k, N), b, carried, needs (k,), dq, ddq, accelerations, jerks, speeds and the reach\n"
+      "limits (N,).");
 
   m.def(
       "braking_reach",

@@ -135,7 +135,8 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
                     const double* ff_in, const double* q, Eigen::Ref<Vector> step,
                     const double* matrix, const double* user_lo,
                     const double* user_hi, const Eigen::Ref<const RowMatrix>& A,
-                    const Eigen::Ref<const Vector>& b, const double* room) {
+                    const Eigen::Ref<const Vector>& b, const double* room,
+                    const double* needs) {
   const Index n = nv;
   // 1. the weighted rows of the moving joints
   Jw_.noalias() = sqrt_weight.asDiagonal() * J * moving.asDiagonal();
@@ -227,16 +228,26 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
   for (Index j = 0; j < n; ++j) torn = torn || box.torn[j];
   if (torn) status |= kConflict;
   // a row that no velocity within the hard box keeps (a link its joints cannot move away from
-  // an obstacle, an obstacle faster than the speed limits) asks what the box allows at best:
-  // kept alone, it does not tear the others apart (StepInfo.rows_exceeded reports the row as
-  // given)
+  // an obstacle, an obstacle faster than the speed limits) asks what the box allows at best,
+  // and with acceleration limits what their box allows (yielding them would not keep it
+  // either), as does a row its limit gives up (needs below b). Kept alone, it does not tear
+  // the others apart (StepInfo.rows_exceeded reports a row as its limit needs it)
   const Index k = A.rows();
   bk_.resize(k);
   const auto hard = [this](Index j, double& lo, double& hi) {
     lo = box.hard_lo[j];
     hi = box.hard_hi[j];
   };
-  for (Index i = 0; i < k; ++i) bk_[i] = std::max(b[i], least_over(A.row(i).transpose(), hard));
+  const auto smooth = [this](Index j, double& lo, double& hi) {
+    lo = std::min(box.lo[j], box.hi[j]);
+    hi = std::max(box.lo[j], box.hi[j]);
+  };
+  for (Index i = 0; i < k; ++i) {
+    const double best = least_over(A.row(i).transpose(), hard);
+    bk_[i] = std::max(b[i], best);
+    if (bounds.smooth && (b[i] < best || (needs != nullptr && needs[i] < b[i])))
+      bk_[i] = std::max(bk_[i], least_over(A.row(i).transpose(), smooth));
+  }
   const Vector& bk = bk_;
   // 5. the method's step where it is within every limit; else first the hard limits (position,
   // speed, a user's bounds and rows) by the projection, where joints held at a bound leave the

@@ -42,14 +42,16 @@ class Controller {
 
   // One step: J (m x nv), e (m), ff (m) or none, q (nq); matrix: a user method's M (nv x r0,
   // row-major, r0 the first level's rows) mapping the first level instead of the built-in
-  // method; user bounds (nv), rows A (k x nv), b (k), and the rows' room (k; A d <= room for
-  // a displacement d, NaN: none) or null.
+  // method; user bounds (nv), rows A (k x nv), b (k), the rows' room (k; A d <= room for
+  // a displacement d, NaN: none) or null, and what the rows need (k; NaN: b; below b: the
+  // row is given up, kept only within the acceleration and jerk limits, never yielding
+  // them) or null.
   // Writes the displacement q_dot dt into `step` (nv); returns the status bits.
   int run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const Vector>& e,
           const double* ff, const double* q, Eigen::Ref<Vector> step, const double* matrix,
           const double* user_lo, const double* user_hi,
           const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b,
-          const double* room = nullptr);
+          const double* room = nullptr, const double* needs = nullptr);
 
   // A user method's matrix, before run(): the first level's weighted rows of J (m x nv), as
   // the step weighs them, into `rows` (r0 x nv, row-major: the rows the method is given).
