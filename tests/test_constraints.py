@@ -144,6 +144,60 @@ def test_a_room_of_the_wrong_size_is_refused_naming_its_limit(panda):
         solver.step(panda.q0, panda.fk(panda.q0).translation)
 
 
+class Lift(Floor):
+    """A row asking the hand to rise at ``speed`` (m/s), within what Panda's speed limits give
+    but far beyond what its acceleration limits reach in a step from rest; with ``needs``,
+    the limit gives it up (its need below the bound)."""
+
+    name = "lift"
+
+    def __init__(self, robot, frame, speed, needs=None):
+        super().__init__(robot, frame, z_min=0.0)
+        self.speed, self._needs = speed, needs
+
+    def rows(self, kinematics, motion):
+        A, _ = super().rows(kinematics, motion)
+        return A, np.array([-self.speed])
+
+    def needs(self):
+        return None if self._needs is None else np.asarray(self._needs, dtype=float)
+
+
+@pytest.mark.parametrize("given_up", [False, True])
+def test_a_row_its_limit_gives_up_never_makes_the_acceleration_limits_yield(panda, given_up):
+    """A row no step within Panda's acceleration limits keeps (the hand rising at 0.5 m/s from
+    rest): kept, the acceleration limits yield to it; given up (``Limit.needs`` below its
+    bound), the stage asks only its best within them, the hand rises faster every step, and
+    ``rows_exceeded`` measures the step against the need (0.6 m/s less the rise)."""
+    n, dt = panda.nv, 1e-3
+    accelerations = np.full(n, 10.0)
+    limit = Lift(panda, "panda_hand", 0.5, needs=[-0.6] if given_up else None)
+    solver = sjt.SJTSolver(panda, task=sjt.PositionTask(), limits=[limit], dt=dt,
+                           acceleration_limits=accelerations)
+    q, target = panda.q0.copy(), panda.fk(panda.q0).translation
+    qs, excess = [q], []
+    for _ in range(20):
+        q = solver.step(q, target)
+        qs.append(q)
+        excess.append(dict(solver.last.rows_exceeded).get("lift", 0.0))
+    v = np.diff(np.array(qs), axis=0) / dt
+    worst = np.max(np.abs(np.diff(np.vstack([np.zeros(n), v]), axis=0)) / dt / accelerations)
+    rise = np.diff([panda.fk(x).translation[2] for x in qs]) / dt
+    if not given_up:
+        assert worst > 10.0  # (the premise: a kept row makes the limits yield)
+        return
+    assert worst <= 1.0 + 1e-9
+    assert np.all(np.diff(rise) > 0.0)  # rising faster every step: its best within them
+    np.testing.assert_allclose(excess, 0.6 - rise, rtol=1e-4)
+
+
+def test_needs_of_the_wrong_size_are_refused_naming_their_limit(panda):
+    solver = sjt.SJTSolver(panda, task=sjt.PositionTask(), dt=1e-3,
+                           limits=[Lift(panda, "panda_hand", 0.0, needs=[-1.0, -1.0])])
+    with pytest.raises(ValueError, match=r"Lift.*needs\(\) must return one value per row"):
+        solver.step(panda.q0, panda.fk(panda.q0).translation)
+
+
 def projection_problem(rng, n, rows, equalities, task_rows):
     """A random projection whose constraints a known point meets: (xb, lam, B, lo, hi, A, b,
     C, d)."""

@@ -190,6 +190,7 @@ class Controller {
   bool hold_rows(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b);
   bool held_kept(const Vector& x);
   void yield_smoothness(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b);
+  void within_hard_box(const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b);
 
   double dt_;
   RowMatrix Jw_, Jhat_, Bnone_, B_, coupling_;

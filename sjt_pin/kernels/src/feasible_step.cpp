@@ -231,12 +231,21 @@ bool Controller::rows_hold_within(double s, const Eigen::Ref<const RowMatrix>& A
 
 // Rows that no velocity within the smoothness box meets (a collision row, a user's hard row):
 // the acceleration and jerk limits yield, by the least factor (to 1 %) that lets the rows hold,
-// widened about the box's centre on every joint alike; the hard box alone where even that fails.
+// widened about the box's centre on every joint alike; the hard box alone where even that
+// fails, if there they hold; where not even the hard box keeps them all (a ball between two
+// links, each of whose rows could be kept alone), the limits hold: yielding would keep no
+// row that they break (a ball at SO-101's forearm drove every joint to +-10 rad/s a step).
 // The factor each row needs alone (least_widening, a scalar search) bounds it from below, and
 // is the answer where one row binds or the rows do not compete: two projections. Otherwise
 // bisected from there: at most 6 + 2 log2(s) + 7 more, in the steps that need them (bisected
 // from 1, UR5 starting 1 mm beyond a user's row ran up to 20 projections, 376 Newton steps, in
 // a step; 167 now).
+void Controller::within_hard_box(const Eigen::Ref<const RowMatrix>& A,
+                                 const Eigen::Ref<const Vector>& b) {
+  project(A, b, box.hard_lo, box.hard_hi, true);
+  if (!rows_hold(A, b)) project(A, b, box.lo, box.hi, false);
+}
+
 void Controller::yield_smoothness(const Eigen::Ref<const RowMatrix>& A,
                                   const Eigen::Ref<const Vector>& b) {
   if (rows_hold_within(1.0, A, b)) return;
@@ -244,7 +253,7 @@ void Controller::yield_smoothness(const Eigen::Ref<const RowMatrix>& A,
   for (Index i = 0; i < A.rows(); ++i)
     need = std::max(need, least_widening(box, A.row(i).transpose(), b[i]));
   if (!(need <= kWideningMost)) {  // (no widening meets a row, or none short of the hard box)
-    project(A, b, box.hard_lo, box.hard_hi, true);
+    within_hard_box(A, b);
     return;
   }
   // (a little inside the rows, whose boundary leaves the projection's dual degenerate)
@@ -259,7 +268,7 @@ void Controller::yield_smoothness(const Eigen::Ref<const RowMatrix>& A,
     }
   }
   if (!found) {
-    project(A, b, box.hard_lo, box.hard_hi, true);
+    within_hard_box(A, b);
     return;
   }
   while (high > 1.01 * low) {
