@@ -33,6 +33,36 @@ def test_a_mesh_obstacle_is_kept_as_its_hull_and_copied_as_given(panda):
         assert a.distance <= b.distance + 1e-9
 
 
+def test_convex_robot_keeps_the_mesh_obstacles_as_given(panda):
+    """``convex="robot"``: the robot's meshes are hulls (as with ``True``), a mesh obstacle is
+    kept as given (as with ``False``), a primitive obstacle as it is; each link's distance to
+    the mesh lies between the hulls' and the meshes'. Anything else is refused."""
+    plate = bench.bumpy_plate()
+    pose = pin.SE3(np.eye(3), np.array([0.4, 0.0, 0.1]))
+    box = coal.Box(0.1, 0.1, 0.1)
+    both = CollisionLimit(panda, [(plate, pose), (box, pose)])
+    robot = CollisionLimit(panda, [(plate, pose), (box, pose)], convex="robot")
+    none = CollisionLimit(panda, [(plate, pose), (box, pose)], convex=False)
+    geometry = robot.geometry.geometryObjects
+    for g in range(robot.n_robot):
+        assert type(geometry[g].geometry) is type(both.geometry.geometryObjects[g].geometry)
+    assert not isinstance(geometry[robot.n_robot].geometry, coal.ConvexBase)
+    assert isinstance(geometry[robot.n_robot + 1].geometry, coal.Box)
+    q = panda.q0.copy()
+    # each link's distance to the plate: hull to hull <= hull to mesh <= mesh to mesh
+    hulls, meshes = ({(p.a, p.b): p.distance for p in limit.distances(q)}
+                     for limit in (both, none))
+    checked = 0
+    for p in robot.distances(q):
+        if p.b == "obstacle_0":
+            assert hulls[(p.a, p.b)] - 1e-9 <= p.distance <= meshes[(p.a, p.b)] + 1e-9
+            checked += 1
+    assert checked > 5
+    for bad in ("mesh", None, 1, "Robot"):
+        with pytest.raises(ValueError, match="convex must be"):
+            CollisionLimit(panda, [(plate, pose)], convex=bad)
+
+
 @pytest.mark.parametrize("shape, error", [
     (coal.Sphere(0.0), "zero or non-finite size"), (coal.Box(0.0, 0.0, 0.0), "zero"),
     (coal.Sphere(np.inf), "non-finite")])

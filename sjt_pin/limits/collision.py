@@ -141,8 +141,10 @@ class CollisionLimit(PairsMixin, TablesMixin, BroadPhaseMixin, MovingMixin, Rows
             (Panda), and a hull's closest points move continuously where a mesh's jump from
             triangle to triangle (beside a mesh obstacle those jumps broke the acceleration
             limit 30x). A non-convex obstacle is filled in: the arm keeps off its hull
-            (give its convex parts as obstacles of their own to reach into it). ``False``
-            keeps every mesh as given.
+            (give its convex parts as obstacles of their own to reach into it). ``"robot"``
+            replaces the robot's meshes only, keeping mesh obstacles as given (a bin the arm
+            reaches into; an obstacle given as ``coal.Convex`` is convex either way).
+            ``False`` keeps every mesh as given.
         witnesses: how many recent closest points of each pair within ``influence`` to keep as
             rows beside its own (module docstring, "Witnesses"); 0 keeps none.
     """
@@ -154,7 +156,7 @@ class CollisionLimit(PairsMixin, TablesMixin, BroadPhaseMixin, MovingMixin, Rows
     def __init__(self, robot, obstacles: Sequence = (), self_collision: bool = False,
                  margin: float = 0.01, influence: float = 0.05, gain: float = 0.5,
                  pairs: Iterable[tuple[str, str]] = (), ignore: Iterable[tuple[str, str]] = (),
-                 srdf: str | None = None, convex: bool = True, witnesses: int = 3):
+                 srdf: str | None = None, convex: bool | str = True, witnesses: int = 3):
         if coal is None:  # pragma: no cover
             raise CollisionError("CollisionLimit needs coal (shipped with the pin wheel)")
         for name, value in (("margin", margin), ("influence", influence), ("gain", gain)):
@@ -172,6 +174,10 @@ class CollisionLimit(PairsMixin, TablesMixin, BroadPhaseMixin, MovingMixin, Rows
                 0 <= witnesses <= MAX_WITNESSES):
             raise ValueError(f"witnesses must be an int in [0, {MAX_WITNESSES}], got "
                              f"{witnesses!r}")
+        if isinstance(convex, np.bool_):
+            convex = bool(convex)
+        if not (isinstance(convex, bool) or (isinstance(convex, str) and convex == "robot")):
+            raise ValueError(f"convex must be True, False or 'robot', got {convex!r}")
         self.margin, self.influence, self.gain = float(margin), float(influence), float(gain)
         self.witnesses = int(witnesses)
         # what a copy in another process is rebuilt from (coal's hulls do not pickle)
@@ -184,9 +190,9 @@ class CollisionLimit(PairsMixin, TablesMixin, BroadPhaseMixin, MovingMixin, Rows
         source = self.__dict__.pop("_restored_geometry", None)  # set by __setstate__
         self.geometry = source.copy() if source is not None else collision_model_of(robot)
         self._source = self.geometry.copy()  # the robot's own geometry (meshes), for copies
-        if convex:
+        if convex is not False:
             to_hulls(self.geometry)
-        self._convex = bool(convex)
+        self._convex = convex is True  # (the mesh obstacles' hulls too)
         self.n_robot = self.geometry.ngeoms
         self._obstacle_ids: list[int] = []
         self._obstacle_shapes: list = []  # (as given: a mesh obstacle's hull is the limit's)
