@@ -118,50 +118,33 @@ class UserLimits:
             else:
                 A = np.vstack([a for _, a, _ in blocks])
                 b = np.concatenate([c for _, _, c in blocks])
-            room = self._room(blocks) if self._any_room else None
+            room = self._stacked(blocks, "room") if self._any_room else None
         self.room = room
-        self.needs = self._needs(blocks) if self._any_needs and blocks else None
+        self.needs = self._stacked(blocks, "needs") if self._any_needs and blocks else None
         self._blocks = blocks
         self.last_rows = None if A is None or b is None else (A, b, owners)
         return lower, upper, A, b, owners
 
     @staticmethod
-    def _room(blocks: list[tuple[Limit, np.ndarray, np.ndarray]]) -> np.ndarray | None:
-        """The rows' room stacked (NaN for a limit without one); None where none has one."""
-        rooms = []
-        for limit, _, bk in blocks:
-            room = limit.room()
-            if room is not None:
-                room = np.ascontiguousarray(room, dtype=float)
-                if room.shape != bk.shape:
-                    raise ValueError(f"{limit!r}.room() must return one value per row of its "
-                                     f"rows(), shape {bk.shape}, got {room.shape}")
-            rooms.append(room)
-        if all(room is None for room in rooms):
-            return None
-        if len(rooms) == 1:
-            return rooms[0]
-        return np.concatenate([np.full(bk.size, np.nan) if room is None else room
-                               for room, (_, _, bk) in zip(rooms, blocks, strict=True)])
-
-    @staticmethod
-    def _needs(blocks: list[tuple[Limit, np.ndarray, np.ndarray]]) -> np.ndarray | None:
-        """The rows' needs stacked (NaN for a row not given up); None where none is."""
+    def _stacked(blocks: list[tuple[Limit, np.ndarray, np.ndarray]], name: str
+                 ) -> np.ndarray | None:
+        """The rows' values of each limit's method ``name`` (``room`` or ``needs``) stacked,
+        NaN for a limit without them; None where no limit has any."""
         parts = []
         for limit, _, bk in blocks:
-            needs = limit.needs()
-            if needs is not None:
-                needs = np.asarray(needs, dtype=float)
-                if needs.shape != bk.shape:
-                    raise ValueError(f"{limit!r}.needs() must return one value per row of its "
-                                     f"rows(), shape {bk.shape}, got {needs.shape}")
-            parts.append(needs)
-        if all(needs is None for needs in parts):
+            values = getattr(limit, name)()
+            if values is not None:
+                values = np.ascontiguousarray(values, dtype=float)
+                if values.shape != bk.shape:
+                    raise ValueError(f"{limit!r}.{name}() must return one value per row of "
+                                     f"its rows(), shape {bk.shape}, got {values.shape}")
+            parts.append(values)
+        if all(values is None for values in parts):
             return None
         if len(parts) == 1:
             return parts[0]
-        return np.concatenate([np.full(bk.size, np.nan) if needs is None else needs
-                               for needs, (_, _, bk) in zip(parts, blocks, strict=True)])
+        return np.concatenate([np.full(bk.size, np.nan) if values is None else values
+                               for values, (_, _, bk) in zip(parts, blocks, strict=True)])
 
     def raise_non_finite_rows(self) -> None:
         """ValueError naming the limit whose last rows hold NaN or inf in ``A`` or NaN in

@@ -173,10 +173,13 @@ def stoppable_case(jerks: bool = True) -> Case:
                      ddq=RNG.normal(size=N), accelerations=RNG.uniform(5, 10, N),
                      jerks=RNG.uniform(1e3, 5e3, N) if jerks else None, rate=500.0, dt=1e-3,
                      share=0.5, slack=5e-4, reach_accelerations=RNG.uniform(10, 20, N),
-                     reach_jerks=RNG.uniform(5e3, 1e4, N) if jerks else None),
+                     reach_jerks=RNG.uniform(5e3, 1e4, N) if jerks else None,
+                     carried=RNG.uniform(-1, 1, k), speeds=RNG.uniform(0, 3, (2, N)),
+                     needs=np.zeros(k)),
                 dict(A=Arg(), b=Arg(written=True), dq=Arg(), ddq=Arg(), accelerations=Arg(),
                      jerks=Arg(optional=True), reach_accelerations=Arg(optional=True),
-                     reach_jerks=Arg(optional=True)))
+                     reach_jerks=Arg(optional=True), carried=Arg(optional=True),
+                     speeds=Arg(optional=True), needs=Arg(written=True, optional=True)))
 
 
 def braking_case() -> Case:

@@ -159,10 +159,10 @@ def test_an_obstacle_faster_than_the_arm_is_reported(panda):
 def test_a_moving_obstacles_rows_brake_the_relative_speed_and_give_up_what_it_outruns(jerk):
     """``kernels.stoppable_rows`` with ``carried`` (the obstacle's normal velocity away,
     -u): a row is the still obstacle's row of an arm that closes u faster, less u (it is the
-    arm's speed that brakes, the obstacle's stays); with ``speeds``, a row whose obstacle comes
-    faster than the row's retreat within them (u > sum_j |A_ij| v_j) counts u only up to that
-    retreat, and ``needs`` holds the bound it would need (below the one given), NaN for the
-    other rows."""
+    arm's speed that brakes, the obstacle's stays); with ``speeds`` (how fast each joint can
+    move down, then up), a row whose obstacle comes faster than the row's retreat within them
+    (u > sum_j |A_ij| speeds[A_ij > 0 ? down : up, j]) counts u only up to that retreat, and
+    ``needs`` holds the bound it would need (below the one given), NaN for the other rows."""
     rng = np.random.default_rng(11 + jerk)
     n, k, dt = 6, 120, 1e-3
     rate = 0.5 / dt
@@ -171,7 +171,7 @@ def test_a_moving_obstacles_rows_brake_the_relative_speed_and_give_up_what_it_ou
     dq, ddq = rng.normal(size=n) * 0.5, rng.normal(size=n) * 3.0
     acc = rng.uniform(5.0, 20.0, n)
     jerks = rng.uniform(2000.0, 8000.0, n) if jerk else None
-    speeds = rng.uniform(1.0, 3.0, n)
+    speeds = rng.uniform(0.0, 3.0, (2, n))  # (down, up: a joint near a range's end is slow)
     u = rng.uniform(-0.5, 2.0, k)
 
     def cut(b, dq_arm, carried=None, speeds=None, needs=None):
@@ -185,7 +185,7 @@ def test_a_moving_obstacles_rows_brake_the_relative_speed_and_give_up_what_it_ou
         shifted = dq + u[i] * A[i] / (A[i] @ A[i])
         still = cut(damper, shifted)[i]
         assert moving[i] == pytest.approx(still - u[i], rel=1e-9, abs=1e-9)
-    retreat = np.abs(A) @ speeds
+    retreat = np.sum(np.abs(A) * np.where(A > 0, speeds[0], speeds[1]), axis=1)
     needs = np.empty(k)
     given = cut(damper, dq, carried=-u, speeds=speeds, needs=needs)
     outrun = u > retreat
@@ -230,3 +230,23 @@ def test_a_ball_that_outruns_a_link_leaves_the_acceleration_limits_whole(panda):
     assert np.all(np.abs(j) <= 1.01 * jerks)
     assert np.all(np.abs(v) <= 1.01 * panda.velocity_limits)
     assert given_up > 0 and exceeded > 0
+
+
+def test_a_joint_near_the_end_of_its_range_retreats_no_faster_than_it_can_stop(panda):
+    """The retreat a moving obstacle's row is measured against (``kernels.stoppable_rows``'
+    ``speeds``): each joint's speed limit, and toward a range's end no faster than the joint
+    can still stop there at its acceleration limit, sqrt(2 a room); at the end, nothing."""
+    limit = CollisionLimit(panda, [(coal.Sphere(0.05), pin.SE3(np.eye(3), np.ones(3)))])
+    lower, upper = panda.model.lowerPositionLimit, panda.model.upperPositionLimit
+    q = panda.q0.copy()
+    q[0] = lower[0]  # at its lower end
+    q[3] = upper[3] - 1e-3  # 1 mrad below its upper end
+    accelerations = np.full(panda.nv, 10.0)
+    motion = Motion(q=q, dq=np.zeros(panda.nv), ddq=np.zeros(panda.nv), dt=1e-3,
+                    acceleration_limits=accelerations, velocity_limits=panda.velocity_limits)
+    speeds = limit._retreat_speeds(motion)
+    expected = np.vstack([np.minimum(panda.velocity_limits, np.sqrt(20.0 * (q - lower))),
+                          np.minimum(panda.velocity_limits, np.sqrt(20.0 * (upper - q)))])
+    np.testing.assert_allclose(speeds, expected, rtol=1e-12)
+    assert speeds[0, 0] == 0.0 and speeds[1, 0] == panda.velocity_limits[0]
+    assert speeds[1, 3] == pytest.approx(np.sqrt(20.0 * 1e-3))

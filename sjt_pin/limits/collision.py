@@ -218,6 +218,7 @@ class CollisionLimit(PairsMixin, TablesMixin, BroadPhaseMixin, MovingMixin, Rows
         self._witness_count = 0  # the witness rows of the last rows() (_owners holds their pairs)
         self._room: np.ndarray | None = None  # room() of the last rows()
         self._needs: np.ndarray | None = None  # needs() of the last rows()
+        self._ranged = None  # the ranged joints (_retreat_speeds)
         self._prepare_broad_phase()
 
     def __getstate__(self) -> dict:
@@ -359,7 +360,7 @@ class CollisionLimit(PairsMixin, TablesMixin, BroadPhaseMixin, MovingMixin, Rows
                 needs = np.empty_like(b)
             stoppable_rows(A, b, motion.dq, motion.ddq, accelerations, jerks, self.gain / dt,
                            dt, BRAKING_SHARE, EASING_SLACK, None, None, carried,
-                           motion.velocity_limits, needs)
+                           None if carried is None else self._retreat_speeds(motion), needs)
             b.setflags(write=False)
             if needs is not None:
                 if np.isnan(needs).all():
@@ -385,9 +386,9 @@ class CollisionLimit(PairsMixin, TablesMixin, BroadPhaseMixin, MovingMixin, Rows
         """For each row of the last :meth:`rows` given up, the bound the margin would need
         (:meth:`Limit.needs <sjt_pin.limits.Limit.needs>`; NaN for the others): beside
         acceleration limits, a row whose moving obstacle comes faster than the arm can retreat
-        along it within its speed limits (``u > sum_j |A_ij| v_j``) counts the obstacle's
-        approach only up to that retreat (``kernels.stoppable_rows``). None where no row is
-        given up."""
+        along it within its speed limits and ranges (``u > sum_j |A_ij| v_j``) counts the
+        obstacle's approach only up to that retreat (``kernels.stoppable_rows``). None where
+        no row is given up."""
         return self._needs
 
     def _room_of(self, out: tuple[np.ndarray, np.ndarray] | None) -> np.ndarray | None:

@@ -10,7 +10,9 @@ An obstacle moved with its velocity (:meth:`CollisionLimit.move`, twist
 (``o`` the obstacle's origin; the bound of ``A q_dot <= b`` rises by ``n^T v_b(p_b)``, falls
 where the obstacle comes closer). With ``u = -n^T v_b(p_b)`` the obstacle's approach speed
 and ``r = sum_j |A_ij| v_j`` the fastest the arm's speed limits ``v`` let the row's point
-retreat, the guarantee is:
+retreat (beside acceleration limits ``a``, a joint moving toward the end of its range counts
+no faster than it can still stop there, ``v_j <= sqrt(2 a_j room_j)``:
+:meth:`MovingMixin._retreat_speeds`), the guarantee is:
 
 - without acceleration limits, where ``u <= r``: the step keeps its row, so per period the
   excess ``d - margin`` shrinks by at most the fraction ``gain`` to first order in ``dt``, as
@@ -48,6 +50,7 @@ import math
 import numpy as np
 import pinocchio as pin
 
+from ..joint_ranges import position_ranges
 from ..validation import real_number
 from .base import Motion
 from .collision_geometry import check_pose, obstacle_twist
@@ -149,6 +152,32 @@ class MovingMixin(CollisionState):
                 ramp = ramp[np.isfinite(ramp)]
                 time += float(ramp.max()) if ramp.size else 0.0
         return time
+
+    def _retreat_speeds(self, motion: Motion) -> np.ndarray | None:
+        """How fast each joint can move down (row 0) and up (row 1) (2, nv; rad/s or m/s):
+        its speed limit, and toward a position range's end no faster than it can still stop
+        there at its acceleration limit, ``sqrt(2 a room)`` (a joint at the end of its range
+        gives no retreat that way); None where nothing bounds them."""
+        speeds, accelerations = motion.velocity_limits, motion.acceleration_limits
+        if self._ranged is None:  # (the 1-DoF joints with a range: v index, q index, lo, hi)
+            lower, upper = position_ranges(self.model)
+            ranged = [(j.idx_v, j.idx_q) for j in self.model.joints[1:]
+                      if j.nq == 1 and j.nv == 1 and np.isfinite(lower[j.idx_q])]
+            iv = np.array([v for v, _ in ranged], dtype=np.int64)
+            iq = np.array([q for _, q in ranged], dtype=np.int64)
+            self._ranged = (iv, iq, lower[iq], upper[iq])
+        iv, iq, lo, hi = self._ranged
+        if speeds is None and (accelerations is None or not iv.size):
+            return None
+        out = np.full((2, self.model.nv), np.inf)
+        if speeds is not None:
+            out[:] = speeds
+        if accelerations is not None and iv.size and motion.q is not None:
+            x = motion.q[iq]
+            twice = 2.0 * accelerations[iv]
+            out[0, iv] = np.minimum(out[0, iv], np.sqrt(twice * np.maximum(x - lo, 0.0)))
+            out[1, iv] = np.minimum(out[1, iv], np.sqrt(twice * np.maximum(hi - x, 0.0)))
+        return out
 
     def _carried(self, out: tuple[np.ndarray, np.ndarray] | None) -> np.ndarray | None:
         """How much each bound of ``out``, the rows of this step, rises by the normal velocity

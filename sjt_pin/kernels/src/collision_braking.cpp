@@ -68,13 +68,13 @@ void register_collision_braking(nb::module_& m) {
         }
         std::optional<Array> carried, speeds, needs;
         if (!carried_obj.is_none()) carried.emplace(carried_obj, "carried", 1);
-        if (!speeds_obj.is_none()) speeds.emplace(speeds_obj, "speeds", 1);
+        if (!speeds_obj.is_none()) speeds.emplace(speeds_obj, "speeds", 2);
         if (!needs_obj.is_none()) needs.emplace(needs_obj, "needs", 1, Access::write);
         if ((carried && carried->size() != k) || (needs && needs->size() != k) ||
-            (speeds && speeds->size() != N)) {
+            (speeds && (speeds->rows() != 2 || speeds->cols() != N))) {
           std::ostringstream out;
           out << "stoppable_rows: carried and needs must hold one number per row (" << k
-              << ") and speeds one per joint (" << N << "): they do not fit";
+              << ") and speeds (2, " << N << ") two per joint: they do not fit";
           fail(out.str());
         }
         ArmLimits limits = arm_limits(accelerations, jerks, N, "stoppable_rows");
@@ -99,19 +99,20 @@ void register_collision_braking(nb::module_& m) {
         const double* rjl = boxes ? reach.jerks->data() : nullptr;
         const double* v0 = dq.data();
         const double* a0 = ddq.data();
-        const double* vmax = speeds ? speeds->data() : nullptr;
+        const Array* vmax = speeds ? &*speeds : nullptr;  // (down, then up: row 0, row 1)
         auto bound = b.vector();
         for (Index i = 0; i < k; ++i) {
           // along row i the closing speed s changes at up to a (m/s^2), that rate at up to j;
           // within the joints' acceleration and jerk boxes this step, its acceleration lies
-          // in [least, most]; the joints' speed limits let it retreat at up to retreat (m/s)
+          // in [least, most]; the joints' speeds (speed limits, range braking) let it retreat at
+          // up to retreat (m/s)
           double a = 0.0, j = 0.0, s = 0.0, sd = 0.0, least = 0.0, most = 0.0, retreat = 0.0;
           for (Index c = 0; c < N; ++c) {
             const double w = rows(i, c);
             if (w == 0.0) continue;
             a += std::fabs(w) * acc[c];
             if (jerk) j += std::fabs(w) * jl[c];
-            if (vmax) retreat += std::fabs(w) * vmax[c];
+            if (vmax) retreat += std::fabs(w) * (*vmax)(w > 0.0 ? 0 : 1, c);
             s += w * v0[c];
             sd += w * a0[c];
             if (boxes) {
@@ -176,7 +177,7 @@ void register_collision_braking(nb::module_& m) {
           const double u = -shift;
           if (vmax && u > retreat) {
             // outrun: the obstacle comes faster than the arm can retreat along the row within
-            // its speed limits, so no yielding of the acceleration and jerk limits holds the
+            // its speed limits and ranges, so no yielding of the acceleration and jerk limits holds the
             // margin: its approach counts up to that retreat, and needs says what the margin
             // would need (below the bound: the stage keeps the row within those limits)
             bound[i] = cut(retreat);
@@ -217,16 +218,17 @@ void register_collision_braking(nb::module_& m) {
       "    stays at least margin - slack apart;\n"
       "  - b_i = max(b_i, c_i + r dt - u_i) inside the margin (h < 0): the pair separates as\n"
       "    fast as that share lets its closing speed drop;\n"
-      "  - outrun (speeds given, u_i > sum_j |A_ij| speeds_j: no retreat within the speed\n"
-      "    limits keeps the margin, whatever the acceleration and jerk limits give): the bound\n"
+      "  - outrun (speeds (2, N) given: how fast each joint can move down, then up; u_i >\n"
+      "    sum_j |A_ij| speeds[A_ij > 0 ? 0 : 1, j], the fastest the row can retreat: no\n"
+      "    retreat keeps the margin, whatever the acceleration and jerk limits give): the bound\n"
       "    as above with u_i cut to that retreat, and needs_i (needs (k,), if given; NaN for\n"
       "    every other row) the bound as above, below it: the row is given up, the stage keeps\n"
       "    it within the acceleration and jerk limits, never yielding them for it.\n"
       "The row's j_i assumes its joints ramp together, as tau does.\n"
       "reach_accelerations and reach_jerks (each None: accelerations, jerks) are the joints' own\n"
       "limits where the budget given is a share of them.\n"
-      "A (k, N), b, carried, needs (k,), dq, ddq, accelerations, jerks, speeds and the reach\n"
-      "limits (N,).");
+      "A (k, N), b, carried, needs (k,), dq, ddq, accelerations, jerks and the reach limits\n"
+      "(N,), speeds (2, N).");
 
   m.def(
       "braking_reach",
