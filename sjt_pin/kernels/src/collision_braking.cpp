@@ -104,8 +104,8 @@ void register_collision_braking(nb::module_& m) {
         for (Index i = 0; i < k; ++i) {
           // along row i the closing speed s changes at up to a (m/s^2), that rate at up to j;
           // within the joints' acceleration and jerk boxes this step, its acceleration lies
-          // in [least, most]; the joints' speeds (speed limits, range braking) let it retreat at
-          // up to retreat (m/s)
+          // in [least, most]; the joints' speeds (speed limits, range braking) let it retreat
+          // at up to retreat (m/s)
           double a = 0.0, j = 0.0, s = 0.0, sd = 0.0, least = 0.0, most = 0.0, retreat = 0.0;
           for (Index c = 0; c < N; ++c) {
             const double w = rows(i, c);
@@ -177,9 +177,9 @@ void register_collision_braking(nb::module_& m) {
           const double u = -shift;
           if (vmax && u > retreat) {
             // outrun: the obstacle comes faster than the arm can retreat along the row within
-            // its speed limits and ranges, so no yielding of the acceleration and jerk limits holds the
-            // margin: its approach counts up to that retreat, and needs says what the margin
-            // would need (below the bound: the stage keeps the row within those limits)
+            // its speed limits and ranges, so no yielding of the acceleration and jerk limits
+            // holds the margin: its approach counts up to that retreat, and needs says what the
+            // margin would need (below the bound: the stage keeps the row within those limits)
             bound[i] = cut(retreat);
             if (needs) needs->data()[i] = cut(u);
           } else {
