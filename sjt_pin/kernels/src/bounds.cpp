@@ -33,6 +33,7 @@ void JointBox::resize(Index n) {
   for (Vector* x : {&lo, &hi, &hard_lo, &hard_hi, &soft_lo, &soft_hi, &cap_lo, &cap_hi,
                     &brake_lo, &brake_hi})
     x->resize(n);
+  span.setZero(n);
   lo_by.resize(n);
   hi_by.resize(n);
   torn.resize(n);
@@ -49,8 +50,10 @@ void capability(const BoundsConfig& config, double dt, const Vector& v, const Ve
     double sl = -kInf, sh = kInf;
     int8_t sl_by = kNone, sh_by = kNone;
     out.jerk_apart[j] = 0;
+    out.span[j] = 0.0;
     if (config.smooth && config.moving[j] != 0.0) {
       const double A = config.acceleration[j], J = config.jerk[j];
+      out.span[j] = A * dt;
       sl = v[j] - A * dt, sh = v[j] + A * dt;
       sl_by = sh_by = kAcceleration;
       if (std::isfinite(J)) {
