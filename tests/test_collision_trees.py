@@ -32,9 +32,12 @@ def _with_geometry(xml: str, rng: np.random.Generator) -> str:
     return re.sub(r'<link name="(l\d+)"/>', shape, xml)
 
 
-def _closest_over_a_run(seed: int, method: str) -> float | None:
-    """The least distance of any pair over 1 s of targets changing every 0.25 s, at 1 kHz
-    with 8 rad/s^2 and 4,000 rad/s^3 on every joint; None where the tree is refused, has no
+def _run(seed: int, method: str):
+    """One run: 1 s of targets changing every 0.25 s, at 1 kHz with 8 rad/s^2 and 4,000
+    rad/s^3 on every joint. ``(closest, acceleration, jerk, reported)``: the least distance of
+    any pair (every 5th step, checked by a limit of the test's own), each step's largest
+    acceleration and jerk over their limits (the tangent-space rates of the configurations
+    returned) and whether it reported a conflict; None where the tree is refused, has no
     moving joint or starts within 15 mm of a pair."""
     rng = np.random.default_rng(seed)
     xml, leaf = random_urdf_semantics(seed, 3 + seed % 8)
@@ -58,14 +61,21 @@ def _closest_over_a_run(seed: int, method: str) -> float | None:
     solver = sjt.make_solver(method, robot, dt=1e-3, limits=[limit],
                              acceleration_limits=np.full(robot.nv, 8.0),
                              jerk_limits=np.full(robot.nv, 4000.0))
-    closest = np.inf
+    closest, qs, reported = np.inf, [q], []
     for k in range(1000):
         if k % 250 == 0:
             target = robot.fk(robot.random_configuration(rng))
         q = solver.step(q, target)
+        qs.append(q)
+        reported.append(bool(solver.last.limit_conflicts))
         if k % 5 == 0:
             closest = min(closest, min(p.distance for p in check.distances(q)))
-    return closest
+    v = np.array([pin.difference(robot.model, a, b) for a, b in zip(qs[:-1], qs[1:],
+                                                                     strict=True)]) / 1e-3
+    a = np.diff(np.vstack([np.zeros((1, robot.nv)), v]), axis=0) / 1e-3
+    j = np.diff(np.vstack([np.zeros((1, robot.nv)), a]), axis=0) / 1e-3
+    return (closest, np.abs(a).max(axis=1) / 8.0, np.abs(j).max(axis=1) / 4000.0,
+            np.array(reported))
 
 
 @pytest.mark.slow
@@ -73,52 +83,12 @@ def _closest_over_a_run(seed: int, method: str) -> float | None:
 def test_the_margin_wins_on_random_trees(method):
     closest = {}
     for seed in range(12):
-        d = _closest_over_a_run(seed, method)
-        if d is not None:
-            closest[seed] = d
+        run = _run(seed, method)
+        if run is not None:
+            closest[seed] = run[0]
     assert len(closest) >= 6
     crossed = {seed: round(1e3 * d, 2) for seed, d in closest.items() if d < MARGIN - 1e-3}
     assert not crossed, f"mm, by seed: {crossed}"
-
-
-def _rates_over_a_run(seed: int, method: str):
-    """Each step's largest acceleration and jerk over their limits (8 rad/s^2, 4,000 rad/s^3;
-    the joints' tangent-space rates of the configurations returned) and whether the step
-    reported a conflict, over the run of :func:`_closest_over_a_run`; None where that has
-    none."""
-    rng = np.random.default_rng(seed)
-    xml, leaf = random_urdf_semantics(seed, 3 + seed % 8)
-    try:
-        robot = sjt.Robot.from_urdf(_with_geometry(xml, rng), ee_frame=leaf,
-                                    load_visuals=False)
-    except sjt.URDFError:
-        return None
-    if robot.nv == 0:
-        return None
-    q = robot.q0.copy()
-    ball = (coal.Sphere(0.03), pin.SE3(np.eye(3), robot.fk(q).translation
-                                       + rng.normal(size=3) * 0.1))
-    limit = sjt.CollisionLimit(robot, [ball], self_collision=True, margin=MARGIN)
-    try:
-        if min(p.distance for p in limit.distances(q)) < 0.015:
-            return None
-    except ValueError:
-        return None
-    solver = sjt.make_solver(method, robot, dt=1e-3, limits=[limit],
-                             acceleration_limits=np.full(robot.nv, 8.0),
-                             jerk_limits=np.full(robot.nv, 4000.0))
-    qs, reported = [q], []
-    for k in range(1000):
-        if k % 250 == 0:
-            target = robot.fk(robot.random_configuration(rng))
-        q = solver.step(q, target)
-        qs.append(q)
-        reported.append(bool(solver.last.limit_conflicts))
-    v = np.array([pin.difference(robot.model, a, b) for a, b in zip(qs[:-1], qs[1:],
-                                                                     strict=True)]) / 1e-3
-    a = np.diff(np.vstack([np.zeros((1, robot.nv)), v]), axis=0) / 1e-3
-    j = np.diff(np.vstack([np.zeros((1, robot.nv)), a]), axis=0) / 1e-3
-    return np.abs(a).max(axis=1) / 8.0, np.abs(j).max(axis=1) / 4000.0, np.array(reported)
 
 
 @pytest.mark.slow
@@ -132,10 +102,10 @@ def test_where_the_rows_make_the_limits_yield_on_random_trees_they_yield_by_litt
     worst, above = 0.0, 0
     for seed in range(24):
         for method in ("jt", "sjt", "dls"):
-            rates = _rates_over_a_run(seed, method)
-            if rates is None:
+            run = _run(seed, method)
+            if run is None:
                 continue
-            acc, jerk, reported = rates
+            _, acc, jerk, reported = run
             over = np.concatenate([[False], acc[1:] > 1.01]) | np.concatenate(
                 [[False, False], jerk[2:] > 1.01])
             above += bool(over.any())
