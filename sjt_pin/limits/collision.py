@@ -95,6 +95,7 @@ from .collision_reach import damper_rows_reference as damper_rows_reference
 from .collision_reach import mimic_map
 from .collision_rows import RowsMixin
 from .collision_tables import TablesMixin
+from .position import PositionLimit
 
 __all__ = ["ClosestPoints", "CollisionLimit", "CollisionError", "PairDistance"]
 
@@ -218,7 +219,8 @@ class CollisionLimit(PairsMixin, TablesMixin, BroadPhaseMixin, MovingMixin, Rows
         self._witness_count = 0  # the witness rows of the last rows() (_owners holds their pairs)
         self._room: np.ndarray | None = None  # room() of the last rows()
         self._needs: np.ndarray | None = None  # needs() of the last rows()
-        self._ranged = None  # the ranged joints (_retreat_speeds)
+        #: the robot's ranged joints (_retreat_speeds)
+        self._ranges = PositionLimit(robot, np.ones(robot.model.nv), np.zeros(robot.model.nv))
         self._prepare_broad_phase()
 
     def __getstate__(self) -> dict:

@@ -50,7 +50,6 @@ import math
 import numpy as np
 import pinocchio as pin
 
-from ..joint_ranges import position_ranges
 from ..validation import real_number
 from .base import Motion
 from .collision_geometry import check_pose, obstacle_twist
@@ -159,24 +158,17 @@ class MovingMixin(CollisionState):
         there at its acceleration limit, ``sqrt(2 a room)`` (a joint at the end of its range
         gives no retreat that way); None where nothing bounds them."""
         speeds, accelerations = motion.velocity_limits, motion.acceleration_limits
-        if self._ranged is None:  # (the 1-DoF joints with a range: v index, q index, lo, hi)
-            lower, upper = position_ranges(self.model)
-            ranged = [(j.idx_v, j.idx_q) for j in self.model.joints[1:]
-                      if j.nq == 1 and j.nv == 1 and np.isfinite(lower[j.idx_q])]
-            iv = np.array([v for v, _ in ranged], dtype=np.int64)
-            iq = np.array([q for _, q in ranged], dtype=np.int64)
-            self._ranged = (iv, iq, lower[iq], upper[iq])
-        iv, iq, lo, hi = self._ranged
-        if speeds is None and (accelerations is None or not iv.size):
+        ranges = self._ranges  # (the robot's ranged 1-DoF joints: PositionLimit's table)
+        if speeds is None and (accelerations is None or not ranges.active):
             return None
         out = np.full((2, self.model.nv), np.inf)
         if speeds is not None:
             out[:] = speeds
-        if accelerations is not None and iv.size and motion.q is not None:
-            x = motion.q[iq]
+        if accelerations is not None and ranges.active and motion.q is not None:
+            iv, x = ranges.v_index, motion.q[ranges.q_index]
             twice = 2.0 * accelerations[iv]
-            out[0, iv] = np.minimum(out[0, iv], np.sqrt(twice * np.maximum(x - lo, 0.0)))
-            out[1, iv] = np.minimum(out[1, iv], np.sqrt(twice * np.maximum(hi - x, 0.0)))
+            out[0, iv] = np.minimum(out[0, iv], np.sqrt(twice * np.maximum(x - ranges.lower, 0.0)))
+            out[1, iv] = np.minimum(out[1, iv], np.sqrt(twice * np.maximum(ranges.upper - x, 0.0)))
         return out
 
     def _carried(self, out: tuple[np.ndarray, np.ndarray] | None) -> np.ndarray | None:

@@ -29,8 +29,6 @@ class CollisionState:
     _reaches: tuple[object, np.ndarray | None]
     _cache: tuple | None
     _bounds: tuple[float, np.ndarray | None, bool, tuple] | None
-    #: the 1-DoF joints with a range: v indices, q indices, lower and upper (collision_moving)
-    _ranged: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None
 
     if TYPE_CHECKING:  # the rest of the state: arrays and coal's objects the parts set
         def __getattr__(self, name: str) -> Any: ...
