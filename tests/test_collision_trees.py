@@ -13,6 +13,7 @@ import pinocchio as pin
 import pytest
 
 import sjt_pin as sjt
+from sjt_pin.bench.collision import rates
 
 from .test_random_urdfs import random_urdf_semantics
 
@@ -70,10 +71,7 @@ def _run(seed: int, method: str):
         reported.append(bool(solver.last.limit_conflicts))
         if k % 5 == 0:
             closest = min(closest, min(p.distance for p in check.distances(q)))
-    v = np.array([pin.difference(robot.model, a, b) for a, b in zip(qs[:-1], qs[1:],
-                                                                     strict=True)]) / 1e-3
-    a = np.diff(np.vstack([np.zeros((1, robot.nv)), v]), axis=0) / 1e-3
-    j = np.diff(np.vstack([np.zeros((1, robot.nv)), a]), axis=0) / 1e-3
+    _, a, j = rates(robot.model, qs, 1e-3)
     return (closest, np.abs(a).max(axis=1) / 8.0, np.abs(j).max(axis=1) / 4000.0,
             np.array(reported))
 
