@@ -27,6 +27,16 @@ def velocity_limits(model: pin.Model) -> np.ndarray:
     return np.where((limit > 0) & (limit < 1e30), limit, np.inf)
 
 
+def revolute_velocities(model: pin.Model) -> np.ndarray:
+    """(nv,) bool: the velocity coordinates of 1-DoF revolute joints (bounded or continuous,
+    along an axis or unaligned): the coordinates in rad/s."""
+    out = np.zeros(model.nv, dtype=bool)
+    for joint in model.joints[1:]:
+        if joint.nv == 1 and joint.shortname().startswith("JointModelR"):
+            out[joint.idx_v] = True
+    return out
+
+
 def velocity_names(model: pin.Model) -> list[str]:
     """The name of the joint of each velocity (tangent) index: columns of J, entries of dq."""
     return [model.names[j] for j in range(1, model.njoints) for _ in range(model.joints[j].nv)]

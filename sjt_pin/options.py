@@ -33,7 +33,9 @@ class SolverOptions:
         position_limits: keep 1-DoF joints within their URDF position limits (default: on
             when the URDF has them).
         velocity_limits: ``True``/``None`` (the URDF's speed limits, the default), ``False``
-            (none), or an (nv,) array in rad/s or m/s (``inf`` for none).
+            (none), or an (nv,) array in rad/s or m/s (``inf`` for none). With the default and
+            ``acceleration_limits``, a revolute joint the URDF gives no speed limit takes the
+            largest one its other revolute joints have (docs/limits.md).
         acceleration_limits: joint acceleration limits (rad/s^2 or m/s^2; a number or one
             per velocity coordinate, ``inf`` for none; default ``None``: URDFs have none).
         jerk_limits: joint jerk limits (rad/s^3 or m/s^3; needs ``acceleration_limits``).

@@ -416,3 +416,32 @@ def test_a_lone_limit_s_rows_as_lists_are_taken_as_arrays_are(ur5):
         assert rows == runs[0][1]
     assert ("back",) in runs[0][1]
     assert (np.diff(runs[0][0][:, 0]) <= 1e-12).all()
+
+
+def test_under_acceleration_limits_a_joint_without_a_speed_limit_takes_the_fastest_one():
+    """Bravo 7's URDF gives three continuous joints no speed limit and the others 0.5 rad/s.
+    Beyond reach under acceleration and jerk limits (``sjt-pin bench settle``'s draw 19), DLS
+    whipped its base to 9.7 rad/s, past where the feedback sent it and back, the error rising,
+    and still moved at 2.1 rad/s after 30 s. Given the fastest limit, 0.5 rad/s, it comes to
+    rest (at 32 s: it leaves a saddle at those speeds); an array the user passes stays as
+    given."""
+    from sjt_pin.bench import settle
+
+    robot = sjt.Robot.from_example("bravo7_no_ee", ee_frame="contact_point")
+    unlimited = ~np.isfinite(robot.velocity_limits)
+    assert unlimited.sum() == 3 and np.all(robot.velocity_limits[~unlimited] == 0.5)
+    draw = settle._draw(robot, 19)
+    assert draw.scene == "beyond" and draw.jerk is not None  # the case under test
+    for given, seconds in [(True, 35.0), (robot.velocity_limits, 7.0)]:
+        solver = sjt.DLSSolver(robot, task=sjt.PositionTask(), velocity_limits=given,
+                               acceleration_limits=draw.acceleration, jerk_limits=draw.jerk)
+        path = [draw.q0]
+        for _ in range(round(seconds / solver.dt)):
+            path.append(solver.step(path[-1], draw.targets[0][1]))
+        speeds = np.abs(np.diff(settle.joint_angles(robot.model, np.array(path)), axis=0))
+        speeds /= solver.dt
+        top = speeds[:, unlimited].max()
+        if given is True:
+            assert top <= 0.5 * (1 + 1e-9) and speeds[-1000:].max() < 1e-6, top
+        else:
+            assert top > 9.0, top
