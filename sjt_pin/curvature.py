@@ -5,10 +5,11 @@ evaluation at a time.
 evaluations of the task rows ``rows(q) -> (J_w, e_w)``), the Jacobian H of ``-J_w^T e_w``: the
 field a transpose update follows, the exact gradient of ``f = 1/2 |e_w|^2`` for position and
 orientation rows and its first-order approximation for pose rows. A clearly negative eigenvalue
-of H's symmetric part is a saddle, and its eigenvector the escape's direction (the sign that
+of H's symmetric part is a saddle where f, probed further out along its eigenvector, falls
+(:meth:`CurvatureTest._descent`), and that eigenvector the escape's direction (the sign that
 lowers f, or where both do, the one with more room before a position limit). A zero curvature
-is probed further out (:meth:`CurvatureTest._flat_descent`); at a minimum whose curvatures span
-orders of magnitude, the Newton step along the flattest ones is the settling step
+is probed further out too (:meth:`CurvatureTest._flat_descent`); at a minimum whose curvatures
+span orders of magnitude, the Newton step along the flattest ones is the settling step
 (:meth:`CurvatureTest._settle`).
 
 :meth:`~CurvatureTest.run` is a generator that pauses after each evaluation of the rows, after
@@ -43,12 +44,16 @@ class Finding:
     ``kind``: ``"seen"`` (tested here already with the same error: nothing new), ``"minimum"``
     (nothing to do), ``"escape"`` (a saddle: leave along ``direction``) or ``"settle"`` (travel
     ``distance`` along ``direction``, the Newton step along the flattest curvatures).
-    ``f``: 1/2 |e_w|^2 at q; ``direction``: a unit joint velocity (nv,) or ``None``."""
+    ``f``: 1/2 |e_w|^2 at q; ``direction``: a unit joint velocity (nv,) or ``None``;
+    ``flat``: at a minimum, its directions of zero or negative curvature (an orthonormal
+    (nv, k) basis, ``None`` where there are none), along which the method's own step would
+    only creep."""
 
     kind: str
     f: float
     direction: np.ndarray | None = None
     distance: float = 0.0
+    flat: np.ndarray | None = None
 
 
 def _evaluated(rows: Rows, q: np.ndarray) -> Generator[None, None, tuple[np.ndarray, np.ndarray]]:
@@ -71,9 +76,11 @@ class CurvatureTest:
     FD_STEP = 1e-4  #: rad or m: finite-difference step of the Hessian
     CURVATURE = 1e-6  #: a curvature below -CURVATURE |e_w|^2 (per rad^2) is a saddle
     FLAT = 1e-6  #: curvatures within this fraction of the largest count as zero
-    PROBE = 0.2  #: rad (or m): how far a flat direction is probed
+    PROBE = 0.2  #: rad (or m): how far a flat direction (a negative one at most) is probed
     PROBE_NEWTON = 2  #: Newton steps that bring the other joints to the valley floor
     PROBE_DROP = 1e-3  #: a fall of f by this fraction along a flat direction is a saddle
+    #: ... along a negative one (whose curvature already says f falls): a fall beyond round-off
+    ESCAPE_DROP = 1e-6
     SLOW = 0.1  #: curvatures below this fraction of the largest: what a settling step takes
     SETTLE = 1e-4  #: rad (or m): the shortest Newton step worth travelling at a minimum
     TRUST = 0.25  #: ... when f falls by this fraction of what its quadratic model predicts
@@ -119,6 +126,12 @@ class CurvatureTest:
         curvatures, vectors = np.empty(columns.size), np.empty((columns.size, columns.size))
         kernels.symmetric_eigen(H, curvatures, vectors)
         yield
+        creeping = curvatures <= self.FLAT * float(curvatures[-1])
+        flat = None
+        if creeping.any():
+            flat = np.zeros((nv, int(creeping.sum())))
+            flat[columns] = vectors[:, creeping]
+        minimum = Finding("minimum", f0, flat=flat)
         if curvatures[0] < -self.CURVATURE * 2.0 * f0:
             direction = np.zeros(nv)
             direction[columns] = vectors[:, 0]
@@ -131,13 +144,22 @@ class CurvatureTest:
             if (self.room(q, -direction) > self.room(q, direction) if both
                     else ep @ ep > em @ em):
                 direction = -direction
-            return Finding("escape", f0, direction)
+            # confirmed further out (``_descent``), no further than where the quadratic model
+            # would halve f, the other joints brought down along the curvatures the regular
+            # update settles quickly (a Newton step on the slow ones is long and unreliable)
+            probe = min(self.PROBE, float(np.sqrt(f0 / -curvatures[0])))
+            stiff = curvatures > self.SLOW * float(curvatures[-1])
+            found = yield from self._descent(q, rows, columns, curvatures, vectors, f0,
+                                             [direction, -direction], probe, stiff,
+                                             self.ESCAPE_DROP, first=True)
+            return minimum if found is None else Finding("escape", f0, found)
         found = yield from self._flat_descent(q, rows, columns, curvatures, vectors, f0)
         if found is not None:
             return Finding("escape", f0, found)
         yield
-        return (yield from self._settle(q, rows, J_w, e_w, columns, curvatures, vectors, f0,
-                                        settled_at))
+        found = yield from self._settle(q, rows, J_w, e_w, columns, curvatures, vectors, f0,
+                                        settled_at)
+        return minimum if found.kind == "minimum" else found
 
     def toward(self, now: np.ndarray, q: np.ndarray, finding: Finding) -> tuple[np.ndarray, float]:
         """A settling step found at ``q`` taken from ``now`` (where the arm is when the test,
@@ -238,13 +260,37 @@ class CurvatureTest:
         flat = np.abs(curvatures) <= self.FLAT * top
         if top <= 0.0 or not flat.any() or flat.all():
             return None
-        keep = ~flat
+        nv = self.model.nv
+        candidates = []
+        for k in np.flatnonzero(flat):
+            for sign in (1.0, -1.0):
+                v = np.zeros(nv)
+                v[columns] = sign * vectors[:, k]
+                candidates.append(v)
+        return (yield from self._descent(q, rows, columns, curvatures, vectors, f0, candidates,
+                                         self.PROBE, ~flat, self.PROBE_DROP))
+
+    def _descent(self, q, rows, columns, curvatures, vectors, f0, candidates, probe, keep,
+                 drop, first=False) -> Generator[None, None, np.ndarray | None]:
+        """The one of the unit ``candidates`` along which f falls most (with ``first``, the
+        first in their order), probed ``probe`` out with the other free joints brought to the
+        valley floor by ``PROBE_NEWTON`` Newton steps on H's curvatures ``keep`` (a mask), if by
+        more than ``drop`` of the lower of f at q and that floor below q; or ``None``.
+
+        A curvature test sees f to second order over ``FD_STEP``; an escape travels
+        ``MAX_TRAVEL``. Along the self-motion of a redundant arm whose target is out of reach,
+        f's curvature can be negative by a few millionths of the largest and turn positive a
+        few hundredths of a radian out: xArm7 (JT, a target 0.26 m beyond reach, acceleration
+        and jerk limits) left such a "saddle" at 1.6 rad/s, travelled 0.5 rad with f rising,
+        settled back and left again, once a second for good. So a direction of negative or
+        zero curvature is an escape only where f falls by this probe.
+        """
         inverse = (vectors[:, keep] / curvatures[keep]) @ vectors[:, keep].T
         nv = self.model.nv
 
         def valley(v: np.ndarray) -> Generator[None, None, float]:
-            """f at q (+) PROBE v with the other joints at the valley floor"""
-            qt = pin.integrate(self.model, q, self.PROBE * v)
+            """f at q (+) probe v with the other joints at the valley floor"""
+            qt = pin.integrate(self.model, q, probe * v)
             for _ in range(self.PROBE_NEWTON):
                 J_w, e_w = yield from _evaluated(rows, qt)
                 step = np.zeros(nv)
@@ -253,14 +299,13 @@ class CurvatureTest:
             _, e_w = yield from _evaluated(rows, qt)
             return 0.5 * float(e_w @ e_w)
 
-        # the floor below q itself: what the regular update reaches without the flat direction
+        # the floor below q itself: what the regular update reaches without the direction
         floor = yield from valley(np.zeros(nv))
-        best, found = (1.0 - self.PROBE_DROP) * min(f0, floor), None
-        for k in np.flatnonzero(flat):
-            for sign in (1.0, -1.0):
-                v = np.zeros(nv)
-                v[columns] = sign * vectors[:, k]
-                f = yield from valley(v)
-                if f < best:
-                    best, found = f, v
+        best, found = (1.0 - drop) * min(f0, floor), None
+        for v in candidates:
+            f = yield from valley(v)
+            if f < best:
+                if first:
+                    return v
+                best, found = f, v
         return found

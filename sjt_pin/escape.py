@@ -9,15 +9,18 @@ moves). Round-off alone takes thousands of steps to leave it.
 :func:`~sjt_pin.kernels.transpose_step`). After ``WINDOW`` steps without progress it tests the
 curvature of ``f = 1/2 |e_w|^2`` over the free joints (:class:`~sjt_pin.curvature.CurvatureTest`),
 spread over the next steps, one evaluation of the task rows a step (a test whose stall ends
-first is dropped). Only a clearly negative curvature starts an escape: a joint velocity along
-the most negative direction, ramped up and later down within ``RAMP`` seconds, at ``SPEED``
-times the URDF speed limits at most (also when the solver's speed limits are off), added to the
-regular update until that update moves faster than the escape. At a true minimum (an
+first is dropped). Only a clearly negative curvature along which f, probed further out, falls
+starts an escape: a joint velocity along the most negative direction, ramped up and later down
+within ``RAMP`` seconds, at ``SPEED`` times the URDF speed limits at most (also when the
+solver's speed limits are off), added to the regular update until that update moves faster
+than the escape. At a true minimum (an
 unreachable target, a target held against a joint limit, or one reachable only on another
 branch of the inverse kinematics: UR10 with its elbow exactly straight and the error along the
 direction the stretched arm cannot move in, pointing outward — bending the elbow raises the
-error) the curvature is not negative, nothing fires, and the arm rests (``StepInfo.stalled``);
-the test is not repeated until the configuration or the error changes. At a minimum whose
+error) the curvature is not negative, nothing fires, and the arm rests (``StepInfo.stalled``):
+the method's own feedback, which would creep on along the minimum's flat directions (zero or
+negative curvature), leaves them out until the stall ends (the controller's ``resting``). The test is not repeated until the
+configuration or the error changes. At a minimum whose
 curvatures span orders of magnitude (a redundant arm at a target out of reach), the escape
 travels the test's Newton step along the flattest curvatures instead, so that the arm comes to
 rest at the bottom rather than creeping towards it for seconds. All thresholds are relative or
@@ -87,6 +90,9 @@ class SaddleEscape:
         #: a test under way: (q, targets, pauses taken), and its generator (not copied)
         self._pending: tuple[np.ndarray, list, int] | None = None
         self._run: Generator[None, None, Finding] | None = None
+        #: a test found a minimum with flat directions (an (nv, k) basis): along them the
+        #: controller's first level rests while the stall lasts
+        self._flat: np.ndarray | None = None
         #: escapes started since construction (or the last reset)
         self.escapes = 0
         #: Newton steps travelled at minima (see :meth:`CurvatureTest._settle
@@ -152,7 +158,8 @@ class SaddleEscape:
         if finding.kind == "seen":
             return False
         self._tested = (q.copy(), finding.f)
-        if finding.direction is None:
+        if finding.direction is None:  # a minimum: rest along its flat directions
+            self._flat = finding.flat
             return False
         if finding.kind == "settle":
             direction, distance = finding.direction, finding.distance
@@ -303,6 +310,9 @@ class SaddleEscape:
                     self._begin(q, targets, rows_for)
             finally:  # (no window ends while a test is under way)
                 c.stall_wait = self.wait if self._pending is None else float("inf")
+        if self._flat is not None:  # (the controller clears it when the stall ends)
+            c.rest_keep[:] = (np.eye(len(self._flat)) - self._flat @ self._flat.T).ravel()
+            c.resting, self._flat = True, None
         velocity = None if not self.active else self.velocity(c.regular, dt, c.ew_sq)
         if velocity is None:
             if c.escaping:  # an escape ended: a stall after it is a new run

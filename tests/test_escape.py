@@ -120,6 +120,47 @@ def test_an_escape_never_raises_the_error_by_more_than_ten_per_cent():
     assert worst <= 1.1
 
 
+def test_a_negative_curvature_the_error_does_not_follow_starts_no_escape():
+    """xArm7 (JT, a target 0.26 m beyond reach, acceleration and jerk limits: ``sjt-pin bench
+    settle``'s draw 19) stalls where f's curvature along a self-motion is negative by a few
+    millionths of the largest and positive a few hundredths of a radian out. Each escape
+    travelled 0.5 rad at 1.6 rad/s with f rising, a settling step took it back, and the next
+    test left again: the arm still moved at 1.6 rad/s after 30 s. Confirmed further out, that
+    direction is no escape and the arm stays put."""
+    from sjt_pin.bench import settle
+
+    row = settle.run(sjt.Robot.from_example("xarm7"), 19, "jt")
+    assert row.scene == "beyond" and row.acceleration and row.jerk  # the case under test
+    assert row.speed < 1e-4 and row.reversals == 0, row
+
+
+@pytest.mark.parametrize("seed, method", [(1, "sjt"), (13, "jt")])
+def test_at_a_minimum_the_feedback_rests_instead_of_creeping(seed, method):
+    """xArm7 beyond reach (``sjt-pin bench settle``'s draws): at the minimum the curvature test
+    finds, the method's own feedback crept on along its flat directions at 4e-4 rad/s (SJT)
+    and 3e-5 (JT) after 30 s, lowering |e| by 1e-10 of itself a second. Along them it rests
+    now, and the creep it gives up is worth nothing: 10 s more of the method without the
+    escape lowers the error by less than a millionth."""
+    from sjt_pin.bench import settle
+
+    robot = sjt.Robot.from_example("xarm7")
+    row = settle.run(robot, seed, method)
+    assert row.scene == "beyond" and row.state == "rest" and row.seconds == settle.SECONDS, row
+    draw = settle._draw(robot, seed)
+    assert draw.acceleration is None  # (the solver below is the run's)
+    solver = sjt.make_solver(method, robot, task=sjt.PositionTask(), dt=settle.DT)
+    q = draw.q0
+    for _ in range(round(row.seconds / settle.DT)):
+        q = solver.step(q, draw.targets[0][1])
+    assert solver.last.stalled and np.abs(solver.last.dq).max() < 1e-6
+    rested = solver.error_norm
+    creeping = sjt.make_solver(method, robot, task=sjt.PositionTask(), dt=settle.DT,
+                               escape=False)
+    for _ in range(10000):
+        q = creeping.step(q, draw.targets[0][1])
+    assert rested - 1e-6 * rested < creeping.error_norm <= rested + 1e-12
+
+
 @pytest.mark.parametrize("dt", [1e-3, 4e-3])
 @pytest.mark.parametrize("saddle", [2, 3], ids=["bravo7 q5=pi", "baxter arm singular"])
 def test_default_sjt_leaves_wrist_and_redundant_saddles_within_twice_dls(saddle, dt):

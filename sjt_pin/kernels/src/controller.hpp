@@ -83,6 +83,11 @@ class Controller {
   bool escaping = false;
   double given_gain = 1.0;  // K of a user method's last feedback (its fb / K is the displacement)
   double stall_run = -1.0, stall_wait = 1e300;
+  // the saddle escape's curvature test found a minimum where the arm stalls (no saddle, no
+  // settling step worth taking): the first level's feedback is rest_keep (nv x nv, row-major:
+  // the projector off the minimum's flat directions) times the method's, until the stall ends
+  bool resting = false;
+  Vector rest_keep;
   // the first level's pose errors take their exact rows (exact_rows; set after `still`
   // consecutive steps at rest at a position range short of the target, cleared near it or
   // when the target jumps)
@@ -212,7 +217,7 @@ class Controller {
   // project(): the box with unbounded joints capped; the task velocity that removes level 0's
   // error in a step (e_w / dt, and the feed-forward); J0^T of it, the error's steepest
   // descent; the Cauchy point and its path's state
-  Vector plo_, phi_, wanted_, descent_, cauchy_, free_, jd_, res_, rest_;
+  Vector plo_, phi_, wanted_, descent_, cauchy_, free_, jd_, res_, rest_, kept_fb_;
   bool rested_ = false;
   // lower_nearest's task rows, their posture's diagonal, its anchor and Woodbury solve
   RowMatrix low_B_;
