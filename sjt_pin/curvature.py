@@ -126,11 +126,11 @@ class CurvatureTest:
         curvatures, vectors = np.empty(columns.size), np.empty((columns.size, columns.size))
         kernels.symmetric_eigen(H, curvatures, vectors)
         yield
-        creeping = curvatures <= self.FLAT * float(curvatures[-1])
+        soft = curvatures <= self.FLAT * float(curvatures[-1])  # zero or negative
         flat = None
-        if creeping.any():
-            flat = np.zeros((nv, int(creeping.sum())))
-            flat[columns] = vectors[:, creeping]
+        if soft.any():
+            flat = np.zeros((nv, int(soft.sum())))
+            flat[columns] = vectors[:, soft]
         minimum = Finding("minimum", f0, flat=flat)
         if curvatures[0] < -self.CURVATURE * 2.0 * f0:
             direction = np.zeros(nv)

@@ -13,18 +13,18 @@ first is dropped). Only a clearly negative curvature along which f, probed furth
 starts an escape: a joint velocity along the most negative direction, ramped up and later down
 within ``RAMP`` seconds, at ``SPEED`` times the URDF speed limits at most (also when the
 solver's speed limits are off), added to the regular update until that update moves faster
-than the escape. At a true minimum (an
-unreachable target, a target held against a joint limit, or one reachable only on another
-branch of the inverse kinematics: UR10 with its elbow exactly straight and the error along the
-direction the stretched arm cannot move in, pointing outward — bending the elbow raises the
-error) the curvature is not negative, nothing fires, and the arm rests (``StepInfo.stalled``):
-the method's own feedback, which would creep on along the minimum's flat directions (zero or
-negative curvature), leaves them out until the stall ends (the controller's ``resting``). The test is not repeated until the
-configuration or the error changes. At a minimum whose
-curvatures span orders of magnitude (a redundant arm at a target out of reach), the escape
-travels the test's Newton step along the flattest curvatures instead, so that the arm comes to
-rest at the bottom rather than creeping towards it for seconds. All thresholds are relative or
-in joint units, so the same run in mm and in m takes the same decisions.
+than the escape. At a true minimum (an unreachable target, a target held against a joint
+limit, or one reachable only on another branch of the inverse kinematics: UR10 with its elbow
+exactly straight and the error along the direction the stretched arm cannot move in, pointing
+outward — bending the elbow raises the error) the curvature is not negative, nothing fires,
+and the arm rests (``StepInfo.stalled``): the method's own feedback, which would creep on along
+the minimum's flat directions (zero or negative curvature), leaves them out until the stall
+ends (the controller's ``resting``). The test is not repeated until the configuration or the
+error changes. At a minimum whose curvatures span orders of magnitude (a redundant arm at a
+target out of reach), the escape travels the test's Newton step along the flattest curvatures
+instead, so that the arm comes to rest at the bottom rather than creeping towards it for
+seconds. All thresholds are relative or in joint units, so the same run in mm and in m takes
+the same decisions.
 """
 
 from __future__ import annotations
