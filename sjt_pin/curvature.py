@@ -157,9 +157,9 @@ class CurvatureTest:
         if found is not None:
             return Finding("escape", f0, found)
         yield
-        found = yield from self._settle(q, rows, J_w, e_w, columns, curvatures, vectors, f0,
-                                        settled_at)
-        return minimum if found.kind == "minimum" else found
+        settling = yield from self._settle(q, rows, J_w, e_w, columns, curvatures, vectors, f0,
+                                           settled_at)
+        return minimum if settling.kind == "minimum" else settling
 
     def toward(self, now: np.ndarray, q: np.ndarray, finding: Finding) -> tuple[np.ndarray, float]:
         """A settling step found at ``q`` taken from ``now`` (where the arm is when the test,
