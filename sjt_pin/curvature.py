@@ -45,15 +45,16 @@ class Finding:
     (nothing to do), ``"escape"`` (a saddle: leave along ``direction``) or ``"settle"`` (travel
     ``distance`` along ``direction``, the Newton step along the flattest curvatures).
     ``f``: 1/2 |e_w|^2 at q; ``direction``: a unit joint velocity (nv,) or ``None``;
-    ``flat``: at a minimum, its directions of zero or negative curvature (an orthonormal
-    (nv, k) basis, ``None`` where there are none), along which the method's own step would
-    only creep."""
+    ``kept``: at a minimum with directions of zero or negative curvature (along which the
+    method's own step would only creep), an orthonormal (nv, r) basis of the others: the
+    positive curvatures' directions and each joint the test left out; ``None`` where there are
+    no such directions."""
 
     kind: str
     f: float
     direction: np.ndarray | None = None
     distance: float = 0.0
-    flat: np.ndarray | None = None
+    kept: np.ndarray | None = None
 
 
 def _evaluated(rows: Rows, q: np.ndarray) -> Generator[None, None, tuple[np.ndarray, np.ndarray]]:
@@ -127,11 +128,13 @@ class CurvatureTest:
         kernels.symmetric_eigen(H, curvatures, vectors)
         yield
         soft = curvatures <= self.FLAT * float(curvatures[-1])  # zero or negative
-        flat = None
+        kept = None
         if soft.any():
-            flat = np.zeros((nv, int(soft.sum())))
-            flat[columns] = vectors[:, soft]
-        minimum = Finding("minimum", f0, flat=flat)
+            others = np.setdiff1d(np.arange(nv), columns)
+            kept = np.zeros((nv, int((~soft).sum()) + others.size))
+            kept[columns, :int((~soft).sum())] = vectors[:, ~soft]
+            kept[others, int((~soft).sum()) + np.arange(others.size)] = 1.0
+        minimum = Finding("minimum", f0, kept=kept)
         if curvatures[0] < -self.CURVATURE * 2.0 * f0:
             direction = np.zeros(nv)
             direction[columns] = vectors[:, 0]

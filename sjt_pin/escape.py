@@ -90,9 +90,9 @@ class SaddleEscape:
         #: a test under way: (q, targets, pauses taken), and its generator (not copied)
         self._pending: tuple[np.ndarray, list, int] | None = None
         self._run: Generator[None, None, Finding] | None = None
-        #: a test found a minimum with flat directions (an (nv, k) basis): along them the
-        #: controller's first level rests while the stall lasts
-        self._flat: np.ndarray | None = None
+        #: a test found a minimum with flat directions: the (nv, r) basis of the others, the
+        #: only ones the controller's first level moves along while the stall lasts
+        self._kept: np.ndarray | None = None
         #: escapes started since construction (or the last reset)
         self.escapes = 0
         #: Newton steps travelled at minima (see :meth:`CurvatureTest._settle
@@ -159,7 +159,7 @@ class SaddleEscape:
             return False
         self._tested = (q.copy(), finding.f)
         if finding.direction is None:  # a minimum: rest along its flat directions
-            self._flat = finding.flat
+            self._kept = finding.kept
             return False
         if finding.kind == "settle":
             direction, distance = finding.direction, finding.distance
@@ -310,9 +310,10 @@ class SaddleEscape:
                     self._begin(q, targets, rows_for)
             finally:  # (no window ends while a test is under way)
                 c.stall_wait = self.wait if self._pending is None else float("inf")
-        if self._flat is not None:  # (the controller clears it when the stall ends)
-            c.rest_keep[:] = (np.eye(len(self._flat)) - self._flat @ self._flat.T).ravel()
-            c.resting, self._flat = True, None
+        if self._kept is not None:  # (the controller clears it when the stall ends)
+            rank = self._kept.shape[1]
+            c.rest_keep[:self._kept.size] = self._kept.ravel()
+            c.rest_rank, c.resting, self._kept = rank, True, None
         velocity = None if not self.active else self.velocity(c.regular, dt, c.ew_sq)
         if velocity is None:
             if c.escaping:  # an escape ended: a stall after it is a new run

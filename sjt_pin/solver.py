@@ -367,7 +367,7 @@ class Solver:
         c = self._controller
         state = {"motion": (c.dq.copy(), c.ddq.copy()), "escape": self.escape,
                  "escaping": c.escaping, "escape_velocity": c.escape_velocity.copy(),
-                 "resting": (c.resting, c.rest_keep.copy()),
+                 "resting": (c.resting, c.rest_rank, c.rest_keep.copy()),
                  "warned": self._stability.warned, "count": self._count, "first": self._first,
                  "stall": (c.stall_run, c.stall_wait, c.exact, c.still, c.expected.copy()),
                  "warm": c.warm_state, "curvature": c.curvature_memory,
@@ -378,7 +378,7 @@ class Solver:
         c = self._controller
         c.dq[:], c.ddq[:] = state["motion"]
         self.escape, c.escaping = state["escape"], state["escaping"]
-        c.resting, c.rest_keep[:] = state["resting"]
+        c.resting, c.rest_rank, c.rest_keep[:] = state["resting"]
         c.escape_velocity[:] = state["escape_velocity"]
         self._stability.warned, self._count, self._first = (state["warned"], state["count"],
                                                             state["first"])

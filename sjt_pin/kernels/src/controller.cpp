@@ -48,7 +48,7 @@ Controller::Controller(const MethodParameters& method_, Index rows, Index nv_, I
   expected.setZero(levels[0].targets);
   for (Vector* v : {&desired, &fb, &ff, &velocity, &fb0_, &ff0_, &desired_top, &x0_, &xa_,
                     &tmp_, &tmp2_, &lam_low_, &low_p_, &low_h_, &low_d_, &low_dh_, &low_dinv_,
-                    &anchor_, &coef_, &wide_lo_, &wide_hi_, &rest_, &kept_fb_, &holding})
+                    &anchor_, &coef_, &wide_lo_, &wide_hi_, &rest_, &rest_coef_, &holding})
     v->setZero(nv);
   basis_.setZero(nv, nv);
   const Index r0 = levels[0].end - levels[0].begin;
@@ -203,10 +203,7 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
   // 3e-4 rad/s after 30 s, |e| falling by 1e-10 of itself a second. Along them it rests while
   // the stall lasts; along the others it settles (the target's motion, the lower levels and
   // the escape go on)
-  if (resting && !escaping) {
-    kept_fb_.noalias() = Eigen::Map<const RowMatrix>(rest_keep.data(), nv, nv) * fb0_;
-    fb0_ = kept_fb_;
-  }
+  if (resting && !escaping) rest_along_flat();
   if (escaping) ff0_ += escape_velocity;
   // under acceleration limits, a first-level displacement past a position range gives way to
   // the bounded least-squares one (range_goal; the method's own velocity stays in method_top_)

@@ -84,10 +84,12 @@ class Controller {
   double given_gain = 1.0;  // K of a user method's last feedback (its fb / K is the displacement)
   double stall_run = -1.0, stall_wait = 1e300;
   // the saddle escape's curvature test found a minimum where the arm stalls (no saddle, no
-  // settling step worth taking): the first level's feedback is rest_keep (nv x nv, row-major:
-  // the projector off the minimum's flat directions) times the method's, until the stall ends
+  // settling step worth taking): until the stall ends the first level's feedback is the
+  // method's projected onto the first rest_rank columns of rest_keep (nv x rest_rank,
+  // row-major, orthonormal: the directions other than the minimum's flat ones)
   bool resting = false;
   Vector rest_keep;
+  Index rest_rank = 0;
   // the first level's pose errors take their exact rows (exact_rows; set after `still`
   // consecutive steps at rest at a position range short of the target, cleared near it or
   // when the target jumps)
@@ -180,6 +182,7 @@ class Controller {
   bool range_goal(const Eigen::Ref<const RowMatrix>& J0, const double* q, double K, bool user,
                   const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b,
                   const double* room);
+  void rest_along_flat();
   void settle(const Eigen::Ref<const RowMatrix>& J0, const double* q,
               const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b,
               const double* user_lo, const double* user_hi);
@@ -217,7 +220,7 @@ class Controller {
   // project(): the box with unbounded joints capped; the task velocity that removes level 0's
   // error in a step (e_w / dt, and the feed-forward); J0^T of it, the error's steepest
   // descent; the Cauchy point and its path's state
-  Vector plo_, phi_, wanted_, descent_, cauchy_, free_, jd_, res_, rest_, kept_fb_;
+  Vector plo_, phi_, wanted_, descent_, cauchy_, free_, jd_, res_, rest_, rest_coef_;
   bool rested_ = false;
   // lower_nearest's task rows, their posture's diagonal, its anchor and Woodbury solve
   RowMatrix low_B_;

@@ -213,6 +213,7 @@ void register_controller(nb::module_& m) {
       .def_rw("stall_run", &Controller::stall_run)
       .def_rw("stall_wait", &Controller::stall_wait)
       .def_rw("resting", &Controller::resting)
+      .def_rw("rest_rank", &Controller::rest_rank)
       .def_prop_ro("rest_keep",
                    [](Controller& c) { return view<WriteView>(c, c.rest_keep.data(), c.nv * c.nv); },
                    nb::rv_policy::reference_internal)

@@ -391,4 +391,15 @@ void Controller::held_by_ranges(const Vector& d, const Vector& lo, const Vector&
   }
 }
 
+// resting at a minimum the curvature test found (run): the first level's feedback projected
+// onto the directions other than the minimum's flat ones (rest_keep's first rest_rank columns);
+// out of line, so that the step that does not rest compiles as before (inlined, it cost
+// 200-joint chains 30 % of their step)
+void Controller::rest_along_flat() {
+  const Index r = std::clamp<Index>(rest_rank, 0, nv);
+  const Eigen::Map<const RowMatrix> kept(rest_keep.data(), nv, r);
+  rest_coef_.head(r).noalias() = kept.transpose() * fb0_;
+  fb0_.noalias() = kept * rest_coef_.head(r);
+}
+
 }  // namespace sjt
