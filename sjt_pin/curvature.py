@@ -127,14 +127,6 @@ class CurvatureTest:
         curvatures, vectors = np.empty(columns.size), np.empty((columns.size, columns.size))
         kernels.symmetric_eigen(H, curvatures, vectors)
         yield
-        soft = curvatures <= self.FLAT * float(curvatures[-1])  # zero or negative
-        kept = None
-        if soft.any():
-            others = np.setdiff1d(np.arange(nv), columns)
-            kept = np.zeros((nv, int((~soft).sum()) + others.size))
-            kept[columns, :int((~soft).sum())] = vectors[:, ~soft]
-            kept[others, int((~soft).sum()) + np.arange(others.size)] = 1.0
-        minimum = Finding("minimum", f0, kept=kept)
         if curvatures[0] < -self.CURVATURE * 2.0 * f0:
             direction = np.zeros(nv)
             direction[columns] = vectors[:, 0]
@@ -155,14 +147,32 @@ class CurvatureTest:
             found = yield from self._descent(q, rows, columns, curvatures, vectors, f0,
                                              [direction, -direction], probe, stiff,
                                              self.ESCAPE_DROP, first=True)
-            return minimum if found is None else Finding("escape", f0, found)
+            if found is None:
+                return self._minimum(f0, columns, curvatures, vectors)
+            return Finding("escape", f0, found)
         found = yield from self._flat_descent(q, rows, columns, curvatures, vectors, f0)
         if found is not None:
             return Finding("escape", f0, found)
         yield
         settling = yield from self._settle(q, rows, J_w, e_w, columns, curvatures, vectors, f0,
                                            settled_at)
-        return minimum if settling.kind == "minimum" else settling
+        if settling.kind == "minimum":
+            return self._minimum(f0, columns, curvatures, vectors)
+        return settling
+
+    def _minimum(self, f0, columns, curvatures, vectors) -> Finding:
+        """A minimum at f0, with the basis of its directions other than those of zero or
+        negative curvature (:attr:`Finding.kept`) where it has any."""
+        nv = self.model.nv
+        soft = curvatures <= self.FLAT * float(curvatures[-1])
+        if not soft.any():
+            return Finding("minimum", f0)
+        others = np.setdiff1d(np.arange(nv), columns)
+        stiff = int((~soft).sum())
+        kept = np.zeros((nv, stiff + others.size))
+        kept[columns, :stiff] = vectors[:, ~soft]
+        kept[others, stiff + np.arange(others.size)] = 1.0
+        return Finding("minimum", f0, kept=kept)
 
     def toward(self, now: np.ndarray, q: np.ndarray, finding: Finding) -> tuple[np.ndarray, float]:
         """A settling step found at ``q`` taken from ``now`` (where the arm is when the test,
