@@ -146,7 +146,7 @@ def test_at_a_minimum_the_feedback_rests_instead_of_creeping(seed, method):
     robot = sjt.Robot.from_example("xarm7")
     row = settle.run(robot, seed, method)
     assert row.scene == "beyond" and row.state == "rest" and row.seconds == settle.SECONDS, row
-    draw = settle._draw(robot, seed)
+    draw = settle.draw(robot, seed)
     assert draw.acceleration is None  # (the solver below is the run's)
     solver = sjt.make_solver(method, robot, task=sjt.PositionTask(), dt=settle.DT)
     q = draw.q0

@@ -430,7 +430,7 @@ def test_under_acceleration_limits_a_joint_without_a_speed_limit_takes_the_faste
     robot = sjt.Robot.from_example("bravo7_no_ee", ee_frame="contact_point")
     unlimited = ~np.isfinite(robot.velocity_limits)
     assert unlimited.sum() == 3 and np.all(robot.velocity_limits[~unlimited] == 0.5)
-    draw = settle._draw(robot, 19)
+    draw = settle.draw(robot, 19)
     assert draw.scene == "beyond" and draw.jerk is not None  # the case under test
     for given, seconds in [(True, 35.0), (robot.velocity_limits, 7.0)]:
         solver = sjt.DLSSolver(robot, task=sjt.PositionTask(), velocity_limits=given,

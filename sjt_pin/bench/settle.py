@@ -85,7 +85,10 @@ class SettleRow:
 
 
 @dataclass
-class _Draw:
+class Draw:
+    """One draw of the module docstring: the start, the scene, the task (``"position"`` or
+    ``"pose"``), the limits (None where not drawn) and the targets from their times (s)."""
+
     q0: np.ndarray
     scene: str
     task: str
@@ -120,7 +123,8 @@ def _reach(robot: Robot) -> float:
     return _REACH[robot.name]
 
 
-def _draw(robot: Robot, seed: int) -> _Draw:
+def draw(robot: Robot, seed: int) -> Draw:
+    """The draw ``seed`` of ``robot`` (module docstring): the same on every machine."""
     model = robot.model
     rng = np.random.default_rng(1000 * seed + sum(map(ord, robot.name)))
     q0 = _random_q(model, rng)
@@ -147,14 +151,14 @@ def _draw(robot: Robot, seed: int) -> _Draw:
     if scene == "beyond":  # (position task: its direction from the base, past the reach)
         out = final / max(np.linalg.norm(final), 1e-9)
         final = (_reach(robot) + rng.uniform(0.1, 1.0)) * out
-        return _Draw(q0, scene, task, acceleration, jerk, [(0.0, final)])
+        return Draw(q0, scene, task, acceleration, jerk, [(0.0, final)])
     targets = []
     if scene == "stream":
         for k in range(8):
             q = _random_q(model, rng)
             targets.append((0.5 * k, target(q, 0.5 if rng.random() < 1 / 3 else 0.0)))
     targets.append((4.0 if targets else 0.0, final))
-    return _Draw(q0, scene, task, acceleration, jerk, targets)
+    return Draw(q0, scene, task, acceleration, jerk, targets)
 
 
 def joint_angles(model: pin.Model, qs: np.ndarray) -> np.ndarray:
@@ -175,25 +179,25 @@ def joint_angles(model: pin.Model, qs: np.ndarray) -> np.ndarray:
 
 def run(robot: Robot, seed: int, method: str) -> SettleRow:
     """One run of the module docstring."""
-    draw = _draw(robot, seed)
+    drawn = draw(robot, seed)
     limits = {}
-    if draw.acceleration is not None:
-        limits["acceleration_limits"] = draw.acceleration
-    if draw.jerk is not None:
-        limits["jerk_limits"] = draw.jerk
-    task = PositionTask() if draw.task == "position" else PoseTask()
+    if drawn.acceleration is not None:
+        limits["acceleration_limits"] = drawn.acceleration
+    if drawn.jerk is not None:
+        limits["jerk_limits"] = drawn.jerk
+    task = PositionTask() if drawn.task == "position" else PoseTask()
     solver = make_solver(method, robot, dt=DT, task=task, **limits)
     steps, longest = round(SECONDS / DT), round(LONGEST / DT)
     qs = np.empty((longest + 1, robot.model.nq))
     errors = np.empty(longest)
-    q = qs[0] = draw.q0
-    switches = [round(t / DT) for t, _ in draw.targets]
-    k, goal = 0, draw.targets[0][1]
+    q = qs[0] = drawn.q0
+    switches = [round(t / DT) for t, _ in drawn.targets]
+    k, goal = 0, drawn.targets[0][1]
     i = 0
     while i < longest:
         while k + 1 < len(switches) and i >= switches[k + 1]:
             k += 1
-            goal = draw.targets[k][1]
+            goal = drawn.targets[k][1]
         q = qs[i + 1] = solver.step(q, goal)
         errors[i] = solver.error_norm
         i += 1
@@ -206,9 +210,9 @@ def run(robot: Robot, seed: int, method: str) -> SettleRow:
     held = switches[-1] + 2  # (the last target's jump: a stream may ask more than the limits)
     speed_limit = robot.model.velocityLimit
     ratio_v = float(np.max(np.abs(v) / np.where(speed_limit > 0, speed_limit, np.inf)))
-    ratio_a = (float(np.max(np.abs(a[held:]) / draw.acceleration))
-               if draw.acceleration is not None else np.nan)
-    ratio_j = float(np.max(np.abs(j[held:]) / draw.jerk)) if draw.jerk is not None else np.nan
+    ratio_a = (float(np.max(np.abs(a[held:]) / drawn.acceleration))
+               if drawn.acceleration is not None else np.nan)
+    ratio_j = float(np.max(np.abs(j[held:]) / drawn.jerk)) if drawn.jerk is not None else np.nan
     last = v[-2000:]
     peak = np.abs(last).max(axis=0)
     fastest = last[:, int(np.argmax(peak))]
@@ -216,9 +220,9 @@ def run(robot: Robot, seed: int, method: str) -> SettleRow:
     reversals = int(np.sum(signs[1:] != signs[:-1])) if peak.max() > 1e-5 else 0
     moving = np.nonzero(np.abs(v).max(axis=1) > 1e-5)[0]
     reached = np.nonzero(errors[switches[-1]:i] < REACHED)[0]
-    return SettleRow(robot.name, seed, method, draw.scene, draw.task,
-                     draw.acceleration is not None, draw.jerk is not None,
-                     draw.scene != "beyond", float(errors[i - 1]),
+    return SettleRow(robot.name, seed, method, drawn.scene, drawn.task,
+                     drawn.acceleration is not None, drawn.jerk is not None,
+                     drawn.scene != "beyond", float(errors[i - 1]),
                      float(np.abs(v[-1000:]).max()), reversals, i * DT,
                      float((moving[-1] + 1) * DT) if len(moving) else 0.0,
                      float((switches[-1] + reached[0] + 1) * DT) if len(reached) else None,
