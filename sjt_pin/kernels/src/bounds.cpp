@@ -33,6 +33,8 @@ void JointBox::resize(Index n) {
   for (Vector* x : {&lo, &hi, &hard_lo, &hard_hi, &soft_lo, &soft_hi, &cap_lo, &cap_hi,
                     &brake_lo, &brake_hi})
     x->resize(n);
+  stop_lo.setConstant(n, -kInf);  // (none until stopping_bounds)
+  stop_hi.setConstant(n, kInf);
   span.setZero(n);
   lo_by.resize(n);
   hi_by.resize(n);
@@ -184,6 +186,30 @@ void joint_box(const BoundsConfig& config, double dt, const double* q, const Vec
       hi_by = lo_by;
     }
     out.lo[j] = lo, out.hi[j] = hi, out.lo_by[j] = lo_by, out.hi_by[j] = hi_by;
+  }
+}
+
+void stopping_bounds(const BoundsConfig& config, double dt, const double* q, const Vector& v,
+                     JointBox& out) {
+  out.stop_lo.setConstant(config.nv, -kInf);
+  out.stop_hi.setConstant(config.nv, kInf);
+  if (!config.smooth) return;
+  for (const PositionRange& r : config.ranges) {
+    const Index j = r.v;
+    if (config.moving[j] == 0.0) continue;
+    const double x = q[r.q], room_up = r.upper - x, room_down = x - r.lower;
+    if (room_up < 0.0 || room_down < 0.0) continue;  // (outside: the hard box brings it back)
+    const double A = config.acceleration[j], J = config.jerk[j];
+    // (the velocities a widened box can hold: from the hardest braking the limits allow this
+    // step to the speed limit)
+    const double lo = std::min(out.cap_lo[j], 0.0), hi = std::max(out.hard_hi[j], lo);
+    const double up = std::min(room_up / dt, largest_stoppable(lo, hi, v[j], room_up, dt, A, J));
+    const double lo_down = std::min(-out.cap_hi[j], 0.0);
+    const double hi_down = std::max(-out.hard_lo[j], lo_down);
+    const double down =
+        std::min(room_down / dt, largest_stoppable(lo_down, hi_down, -v[j], room_down, dt, A, J));
+    out.stop_hi[j] = std::max(up, 0.0);
+    out.stop_lo[j] = -std::max(down, 0.0);
   }
 }
 

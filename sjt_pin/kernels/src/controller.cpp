@@ -293,6 +293,7 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
       project(A, bk, box.lo, box.hi, false);
       bool broken = !rows_hold(A, bk);
       if (broken && bounds.smooth) {
+        stopping_bounds(bounds, dt_, q, dq, box);
         yield_smoothness(A, bk);
         for (Index j = 0; j < n; ++j)
           if (velocity[j] < box.cap_lo[j] - kBoundTol || velocity[j] > box.cap_hi[j] + kBoundTol) {

@@ -242,7 +242,11 @@ bool Controller::rows_hold_within(double s, const Eigen::Ref<const RowMatrix>& A
 // a step; 167 now).
 void Controller::within_hard_box(const Eigen::Ref<const RowMatrix>& A,
                                  const Eigen::Ref<const Vector>& b) {
-  project(A, b, box.hard_lo, box.hard_hi, true);
+  for (Index j = 0; j < nv; ++j) {  // (within each range's braking at the whole limits too)
+    wide_hi_[j] = std::min(box.hard_hi[j], std::max(box.stop_hi[j], box.hard_lo[j]));
+    wide_lo_[j] = std::max(box.hard_lo[j], std::min(box.stop_lo[j], wide_hi_[j]));
+  }
+  project(A, b, wide_lo_, wide_hi_, true);
   if (!rows_hold(A, b)) project(A, b, box.lo, box.hi, false);
 }
 
