@@ -278,18 +278,21 @@ def _so101_forearm_ball():
     return robot, q0, path
 
 
-def _so101_run(method):
+def _so101_run(method, read_every=0):
     robot, q0, path = _so101_forearm_ball()
     limit = CollisionLimit(robot, [(coal.Sphere(0.05), path[0][0])], margin=MARGIN)
     accelerations, jerks = moving.franka_like(robot.nv)
     solver = sjt.make_solver(method, robot, dt=1e-3, limits=[limit],
                              acceleration_limits=accelerations, jerk_limits=jerks)
     q, qs, reported, target = q0.copy(), [q0.copy()], [], robot.fk(q0)
-    for pose, velocity in path:
+    for k, (pose, velocity) in enumerate(path):
         limit.move(0, pose, velocity=velocity)
         q = solver.step(q, target)
         qs.append(q)
         reported.append(bool(solver.last.limit_conflicts))
+        if read_every and k % read_every == 0:
+            limit.distances(q)
+            limit.closest_points(q)
     return robot, np.array(qs), np.array(reported), accelerations
 
 
@@ -311,3 +314,11 @@ def test_a_yield_to_the_rows_leaves_each_joint_able_to_stop_within_its_range(met
     at_end = (qs[1:] >= hi - 1e-9) | (qs[1:] <= lo + 1e-9)
     assert np.all(np.abs(v[at_end]) <= (accelerations * dt * np.ones_like(v))[at_end] + 1e-9)
 
+
+def test_reading_the_distances_between_steps_leaves_the_steps_as_they_were():
+    """``distances()`` and ``closest_points()`` between steps use a geometry data of their
+    own: in the steps' own, reading them every step for six steps changed SO-101's path from
+    there (coal's queries keep state from one call to the next)."""
+    _, plain, _, _ = _so101_run("dls")
+    _, read, _, _ = _so101_run("dls", read_every=7)
+    assert np.array_equal(plain, read)

@@ -104,16 +104,36 @@ class PairsMixin(CollisionState):
             self.geometry.addCollisionPair(pin.CollisionPair(a, b))
         self.pairs = np.array(chosen, dtype=np.int64).reshape(-1, 2)
         self.pair_names = [(geoms[a].name, geoms[b].name) for a, b in chosen]
-        self.geometry_data = self.geometry.createData()
-        for req in self.geometry_data.distanceRequests:
-            req.enable_signed_distance = True
-            req.gjk_tolerance = req.epa_tolerance = GJK_TOLERANCE
+        self.geometry_data = self._new_geometry_data()
+        self._probe_data = None  # (distances(), closest_points(), placements(): _probe)
         #: the distance each pair keeps (m): ``margin``, or less for a pair of the robot's own
         #: links that was closer than ``margin`` where the limit started
         self.margins = np.full(len(chosen), self.margin)
 
-    def _distance(self, k: int):
-        return pin.computeDistance(self.geometry, self.geometry_data, int(k))
+    def _new_geometry_data(self):
+        """A GeometryData of the pairs: coal's requests for signed distances, GJK and EPA to
+        GJK_TOLERANCE."""
+        data = self.geometry.createData()
+        for req in data.distanceRequests:
+            req.enable_signed_distance = True
+            req.gjk_tolerance = req.epa_tolerance = GJK_TOLERANCE
+        return data
+
+    def _distance(self, k: int, data=None):
+        return pin.computeDistance(self.geometry, self.geometry_data if data is None else data,
+                                   int(k))
+
+    def _probe(self, q: np.ndarray):
+        """The geometry at ``q`` for the queries a user asks between steps (distances(),
+        closest_points(), placements()), in a GeometryData of their own: in the steps' own, a
+        query there changed the next steps (coal's queries keep state from one call to the
+        next; SO-101 beside a moving ball, its distances read every step for 6 steps, took
+        another path from there, up to 2.5 times the acceleration the unread run took)."""
+        if self._probe_data is None:
+            self._probe_data = self._new_geometry_data()
+        pin.framesForwardKinematics(self.model, self._data, np.asarray(q, dtype=float))
+        pin.updateGeometryPlacements(self.model, self._data, self.geometry, self._probe_data)
+        return self._probe_data
 
     def check(self, q: np.ndarray) -> None:
         """Raise :class:`CollisionError` if an obstacle overlaps the robot at ``q``, and take
@@ -165,11 +185,10 @@ class PairsMixin(CollisionState):
 
     def distances(self, q: np.ndarray) -> list[PairDistance]:
         """Every checked pair at ``q`` with its exact distance (m), closest first."""
-        pin.framesForwardKinematics(self.model, self._data, np.asarray(q, dtype=float))
-        pin.updateGeometryPlacements(self.model, self._data, self.geometry, self.geometry_data)
+        data = self._probe(q)
         out = []
         for k, (a, b) in enumerate(self.pairs):
-            d = self._distance(k).min_distance
+            d = self._distance(k, data).min_distance
             na, nb = self.pair_names[k]
             out.append(PairDistance(na, nb, self._link(a), self._link(b), float(d)))
         out.sort(key=lambda p: p.distance)
@@ -178,10 +197,9 @@ class PairsMixin(CollisionState):
     def placements(self, q: np.ndarray) -> list[tuple[str, object, np.ndarray]]:
         """The robot's checked geometry at ``q``: ``(name, coal shape, 4x4 world pose)`` for
         each geometry that moves (hulls with ``convex=True``), e.g. to draw it."""
-        pin.framesForwardKinematics(self.model, self._data, np.asarray(q, dtype=float))
-        pin.updateGeometryPlacements(self.model, self._data, self.geometry, self.geometry_data)
+        data = self._probe(q)
         geoms = self.geometry.geometryObjects
-        return [(geoms[g].name, geoms[g].geometry, self.geometry_data.oMg[g].homogeneous)
+        return [(geoms[g].name, geoms[g].geometry, data.oMg[g].homogeneous)
                 for g in range(self.n_robot) if geoms[g].parentJoint != 0]
 
     def closest_points(self, q: np.ndarray, within: float | None = None
@@ -190,11 +208,10 @@ class PairsMixin(CollisionState):
         their closest points, closest first (e.g. to draw them: ``Viewer.show(..., collision=)``).
         """
         within = self.influence if within is None else float(within)
-        pin.framesForwardKinematics(self.model, self._data, np.asarray(q, dtype=float))
-        pin.updateGeometryPlacements(self.model, self._data, self.geometry, self.geometry_data)
+        data = self._probe(q)
         out = []
         for k, (a, b) in enumerate(self.pairs):
-            res = self._distance(k)
+            res = self._distance(k, data)
             d = res.min_distance
             if d < within:
                 na, nb = self.pair_names[k]
