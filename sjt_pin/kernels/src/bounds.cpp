@@ -31,10 +31,8 @@ inline void tighten_lo(double value, int8_t reason, double& lo, int8_t& by) {
 
 void JointBox::resize(Index n) {
   for (Vector* x : {&lo, &hi, &hard_lo, &hard_hi, &soft_lo, &soft_hi, &cap_lo, &cap_hi,
-                    &brake_lo, &brake_hi})
+                    &brake_lo, &brake_hi, &stop_lo, &stop_hi})
     x->resize(n);
-  stop_lo.setConstant(n, -kInf);  // (none until stopping_bounds)
-  stop_hi.setConstant(n, kInf);
   span.setZero(n);
   lo_by.resize(n);
   hi_by.resize(n);
@@ -255,6 +253,8 @@ void register_bounds(nb::module_& m) {
         row.finite();
         JointBox box;
         box.resize(n);
+        box.stop_lo.setConstant(-kInf);  // (no range)
+        box.stop_hi.setConstant(kInf);
         const std::pair<const char*, nb::handle> given[] = {
             {"cap_lo", cap_lo}, {"cap_hi", cap_hi}, {"hard_lo", hard_lo}, {"hard_hi", hard_hi}};
         Vector* into[] = {&box.cap_lo, &box.cap_hi, &box.hard_lo, &box.hard_hi};

@@ -98,6 +98,13 @@ void joint_box(const BoundsConfig& config, double dt, const double* q, const Vec
 void stopping_bounds(const BoundsConfig& config, double dt, const double* q, const Vector& v,
                      JointBox& out);
 
+// [lo, hi] of joint j cut to its range's braking at the whole limits (stop_lo, stop_hi; after
+// stopping_bounds), its nearer side where the two are apart.
+inline void within_stopping(const JointBox& box, Index j, double& lo, double& hi) {
+  hi = std::min(hi, std::max(box.stop_hi[j], lo));
+  lo = std::max(lo, std::min(box.stop_lo[j], hi));
+}
+
 // Joint j's acceleration/jerk box widened s times about its centre, within the hard box (its
 // nearer side where the two are apart) and within its range's braking at the whole limits
 // (stop_lo, stop_hi; likewise); the hard box where the smooth one is unbounded. A box the
@@ -119,8 +126,7 @@ inline void widened(const JointBox& box, Index j, double s, double& lo, double& 
     lo = std::max(box.hard_lo[j], std::min(c - w, box.hard_hi[j]));
     hi = std::min(box.hard_hi[j], std::max(c + w, box.hard_lo[j]));
   }
-  hi = std::min(hi, std::max(box.stop_hi[j], lo));
-  lo = std::max(lo, std::min(box.stop_lo[j], hi));
+  within_stopping(box, j, lo, hi);
 }
 
 // The least value of a . x over the box whose joint j spans [lo, hi] = bounds(j, lo, hi); a

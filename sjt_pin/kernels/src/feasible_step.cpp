@@ -243,8 +243,9 @@ bool Controller::rows_hold_within(double s, const Eigen::Ref<const RowMatrix>& A
 void Controller::within_hard_box(const Eigen::Ref<const RowMatrix>& A,
                                  const Eigen::Ref<const Vector>& b) {
   for (Index j = 0; j < nv; ++j) {  // (within each range's braking at the whole limits too)
-    wide_hi_[j] = std::min(box.hard_hi[j], std::max(box.stop_hi[j], box.hard_lo[j]));
-    wide_lo_[j] = std::max(box.hard_lo[j], std::min(box.stop_lo[j], wide_hi_[j]));
+    wide_lo_[j] = box.hard_lo[j];
+    wide_hi_[j] = box.hard_hi[j];
+    within_stopping(box, j, wide_lo_[j], wide_hi_[j]);
   }
   project(A, b, wide_lo_, wide_hi_, true);
   if (!rows_hold(A, b)) project(A, b, box.lo, box.hi, false);
