@@ -10,7 +10,7 @@ from .exceptions import ConcurrentStepError, FrameNotFound, GainWarning, URDFErr
 from .gains import AutoGain, FixedGain, Gain
 from .ik import IKResult
 from .kinematics import Kinematics
-from .limits import CollisionLimit, SupportLimit
+from .limits import CollisionLimit, SupportLimit, convex_parts
 from .options import SolverOptions
 from .reach import ReachMap, reachability
 from .robot import Robot
@@ -70,6 +70,7 @@ __all__ = [
     "Trajectory",
     "TrackingLog",
     "URDFError",
+    "convex_parts",
     "make_solver",
     "reachability",
     "solve_chunks",

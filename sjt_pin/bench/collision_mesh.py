@@ -10,6 +10,14 @@ acceleration and jerk over their limits, the steps that named joints in
 ``StepInfo.limit_conflicts``, the hand's pose error at the end (``|log6|``, m and rad) and the
 step's process time. pink's and mink's pulls over the same plate are in
 :mod:`.collision_peers` and :mod:`.collision_mink`.
+
+A ring (:func:`ring_grid`, a torus 46 cm across with a 34 cm hole, lying flat 18 cm under the
+hand) shows what each way of keeping a mesh costs the task: the hand's position (a
+:class:`~sjt_pin.tasks.PositionTask`) is sent 33 cm down through the hole along a line in 2 s
+and held there 2 s, with the same limits; the final error is the position's (m). The hull
+fills the hole in; the mesh as given leaves it open, but its closest points can jump; the
+convex parts (:func:`sjt_pin.convex_parts`) leave it open and move their closest points
+continuously.
 """
 
 from __future__ import annotations
@@ -20,14 +28,16 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from ..limits import CollisionLimit
+from ..limits import CollisionLimit, convex_parts
 from ..robot import Robot
 from ..solvers import make_solver
+from ..tasks import PositionTask
 from .collision import Checker, Scene, dash, failed_at, line_path, pose_error, rates, run_scene
 from .collision_moving import franka_like
 
 DT = 1e-3
 PULL, HOLD = 2.0, 1.0  # s
+RING_HOLD = 2.0  # s, the ring's run holds its end longer: the hand rests on its target
 
 
 @dataclass
@@ -42,6 +52,9 @@ class MeshRow:
     us_per_step: float  # process time
     method: str = "SJT"
     failed_at: float = float("nan")  # s: when the solver failed and the run ended (nan: never)
+    scene: str = "plate"  # "plate" (the pull) or "ring"
+    parts: int = 0  # the obstacle given as this many convex parts (0: as one shape)
+    kept: str = ""  # how the obstacle was kept: "convex hull", "mesh" or "N convex parts"
 
 
 def plate_grid(size: float = 0.36, n: int = 24, height: float = 0.03, period: float = 0.08
@@ -61,13 +74,7 @@ def bumpy_plate(size: float = 0.36, n: int = 24, height: float = 0.03,
                 period: float = 0.08) -> coal.BVHModelOBBRSS:
     """A square plate of ``size`` (m) on an ``n`` x ``n`` grid whose height is ``height`` sin(2 pi
     x / period) sin(2 pi y / period): a non-convex triangle mesh, in its own frame."""
-    vertices, triangles = plate_grid(size, n, height, period)
-    mesh = coal.BVHModelOBBRSS()
-    mesh.beginModel(len(triangles), len(vertices))
-    mesh.addVertices(vertices)
-    mesh.addTriangles(triangles)
-    mesh.endModel()
-    return mesh
+    return _mesh(*plate_grid(size, n, height, period))
 
 
 def plate_scene(robot: Robot | None = None) -> Scene:
@@ -79,6 +86,71 @@ def plate_scene(robot: Robot | None = None) -> Scene:
     end = pin.SE3(start.rotation, start.translation + np.array([0.0, 0.2, -0.17]))
     return Scene("Panda pulled over a plate of bumps", robot, robot.q0.copy(), [plate],
                  line_path(start, end, PULL), PULL, PULL + HOLD)
+
+
+def ring_grid(major: float = 0.2, minor: float = 0.03, around: int = 24, section: int = 8
+              ) -> tuple[np.ndarray, np.ndarray]:
+    """The vertices (around * section, 3; m) and outward triangles (2 around section, 3) of a
+    torus lying flat about the z axis, its tube's centre line a circle of radius ``major``, the
+    tube's radius ``minor``: a closed, non-convex triangle mesh, in its own frame."""
+    u = np.repeat(np.linspace(0.0, 2.0 * np.pi, around, endpoint=False), section)
+    v = np.tile(np.linspace(0.0, 2.0 * np.pi, section, endpoint=False), around)
+    rho = major + minor * np.cos(v)
+    vertices = np.column_stack([rho * np.cos(u), rho * np.sin(u), minor * np.sin(v)])
+    i, j = np.divmod(np.arange(around * section), section)
+    a, b = i * section + j, ((i + 1) % around) * section + j
+    c, d = ((i + 1) % around) * section + (j + 1) % section, i * section + (j + 1) % section
+    return vertices, np.concatenate([np.column_stack([a, b, c]), np.column_stack([a, c, d])])
+
+
+def _mesh(vertices: np.ndarray, triangles: np.ndarray) -> coal.BVHModelOBBRSS:
+    mesh = coal.BVHModelOBBRSS()
+    mesh.beginModel(len(triangles), len(vertices))
+    mesh.addVertices(vertices)
+    mesh.addTriangles(triangles)
+    mesh.endModel()
+    return mesh
+
+
+def ring_scene(robot: Robot | None = None) -> Scene:
+    """The hand sent down through the ring (module docstring) as a :class:`.collision.Scene`
+    (``robot``: Panda by default), the ring kept as its mesh."""
+    robot = robot or Robot.from_example("panda")
+    start = robot.fk(robot.q0)
+    ring = (_mesh(*ring_grid()), pin.SE3(np.eye(3), start.translation + np.array([0, 0, -0.18])))
+    end = pin.SE3(start.rotation, start.translation + np.array([0.0, 0.0, -0.33]))
+    return Scene("Panda's hand through a ring", robot, robot.q0.copy(), [ring],
+                 line_path(start, end, PULL), PULL, PULL + RING_HOLD)
+
+
+def through_ring(kept: str, robot: Robot | None = None) -> MeshRow:
+    """One run through the ring, the ring kept as ``kept``: ``"hull"`` (``convex=True``),
+    ``"mesh"`` (``convex=False``) or ``"parts"`` (:func:`sjt_pin.convex_parts`, given as
+    obstacles of their own)."""
+    if kept not in ("hull", "mesh", "parts"):
+        raise ValueError(f"kept must be 'hull', 'mesh' or 'parts', got {kept!r}")
+    scene = ring_scene(robot)
+    obstacles = scene.obstacles
+    if kept == "parts":
+        pose = obstacles[0][1]
+        obstacles = [(part, pose) for part in convex_parts(ring_grid())]
+    limit = CollisionLimit(scene.robot, obstacles, convex=kept != "mesh")
+    accelerations, jerks = franka_like(scene.robot.nv)
+    solver = make_solver("sjt", scene.robot, dt=DT, task=PositionTask(), limits=[limit],
+                         acceleration_limits=accelerations, jerk_limits=jerks)
+    reported: list[bool] = []
+    qs, us = run_scene(scene, lambda q, pose, velocity: solver.step(q, pose.translation,
+                                                                    velocity[:3]),
+                       after=lambda: reported.append(bool(solver.last.limit_conflicts)))
+    checker = Checker(scene.robot, scene.obstacles,
+                      CollisionLimit(scene.robot, scene.obstacles, convex=False).pair_names)
+    row = mesh_row(scene, kept != "mesh", qs, us, checker, np.array(reported), "SJT")
+    row.scene = "ring"
+    if kept == "parts":
+        row.parts, row.kept = len(obstacles), f"{len(obstacles)} convex parts"
+    row.final_error = float(np.linalg.norm(scene.robot.fk(qs[-1]).translation
+                                           - scene.target(scene.duration)[0].translation))
+    return row
 
 
 def pull(convex: bool, robot: Robot | None = None) -> MeshRow:
@@ -116,7 +188,8 @@ def mesh_row(scene: Scene, convex: bool, qs: np.ndarray, us: float, checker: Che
     return MeshRow(convex, float(closest), float(np.max(acceleration, initial=0.0)),
                    float(np.max(jerk, initial=0.0)), conflicts, unreported,
                    pose_error(robot, qs[-1], end), us, method,
-                   failed_at(qs, int(round(scene.duration / DT)), DT))
+                   failed_at(qs, int(round(scene.duration / DT)), DT),
+                   kept="convex hull" if convex else "mesh")
 
 
 def mesh_table(rows: list[MeshRow]) -> str:
@@ -125,10 +198,8 @@ def mesh_table(rows: list[MeshRow]) -> str:
             "| steps with conflicts | unreported | final error | failed at | us/step |\n"
             "|---|---|---|---|---|---|---|---|---|---|\n")
     return head + "".join(
-        f"| {r.method} | {'convex hull' if r.convex else 'mesh'} | {1e3 * r.closest:.2f} "
+        f"| {r.method} | {r.kept} | {1e3 * r.closest:.2f} "
         f"| {r.acceleration_ratio:.2f} | {r.jerk_ratio:.2f} | {dash(r.conflicts, 'd')} "
         f"| {dash(r.unreported, 'd')} | {r.final_error:.3f} | "
         f"{dash(r.failed_at, '.3f')} | {r.us_per_step:.0f} |\n"
         for r in rows)
-
-

@@ -81,6 +81,9 @@ def bench(args: argparse.Namespace) -> int:
               + collision_moving.moving_table(moving))
         print("\nPanda's hand pulled over a plate of bumps (a mesh) with Franka-like limits:\n"
               + collision_mesh.mesh_table(mesh))
+        ring = [collision_mesh.through_ring(kept) for kept in ("hull", "parts", "mesh")]
+        print("\nPanda's hand sent through a ring (a mesh), each way of keeping it:\n"
+              + collision_mesh.mesh_table(ring))
         from . import collision_blocked
 
         blocked = collision_blocked.blocked(progress=lambda r: print(
@@ -94,6 +97,7 @@ def bench(args: argparse.Namespace) -> int:
                                 "stream": [asdict(r) for r in stream],
                                 "moving": [asdict(r) for r in moving],
                                 "mesh": [asdict(r) for r in mesh],
+                                "ring": [asdict(r) for r in ring],
                                 "blocked": [asdict(r) for r in blocked]})
     elif args.kind == "accuracy":
         from . import accuracy
