@@ -114,6 +114,23 @@ def test_a_limit_with_parts_copies_and_pickles(panda, ring):
     assert [d.distance for d in copy.distances(q)] == [d.distance for d in limit.distances(q)]
 
 
+def test_a_hull_without_its_triangles_is_refused_a_copy_by_name(panda, ring):
+    """coal cannot pickle a bare ConvexBase (a hull built without its triangles): copying a
+    solver whose limit holds one says which obstacle and how to build it instead of boost's
+    "Pickling ... is not enabled"."""
+    vertices = ring[0]
+    mesh = coal.BVHModelOBBRSS()
+    mesh.beginModel(0, len(vertices))
+    mesh.addVertices(vertices)
+    mesh.endModel()
+    mesh.buildConvexHull(False, "Qt")
+    pose = pin.SE3(np.eye(3), np.array([0.4, 0.0, 0.2]))
+    limit = CollisionLimit(panda, [(ring[3][0], pose), (mesh.convex, pose)], margin=MARGIN)
+    solver = sjt.make_solver("sjt", panda, limits=[limit])
+    with pytest.raises(TypeError, match="obstacle 1 is a coal.ConvexBase without its triangles"):
+        pickle.dumps(solver)
+
+
 def test_bad_meshes_and_options_are_refused(ring):
     vertices, faces, mesh, parts = ring
     with pytest.raises(ValueError, match="threshold"):

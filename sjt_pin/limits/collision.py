@@ -226,7 +226,14 @@ class CollisionLimit(PairsMixin, TablesMixin, BroadPhaseMixin, MovingMixin, Rows
     def __getstate__(self) -> dict:
         """Pickled as its arguments (obstacles at their current poses) and the robot's own
         collision geometry (the robot pickles without it; coal's hulls do not pickle, they
-        are built again)."""
+        are built again; an obstacle given as a bare ``coal.ConvexBase``, a hull built without
+        its triangles, cannot be copied: TypeError)."""
+        for i, shape in enumerate(self._obstacle_shapes):
+            if isinstance(shape, coal.ConvexBase) and not isinstance(shape, coal.Convex):
+                raise TypeError(f"obstacle {i} is a coal.ConvexBase without its triangles, "
+                                "which coal cannot copy or pickle: build it with them "
+                                "(mesh.buildConvexHull(True, 'Qt'), coal.Convex(points, "
+                                "triangles)) or give the mesh itself")
         return {"args": {**self._args, "obstacles": self.obstacles},
                 "geometry": self._source.copy(), "velocity": self._velocity.copy(),
                 "stamps": [None if s is None else (s[0], s[1].copy()) for s in self._stamps]}
