@@ -6,6 +6,7 @@ blocks the way."""
 from __future__ import annotations
 
 import pickle
+import sys
 
 import coal
 import numpy as np
@@ -149,3 +150,10 @@ def test_bad_meshes_and_options_are_refused(ring):
         sjt.convex_parts(parts[0])
     with pytest.raises(TypeError, match="BVHModel"):
         sjt.convex_parts(coal.Sphere(0.1))
+
+
+def test_without_coacd_the_error_says_how_to_install_it(ring, monkeypatch):
+    """CoACD is an optional extra: without it, convex_parts says which one."""
+    monkeypatch.setitem(sys.modules, "coacd", None)
+    with pytest.raises(ImportError, match=r"pip install 'sjt-pin\[mesh\]'"):
+        sjt.convex_parts(ring[2])
