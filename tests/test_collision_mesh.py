@@ -13,6 +13,7 @@ import pytest
 from sjt_pin.bench import collision_mesh as bench
 from sjt_pin.limits import CollisionLimit
 from sjt_pin.limits.collision import CollisionError
+from sjt_pin.limits.collision_geometry import coal_mesh
 
 MARGIN = 0.01
 
@@ -31,6 +32,18 @@ def test_a_mesh_obstacle_is_kept_as_its_hull_and_copied_as_given(panda):
     q = panda.q0.copy()
     for a, b in zip(hull.distances(q), mesh.distances(q), strict=True):
         assert a.distance <= b.distance + 1e-9
+
+
+def test_a_flat_mesh_obstacle_is_refused_a_hull_by_name(panda):
+    """A mesh whose points span no volume (a flat sheet) has no convex hull; coal's qhull of it
+    crashes the process, so the limit refuses it first, naming it and the way out."""
+    vertices, triangles = bench.plate_grid()
+    vertices[:, 2] = 0.0
+    sheet = coal_mesh(vertices, triangles)
+    pose = pin.SE3(np.eye(3), np.array([0.4, 0.0, 0.1]))
+    with pytest.raises(CollisionError, match=r"obstacle 0.*span no volume.*convex=False"):
+        CollisionLimit(panda, [(sheet, pose)])
+    CollisionLimit(panda, [(sheet, pose)], convex=False)  # (kept as given: no hull needed)
 
 
 def test_convex_robot_keeps_the_mesh_obstacles_as_given(panda):

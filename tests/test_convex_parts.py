@@ -17,6 +17,7 @@ from scipy.spatial import ConvexHull
 import sjt_pin as sjt
 from sjt_pin.bench import collision_mesh as bench
 from sjt_pin.limits import CollisionLimit
+from sjt_pin.limits.collision_geometry import coal_mesh
 
 MARGIN = 0.01
 ACCELERATION, JERK = 10.0, 5000.0  # rad/s^2, rad/s^3
@@ -27,12 +28,7 @@ def ring():
     """The benchmark's ring (a torus lying flat, 0.46 m across, a 0.34 m hole): its vertices,
     faces, mesh and parts."""
     vertices, faces = bench.ring_grid()
-    mesh = coal.BVHModelOBBRSS()
-    mesh.beginModel(len(faces), len(vertices))
-    mesh.addVertices(vertices)
-    mesh.addTriangles(faces)
-    mesh.endModel()
-    return vertices, faces, mesh, sjt.convex_parts((vertices, faces))
+    return vertices, faces, coal_mesh(vertices, faces), sjt.convex_parts((vertices, faces))
 
 
 def _outside(points: np.ndarray, part) -> np.ndarray:
@@ -60,10 +56,7 @@ def test_the_parts_are_convex_cover_the_mesh_and_leave_its_hole_open(ring):
 
 
 def _hull_of(vertices):
-    mesh = coal.BVHModelOBBRSS()
-    mesh.beginModel(0, len(vertices))
-    mesh.addVertices(vertices)
-    mesh.endModel()
+    mesh = coal_mesh(vertices)
     mesh.buildConvexHull(True, "Qt")
     return mesh.convex
 
@@ -119,11 +112,7 @@ def test_a_hull_without_its_triangles_is_refused_a_copy_by_name(panda, ring):
     """coal cannot pickle a bare ConvexBase (a hull built without its triangles): copying a
     solver whose limit holds one says which obstacle and how to build it instead of boost's
     "Pickling ... is not enabled"."""
-    vertices = ring[0]
-    mesh = coal.BVHModelOBBRSS()
-    mesh.beginModel(0, len(vertices))
-    mesh.addVertices(vertices)
-    mesh.endModel()
+    mesh = coal_mesh(ring[0])
     mesh.buildConvexHull(False, "Qt")
     pose = pin.SE3(np.eye(3), np.array([0.4, 0.0, 0.2]))
     limit = CollisionLimit(panda, [(ring[3][0], pose), (mesh.convex, pose)], margin=MARGIN)

@@ -29,6 +29,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..limits import CollisionLimit, convex_parts
+from ..limits.collision_geometry import coal_mesh
 from ..robot import Robot
 from ..solvers import make_solver
 from ..tasks import PositionTask
@@ -74,7 +75,7 @@ def bumpy_plate(size: float = 0.36, n: int = 24, height: float = 0.03,
                 period: float = 0.08) -> coal.BVHModelOBBRSS:
     """A square plate of ``size`` (m) on an ``n`` x ``n`` grid whose height is ``height`` sin(2 pi
     x / period) sin(2 pi y / period): a non-convex triangle mesh, in its own frame."""
-    return _mesh(*plate_grid(size, n, height, period))
+    return coal_mesh(*plate_grid(size, n, height, period))
 
 
 def plate_scene(robot: Robot | None = None) -> Scene:
@@ -103,21 +104,13 @@ def ring_grid(major: float = 0.2, minor: float = 0.03, around: int = 24, section
     return vertices, np.concatenate([np.column_stack([a, b, c]), np.column_stack([a, c, d])])
 
 
-def _mesh(vertices: np.ndarray, triangles: np.ndarray) -> coal.BVHModelOBBRSS:
-    mesh = coal.BVHModelOBBRSS()
-    mesh.beginModel(len(triangles), len(vertices))
-    mesh.addVertices(vertices)
-    mesh.addTriangles(triangles)
-    mesh.endModel()
-    return mesh
-
-
 def ring_scene(robot: Robot | None = None) -> Scene:
     """The hand sent down through the ring (module docstring) as a :class:`.collision.Scene`
     (``robot``: Panda by default), the ring kept as its mesh."""
     robot = robot or Robot.from_example("panda")
     start = robot.fk(robot.q0)
-    ring = (_mesh(*ring_grid()), pin.SE3(np.eye(3), start.translation + np.array([0, 0, -0.18])))
+    below = pin.SE3(np.eye(3), start.translation + np.array([0.0, 0.0, -0.18]))
+    ring = (coal_mesh(*ring_grid()), below)
     end = pin.SE3(start.rotation, start.translation + np.array([0.0, 0.0, -0.33]))
     return Scene("Panda's hand through a ring", robot, robot.q0.copy(), [ring],
                  line_path(start, end, PULL), PULL, PULL + RING_HOLD)

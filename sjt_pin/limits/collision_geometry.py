@@ -129,20 +129,41 @@ def to_hulls(geom: pin.GeometryModel) -> None:
             g.geometry = _hull(shape, g.name)
 
 
-def _hull(mesh, name: str):
+def coal_mesh(vertices: np.ndarray, triangles: np.ndarray | None = None):
+    """A coal mesh (``BVHModelOBBRSS``) of ``vertices`` (n, 3; m) and ``triangles`` (k, 3;
+    vertex indices), or of the points alone (None: for their hull)."""
+    mesh = coal.BVHModelOBBRSS()
+    mesh.beginModel(0 if triangles is None else len(triangles), len(vertices))
+    mesh.addVertices(np.ascontiguousarray(vertices, dtype=float))
+    if triangles is not None:
+        mesh.addTriangles(np.ascontiguousarray(triangles, dtype=np.int64))
+    mesh.endModel()
+    return mesh
+
+
+def _hull(mesh, name: str, triangles: bool = False):
     """The convex hull of ``mesh`` (qhull through coal): triangulated ("Qt"), or, where qhull
     refuses that (Centauro's pelvis), of its points joggled ("QJ": qhull's default joggle, a
-    relative 1e-11 or so of the mesh's size, far below any margin)."""
+    relative 1e-11 or so of the mesh's size, far below any margin). ``triangles``: keep the
+    hull's triangles (a ``coal.Convex``, which pickles; else a ``ConvexBase``). Points that
+    span no volume (flat, or on a line) are refused: coal's hull of them crashes the process."""
+    points = np.asarray(mesh.vertices(), dtype=float).reshape(-1, 3)
+    spread = np.linalg.svd(points - points.mean(axis=0), compute_uv=False) if len(points) \
+        else np.zeros(1)
+    advice = "" if triangles else "; pass convex=False to use the mesh itself"
+    if len(points) < 4 or not spread[-1] > 1e-9 * spread[0]:
+        raise CollisionError(f"collision mesh {name!r}: its points span no volume (flat or on "
+                             f"a line), so it has no convex hull{advice}")
     error = None
     for options in ("Qt", "QJ"):
         copy = mesh.clone()
         try:
-            copy.buildConvexHull(False, options)
+            copy.buildConvexHull(triangles, options)
             return copy.convex
         except Exception as exc:  # noqa: BLE001 - qhull's errors are plain exceptions
             error = exc
-    raise CollisionError(f"collision mesh {name!r}: no convex hull ({error}); pass "
-                         "convex=False to use the mesh itself") from error
+    raise CollisionError(f"collision mesh {name!r}: no convex hull ({error}){advice}") \
+        from error
 
 
 def check_pose(pose, name: str) -> None:

@@ -22,7 +22,7 @@ import numbers
 
 import numpy as np
 
-from .collision_geometry import CollisionError, coal
+from .collision_geometry import CollisionError, _hull, coal, coal_mesh
 
 __all__ = ["convex_parts"]
 
@@ -61,17 +61,6 @@ def _vertices_faces(mesh) -> tuple[np.ndarray, np.ndarray]:
         raise ValueError(f"faces index vertices 0..{len(vertices) - 1}, got "
                          f"{faces.min()}..{faces.max()}")
     return vertices, faces
-
-
-def _hull(vertices: np.ndarray):
-    """The convex hull of ``vertices`` as a ``coal.Convex`` with its triangles (qhull through
-    coal; it pickles, as a solver's copies need)."""
-    mesh = coal.BVHModelOBBRSS()
-    mesh.beginModel(0, len(vertices))
-    mesh.addVertices(np.ascontiguousarray(vertices, dtype=float))
-    mesh.endModel()
-    mesh.buildConvexHull(True, "Qt")
-    return mesh.convex
 
 
 def convex_parts(mesh, threshold: float = 0.05, max_parts: int | None = None,
@@ -120,4 +109,6 @@ def convex_parts(mesh, threshold: float = 0.05, max_parts: int | None = None,
     pieces = coacd.run_coacd(coacd.Mesh(vertices, faces), threshold=float(threshold),
                              max_convex_hull=-1 if max_parts is None else int(max_parts),
                              seed=int(seed))
-    return [_hull(np.asarray(piece_vertices, dtype=float)) for piece_vertices, _ in pieces]
+    # (each with its triangles: a coal.Convex pickles, as a solver's copies need)
+    return [_hull(coal_mesh(np.asarray(piece_vertices, dtype=float)), f"convex part {k}",
+                  triangles=True) for k, (piece_vertices, _) in enumerate(pieces)]
