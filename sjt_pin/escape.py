@@ -1,7 +1,8 @@
-"""Smooth escape from the saddles of exactly singular configurations (JT and SJT).
+"""Smooth escape from the saddles of exactly singular configurations (every built-in method).
 
 At an exactly singular configuration an error along the lost task direction gives
-``J^T e = 0`` although ``e != 0``: the transpose-type updates stop, though ``1/2 |e|^2`` is not
+``J^T e = 0`` although ``e != 0``: the updates stop (the transpose's, and the pseudoinverse's
+and damped solve's, which drop or damp that direction), though ``1/2 |e|^2`` is not
 at a minimum but at a saddle (UR5 at q = 0, asked to roll its tool about the lost axis, never
 moves). Round-off alone takes thousands of steps to leave it.
 

@@ -42,7 +42,7 @@ class SolverOptions:
         limits: further :class:`~sjt_pin.limits.Limit` objects for the constraint stage (see
             docs/extending.md).
         escape: add a smooth escape velocity at the saddles of exactly singular
-            configurations (JT and SJT; default True; see :mod:`sjt_pin.escape`).
+            configurations (every built-in method; default True; see :mod:`sjt_pin.escape`).
         check_stability: warn once (:class:`~sjt_pin.GainWarning`) when a fixed gain exceeds
             the stability bound ``2 / (dt lambda_max(J M))`` at the current configuration
             (:mod:`sjt_pin.stability`).

@@ -103,7 +103,7 @@ class StepInfo:
             ``active_limits`` naming the limits that hold it, a minimum against them
             (``solver.move_to()`` reaches such targets by another way); without, a minimum of
             the error itself — a target out of reach, or one reachable only on another branch
-            of the inverse kinematics — or, for JT and SJT, a saddle that the escape tests
+            of the inverse kinematics — or a saddle that the escape tests
             after a window of stalled steps, over the next 2 n steps or so (one evaluation of
             the task rows a step; ``escaped`` is true on the steps of an escape it starts).
         levels: one :class:`LevelInfo` per priority level, top first: its error norm and

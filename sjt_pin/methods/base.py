@@ -27,7 +27,8 @@ class Method:
     :meth:`matrix` (your own)."""
 
     name: ClassVar[str] = "method"
-    #: transpose-type updates stall at saddles of exactly singular configurations
+    #: the update stalls at saddles of exactly singular configurations, and creeps toward the
+    #: flat minima of targets out of reach: the solver watches it (:mod:`sjt_pin.escape`)
     stalls: ClassVar[bool] = False
 
     def parameters(self) -> kernels.MethodParameters | None:

@@ -50,6 +50,7 @@ class LeastSquaresMethod(Method):
 
     damping = 0.0
     rcond = 1e-12
+    stalls = True
 
     def __init__(self, error_damping: float | None = None):
         if error_damping is not None:

@@ -14,6 +14,21 @@ constexpr double kEigenFloor = 1e3 * std::numeric_limits<double>::epsilon();
 // power of the loop bound: lambda_max <= (tr A^(2^(P+1)))^(1/2^(P+1))
 constexpr int kBoundProducts = 2;
 
+// The stall the escape watches: the loop gain along the command k = K e_w over the trace,
+// sum_j s_j (J_j^T k)^2 / (|k|^2 sum_j s_j |J_j|^2), over the first `rows` rows (0 without a
+// command or a moving column)
+double stall_ratio(const Eigen::Ref<const RowMatrix>& Jw, const Vector& k, const Vector& s,
+                   const Vector& norms, Index rows) {
+  const double k_sq = k.head(rows).squaredNorm();
+  double stall = 0.0, trace = 0.0;
+  for (Index j = 0; j < Jw.cols(); ++j) {
+    const double task = Jw.col(j).head(rows).dot(k.head(rows));
+    stall += s[j] * task * task;
+    trace += s[j] * norms[j];
+  }
+  return k_sq > 0.0 && trace > 0.0 ? stall / (k_sq * trace) : 0.0;
+}
+
 }  // namespace
 
 double Method::loop_bound(const Eigen::Ref<const Eigen::MatrixXd>& A) {
@@ -58,23 +73,19 @@ void Method::prepare(const Eigen::Ref<const RowMatrix>& Jw, const Eigen::Ref<con
   for (Index j = 0; j < n; ++j) norms_[j] = Jw.col(j).squaredNorm();
   const Vector& norms = norms_;
   if (p.family == Family::transpose) {
-    double trace = 0.0, stall = 0.0, curvature = 0.0, alpha_max = 0.0;
-    v_.noalias() = k.cwiseProduct(ew);
-    const Vector& kew = v_;
-    const double kew_sq = kew.head(error_rows).squaredNorm();
+    double trace = 0.0, curvature = 0.0, alpha_max = 0.0;
     for (Index j = 0; j < n; ++j) {
       const double norm = norms[j];
       const bool moves = norm > p.column_tol;
       out.alpha[j] = moves ? 1.0 / std::max(norm, p.length2) : 0.0;
       out.s[j] = p.scaled ? out.alpha[j] : (moves ? 1.0 : 0.0);
       trace += out.s[j] * norm;
-      const double task = Jw.col(j).head(error_rows).dot(kew.head(error_rows));
-      stall += out.s[j] * task * task;
       if (moves) curvature = std::max(curvature, std::sqrt(norm) * out.s[j]);
       alpha_max = std::max(alpha_max, out.alpha[j]);
     }
     out.trace = trace;
-    out.stall = kew_sq > 0.0 && trace > 0.0 ? stall / (kew_sq * trace) : 0.0;
+    v_.noalias() = k.cwiseProduct(ew);
+    out.stall = stall_ratio(Jw, v_, out.s, norms, error_rows);
     out.loop_bound = 1.0;
     if (!p.auto_gain || !gain) {
       out.gain = 1.0;
@@ -100,7 +111,12 @@ void Method::prepare(const Eigen::Ref<const RowMatrix>& Jw, const Eigen::Ref<con
   // least squares: JP (lambda = 0) and DLS
   out.s = (norms.array() > 0.0).cast<double>();
   out.trace = 0.0;
-  out.stall = 1.0;
+  // the stall the escape watches, as JT's (S = I). Near a singular minimum out of reach the
+  // damped and pseudoinverse steps shrink with the lost direction's singular value: without it
+  // Kinova stretched toward targets out of reach crept at 5e-3 to 3e-2 rad/s after 30 s (DLS,
+  // JP; `sjt-pin bench settle`), where the escape's test finds the minimum and the arm rests
+  v_.noalias() = k.cwiseProduct(ew);
+  out.stall = stall_ratio(Jw, v_, out.s, norms, error_rows);
   out.loop_bound = 1.0;
   out.gain = p.auto_gain ? p.gain_factor / dt : 1.0;
   out.damping = p.mu * p.mu + p.lm * std::sqrt(out.ew_sq);
