@@ -14,8 +14,8 @@ first is dropped). Only a clearly negative curvature along which f, probed furth
 starts an escape: a joint velocity along the most negative direction, ramped up and later down
 within ``RAMP`` seconds, at ``SPEED`` times the URDF speed limits at most (also when the
 solver's speed limits are off), added to the regular update until that update moves faster
-than the escape. At a true minimum (an unreachable target, a target held against a joint
-limit, or one reachable only on another branch of the inverse kinematics: UR10 with its elbow
+than the escape's top speed. At a true minimum (an unreachable target, a target held against a
+joint limit, or one reachable only on another branch of the inverse kinematics: UR10 with its elbow
 exactly straight and the error along the direction the stretched arm cannot move in, pointing
 outward — bending the elbow raises the error) the curvature is not negative, nothing fires,
 and the arm rests (``StepInfo.stalled``): the method's own feedback, which would creep on along
@@ -265,7 +265,9 @@ class SaddleEscape:
         if self._settling and not self._leaving:
             return self._settling_velocity(dt)
         accel = self._top / self.RAMP
-        if not self._leaving and (regular_speed >= self.speed > 0.0
+        # (against the top speed, not the ramp's: a regular update that already creeps
+        # along a flat direction ended every escape on its first step, and the arm crept on)
+        if not self._leaving and (regular_speed >= self._top > 0.0
                                   or self._travel >= self._max_travel):
             self._leaving = True
         if self._leaving:

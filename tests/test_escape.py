@@ -188,6 +188,22 @@ def test_least_squares_methods_rest_at_a_stretched_minimum_out_of_reach(method):
     assert rested - 1e-6 * rested < creeping.error_norm <= rested + 1e-12
 
 
+@pytest.mark.parametrize("method", ["dls", "jp"])
+def test_an_escape_goes_on_where_the_regular_update_creeps_along_it(method):
+    """Kinova stretched toward a target out of reach under acceleration and jerk limits
+    (``sjt-pin bench settle``'s draw 13): its wrist turned downhill at 0.01-0.02 rad/s for 30 s,
+    the error falling by a millionth of itself a second. The curvature test found the descent,
+    but each escape ended on its first step: the regular update moved faster than the escape's
+    ramp had reached. Weighed against the escape's top speed instead, the escape travels the
+    descent, and the arm rests at its bottom within 20 s."""
+    from sjt_pin.bench import settle
+
+    row = settle.run(sjt.Robot.from_example("kinova"), 13, method)
+    assert row.scene == "beyond" and row.acceleration and row.jerk, row
+    assert row.state == "rest" and row.rest_s < 20.0, row
+    assert max(row.ratio_a, row.ratio_j) <= 1.0 + 1e-6, row
+
+
 @pytest.mark.parametrize("dt", [1e-3, 4e-3])
 @pytest.mark.parametrize("saddle", [2, 3], ids=["bravo7 q5=pi", "baxter arm singular"])
 def test_default_sjt_leaves_wrist_and_redundant_saddles_within_twice_dls(saddle, dt):
