@@ -126,7 +126,7 @@ def to_hulls(geom: pin.GeometryModel) -> None:
     for g in geom.geometryObjects:
         shape = g.geometry
         if isinstance(shape, coal.BVHModelBase) and not isinstance(shape, coal.ConvexBase):
-            g.geometry = _hull(shape, g.name)
+            g.geometry = mesh_hull(shape, g.name)
 
 
 def coal_mesh(vertices: np.ndarray, triangles: np.ndarray | None = None):
@@ -141,7 +141,7 @@ def coal_mesh(vertices: np.ndarray, triangles: np.ndarray | None = None):
     return mesh
 
 
-def _hull(mesh, name: str, triangles: bool = False):
+def mesh_hull(mesh, name: str, triangles: bool = False):
     """The convex hull of ``mesh`` (qhull through coal): triangulated ("Qt"), or, where qhull
     refuses that (Centauro's pelvis), of its points joggled ("QJ": qhull's default joggle, a
     relative 1e-11 or so of the mesh's size, far below any margin). ``triangles``: keep the

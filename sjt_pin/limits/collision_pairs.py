@@ -15,10 +15,10 @@ from .collision_geometry import (
     CollisionError,
     PairDistance,
     _check_extent,
-    _hull,
     _supported,
     check_pose,
     coal,
+    mesh_hull,
 )
 from .collision_state import CollisionState
 
@@ -41,7 +41,7 @@ class PairsMixin(CollisionState):
         self._obstacle_shapes.append(shape)
         if self._convex and isinstance(shape, coal.BVHModelBase) and not isinstance(
                 shape, coal.ConvexBase):  # a mesh: its hull, as the robot's own meshes
-            shape = _hull(shape, f"obstacle {i}")
+            shape = mesh_hull(shape, f"obstacle {i}")
         obj = pin.GeometryObject(f"obstacle_{i}", 0, 0, pose, shape)
         self._obstacle_ids.append(self.geometry.addGeometryObject(obj))
 

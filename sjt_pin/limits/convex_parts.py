@@ -22,7 +22,7 @@ import numbers
 
 import numpy as np
 
-from .collision_geometry import CollisionError, _hull, coal, coal_mesh
+from .collision_geometry import CollisionError, coal, coal_mesh, mesh_hull
 
 __all__ = ["convex_parts"]
 
@@ -110,5 +110,5 @@ def convex_parts(mesh, threshold: float = 0.05, max_parts: int | None = None,
                              max_convex_hull=-1 if max_parts is None else int(max_parts),
                              seed=int(seed))
     # (each with its triangles: a coal.Convex pickles, as a solver's copies need)
-    return [_hull(coal_mesh(np.asarray(piece_vertices, dtype=float)), f"convex part {k}",
+    return [mesh_hull(coal_mesh(np.asarray(piece_vertices, dtype=float)), f"convex part {k}",
                   triangles=True) for k, (piece_vertices, _) in enumerate(pieces)]

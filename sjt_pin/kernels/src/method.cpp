@@ -15,16 +15,15 @@ constexpr double kEigenFloor = 1e3 * std::numeric_limits<double>::epsilon();
 constexpr int kBoundProducts = 2;
 
 // The stall the escape watches: the loop gain along the command k = K e_w over the trace,
-// sum_j s_j (J_j^T k)^2 / (|k|^2 sum_j s_j |J_j|^2), over the first `rows` rows (0 without a
-// command or a moving column)
+// sum_j s_j (J_j^T k)^2 / (|k|^2 trace), trace = sum_j s_j |J_j|^2 (the caller's), over the
+// first `rows` rows (0 without a command or a moving column)
 double stall_ratio(const Eigen::Ref<const RowMatrix>& Jw, const Vector& k, const Vector& s,
-                   const Vector& norms, Index rows) {
+                   double trace, Index rows) {
   const double k_sq = k.head(rows).squaredNorm();
-  double stall = 0.0, trace = 0.0;
+  double stall = 0.0;
   for (Index j = 0; j < Jw.cols(); ++j) {
     const double task = Jw.col(j).head(rows).dot(k.head(rows));
     stall += s[j] * task * task;
-    trace += s[j] * norms[j];
   }
   return k_sq > 0.0 && trace > 0.0 ? stall / (k_sq * trace) : 0.0;
 }
@@ -85,7 +84,7 @@ void Method::prepare(const Eigen::Ref<const RowMatrix>& Jw, const Eigen::Ref<con
     }
     out.trace = trace;
     v_.noalias() = k.cwiseProduct(ew);
-    out.stall = stall_ratio(Jw, v_, out.s, norms, error_rows);
+    out.stall = stall_ratio(Jw, v_, out.s, trace, error_rows);
     out.loop_bound = 1.0;
     if (!p.auto_gain || !gain) {
       out.gain = 1.0;
@@ -116,7 +115,9 @@ void Method::prepare(const Eigen::Ref<const RowMatrix>& Jw, const Eigen::Ref<con
   // Kinova stretched toward targets out of reach crept at 5e-3 to 3e-2 rad/s after 30 s (DLS,
   // JP; `sjt-pin bench settle`), where the escape's test finds the minimum and the arm rests
   v_.noalias() = k.cwiseProduct(ew);
-  out.stall = stall_ratio(Jw, v_, out.s, norms, error_rows);
+  double trace = 0.0;  // (S is the mask of the moving columns: the sum of their norms)
+  for (Index j = 0; j < n; ++j) trace += norms[j];
+  out.stall = stall_ratio(Jw, v_, out.s, trace, error_rows);
   out.loop_bound = 1.0;
   out.gain = p.auto_gain ? p.gain_factor / dt : 1.0;
   out.damping = p.mu * p.mu + p.lm * std::sqrt(out.ew_sq);
