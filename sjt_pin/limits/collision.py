@@ -26,8 +26,12 @@ that bound also counts the row's acceleration toward the margin: a closing speed
 reaches by speeding up is allowed only if, from that speed and that acceleration, the jerk-
 limited braking still stops within ``d - margin`` (``largest_stoppable``, the joints' own
 position braking; a pair sliding 0.1 mm from its margin and speeding up at 6 m/s^2 otherwise
-reached it at 21 mm/s). A row whose closing speed jumps (a contact's closest points slide onto
-another feature, a witness row appears) eases in: it asks that speed to drop no faster than
+reached it at 21 mm/s). The row's jerk is what its joints give, each ramping its own
+deceleration at its own limit: below the summed jerks where some already brake at their limit
+or speed the row up (the chord of those ramps; the summed jerks let xArm7's wrist link, at
+jerk limits 173 times its acceleration limits, close on a ring's hull too fast to stop). A
+row whose closing speed jumps (a contact's closest points slide onto another feature, a
+witness row appears) eases in: it asks that speed to drop no faster than
 the limits allow from the previous step's velocity and acceleration (the share of the row's
 acceleration and jerk, and never more than the joints' acceleration and jerk boxes give it
 this period: a joint already braking at its limit gives nothing more), as long as the pair,

@@ -107,11 +107,18 @@ void register_collision_braking(nb::module_& m) {
           // in [least, most]; the joints' speeds (speed limits, range braking) let it retreat
           // at up to retreat (m/s)
           double a = 0.0, j = 0.0, s = 0.0, sd = 0.0, least = 0.0, most = 0.0, retreat = 0.0;
+          double full = 0.0;  // s until every joint of the row brakes it at its limit
+          double rise = 0.0;  // the row's largest acc_j / jerk_j (s)
           for (Index c = 0; c < N; ++c) {
             const double w = rows(i, c);
             if (w == 0.0) continue;
             a += std::fabs(w) * acc[c];
-            if (jerk) j += std::fabs(w) * jl[c];
+            if (jerk) {
+              j += std::fabs(w) * jl[c];
+              const double braking = w > 0.0 ? -a0[c] : a0[c];  // (its share of -A_i ddq)
+              if (braking < acc[c]) full = std::max(full, (acc[c] - braking) / jl[c]);
+              rise = std::max(rise, acc[c] / jl[c]);
+            }
             if (vmax) retreat += std::fabs(w) * (*vmax)(w > 0.0 ? 0 : 1, c);
             s += w * v0[c];
             sd += w * a0[c];
@@ -131,8 +138,19 @@ void register_collision_braking(nb::module_& m) {
             bound[i] += shift;
             continue;
           }
+          // The row's deceleration, each joint ramping its own to its limit at its jerk limit,
+          // is sum_j |A_ij| min(acc_j, c_j + jerk_j t) from -A_i ddq = sum_j |A_ij| c_j: concave
+          // in t, and a from `full` on, so above its chord, -A_i ddq + t (a + A_i ddq) / full.
+          // Summed jerks (j_i) ramp faster than that where some joints already brake at their
+          // limit (their jerk gives nothing) or speed the row up: the row's jerk is the chord's
+          // where it is slower. (xArm7's wrist link, jerk limits 173 times the acceleration
+          // limits, closed on a ring's hull at 180 mm/s and braked at half the rate the summed
+          // jerks promised: it crossed the margin by 0.8 mm, and the limits yielded.)
+          if (full > 0.0 && a + sd > 0.0) j = std::min(j, (a + sd) / full);
           const bool jerk_row = jerk && j > 0.0 && std::isfinite(j);
-          const double ramp = jerk_row ? a / j : 0.0;  // s to reach a
+          // s to reach a at that jerk, at most the time each joint takes from its limit one
+          // way to its limit the other (braking_reach's)
+          const double ramp = jerk_row ? std::min(a / j, 2.0 * rise) : 0.0;
           const double damper = bound[i], h = damper / rate;
           const double r0 = jerk_row ? std::max(-share * a, sd - share * j * dt) : -share * a;
           // nor faster than the joints' boxes let it drop this step (a joint at its
@@ -197,10 +215,13 @@ void register_collision_braking(nb::module_& m) {
       "the damper rows' bounds (in place) made ones an arm with acceleration (and jerk) limits\n"
       "can keep. Along row i the closing speed s_i = A_i q_dot changes at up to a_i = sum_j\n"
       "|A_ij| accelerations_j (m/s^2), and that rate at up to j_i = sum_j |A_ij| jerks_j (m/s^3;\n"
-      "jerks None: no limit). With h = b_i / rate the row's excess over its margin (m; rate =\n"
+      "jerks None: no limit), or where slower the chord (a_i + A_i ddq) / T_i of the row's\n"
+      "deceleration as each joint ramps its own from -sign(A_ij) ddq_j to its limit, the last\n"
+      "one at T_i. With h = b_i / rate the row's excess over its margin (m; rate =\n"
       "gain / dt), in the relative closing speed c_i = s_i + u_i of a pair whose other side\n"
       "comes at u_i = -carried_i (m/s; carried None: 0), and the bound returned on s_i:\n"
-      "  - b_i = min(b_i, v(h)) - u_i, v the closing speed that, held for tau = dt + a / j and\n"
+      "  - b_i = min(b_i, v(h)) - u_i, v the closing speed that, held for tau = dt + min(a_i /\n"
+      "    j_i, 2 max_j accelerations_j / jerks_j over the row's joints) and\n"
       "    then braked at a = share a_i (j = share j_i), covers h: v tau + v^2 / (2 a) = h (a\n"
       "    row inside its margin separates no faster than v(|h|)); with jerks, where v > c_i,\n"
       "    the fastest closing speed x this step can reach (its acceleration at most the row's\n"
@@ -224,7 +245,7 @@ void register_collision_braking(nb::module_& m) {
       "    as above with u_i cut to that retreat, and needs_i (needs (k,), if given; NaN for\n"
       "    every other row) the bound as above, below it: the row is given up, the stage keeps\n"
       "    it within the acceleration and jerk limits, never yielding them for it.\n"
-      "The row's j_i assumes its joints ramp together, as tau does.\n"
+      "The row's j_i and tau bound what its joints give, each at its own limits.\n"
       "reach_accelerations and reach_jerks (each None: accelerations, jerks) are the joints' own\n"
       "limits where the budget given is a share of them.\n"
       "A (k, N), b, carried, needs (k,), dq, ddq, accelerations, jerks and the reach limits\n"
@@ -251,10 +272,10 @@ void register_collision_braking(nb::module_& m) {
         ArmLimits limits = arm_limits(accelerations, jerks, N, "braking_reach");
         const double* acc = limits.accelerations.data();
         const double* jerk = limits.jerks ? limits.jerks->data() : nullptr;
-        double tau = dt;
+        double tau = dt;  // (and the ramp stoppable_rows holds the speed for: at most 2 a / j)
         for (Index j = 0; j < N; ++j)
           if (jerk && jerk[j] > 0.0 && std::isfinite(jerk[j]) && std::isfinite(acc[j]))
-            tau = std::max(tau, dt + acc[j] / jerk[j]);
+            tau = std::max(tau, dt + 2.0 * acc[j] / jerk[j]);
         auto L = lever.matrix();
         for (Index k = 0; k < npairs; ++k) {
           // s: the pair's closing speed bound after this step, T: the joints' time to stop
@@ -277,8 +298,8 @@ void register_collision_braking(nb::module_& m) {
       "row may have to start braking the pair. With w_j = |dq_j| + accelerations_j dt (a\n"
       "joint's speed after this step at most), s_k = sum_j lever_kj w_j bounds the pair's\n"
       "closing speed (lever (npairs, N): m per unit of q_dot_j), T_k = max_j w_j /\n"
-      "accelerations_j over the joints that move it, tau = dt + max_j accelerations_j / jerks_j\n"
-      "(jerks None: dt).");
+      "accelerations_j over the joints that move it, tau = dt + 2 max_j accelerations_j /\n"
+      "jerks_j (the longest ramp stoppable_rows holds a speed for; jerks None: dt).");
 }
 
 }  // namespace sjt
