@@ -90,6 +90,8 @@ void Controller::reset() {
   stall_run = -1.0;
   stall_wait = 1e300;
   resting = false;
+  start_error = 1e300;
+  start_run = false;
   nearest.forget();
   bent_ready_ = false;
   exact = false;

@@ -88,6 +88,10 @@ class Controller {
   // method's projected onto the first rest_rank columns of rest_keep (nv x rest_rank,
   // row-major, orthonormal: the directions other than the minimum's flat ones)
   bool resting = false;
+  // settle's start from rest: |e_w| when the last one began (inf: none), and whether the
+  // arm is still in it
+  double start_error = 1e300;
+  bool start_run = false;
   Vector rest_keep;
   Index rest_rank = 0;
   // the first level's pose errors take their exact rows (exact_rows; set after `still`
@@ -175,13 +179,16 @@ class Controller {
                            const Eigen::Ref<const Vector>& b,
                            const Eigen::Ref<const RowMatrix>& H,
                            const Eigen::Ref<const Vector>& hd, double ball);
-  void cauchy_point(const Eigen::Ref<const RowMatrix>& J0, double ball);
+  void cauchy_point(const Eigen::Ref<const RowMatrix>& J0, const Vector& a, const Vector& lo,
+                    const Vector& hi, double ball);
   double trusted_share(const Eigen::Ref<const RowMatrix>& J0, double along, double jj,
                        double xx);
   double measured_bend(const Eigen::Ref<const RowMatrix>& J0);
   bool range_goal(const Eigen::Ref<const RowMatrix>& J0, const double* q, double K, bool user,
                   const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b,
                   const double* room);
+  bool fit_within_box(const Eigen::Ref<const RowMatrix>& J0, const Eigen::Ref<const RowMatrix>& A,
+                      const Eigen::Ref<const Vector>& b);
   void rest_along_flat();
   void settle(const Eigen::Ref<const RowMatrix>& J0, const double* q,
               const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b,
@@ -253,6 +260,8 @@ class Controller {
   Vector goal_xb_, goal_lam_, goal_lo_, goal_hi_, goal_, goal_y_, goal_e_, goal_d_, goal_room_,
       method_top_;
   JointBox rest_box_;      // settle: the box of braking to rest
+  // fit_within_box: its box about the velocity, J0 (desired - v), the velocity it found
+  Vector fit_lo_, fit_hi_, fit_a_, fit_v_;
   bool goal_rows_ = false;  // a row's room binds range_goal's displacement (settle applies)
   bool replaced_ = false;  // range_goal replaced the first level's feedback this step
   Method lower_;

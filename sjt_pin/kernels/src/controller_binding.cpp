@@ -213,6 +213,8 @@ void register_controller(nb::module_& m) {
       .def_rw("stall_run", &Controller::stall_run)
       .def_rw("stall_wait", &Controller::stall_wait)
       .def_rw("resting", &Controller::resting)
+      .def_rw("start_error", &Controller::start_error)
+      .def_rw("start_run", &Controller::start_run)
       .def_rw("rest_rank", &Controller::rest_rank)
       .def_prop_ro("rest_keep",
                    [](Controller& c) { return view<WriteView>(c, c.rest_keep.data(), c.nv * c.nv); },
