@@ -3,6 +3,7 @@
 import copy
 import pickle
 
+import coal
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -189,7 +190,6 @@ def test_a_copy_at_a_rest_takes_the_rows_the_original_takes(how):
     assert not np.array_equal(run(fresh, q, [target] * 200), ahead)  # (the case under test)
 
 
-
 @pytest.mark.parametrize("how", ["pickle", "deepcopy"])
 def test_a_copy_carries_where_the_last_start_from_rest_began(ur5, how):
     """UR5 above a table under jerk limits, its target below it, comes to rest 4 mm above the
@@ -197,8 +197,6 @@ def test_a_copy_carries_where_the_last_start_from_rest_began(ur5, how):
     than it did: a copy made there carries that memory and stays at rest as the original does
     (one without it starts again). To 1e-9 rad, not bitwise: a copy of a `CollisionLimit`
     differs from its original in the last bits (1e-15 rad here), a known gap."""
-    import coal
-
     q = ur5.q0.copy()
     hand = ur5.fk(q).translation
     table = (coal.Box(0.3, 0.3, 0.02), pin.SE3(np.eye(3), hand + [0.0, 0.0, -0.13]))

@@ -321,8 +321,12 @@ void Controller::settle(const Eigen::Ref<const RowMatrix>& J0, const double* q,
   if (targets == 0) return;
   goal_y_.noalias() = J0 * velocity;
   const auto e = goal_e_.head(targets), moved = goal_y_.head(targets);
+  // a resting arm's rate, and what the model cannot tell from none, for the motion in `moved`
+  const auto rest_rate = [&] {
+    return std::max(kRestRate * e.squaredNorm(), kAligned * e.norm() * moved.norm());
+  };
   double rate = e.dot(moved);
-  double rest = std::max(kRestRate * e.squaredNorm(), kAligned * e.norm() * moved.norm());
+  double rest = rest_rate();
   // (a start: jerk limits, every joint within the speed one step or one jerk ramp gives it)
   bool slow = true;
   for (Index j = 0; j < nv; ++j) {
@@ -336,17 +340,15 @@ void Controller::settle(const Eigen::Ref<const RowMatrix>& J0, const double* q,
   // a new start only where the last one brought the error down by kStartProgress of itself
   const bool may_start = slow && (start_run || error < (1.0 - kStartProgress) * start_error);
   if (may_start && fit_within_box(J0, A, b)) {
-    goal_y_.noalias() = J0 * fit_v_;
+    goal_y_.noalias() = J0 * fit_v_;  // (the fit's motion: not read again where not taken)
     const double fit_rate = e.dot(moved);
     if (fit_rate > rate) {
       if (!start_run) start_error = error;
       start_run = true;
       velocity = fit_v_;
       rate = fit_rate;
-      rest = std::max(kRestRate * e.squaredNorm(), kAligned * e.norm() * moved.norm());
+      rest = rest_rate();
       if (!(rate < 2.0 * rest)) return;
-    } else {
-      goal_y_.noalias() = J0 * velocity;
     }
   }
   rest_box_ = box;
