@@ -7,8 +7,9 @@ and general rows ``A q_dot <= b``, and the projection (``projection.hpp``) that 
 method's step where it is within every limit and else the admissible velocity nearest it in
 the method's metric. This module gathers what the user's limits say at a step (each limit's
 ``bounds`` intersected, its ``rows`` stacked, each row's owner kept for
-:attr:`StepInfo.active_rows <sjt_pin.StepInfo.active_rows>`) and turns the compiled report's
-codes into ``(limit, joint)`` names.
+:attr:`StepInfo.active_rows <sjt_pin.StepInfo.active_rows>`; beside acceleration limits, the
+rows with room of a limit that does not brake its own cut to closing speeds the arm can stop
+within that room) and turns the compiled report's codes into ``(limit, joint)`` names.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from . import kernels
-from .limits.base import Limit, Motion
+from .limits.base import BRAKING_SHARE, EASING_SLACK, Limit, Motion
 
 _F64 = np.dtype(np.float64)
 #: a velocity this close to a bound (rad/s, m/s) is on it (the compiled stage's own tolerance)
@@ -71,12 +72,20 @@ class UserLimits:
         #: <sjt_pin.limits.Limit.room>`; NaN for rows that bound velocity only), None where no
         #: limit gives one
         self.room: np.ndarray | None = None
+        #: which of the last evaluation's rows have bounds their limit made a damper of their
+        #: room (k,; 1, e.g. a collision limit's) and which the stage braked to their room
+        #: itself (0: a bound that may say nothing of the room, such as a speed cap), None
+        #: where the stage braked none
+        self.dampers: np.ndarray | None = None
         self._blocks: list[tuple[Limit, np.ndarray, np.ndarray]] = []
         # per limit: whether it has bounds of its own (the base class's say nothing, and are
         # not called each step); whether any limit has a room of its own (the same)
         self._plan = [(k, limit, type(limit).bounds is not Limit.bounds)
                       for k, limit in enumerate(self.limits)]
         self._any_room = any(type(limit).room is not Limit.room for limit in self.limits)
+        # whether any limit with a room of its own leaves its rows' braking to the stage
+        self._braked_here = any(type(limit).room is not Limit.room and not limit.brakes_rows
+                                for limit in self.limits)
         self._any_needs = any(type(limit).needs is not Limit.needs for limit in self.limits)
 
     def evaluate(self, kinematics, motion: Motion):
@@ -111,7 +120,7 @@ class UserLimits:
                 # raise_non_finite_rows names the limit)
                 blocks.append((limit, Ak, bk))
                 owners += [limit.name] * bk.size
-        room = None
+        room = asked = dampers = None
         if blocks:
             if len(blocks) == 1:
                 _, A, b = blocks[0]
@@ -119,11 +128,36 @@ class UserLimits:
                 A = np.vstack([a for _, a, _ in blocks])
                 b = np.concatenate([c for _, _, c in blocks])
             room = self._stacked(blocks, "room") if self._any_room else None
-        self.room = room
+            asked = b
+            if room is not None and self._braked_here and motion.acceleration_limits is not None:
+                b, dampers = self._braked(blocks, A, b, room, motion)
+        self.room, self.dampers = room, dampers
         self.needs = self._stacked(blocks, "needs") if self._any_needs and blocks else None
         self._blocks = blocks
-        self.last_rows = None if A is None or b is None else (A, b, owners)
+        # (the rows as their limits ask them: what rows_exceeded measures a step against)
+        self.last_rows = None if A is None or asked is None else (A, asked, owners)
         return lower, upper, A, b, owners
+
+    @staticmethod
+    def _braked(blocks: list[tuple[Limit, np.ndarray, np.ndarray]], A: np.ndarray,
+                b: np.ndarray, room: np.ndarray, motion: Motion
+                ) -> tuple[np.ndarray, np.ndarray | None]:
+        """The rows' bounds ``b`` with each row that has a room and whose limit does not brake
+        its own rows (:attr:`Limit.brakes_rows <sjt_pin.limits.Limit.brakes_rows>`) lowered to
+        closing speeds the arm stops within that room at half its acceleration (and jerk)
+        limits, never asked to slow faster than they allow (``kernels.stoppable_rows``): a
+        new array (the limits' own are not written); and :attr:`dampers` (None where no row
+        was braked here)."""
+        own = np.concatenate([np.full(bk.size, 1.0 if limit.brakes_rows else 0.0)
+                              for limit, _, bk in blocks])
+        mine = np.where(own == 0.0, room, np.nan)
+        if not np.isfinite(mine).any():
+            return b, None
+        b = np.array(b, dtype=float)
+        kernels.stoppable_rows(A, b, motion.dq, motion.ddq, motion.acceleration_limits,
+                               motion.jerk_limits, 1.0 / motion.dt, motion.dt, BRAKING_SHARE,
+                               EASING_SLACK, room=mine)
+        return b, own
 
     @staticmethod
     def _stacked(blocks: list[tuple[Limit, np.ndarray, np.ndarray]], name: str

@@ -207,15 +207,15 @@ class Solver:
             if not stack.trusted:
                 J, e, ff = stack.contiguous(J, e, ff)
             # 2. the user's limits at q
-            lower = upper = A = b = owners = room = needs = None
+            lower = upper = A = b = owners = room = needs = dampers = None
             if self._user is not None:
                 self._motion.q = q
                 lower, upper, A, b, owners = self._user.evaluate(stack.kinematics, self._motion)
-                room, needs = self._user.room, self._user.needs
+                room, needs, dampers = self._user.room, self._user.needs, self._user.dampers
             # 3. method and stage, compiled (a method of your own: its matrix called there)
             try:
                 status = self._controller.run(J, e, ff, q, self._step, self._matrix, lower,
-                                              upper, A, b, room, needs)
+                                              upper, A, b, room, needs, dampers)
             except ValueError:
                 if self._user is not None:  # (a limit's rows the stage refused: name it)
                     self._user.raise_non_finite_rows()

@@ -36,7 +36,8 @@ vector. The numpy references that pin them are in ``tests/``.
   (``src/transforms.cpp``): the tasks' small transforms and the door's manifold check of q;
 - the collision limit's kernels (:mod:`sjt_pin.limits.collision`, ``src/collision.hpp``):
   ``damper_rows``: its velocity-damper rows from its pairs' closest points;
-  ``stoppable_rows``: their bounds cut to closing speeds the acceleration limits can stop, and
+  ``stoppable_rows``: their bounds cut to closing speeds the acceleration limits can stop (also
+  a user's rows with room, :mod:`sjt_pin.constraints`), and
   ``braking_reach``: each pair's influence for an arm with acceleration limits
   (``src/collision_braking.cpp``); ``witness_rows``: the rows of its pairs' remembered closest
   points (and their memory); ``near_pairs``: the pairs it must query, or whether its broad

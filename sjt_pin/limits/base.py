@@ -28,6 +28,14 @@ import numpy as np
 
 from ..kinematics import Kinematics
 
+#: the share of each joint's acceleration (and jerk) limit a row with room counts on to stop
+#: its closing speed within that room (``kernels.stoppable_rows``); the rest is the task's and
+#: the other rows'
+BRAKING_SHARE = 0.5
+#: beside acceleration limits a row that turns or appears eases in at what they allow as long as
+#: its room stays above minus this (m) (``kernels.stoppable_rows``)
+EASING_SLACK = 5e-4
+
 
 @dataclass
 class Motion:
@@ -56,10 +64,18 @@ class Limit:
         name: how :class:`~sjt_pin.StepInfo` names the limit when it is active.
         uses_motion: whether :meth:`bounds` or :meth:`rows` read ``motion.dq`` or
             ``motion.ddq`` (informational: the solver always keeps them).
+        brakes_rows: whether :meth:`rows` already cuts the bounds of its rows with
+            :meth:`room` to closing speeds the motion's acceleration (and jerk) limits can
+            stop within that room (as :class:`~sjt_pin.CollisionLimit` does). Where not
+            (the default), the solver does it beside acceleration limits: each such row's
+            bound is kept, and lowered ahead of the room so that the arm brakes to it within
+            half of those limits (``kernels.stoppable_rows``), never asked to slow faster
+            than they allow.
     """
 
     name: str = "limit"
     uses_motion: bool = True
+    brakes_rows: bool = False
 
     def bounds(self, kinematics: Kinematics, motion: Motion
                ) -> tuple[np.ndarray, np.ndarray] | None:
@@ -77,10 +93,12 @@ class Limit:
         """How far the rows of the last :meth:`rows` let the joints move: ``r`` (k,) with
         ``A d <= r`` for a displacement ``d`` (rad or m; for a distance row its distance minus
         its margin, m), NaN (or inf) for a row that bounds velocity only; ``None`` (the
-        default) where the rows bound velocity only. Under acceleration limits, where the
-        displacement the task's feedback asks would break a row's room or leave a position
-        range, the arm is sent to the nearest displacement within them and so brakes to rest
-        at the constrained minimum of its task error rather than sliding along the bound."""
+        default) where the rows bound velocity only. Under acceleration limits, each row's
+        bound is lowered to closing speeds the arm can stop within its room (unless
+        :attr:`brakes_rows`), and where the displacement the task's feedback asks would break
+        a row's room or leave a position range, the arm is sent to the nearest displacement
+        within them and so brakes to rest at the constrained minimum of its task error rather
+        than sliding along the bound."""
         return None
 
     def needs(self) -> np.ndarray | None:

@@ -82,7 +82,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..kernels import braking_reach, near_pairs, stoppable_rows
-from .base import Limit, Motion
+from .base import BRAKING_SHARE, EASING_SLACK, Limit, Motion
 from .collision_broad_phase import BroadPhaseMixin
 from .collision_geometry import (
     ClosestPoints,
@@ -103,15 +103,9 @@ from .position import PositionLimit
 
 __all__ = ["ClosestPoints", "CollisionLimit", "CollisionError", "PairDistance"]
 
-#: the share of each joint's acceleration (and jerk) limit a damper row counts on to stop its
-#: pair's closing speed (``kernels.stoppable_rows``); the rest is the task's and the other rows'
-BRAKING_SHARE = 0.5
 #: the most recent closest points a pair may keep as rows of their own (``witnesses``): a
 #: contact manifold has a few; each one costs a row on every step the pair is near
 MAX_WITNESSES = 16
-#: with acceleration limits a row that turns or appears eases in at what they allow as long as
-#: its pair stays at least ``margin`` minus this (m) apart (``kernels.stoppable_rows``)
-EASING_SLACK = 5e-4
 
 
 class CollisionLimit(PairsMixin, TablesMixin, BroadPhaseMixin, MovingMixin, RowsMixin,
@@ -157,6 +151,7 @@ class CollisionLimit(PairsMixin, TablesMixin, BroadPhaseMixin, MovingMixin, Rows
     name: str = "collision"
     uses_motion: bool = False  # its rows depend on q and dt (and, with acceleration limits,
     # on motion.dq and motion.ddq, which the solver then keeps up to date anyway)
+    brakes_rows: bool = True  # (rows(): stoppable_rows, with its moving obstacles' speeds)
 
     def __init__(self, robot, obstacles: Sequence = (), self_collision: bool = False,
                  margin: float = 0.01, influence: float = 0.05, gain: float = 0.5,

@@ -31,8 +31,7 @@ import numpy as np
 from ..kernels import stoppable_rows
 from ..robot_frames import find_frame
 from ..validation import real_number
-from .base import Limit, Motion
-from .collision import BRAKING_SHARE, EASING_SLACK
+from .base import BRAKING_SHARE, EASING_SLACK, Limit, Motion
 
 
 def convex_hull(points: np.ndarray) -> np.ndarray:

@@ -51,7 +51,8 @@ void register_collision_braking(nb::module_& m) {
       [](nb::handle A_obj, nb::handle b_obj, nb::handle dq_obj, nb::handle ddq_obj,
          nb::handle accelerations, nb::handle jerks, double rate, double dt, double share,
          double slack, nb::handle reach_accelerations, nb::handle reach_jerks,
-         nb::handle carried_obj, nb::handle speeds_obj, nb::handle needs_obj) {
+         nb::handle carried_obj, nb::handle speeds_obj, nb::handle needs_obj,
+         nb::handle room_obj) {
         if (!(rate > 0.0 && dt > 0.0 && share > 0.0 && share <= 1.0 && slack >= 0.0))
           fail("stoppable_rows: rate and dt must be > 0, share in (0, 1], slack >= 0");
         const Array A(A_obj, "A", 2);
@@ -66,14 +67,16 @@ void register_collision_braking(nb::module_& m) {
               << dq.size() << ",), ddq (" << ddq.size() << ",)";
           fail(out.str());
         }
-        std::optional<Array> carried, speeds, needs;
+        std::optional<Array> carried, speeds, needs, room;
         if (!carried_obj.is_none()) carried.emplace(carried_obj, "carried", 1);
+        if (!room_obj.is_none()) room.emplace(room_obj, "room", 1);
         if (!speeds_obj.is_none()) speeds.emplace(speeds_obj, "speeds", 2);
         if (!needs_obj.is_none()) needs.emplace(needs_obj, "needs", 1, Access::write);
         if ((carried && carried->size() != k) || (needs && needs->size() != k) ||
+            (room && room->size() != k) ||
             (speeds && (speeds->rows() != 2 || speeds->cols() != N))) {
           std::ostringstream out;
-          out << "stoppable_rows: carried and needs must hold one number per row (" << k
+          out << "stoppable_rows: carried, needs and room must hold one number per row (" << k
               << ") and speeds (2, " << N << ") two per joint: they do not fit";
           fail(out.str());
         }
@@ -134,6 +137,12 @@ void register_collision_braking(nb::module_& m) {
           // normal velocity; the row bounds the relative closing speed s + u, u = -carried)
           const double shift = carried ? carried->data()[i] : 0.0;
           if (needs) needs->data()[i] = std::numeric_limits<double>::quiet_NaN();
+          // a row given its room (a user's: A d <= room_i) keeps its own bound, cut below it
+          // only to what the arm can stop within that room; a row without room there (NaN,
+          // inf) bounds velocity only and is left as it is
+          const bool given = room.has_value();
+          const double room_i = given ? room->data()[i] : 0.0;
+          if (given && !std::isfinite(room_i)) continue;
           if (!(a > 0.0) || !std::isfinite(a)) {  // no joint moves it, or no limit
             bound[i] += shift;
             continue;
@@ -151,7 +160,7 @@ void register_collision_braking(nb::module_& m) {
           // s to reach a at that jerk, at most the time each joint takes from its limit one
           // way to its limit the other (braking_reach's)
           const double ramp = jerk_row ? std::min(a / j, 2.0 * rise) : 0.0;
-          const double damper = bound[i], h = damper / rate;
+          const double damper = bound[i], h = given ? room_i : damper / rate;
           const double r0 = jerk_row ? std::max(-share * a, sd - share * j * dt) : -share * a;
           // nor faster than the joints' boxes let it drop this step (a joint at its
           // acceleration limit, or held by its jerk limit, gives less than its share)
@@ -175,7 +184,7 @@ void register_collision_braking(nb::module_& m) {
                 if (x < top) v = x;
               }
             }
-            double out = h >= 0.0 ? std::min(damper, v) : std::max(damper, v);
+            double out = given ? v : h >= 0.0 ? std::min(damper, v) : std::max(damper, v);
             // ... as long as the pair, braking at the whole limits, stops margin - slack
             // apart: under a jerk limit from the acceleration this step's speed leaves (x -
             // s) / dt, ramped to a_i at j_i (largest_stoppable), not as if held for the whole
@@ -193,7 +202,9 @@ void register_collision_braking(nb::module_& m) {
             return out - u;  // (the arm's closing speed)
           };
           const double u = -shift;
-          if (vmax && u > retreat) {
+          if (given) {
+            bound[i] = std::min(bound[i], cut(u));
+          } else if (vmax && u > retreat) {
             // outrun: the obstacle comes faster than the arm can retreat along the row within
             // its speed limits and ranges, so no yielding of the acceleration and jerk limits
             // holds the margin: its approach counts up to that retreat, and needs says what the
@@ -210,8 +221,10 @@ void register_collision_braking(nb::module_& m) {
       nb::arg("slack"), nb::arg("reach_accelerations").none() = nb::none(),
       nb::arg("reach_jerks").none() = nb::none(), nb::arg("carried").none() = nb::none(),
       nb::arg("speeds").none() = nb::none(), nb::arg("needs").none() = nb::none(),
+      nb::arg("room").none() = nb::none(),
       "stoppable_rows(A, b, dq, ddq, accelerations, jerks, rate, dt, share, slack,\n"
-      "reach_accelerations=None, reach_jerks=None, carried=None, speeds=None, needs=None):\n"
+      "reach_accelerations=None, reach_jerks=None, carried=None, speeds=None, needs=None,\n"
+      "room=None):\n"
       "the damper rows' bounds (in place) made ones an arm with acceleration (and jerk) limits\n"
       "can keep. Along row i the closing speed s_i = A_i q_dot changes at up to a_i = sum_j\n"
       "|A_ij| accelerations_j (m/s^2), and that rate at up to j_i = sum_j |A_ij| jerks_j (m/s^3;\n"
@@ -246,6 +259,11 @@ void register_collision_braking(nb::module_& m) {
       "    every other row) the bound as above, below it: the row is given up, the stage keeps\n"
       "    it within the acceleration and jerk limits, never yielding them for it.\n"
       "The row's j_i and tau bound what its joints give, each at its own limits.\n"
+      "room (k,), if given: the rows are a user's, A d <= room_i for a displacement d (NaN, inf:\n"
+      "a row of velocity only, left as it is): h = room_i (rate unused) and b_i = min(b_i, B_i),\n"
+      "B_i the bound above for a damper without a bound of its own: the row's own bound is\n"
+      "kept, cut below it only to closing speeds the arm can stop within room_i, never faster\n"
+      "than the limits let it drop.\n"
       "reach_accelerations and reach_jerks (each None: accelerations, jerks) are the joints' own\n"
       "limits where the budget given is a share of them.\n"
       "A (k, N), b, carried, needs (k,), dq, ddq, accelerations, jerks and the reach limits\n"

@@ -140,7 +140,7 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
                     const double* matrix, const double* user_lo,
                     const double* user_hi, const Eigen::Ref<const RowMatrix>& A,
                     const Eigen::Ref<const Vector>& b, const double* room,
-                    const double* needs) {
+                    const double* needs, const double* dampers) {
   const Index n = nv;
   // 1. the weighted rows of the moving joints
   Jw_.noalias() = sqrt_weight.asDiagonal() * J * moving.asDiagonal();
@@ -213,7 +213,8 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
   const double K = matrix ? given_gain
                           : (counted > 0 ? gains.segment(L0.begin, counted).mean() : 0.0) *
                                 top.gain;
-  replaced_ = bounds.smooth && K > 0.0 && range_goal(J0, q, K, matrix != nullptr, A, b, room);
+  replaced_ = bounds.smooth && K > 0.0 && range_goal(J0, q, K, matrix != nullptr, A, b, room,
+                                                               dampers);
   // 3. the lower levels
   fb = fb0_;
   ff = ff0_;

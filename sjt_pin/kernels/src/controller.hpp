@@ -43,15 +43,17 @@ class Controller {
   // One step: J (m x nv), e (m), ff (m) or none, q (nq); matrix: a user method's M (nv x r0,
   // row-major, r0 the first level's rows) mapping the first level instead of the built-in
   // method; user bounds (nv), rows A (k x nv), b (k), the rows' room (k; A d <= room for
-  // a displacement d, NaN: none) or null, and what the rows need (k; NaN: b; below b: the
+  // a displacement d, NaN: none) or null, what the rows need (k; NaN: b; below b: the
   // row is given up, kept only within the acceleration and jerk limits, never yielding
-  // them) or null.
+  // them) or null, and which rows' bounds are their limit's damper of their room (k; 0: a
+  // row the stage braked, whose bound says nothing of the room) or null (all of them).
   // Writes the displacement q_dot dt into `step` (nv); returns the status bits.
   int run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const Vector>& e,
           const double* ff, const double* q, Eigen::Ref<Vector> step, const double* matrix,
           const double* user_lo, const double* user_hi,
           const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b,
-          const double* room = nullptr, const double* needs = nullptr);
+          const double* room = nullptr, const double* needs = nullptr,
+          const double* dampers = nullptr);
 
   // A user method's matrix, before run(): the first level's weighted rows of J (m x nv), as
   // the step weighs them, into `rows` (r0 x nv, row-major: the rows the method is given).
@@ -186,7 +188,7 @@ class Controller {
   double measured_bend(const Eigen::Ref<const RowMatrix>& J0);
   bool range_goal(const Eigen::Ref<const RowMatrix>& J0, const double* q, double K, bool user,
                   const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b,
-                  const double* room);
+                  const double* room, const double* dampers);
   bool fit_within_box(const Eigen::Ref<const RowMatrix>& J0, const Eigen::Ref<const RowMatrix>& A,
                       const Eigen::Ref<const Vector>& b);
   void rest_along_flat();

@@ -143,7 +143,7 @@ void register_controller(nb::module_& m) {
           [](Controller& c, nb::handle J, nb::handle e, nb::handle ff, nb::handle q,
              nb::handle step, nb::handle matrix, nb::handle lower,
              nb::handle upper, nb::handle A, nb::handle b, nb::handle room,
-             nb::handle needs) -> int {
+             nb::handle needs, nb::handle dampers) -> int {
             Array Ja(J, "J", 2), ea(e, "e", 1), qa(q, "q", 1), sa(step, "step", 1, Access::write);
             Ja.shape(c.m, c.nv);
             ea.length(c.m);
@@ -168,14 +168,15 @@ void register_controller(nb::module_& m) {
               Aa.shape(ba.size(), c.nv);
               Aa.finite();
               ba.no_nan();
-              std::optional<Array> s5, s6;
+              std::optional<Array> s5, s6, s7;
               const double* rp = optional(room, "room", ba.size(), s5);
               const double* np = optional(needs, "needs", ba.size(), s6);
+              const double* dp = optional(dampers, "dampers", ba.size(), s7);
               return c.run(Ja.matrix(), ea.vector(), ffp, qa.data(), sa.vector(), mp, lo,
-                           hi, Aa.matrix(), ba.vector(), rp, np);
+                           hi, Aa.matrix(), ba.vector(), rp, np, dp);
             }
-            if (!room.is_none() || !needs.is_none())
-              fail("room and needs come with rows A and b");
+            if (!room.is_none() || !needs.is_none() || !dampers.is_none())
+              fail("room, needs and dampers come with rows A and b");
             RowMatrix none(0, c.nv);
             Vector nob(0);
             return c.run(Ja.matrix(), ea.vector(), ffp, qa.data(), sa.vector(), mp, lo, hi,
@@ -185,13 +186,17 @@ void register_controller(nb::module_& m) {
           nb::arg("matrix").none(), nb::arg("lower").none(),
           nb::arg("upper").none(), nb::arg("A").none(), nb::arg("b").none(),
           nb::arg("room").none() = nb::none(), nb::arg("needs").none() = nb::none(),
-          "run(J, e, ff, q, step, matrix, lower, upper, A, b, room=None, needs=None) -> "
+          nb::arg("dampers").none() = nb::none(),
+          "run(J, e, ff, q, step, matrix, lower, upper, A, b, room=None, needs=None, "
+          "dampers=None) -> "
           "status: one step (matrix: a user method's M(J) of the first level's weighted rows, "
           "or its function of those rows, called with a new array of them; room: the "
           "displacement each row allows, A d <= room, NaN where a row bounds velocity only; "
           "needs: NaN where a row's bound is what its limit needs, else the row is given up "
-          "and kept only within the acceleration and jerk limits); None for what a step does "
-          "not have.")
+          "and kept only within the acceleration and jerk limits; dampers: 1 where a row's "
+          "bound is its limit's damper of its room, 0 where the stage braked it (its bound "
+          "says nothing of the room), None: 1 for every row); None for what a step does not "
+          "have.")
       .def("set_dt", &Controller::set_dt)
       .def("set_gains", &Controller::set_gains, nb::arg("gains"), nb::arg("auto_gain"),
            nb::arg("factor"))

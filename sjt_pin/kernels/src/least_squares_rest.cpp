@@ -213,16 +213,23 @@ double Controller::measured_bend(const Eigen::Ref<const RowMatrix>& J0) {
 // the motion the method asks of them as equalities. At a constrained stationary point of the
 // error it is 0, and every joint brakes to rest there. The lower levels are then computed on
 // it. The general rows whose `room` is given (A d <= room: a collision pair's distance less its
-// margin; NaN or inf: a row of velocity only) bound it too, by min(room, b / K), what the row's
-// velocity bound lets the gain cover, and one the displacement breaks also calls for it: an arm
-// whose target lies behind an obstacle slid along it under acceleration limits (16 of 18
-// blocked scenes on KUKA iiwa, xArm6 and UR3 still moved after 8 s; with the room, none).
+// margin; NaN or inf: a row of velocity only) bound it too, and one the displacement breaks
+// also calls for it: an arm whose target lies behind an obstacle slid along it under
+// acceleration limits (16 of 18 blocked scenes on KUKA iiwa, xArm6 and UR3 still moved after
+// 8 s; with the room, none). A row whose bound is its limit's damper of its room (`dampers`: a
+// collision pair's) bounds it by min(room, b / K), what that bound lets the gain cover (with
+// room alone, xArm7 slid along a table's margin at 2.5 rad/s, and its jerk limit yielded 8
+// times); a row the stage braked itself (a user's, whose bound may be a speed cap) by its room
+// alone: b / K, 0.1 mm for a floor approached at 0.1 m/s, or one step at the braked speed, sent
+// the arm nowhere, and Panda, UR5 and Kinova never left their start 5 cm above two floors they
+// were sent through (27 of 72 runs; with the room alone 2, and 64 rest on the floors).
 // True: it replaced the feedback (its box holds 0: a joint outside its range returns by the
 // position bounds; a row's room is at least 0: a pair inside its margin moves out by its
 // velocity rows).
 bool Controller::range_goal(const Eigen::Ref<const RowMatrix>& J0, const double* q, double K,
                             bool user, const Eigen::Ref<const RowMatrix>& A,
-                            const Eigen::Ref<const Vector>& b, const double* room) {
+                            const Eigen::Ref<const Vector>& b, const double* room,
+                            const double* dampers) {
   // (a joint outside its range counts only where the displacement takes it further out; a
   // row already broken, only where the displacement breaks it further)
   bool crosses = false;
@@ -234,7 +241,8 @@ bool Controller::range_goal(const Eigen::Ref<const RowMatrix>& J0, const double*
   const bool rows_with_room = k > 0;
   goal_room_.resize(k);
   for (Index i = 0; i < k; ++i) {
-    goal_room_[i] = std::isfinite(room[i]) ? std::max(std::min(room[i], b[i] / K), 0.0) : kInf;
+    const double cap = dampers == nullptr || dampers[i] != 0.0 ? b[i] / K : kInf;
+    goal_room_[i] = std::isfinite(room[i]) ? std::max(std::min(room[i], cap), 0.0) : kInf;
     if (!crosses && std::isfinite(goal_room_[i])) {
       const double closing = A.row(i).dot(fb0_) / K;
       crosses = closing > goal_room_[i];
