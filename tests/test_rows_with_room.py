@@ -77,6 +77,7 @@ FRAMES = {"ur5": ["ee_link", "wrist_3_link"], "panda": ["panda_hand", "panda_lin
     ("kinova", 1.0, 500.0, "dls"),  # 4.3x / 8.5x
     ("kinova", 0.3, None, "sjt"),   # never left its start: a joint at its range's end
     ("panda", 0.1, 500.0, "dls"),   # never left its start
+    ("panda", 0.1, None, "sjt"),    # never left its start (a start without jerk limits)
     ("panda", 0.3, 2000.0, "dls"),  # never left its start
 ])
 def test_an_arm_sent_through_a_users_floor_rests_on_it_within_every_limit(name, speed, ratio,

@@ -293,6 +293,11 @@ bool Controller::range_goal(const Eigen::Ref<const RowMatrix>& J0, const double*
                               goal_y_.head(0), C, goal_d_, goal_);
   if (!report_goal.converged || !goal_.allFinite()) return false;
   goal_rows_ = report_goal.rows_active > 0;
+  goal_dampers_ = false;
+  for (Index i = 0; goal_rows_ && i < k; ++i)
+    goal_dampers_ = goal_dampers_ ||
+                    ((dampers == nullptr || dampers[i] != 0.0) && std::isfinite(goal_room_[i]) &&
+                     A.row(i).dot(goal_) >= goal_room_[i] - 1e-9 * (1.0 + goal_room_[i]));
   method_top_ = fb0_ + ff0_;
   fb0_ = K * goal_;
   return true;
@@ -320,8 +325,12 @@ bool Controller::range_goal(const Eigen::Ref<const RowMatrix>& J0, const double*
 // gives it). A new start needs the last one to have brought |e_w| down by kStartProgress of
 // itself: starting again and again, arms at a table's margin wandered along it in their
 // self-motion at 0.1-0.7 rad/s for good (UR10, xArm7, UR3; 4 of 22 runs of a survey).
-// Without jerk limits the boxes are not slivers, and starts there kept arms at an obstacle
-// sliding along it (TALOS's arm on the blocked bench: still moving at 8 s).
+// Without jerk limits the boxes are not slivers, and starts where a damper row binds the
+// displacement (b / K: a step's worth along a collision pair's row, not the constrained
+// minimum) kept arms at an obstacle sliding along it (TALOS's arm on the blocked bench: still
+// moving at 8 s); where rooms alone bind it (a user's rows) they start there too: Panda (SJT)
+// sent through a user's floors under acceleration limits alone never left its start, or
+// rested 24 mm above them (4 of 8 runs; now 1, 49 mm above them).
 void Controller::settle(const Eigen::Ref<const RowMatrix>& J0, const double* q,
                         const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b,
                         const double* user_lo, const double* user_hi) {
@@ -335,11 +344,14 @@ void Controller::settle(const Eigen::Ref<const RowMatrix>& J0, const double* q,
   };
   double rate = e.dot(moved);
   double rest = rest_rate();
-  // (a start: jerk limits, every joint within the speed one step or one jerk ramp gives it)
+  // (a start: every joint within the speed one step or one jerk ramp gives it; without jerk
+  // limits only where no damper row binds the displacement, which b / K bounds to a step's
+  // worth along the row: there a start slid along the obstacle)
   bool slow = true;
   for (Index j = 0; j < nv; ++j) {
     const double acc = bounds.acceleration[j], jerk = bounds.jerk[j];
-    slow = slow && std::isfinite(jerk) && std::abs(dq[j]) <= acc * std::max(dt_, acc / jerk);
+    slow = slow && (std::isfinite(jerk) || !goal_dampers_) &&
+           std::abs(dq[j]) <= acc * (std::isfinite(jerk) ? std::max(dt_, acc / jerk) : dt_);
   }
   const double error = e.norm();
   if (!slow) start_run = false;
