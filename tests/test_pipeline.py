@@ -4,6 +4,7 @@ after construction."""
 
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -18,6 +19,8 @@ from sjt_pin.methods.transpose import FF_DAMPING, FLOOR, POSE_LM_WEIGHT
 from sjt_pin.tasks.pose import characteristic_length
 
 from .reference import mappings
+
+URDFS = Path(__file__).parent / "fixtures" / "urdf"  # (whatever the working directory)
 
 DT = 1e-3
 
@@ -192,7 +195,7 @@ def test_dt_and_gain_set_after_construction_act_on_the_next_step(ur5):
 
 
 def test_robots_with_one_moving_joint_and_none():
-    one = sjt.Robot.from_urdf("tests/fixtures/urdf/one_joint.urdf", load_visuals=False)
+    one = sjt.Robot.from_urdf(URDFS / "one_joint.urdf", load_visuals=False)
     target = one.fk(np.array([0.3]))
     for name in ("sjt", "jt", "jp", "dls"):
         for task in (sjt.PoseTask(), sjt.PositionTask(), sjt.OrientationTask()):
@@ -202,6 +205,6 @@ def test_robots_with_one_moving_joint_and_none():
                 q = solver.step(q, target)
             assert solver.error_norm < 1e-6 and solver.last.dq.shape == (1,)
             assert solver.solve(target, one.q0).success
-    zero = sjt.Robot.from_urdf("tests/fixtures/urdf/fixed_only.urdf", load_visuals=False)
+    zero = sjt.Robot.from_urdf(URDFS / "fixed_only.urdf", load_visuals=False)
     with pytest.raises(ValueError, match="has no moving joint"):
         sjt.SJTSolver(zero)
