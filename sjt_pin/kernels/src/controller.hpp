@@ -170,7 +170,7 @@ class Controller {
   bool lower_goal(const Eigen::Ref<const RowMatrix>& J0, const double* q, double K,
                   const Eigen::Ref<const RowMatrix>& A, bool rows);
   // the first level and the stage: the nearest feasible step (feasible_step.cpp), where the
-  // arm rests (least_squares_rest.cpp), a user's method (controller.cpp)
+  // arm rests (least_squares_rest.cpp, settle.cpp), a user's method (controller.cpp)
   bool feasible(const Vector& x, const Eigen::Ref<const RowMatrix>& A,
                 const Eigen::Ref<const Vector>& b, const Vector& lo, const Vector& hi) const;
   void held_by_ranges(const Vector& d, const Vector& lo, const Vector& hi);

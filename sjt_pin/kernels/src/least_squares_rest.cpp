@@ -1,6 +1,6 @@
 // Where the arm rests (controller.hpp): the sufficient decrease of a projected step and its
-// Cauchy point, the measured curvature, the bounded least-squares goal beyond a position range
-// and settling against a row.
+// Cauchy point, the measured curvature, and the bounded least-squares goal beyond a position
+// range (settling against a row: settle.cpp).
 #include "controller.hpp"
 
 #include <algorithm>
@@ -17,19 +17,9 @@ constexpr double kSufficient = 0.25;
 // 1/s: a step that lowers 1/2 |e_w|^2 by less than this share of |e_w|^2 per second makes no
 // progress (StepInfo's STALL_RATE, sjt_pin.step_info)
 constexpr double kStallRate = 1e-6;
-// settle: a motion whose first-order decrease of the error is below this share of
-// |e_w| |J0 v| is one the model cannot tell from an increase (the pose error's log bends the
-// map from J0 v to the error's rate by about |e_w| / 2 of |J0 v|). xArm7 behind an obstacle
-// under acceleration and jerk limits (blocked seed 1, DLS) slid at 0.05 rad/s with its error
-// growing by 2e-4 per second, where the model promised a decrease of 1e-3 of |e_w| |J0 v|;
-// 3e-3 stopped xArm6's blocked seed 2 (SJT) at an error of 0.176 where 1e-3 lets it reach 0.107
-constexpr double kAligned = 1e-3;
 // the share of a step's first-order decrease of 1/2 |e_w|^2 that the measured second-order
 // term may take (trusted_share)
 constexpr double kTrust = 0.5;
-// settle's starts: the share of |e_w| a start must have gained since the last one, and the
-// growth of |e_w| that forgets the last one (a target moved)
-constexpr double kStartProgress = 0.01, kStartReset = 0.05;
 // range_goal's damping, relative to the first level's mean squared column norm: a floor, and
 // a Levenberg-Marquardt term that grows with |e_w| (per task unit). Where a joint sits at its
 // range the Gauss-Newton displacement overshoots in the flat valley of the constrained minimum
@@ -301,111 +291,6 @@ bool Controller::range_goal(const Eigen::Ref<const RowMatrix>& J0, const double*
   method_top_ = fb0_ + ff0_;
   fb0_ = K * goal_;
   return true;
-}
-
-// Where range_goal replaced the feedback and a row's room binds it, a velocity that lowers
-// 1/2 |e_w|^2 by less than a resting arm does (kRestRate), or by less than the model can vouch
-// for (kAligned), gives way to braking to rest, as a projected step does
-// (sufficient_decrease): fully at that rate, not at all at twice it (both velocities keep the
-// rows, and so does their blend; the progress counts the feed-forward's motion too: judging
-// the feedback's share alone stopped UR3 while its target still moved). Each joint brakes
-// toward its own share of the displacement, which bends the motion away from it; against an
-// obstacle, whose rows' room is linearised anew each step, Panda's arm slid along it at
-// 0.045 rad/s for seconds while lowering its error by 6e-7 of itself per second (blocked
-// seed 11 under acceleration limits), where the displacement promised 30 times more. (Not
-// where the ranges alone bind it: those rates also fall while the arm closes in on the
-// constrained minimum, and it stopped 1e-4 short of stationarity on UR5, UR10 and Panda, and
-// 3.5e-3 short of xArm7's final target in the stream of `bench accuracy`.)
-// Under jerk limits an arm at rest starts anew before it is braked: each joint clipped alone
-// into the sliver of a box the jerk limit leaves it moved the task sideways or back, the
-// braking kept the arm at rest, and the next step was the same (UR10 48 mm above a box, a
-// target behind it: it never moved). There the velocity within the same box nearest the
-// feedback's task motion (fit_within_box) replaces the clipped one where it lowers the error
-// faster, while every joint is slow (within the speed one step or one ramp of its jerk limit
-// gives it). A new start needs the last one to have brought |e_w| down by kStartProgress of
-// itself: starting again and again, arms at a table's margin wandered along it in their
-// self-motion at 0.1-0.7 rad/s for good (UR10, xArm7, UR3; 4 of 22 runs of a survey).
-// Without jerk limits the boxes are not slivers, and starts where a damper row binds the
-// displacement (b / K: a step's worth along a collision pair's row, not the constrained
-// minimum) kept arms at an obstacle sliding along it (TALOS's arm on the blocked bench: still
-// moving at 8 s); where rooms alone bind it (a user's rows) they start there too: Panda (SJT)
-// sent through a user's floors under acceleration limits alone never left its start, or
-// rested 24 mm above them (4 of 8 runs; now 1, 49 mm above them).
-void Controller::settle(const Eigen::Ref<const RowMatrix>& J0, const double* q,
-                        const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b,
-                        const double* user_lo, const double* user_hi) {
-  const Index targets = levels[0].targets;
-  if (targets == 0) return;
-  goal_y_.noalias() = J0 * velocity;
-  const auto e = goal_e_.head(targets), moved = goal_y_.head(targets);
-  // a resting arm's rate, and what the model cannot tell from none, for the motion in `moved`
-  const auto rest_rate = [&] {
-    return std::max(kRestRate * e.squaredNorm(), kAligned * e.norm() * moved.norm());
-  };
-  double rate = e.dot(moved);
-  double rest = rest_rate();
-  // (a start: every joint within the speed one step or one jerk ramp gives it; without jerk
-  // limits only where no damper row binds the displacement, which b / K bounds to a step's
-  // worth along the row: there a start slid along the obstacle)
-  bool slow = true;
-  for (Index j = 0; j < nv; ++j) {
-    const double acc = bounds.acceleration[j], jerk = bounds.jerk[j];
-    slow = slow && (std::isfinite(jerk) || !goal_dampers_) &&
-           std::abs(dq[j]) <= acc * (std::isfinite(jerk) ? std::max(dt_, acc / jerk) : dt_);
-  }
-  const double error = e.norm();
-  if (!slow) start_run = false;
-  if (error > (1.0 + kStartReset) * start_error) start_error = kInf;  // (the target moved)
-  if (!(rate < 2.0 * rest)) return;
-  // a new start only where the last one brought the error down by kStartProgress of itself
-  const bool may_start = slow && (start_run || error < (1.0 - kStartProgress) * start_error);
-  if (may_start && fit_within_box(J0, A, b)) {
-    goal_y_.noalias() = J0 * fit_v_;  // (the fit's motion: not read again where not taken)
-    const double fit_rate = e.dot(moved);
-    if (fit_rate > rate) {
-      if (!start_run) start_error = error;
-      start_run = true;
-      velocity = fit_v_;
-      rate = fit_rate;
-      rest = rest_rate();
-      if (!(rate < 2.0 * rest)) return;
-    }
-  }
-  rest_box_ = box;
-  delta_.setZero(nv);
-  joint_box(bounds, dt_, q, dq, delta_, ff, delta_, user_lo, user_hi, rest_box_);
-  rest_ = ff.cwiseMax(rest_box_.lo).cwiseMin(rest_box_.hi);
-  if (!feasible(rest_, A, b, rest_box_.lo, rest_box_.hi) || !held_kept(rest_)) return;
-  const double w = std::clamp(rate / rest - 1.0, 0.0, 1.0);
-  holding = velocity;  // (what StepInfo names as holding the arm: the motion not made)
-  rested_ = true;
-  velocity = w * velocity + (1.0 - w) * rest_;
-}
-
-// Each joint clipped alone into its own box (acceleration, jerk, braking) bends the motion the
-// feedback asks: from rest under a jerk limit, where every box is a sliver, the clipped
-// velocity can move the task sideways or back. Before settle() brakes such a velocity, the
-// velocity within the same box and the rows nearest the feedback's task motion along the
-// projected steepest descent (the Cauchy point of |J0 (desired - v)|^2 from v, cut to the
-// rows): it lowers that distance wherever any velocity within the box does, to first order.
-// True: fit_v_ is that velocity.
-bool Controller::fit_within_box(const Eigen::Ref<const RowMatrix>& J0,
-                                const Eigen::Ref<const RowMatrix>& A,
-                                const Eigen::Ref<const Vector>& b) {
-  if (!feasible(velocity, A, b, box.lo, box.hi) || !held_kept(velocity)) return false;
-  fit_lo_ = (box.lo - velocity).cwiseMin(0.0);
-  fit_hi_ = (box.hi - velocity).cwiseMax(0.0);
-  fit_v_ = desired - velocity;
-  fit_a_.noalias() = J0 * fit_v_;
-  cauchy_point(J0, fit_a_, fit_lo_, fit_hi_, kInf);
-  double t = 1.0;
-  for (Index i = 0; i < A.rows(); ++i) {
-    const double au = A.row(i).dot(cauchy_);
-    if (au > 0.0) t = std::min(t, (b[i] - A.row(i).dot(velocity)) / au);
-  }
-  if (!(t > 0.0)) return false;
-  fit_v_ = velocity + t * cauchy_;
-  return held_kept(fit_v_);
 }
 
 // The generalized Cauchy point (Byrd, Lu, Nocedal and Zhu 1995, section 4) of |a - J0 v|^2
