@@ -91,7 +91,8 @@ class UserLimits:
     def evaluate(self, kinematics, motion: Motion):
         """``(lower, upper, A, b, owners)`` at this step: the intersection of the limits'
         bounds (``None``, ``None`` when none bounds), their rows stacked (``None``, ``None``
-        when none applies) and each row's limit name."""
+        when none applies; ``b`` braked to the rows' room, :meth:`_braked`, where the stage
+        brakes them: :attr:`last_rows` keeps them as asked) and each row's limit name."""
         n = self.nv
         lower = upper = A = b = None
         blocks: list[tuple[Limit, np.ndarray, np.ndarray]] = []
@@ -129,10 +130,12 @@ class UserLimits:
                 b = np.concatenate([c for _, _, c in blocks])
             room = self._stacked(blocks, "room") if self._any_room else None
             asked = b
+            self.needs = self._stacked(blocks, "needs") if self._any_needs else None
             if room is not None and self._braked_here and motion.acceleration_limits is not None:
-                b, dampers = self._braked(blocks, A, b, room, motion)
+                b, dampers = self._braked(blocks, A, b, room, self.needs, motion)
+        else:
+            self.needs = None
         self.room, self.dampers = room, dampers
-        self.needs = self._stacked(blocks, "needs") if self._any_needs and blocks else None
         self._blocks = blocks
         # (the rows as their limits ask them: what rows_exceeded measures a step against)
         self.last_rows = None if A is None or asked is None else (A, asked, owners)
@@ -140,17 +143,19 @@ class UserLimits:
 
     @staticmethod
     def _braked(blocks: list[tuple[Limit, np.ndarray, np.ndarray]], A: np.ndarray,
-                b: np.ndarray, room: np.ndarray, motion: Motion
+                b: np.ndarray, room: np.ndarray, needs: np.ndarray | None, motion: Motion
                 ) -> tuple[np.ndarray, np.ndarray | None]:
-        """The rows' bounds ``b`` with each row that has a room and whose limit does not brake
-        its own rows (:attr:`Limit.brakes_rows <sjt_pin.limits.Limit.brakes_rows>`) lowered to
+        """The rows' bounds ``b`` with each row that has a room, is not given up (NaN in
+        ``needs``) and whose limit does not brake its own rows
+        (:attr:`Limit.brakes_rows <sjt_pin.limits.Limit.brakes_rows>`) lowered to
         closing speeds the arm stops within that room at half its acceleration (and jerk)
         limits, never asked to slow faster than they allow (``kernels.stoppable_rows``): a
         new array (the limits' own are not written); and :attr:`dampers` (None where no row
         was braked here)."""
         own = np.concatenate([np.full(bk.size, 1.0 if limit.brakes_rows else 0.0)
                               for limit, _, bk in blocks])
-        mine = np.where(own == 0.0, room, np.nan)
+        mine = np.where((own == 0.0) & (True if needs is None else np.isnan(needs)), room,
+                        np.nan)
         if not np.isfinite(mine).any():
             return b, None
         b = np.array(b, dtype=float)

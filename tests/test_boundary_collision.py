@@ -182,6 +182,19 @@ def stoppable_case(jerks: bool = True) -> Case:
                      speeds=Arg(optional=True), needs=Arg(written=True, optional=True)))
 
 
+def stoppable_room_case() -> Case:
+    """A user's rows with room (``stoppable_rows`` with ``room``, without the moving
+    obstacles' ``carried``, ``speeds`` and ``needs``)."""
+    k, N = 3, 4
+    return Case(K.stoppable_rows,
+                dict(A=RNG.normal(size=(k, N)), b=RNG.uniform(-1, 5, k), dq=RNG.normal(size=N),
+                     ddq=RNG.normal(size=N), accelerations=RNG.uniform(5, 10, N),
+                     jerks=RNG.uniform(1e3, 5e3, N), rate=1e3, dt=1e-3, share=0.5,
+                     slack=5e-4, room=RNG.uniform(-0.01, 0.05, k)),
+                dict(A=Arg(), b=Arg(written=True), dq=Arg(), ddq=Arg(), accelerations=Arg(),
+                     jerks=Arg(optional=True), room=Arg(optional=True)))
+
+
 def braking_case() -> Case:
     npairs, N = 3, 4
     return Case(K.braking_reach,
@@ -330,6 +343,7 @@ def collision_case(witnesses: bool = True, mimic: bool = True) -> Case:
 
 
 CASES = {"damper_rows": damper_case, "stoppable_rows": stoppable_case,
+         "stoppable_rows (room)": stoppable_room_case,
          "braking_reach": braking_case, "witness_rows": witness_case, "near_pairs": near_case,
          "refresh_pairs": refresh_case, "sphere_gaps": sphere_case,
          "collision_rows": collision_case}

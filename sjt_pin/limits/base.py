@@ -70,7 +70,13 @@ class Limit:
             (the default), the solver does it beside acceleration limits: each such row's
             bound is kept, and lowered ahead of the room so that the arm brakes to it within
             half of those limits (``kernels.stoppable_rows``), never asked to slow faster
-            than they allow.
+            than they allow. ``True`` also says each such bound is a damper of its room
+            (``b`` falls with the room, as ``gain * room / dt``): the displacement the arm
+            is sent toward under acceleration limits is then bounded along the row by
+            ``min(room, b / K)`` (``K`` the feedback's gain) rather than the room alone, and
+            an arm at rest against such a row starts only under jerk limits (a bound that is
+            a speed cap would send the arm nowhere: leave it ``False``). A row of
+            :meth:`needs` (given up) is not braked by the solver.
     """
 
     name: str = "limit"

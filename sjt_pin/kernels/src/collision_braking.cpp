@@ -69,7 +69,12 @@ void register_collision_braking(nb::module_& m) {
         }
         std::optional<Array> carried, speeds, needs, room;
         if (!carried_obj.is_none()) carried.emplace(carried_obj, "carried", 1);
-        if (!room_obj.is_none()) room.emplace(room_obj, "room", 1);
+        if (!room_obj.is_none()) {
+          if (!carried_obj.is_none() || !speeds_obj.is_none() || !needs_obj.is_none())
+            fail("stoppable_rows: room (a user's rows) comes without carried, speeds and needs "
+                 "(a collision limit's moving obstacles)");
+          room.emplace(room_obj, "room", 1);
+        }
         if (!speeds_obj.is_none()) speeds.emplace(speeds_obj, "speeds", 2);
         if (!needs_obj.is_none()) needs.emplace(needs_obj, "needs", 1, Access::write);
         if ((carried && carried->size() != k) || (needs && needs->size() != k) ||
@@ -259,7 +264,8 @@ void register_collision_braking(nb::module_& m) {
       "    every other row) the bound as above, below it: the row is given up, the stage keeps\n"
       "    it within the acceleration and jerk limits, never yielding them for it.\n"
       "The row's j_i and tau bound what its joints give, each at its own limits.\n"
-      "room (k,), if given: the rows are a user's, A d <= room_i for a displacement d (NaN, inf:\n"
+      "room (k,), if given (without carried, speeds and needs): the rows are a user's, A d <=\n"
+      "room_i for a displacement d (NaN, inf:\n"
       "a row of velocity only, left as it is): h = room_i (rate unused) and b_i = min(b_i, B_i),\n"
       "B_i the bound above for a damper without a bound of its own: the row's own bound is\n"
       "kept, cut below it only to closing speeds the arm can stop within room_i, never faster\n"

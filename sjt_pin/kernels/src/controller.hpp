@@ -265,7 +265,7 @@ class Controller {
   // fit_within_box: its box about the velocity, J0 (desired - v), the velocity it found
   Vector fit_lo_, fit_hi_, fit_a_, fit_v_;
   bool goal_rows_ = false;  // a row's room binds range_goal's displacement (settle applies)
-  bool goal_dampers_ = false;  // ... and one of those rows is a damper (b / K binds it)
+  bool goal_dampers_ = false;  // ... and one of those rows is a damper (b / K caps it)
   bool replaced_ = false;  // range_goal replaced the first level's feedback this step
   Method lower_;
   MethodStep lower_step_;

@@ -49,7 +49,7 @@ constexpr double kStartProgress = 0.01, kStartReset = 0.05;
 // minimum) kept arms at an obstacle sliding along it (TALOS's arm on the blocked bench: still
 // moving at 8 s); where rooms alone bind it (a user's rows) they start there too: Panda (SJT)
 // sent through a user's floors under acceleration limits alone never left its start, or
-// rested 24 mm above them (4 of 8 runs; now 1, 49 mm above them).
+// rested 24 mm above them (all 4 runs, one per speed cap; now 1, 49 mm above them).
 void Controller::settle(const Eigen::Ref<const RowMatrix>& J0, const double* q,
                         const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b,
                         const double* user_lo, const double* user_hi) {
