@@ -86,6 +86,9 @@ class UserLimits:
         # whether any limit with a room of its own leaves its rows' braking to the stage
         self._braked_here = any(type(limit).room is not Limit.room and not limit.brakes_rows
                                 for limit in self.limits)
+        # whether some limit brakes its own rows (else every row with room is the stage's)
+        self._some_brake = any(limit.brakes_rows for limit in self.limits)
+        self._zeros = np.zeros(0)
         self._any_needs = any(type(limit).needs is not Limit.needs for limit in self.limits)
 
     def evaluate(self, kinematics, motion: Motion):
@@ -141,8 +144,7 @@ class UserLimits:
         self.last_rows = None if A is None or asked is None else (A, asked, owners)
         return lower, upper, A, b, owners
 
-    @staticmethod
-    def _braked(blocks: list[tuple[Limit, np.ndarray, np.ndarray]], A: np.ndarray,
+    def _braked(self, blocks: list[tuple[Limit, np.ndarray, np.ndarray]], A: np.ndarray,
                 b: np.ndarray, room: np.ndarray, needs: np.ndarray | None, motion: Motion
                 ) -> tuple[np.ndarray, np.ndarray | None]:
         """The rows' bounds ``b`` with each row that has a room, is not given up (NaN in
@@ -152,12 +154,17 @@ class UserLimits:
         limits, never asked to slow faster than they allow (``kernels.stoppable_rows``): a
         new array (the limits' own are not written); and :attr:`dampers` (None where no row
         was braked here)."""
-        own = np.concatenate([np.full(bk.size, 1.0 if limit.brakes_rows else 0.0)
-                              for limit, _, bk in blocks])
-        mine = np.where((own == 0.0) & (True if needs is None else np.isnan(needs)), room,
-                        np.nan)
-        if not np.isfinite(mine).any():
-            return b, None
+        if not self._some_brake and needs is None:  # (every row's: no mask to make)
+            if self._zeros.size != b.size:
+                self._zeros = np.zeros(b.size)
+            own, mine = self._zeros, room
+        else:
+            own = np.concatenate([np.full(bk.size, 1.0 if limit.brakes_rows else 0.0)
+                                  for limit, _, bk in blocks])
+            mine = np.where((own == 0.0) & (True if needs is None else np.isnan(needs)), room,
+                            np.nan)
+            if not np.isfinite(mine).any():
+                return b, None
         b = np.array(b, dtype=float)
         kernels.stoppable_rows(A, b, motion.dq, motion.ddq, motion.acceleration_limits,
                                motion.jerk_limits, 1.0 / motion.dt, motion.dt, BRAKING_SHARE,
