@@ -84,6 +84,7 @@ import pinocchio as pin
 from ..kernels import braking_reach, near_pairs, stoppable_rows
 from .base import BRAKING_SHARE, EASING_SLACK, Limit, Motion
 from .collision_broad_phase import BroadPhaseMixin
+from .collision_copies import CopiesMixin
 from .collision_geometry import (
     ClosestPoints,
     CollisionError,
@@ -109,7 +110,7 @@ MAX_WITNESSES = 16
 
 
 class CollisionLimit(PairsMixin, TablesMixin, BroadPhaseMixin, MovingMixin, RowsMixin,
-                     Limit):
+                     CopiesMixin, Limit):
     """Keep the robot ``margin`` away from ``obstacles`` and (``self_collision=True``) from
     itself, as one velocity-damper row per pair closer than ``influence``.
 
@@ -221,28 +222,6 @@ class CollisionLimit(PairsMixin, TablesMixin, BroadPhaseMixin, MovingMixin, Rows
         #: the robot's ranged joints (_retreat_speeds)
         self._ranges = PositionLimit(robot, np.ones(robot.model.nv), np.zeros(robot.model.nv))
         self._prepare_broad_phase()
-
-    def __getstate__(self) -> dict:
-        """Pickled as its arguments (obstacles at their current poses) and the robot's own
-        collision geometry (the robot pickles without it; coal's hulls do not pickle, they
-        are built again; an obstacle given as a bare ``coal.ConvexBase``, a hull built without
-        its triangles, cannot be copied: TypeError)."""
-        for i, shape in enumerate(self._obstacle_shapes):
-            if isinstance(shape, coal.ConvexBase) and not isinstance(shape, coal.Convex):
-                raise TypeError(f"obstacle {i} is a coal.ConvexBase without its triangles, "
-                                "which coal cannot copy or pickle: build it with them "
-                                "(mesh.buildConvexHull(True, 'Qt'), coal.Convex(points, "
-                                "triangles)) or give the mesh itself")
-        return {"args": {**self._args, "obstacles": self.obstacles},
-                "geometry": self._source.copy(), "velocity": self._velocity.copy(),
-                "stamps": [None if s is None else (s[0], s[1].copy()) for s in self._stamps]}
-
-    def __setstate__(self, state: dict) -> None:
-        self._restored_geometry = state["geometry"]
-        self.__init__(**state["args"])  # type: ignore[misc]
-        self._velocity[:] = state.get("velocity", 0.0)
-        self._stamps = state.get("stamps", self._stamps)
-        self._moving_speeds()
 
     def bounds(self, kinematics, motion: Motion) -> tuple[np.ndarray, np.ndarray] | None:
         """Speed bounds (rad/s or m/s) that keep each step small against the damper: no

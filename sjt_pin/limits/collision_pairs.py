@@ -112,11 +112,13 @@ class PairsMixin(CollisionState):
 
     def _new_geometry_data(self):
         """A GeometryData of the pairs: coal's requests for signed distances, GJK and EPA to
-        GJK_TOLERANCE."""
+        GJK_TOLERANCE, each warm-started from the pair's last query with the state kept in its
+        request (``CachedGuess``), where copies carry it (:mod:`.collision_copies`)."""
         data = self.geometry.createData()
         for req in data.distanceRequests:
             req.enable_signed_distance = True
             req.gjk_tolerance = req.epa_tolerance = GJK_TOLERANCE
+            req.gjk_initial_guess = coal.GJKInitialGuess.CachedGuess
         return data
 
     def _distance(self, k: int, data=None):

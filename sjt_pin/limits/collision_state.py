@@ -29,6 +29,9 @@ class CollisionState:
     _reaches: tuple[object, np.ndarray | None]
     _cache: tuple | None
     _bounds: tuple[float, np.ndarray | None, bool, tuple] | None
+    _args: dict  # what a copy is made anew from (collision.py)
+    _stamps: list  # each obstacle's last time-stamped pose, (time, pose) or None (move())
+    _checked: bool  # whether the start's check ran (collision_pairs.py)
 
     if TYPE_CHECKING:  # the rest of the state: arrays and coal's objects the parts set
         def __getattr__(self, name: str) -> Any: ...
