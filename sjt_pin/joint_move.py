@@ -92,7 +92,7 @@ class JointMove(Trajectory):
         pin.computeJointJacobians(model, data, q)
         pin.updateFramePlacements(model, data)
         J = pin.getFrameJacobian(model, data, self.frame_id, pin.LOCAL_WORLD_ALIGNED)
-        twist = J @ dq
+        twist = J.reshape(6, model.nv) @ dq  # ((6,) where nv = 1)
         return pin.SE3(data.oMf[self.frame_id]), pin.Motion(twist[:3], twist[3:])
 
     def step(self, q) -> np.ndarray:

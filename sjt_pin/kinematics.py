@@ -72,8 +72,8 @@ class Kinematics:
             pin.jacobianCenterOfMass(self.model, self.data, False)
             self._com_fresh = True
         com = self._com
-        if com is None:
-            com = self._com = (self.data.com[0], self.data.Jcom)
+        if com is None:  # (a robot of one velocity coordinate: Pinocchio gives Jcom as (3,))
+            com = self._com = (self.data.com[0], self.data.Jcom.reshape(3, self.model.nv))
         return com
 
     def placement(self, frame_id: int) -> pin.SE3:

@@ -73,7 +73,7 @@ def reach_sphere(robot: Robot, frame: str | None = None) -> tuple[np.ndarray, fl
         origins.append(data.oMi[j].translation.copy())
         if joint.nv == 1:
             J = pin.getJointJacobian(model, data, j, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
-            axis = J[3:, joint.idx_v]
+            axis = J.reshape(6, model.nv)[3:, joint.idx_v]  # ((6,) where nv = 1)
             if np.linalg.norm(axis) > 0.5:  # revolute: any point on its axis will do
                 axes.append(axis / np.linalg.norm(axis))
                 continue

@@ -927,3 +927,36 @@ def test_a_query_without_closest_points_separates_the_pair(answer, panda):
     row = limit.active.index(victim)
     assert b[row] < 0  # the pair must separate: standing still is not within the limit
     assert np.linalg.norm(A[row]) > 0
+
+
+# Pinocchio's bindings give the joint Jacobians of a robot with one velocity coordinate as a
+# vector (6,): the limit's first rows raised "J must be a 2-D ... array" (a random tree of one
+# continuous joint, found by the copies' property test).
+@pytest.mark.parametrize("kind", ["continuous", "revolute"])
+@pytest.mark.parametrize("answer", [None, _NoClosestPoints])
+def test_a_robot_of_one_joint_keeps_its_margin(kind, answer):
+    """One joint swinging a 30 cm bar toward a box: the margin holds, through the compiled
+    queries and through Python's (where a query finds no closest points)."""
+    limits = '<limit lower="-3" upper="3" effort="1" velocity="2"/>' if kind == "revolute" \
+        else '<limit effort="1" velocity="2"/>'
+    urdf = f"""<robot name="bar"><link name="base"/>
+      <link name="bar"><collision><origin xyz="0.15 0 0"/><geometry>
+        <box size="0.3 0.02 0.02"/></geometry></collision></link>
+      <joint name="j" type="{kind}"><parent link="base"/><child link="bar"/>
+        <axis xyz="0 0 1"/>{limits}</joint>
+      <link name="tip"/><joint name="t" type="fixed"><parent link="bar"/><child link="tip"/>
+        <origin xyz="0.3 0 0"/></joint></robot>"""
+    robot = sjt.Robot.from_urdf(urdf, ee_frame="tip", load_visuals=False)
+    box = (coal.Box(0.1, 0.1, 0.1), pin.SE3(np.eye(3), np.array([0.0, 0.25, 0.0])))
+    limit = CollisionLimit(robot, [box])
+    if answer is not None:
+        limit._compute = lambda geometry, data, k: answer()
+    solver = sjt.SJTSolver(robot, task=sjt.PositionTask(), limits=[limit])
+    q, target = robot.q0.copy(), np.array([0.0, 0.3, 0.0])  # (inside the box)
+    for _ in range(2000):
+        q = solver.step(q, target)
+    if answer is None:
+        assert limit.distances(q)[0].distance >= limit.margin - 1e-6
+        assert limit.distances(q)[0].distance < limit.margin + 5e-3  # (pressed against it)
+    else:
+        assert np.isfinite(q).all()

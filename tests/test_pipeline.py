@@ -208,3 +208,43 @@ def test_robots_with_one_moving_joint_and_none():
     zero = sjt.Robot.from_urdf(URDFS / "fixed_only.urdf", load_visuals=False)
     with pytest.raises(ValueError, match="has no moving joint"):
         sjt.SJTSolver(zero)
+
+
+# Pinocchio's bindings give a (6, 1) or (3, 1) matrix as a vector: the centre of mass's
+# Jacobian of a robot with one velocity coordinate broke CoMTask ("could not broadcast (3,)
+# into (3, 1)"), its frame Jacobian move_to (a matmul of (6,) by (1,)) and its joint Jacobian
+# reachability() (IndexError).
+def test_the_centre_of_mass_a_joint_move_and_the_reach_of_a_robot_with_one_joint():
+    """A 1 kg mass 0.25 m out on a revolute joint: CoMTask's Jacobian is the finite
+    difference of the centre of mass, the task brings it onto a point of its circle, move_to
+    takes the hand to a pose of its own, and
+    reachability() maps the arm's workspace (none of its grid's poses lies on the one circle of
+    poses the arm reaches, every one is solved)."""
+    urdf = (URDFS / "one_joint.urdf").read_text().replace(
+        '<link name="arm"/>', '<link name="arm"><inertial><origin xyz="0.25 0 0"/>'
+        '<mass value="1"/><inertia ixx="1e-3" iyy="1e-3" izz="1e-3" ixy="0" ixz="0" '
+        'iyz="0"/></inertial></link>')
+    one = sjt.Robot.from_urdf(urdf, load_visuals=False)
+    kinematics = sjt.Kinematics(one.model)
+    task = sjt.CoMTask().bind(one)
+    at = np.array([0.4])
+    kinematics.update(at)
+    J = task.compute(kinematics, np.zeros(3), None)[0].copy()
+    centre = [pin.centerOfMass(one.model, one.model.createData(), at + h) for h in (1e-6, -1e-6)]
+    np.testing.assert_allclose(J[:, 0], (centre[0] - centre[1]) / 2e-6, atol=1e-8)
+    goal = 0.25 * np.array([np.cos(1.2), np.sin(1.2), 0.0])
+    solver = sjt.SJTSolver(one, task=sjt.CoMTask(), dt=1e-2)
+    q = one.q0
+    for _ in range(500):
+        q = solver.step(q, goal)
+    assert q[0] == pytest.approx(1.2, abs=1e-6)
+    solver = sjt.SJTSolver(one)
+    move, q = solver.move_to(one.q0, one.fk(np.array([-0.7]))), one.q0
+    while not move.done:
+        q = move.step(q)
+    assert q[0] == pytest.approx(-0.7, abs=1e-9)
+    reach = sjt.reachability(one, step=0.1, orientations=1, processes=1, progress=False,
+                             budget=50)
+    assert reach.done == len(reach.positions) and np.isfinite(reach.error).all()
+    assert not reach.reached.any()
+

@@ -115,7 +115,7 @@ class RowsMixin(CollisionState):
                             for j in range(self.model.njoints)]
         n = self.model.njoints
         views = data if any(part.flags.owndata or part.base is not None for part in parts) \
-            else (data, parts[0], parts[1:1 + n], parts[1 + n:])
+            else (data, _joint_jacobians(parts[0]), parts[1:1 + n], parts[1 + n:])
         self._views = (data, views)
         return views
 
@@ -127,7 +127,7 @@ class RowsMixin(CollisionState):
         count = self._witness_rows(data, found) if self.witnesses else len(found)
         A = np.empty((count, self._support.shape[1]))
         b = np.empty(count)
-        damper_rows(data.J, self._support, self._pair_rows[:count], rate, A, b)
+        damper_rows(_joint_jacobians(data.J), self._support, self._pair_rows[:count], rate, A, b)
         if self._mimic is not None:
             A = A @ self._mimic
         A.setflags(write=False)
@@ -168,3 +168,9 @@ class RowsMixin(CollisionState):
                              self._owners)
         self._witness_count = total - count
         return total
+
+
+def _joint_jacobians(J: np.ndarray) -> np.ndarray:
+    """Pinocchio's WORLD joint Jacobians ``data.J`` as (6, nv): its bindings give a robot of
+    one velocity coordinate a vector (6,) (a view of the same memory, reshaped)."""
+    return J if J.ndim == 2 else J.reshape(6, 1)
