@@ -1,6 +1,7 @@
 """What a robot's Pinocchio model implies, computed once per model: the unit-norm blocks of its
-configurations, its speed limits, its reach (and the warning for a target far beyond it), and
-the memory one ``pin.Data`` of it takes (a model above the budget is refused)."""
+configurations, its speed limits, its reach (and the warning for a target far beyond it), the
+memory one ``pin.Data`` of it takes (a model above the budget is refused) and whether it has
+the mass a centre of mass needs."""
 
 from __future__ import annotations
 
@@ -120,3 +121,14 @@ def check_memory(model: pin.Model, label: str, budget: float) -> None:
         warnings.warn(f"{label}: a pin.Data of this model (nv = {model.nv}) takes about "
                       f"{need / 1e9:.3g} GB, and every thread and solver holds one",
                       UserWarning, stacklevel=4)
+
+
+
+def check_mass(model: pin.Model, robot_name: str, what: str) -> None:
+    """Raise ``ValueError`` where the links of ``model`` have no mass between them (a URDF
+    without ``<inertial>`` elements): the centre of mass ``what`` needs is then 0 / 0."""
+    total = sum(inertia.mass for inertia in model.inertias)
+    if not total > 0:
+        raise ValueError(f"{what} needs the robot's centre of mass, but the links of "
+                         f"{robot_name} have no mass (total {total:g} kg): give them "
+                         "<inertial> elements in the URDF")

@@ -6,6 +6,7 @@ soles hold and its centre of mass stays over them.
 """
 
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -262,6 +263,15 @@ def test_whole_body_bad_input(solo):
         missing.step(solo.q0, com(solo, solo.q0))
     with pytest.raises(sjt.FrameNotFound, match=r"PositionTask\(axes='xy'\)"):
         sjt.SJTSolver(solo, task=sjt.PositionTask("xy"))
+    # links without <inertial>: the centre of mass is 0 / 0 (a step said "target is too far
+    # for a finite task error")
+    massless = sjt.Robot.from_urdf(Path(__file__).parent / "fixtures" / "urdf" / "one_joint.urdf",
+                                   load_visuals=False)
+    with pytest.raises(ValueError, match="CoMTask needs .* one_joint have no mass"):
+        sjt.SJTSolver(massless, task=sjt.CoMTask())
+    solver = sjt.SJTSolver(massless, limits=[sjt.SupportLimit(["tip"])])
+    with pytest.raises(ValueError, match="SupportLimit needs .* have no mass"):
+        solver.step(massless.q0, massless.fk(massless.q0))
 
 
 def test_a_start_outside_the_margin_is_said_and_moved_in(solo):

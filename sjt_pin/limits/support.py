@@ -29,6 +29,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..kernels import stoppable_rows
+from ..model_measures import check_mass
 from ..robot_frames import find_frame
 from ..validation import real_number
 from .base import BRAKING_SHARE, EASING_SLACK, Limit, Motion
@@ -141,6 +142,7 @@ class SupportLimit(Limit):
         model = kinematics.model
         if self._frames is None:  # (found as the tasks find their frames)
             self._frames = [find_frame(model, c, None, "the robot") for c in self.contacts]
+            check_mass(model, model.name, "SupportLimit")
         hull, normals, offsets = support_polygon(
             [kinematics.placement(f) for f in self._frames], self._corners, self.contacts)
         self.polygon, self._normals, self._outward = hull, normals, -normals

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
+from ..model_measures import check_mass
 from ..validation import as_vector, axis_rows
 from .base import Task
 
@@ -42,6 +43,7 @@ class CoMTask(Task):
         self.label = "com"
 
     def bind(self, robot):
+        check_mass(robot.model, robot.name, "CoMTask")
         bound = super().bind(robot)
         d, n = self.dim, robot.nv
         bound._J, bound._e, bound._ff = np.zeros((d, n)), np.zeros(d), np.zeros(d)
