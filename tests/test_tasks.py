@@ -132,3 +132,24 @@ def test_error_jacobian_is_the_exact_derivative_far_from_the_target(all_robots, 
         if task_name in ("pose", "orientation") and robot_name != "continuous + prismatic":
             assert np.abs(exact - J).max() > 1e-2  # (that arm turns about one axis only)
 
+
+
+def test_an_orientation_task_takes_a_rotation_matrix_as_its_target(ur5):
+    """A 3x3 rotation is the same target as a pose with that rotation (the steps are the same,
+    bitwise, and solve() and move_to() take it too); a matrix that is no rotation, or not
+    numbers, is refused, naming what was expected."""
+    goal = ur5.fk(ur5.random_configuration(np.random.default_rng(3)))
+    as_pose, as_rotation = (sjt.SJTSolver(ur5, task=sjt.OrientationTask()) for _ in range(2))
+    qa = qb = ur5.q0
+    for _ in range(300):
+        qa, qb = as_pose.step(qa, goal), as_rotation.step(qb, goal.rotation)
+    np.testing.assert_array_equal(qa, qb)
+    assert as_rotation.error_norm < 1e-9
+    assert as_rotation.solve(goal.rotation, ur5.q0).success
+    as_rotation.move_to(ur5.q0, goal.rotation)
+    with pytest.raises(ValueError, match="not a rotation matrix"):
+        as_rotation.step(qb, 2.0 * np.eye(3))
+    with pytest.raises(ValueError, match="NaN or inf"):
+        as_rotation.step(qb, np.full((3, 3), np.nan))
+    with pytest.raises(ValueError, match="a 3x3 rotation"):
+        as_rotation.step(qb, [["a"] * 3] * 3)

@@ -6,6 +6,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..kernels import frame_velocity
+from ..validation import as_pose
 from .base import Task
 from .pose import characteristic_length, checked_length
 
@@ -15,7 +16,7 @@ class OrientationTask(Task):
 
     ``e = log3(R^T R_d)`` (rad) with the angular rows of the LOCAL Jacobian; the desired
     angular velocity (world axes) becomes ``R^T omega_d``. Targets are poses (only the
-    rotation is used).
+    rotation is used) or 3x3 rotation matrices.
 
     Args:
         frame: name of the task frame; ``None`` for the robot's end effector.
@@ -44,6 +45,18 @@ class OrientationTask(Task):
         bound.sqrt_weight = base * bound.length
         bound._ff = np.zeros(6)
         return bound
+
+    def target(self, value):
+        if not isinstance(value, pin.SE3) and np.shape(value) == (3, 3):
+            try:
+                rotation = np.asarray(value, dtype=float)
+            except (TypeError, ValueError) as exc:
+                raise ValueError(f"target must be a pin.SE3, a 4x4 matrix or a 3x3 rotation, "
+                                 f"got {value!r}") from exc
+            homogeneous = np.eye(4)
+            homogeneous[:3, :3] = rotation
+            return as_pose(homogeneous, "target")  # (rigid, finite: checked there)
+        return super().target(value)
 
     def compute(self, kinematics, target, velocity):
         oMf = kinematics.placement(self.frame_id)
