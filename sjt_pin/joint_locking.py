@@ -57,11 +57,20 @@ def reduce_model(model: pin.Model, unmimicked: pin.Model | None, mimics: Sequenc
         base = unmimicked
         q_base, ids, mimics = unmimicked_lock(model, base, mimics, names, q_ref)
     geometries = [g for g in (visual_model, collision_model) if g is not None]
-    if geometries:
-        reduced, reduced_geometries = pin.buildReducedModel(base, geometries, ids, q_base)
-        reduced_geometries = list(reduced_geometries)
-    else:
-        reduced, reduced_geometries = pin.buildReducedModel(base, ids, q_base), []
+    try:
+        if geometries:
+            reduced, reduced_geometries = pin.buildReducedModel(base, geometries, ids, q_base)
+            reduced_geometries = list(reduced_geometries)
+        else:
+            reduced, reduced_geometries = pin.buildReducedModel(base, ids, q_base), []
+    except ValueError as error:
+        shared = _shared_frame_names(base)
+        if not shared:
+            raise
+        raise URDFError(f"{robot_name}: joints cannot be locked where a joint and a link "
+                        f"share a name ({name_list(shared)}): Pinocchio's buildReducedModel "
+                        f"finds frames by name ({error}); rename one of each pair in the "
+                        "URDF") from error
     unmimicked = reduced if mimics else None
     if mimics:
         reduced, mimics = apply_mimics(reduced, mimics, URDFError)
@@ -71,6 +80,18 @@ def reduce_model(model: pin.Model, unmimicked: pin.Model | None, mimics: Sequenc
         q0[model.idx_qs[model.getJointId(reduced.names[j])]:][
             :reduced.joints[j].nq] for j in range(1, reduced.njoints)])
     return Reduction(reduced, visual, collision, unmimicked, list(mimics), q0)
+
+
+def _shared_frame_names(model: pin.Model) -> list[str]:
+    """The frame names ``model`` gives more than one frame (a URDF's joint named as a link:
+    their names are apart there)."""
+    seen: set[str] = set()
+    shared = []
+    for frame in model.frames:
+        if frame.name in seen and frame.name not in shared:
+            shared.append(frame.name)
+        seen.add(frame.name)
+    return shared
 
 
 def unmimicked_lock(model: pin.Model, base: pin.Model, mimics: Sequence[MimicJoint],
@@ -90,7 +111,9 @@ def unmimicked_lock(model: pin.Model, base: pin.Model, mimics: Sequence[MimicJoi
         joint, own = base.joints[j], model.joints[j]
         if own.nq:
             q_base[joint.idx_q:joint.idx_q + joint.nq] = q[own.idx_q:own.idx_q + own.nq]
-        elif base.names[j] in values:
-            q_base[joint.idx_q] = values[base.names[j]]
+        elif base.names[j] in values:  # (a mimic joint: its value, (cos, sin) if continuous)
+            value = values[base.names[j]]
+            q_base[joint.idx_q:joint.idx_q + joint.nq] = (
+                (np.cos(value), np.sin(value)) if joint.nq == 2 else value)
     ids = [base.getJointId(name) for name in sorted(locked, key=base.getJointId)]
     return q_base, ids, [m for m in mimics if m.joint not in locked and m.mimicked not in locked]

@@ -144,3 +144,7 @@ def test_reduced_locks_joints_at_a_configuration(panda):
         panda.reduced([3])
     urdf = sjt.Robot.from_urdf(SHARED_NAME, ee_frame="tip", locked_joints=["wrist"])
     assert urdf.nv == 1 and urdf.velocity_names == ["elbow"]
+    # (Pinocchio's buildReducedModel finds frames by name: a joint named as its link cannot
+    # be locked, and says why)
+    with pytest.raises(sjt.URDFError, match=r"a joint and a link share a name \(\['elbow'\]\)"):
+        sjt.Robot.from_urdf(SHARED_NAME, ee_frame="tip", locked_joints=["elbow"])

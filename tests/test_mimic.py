@@ -311,3 +311,31 @@ def test_a_mimic_joint_that_no_task_moves_says_it_stays_outside(robot_name, grip
     assert solver.last.outside_limits == ()
     values = robot.joint_values(q)
     assert abs(values[finger]) <= 0.04 and abs(values[mimic]) <= 0.04
+
+
+def test_a_continuous_joint_locked_takes_its_continuous_mimic_along():
+    """Locking a continuous joint that a continuous joint mimics: the follower is locked at
+    its relation's angle, as (cos, sin). Before, its angle went into the cosine alone and the
+    locked chain's rotation was not a rotation (|R^T R - I| = 0.99 on a random tree)."""
+    urdf = """<robot name="twist"><link name="base"/><link name="a"/><link name="b"/>
+      <link name="c"/><link name="tip"/>
+      <joint name="ja" type="continuous"><parent link="base"/><child link="a"/>
+        <axis xyz="0 0 1"/></joint>
+      <joint name="jb" type="continuous"><parent link="a"/><child link="b"/>
+        <origin xyz="0.2 0 0"/><axis xyz="1 0 0"/>
+        <mimic joint="ja" multiplier="2.0" offset="0.1"/></joint>
+      <joint name="jc" type="revolute"><parent link="b"/><child link="c"/>
+        <origin xyz="0.2 0 0"/><axis xyz="0 1 0"/>
+        <limit lower="-2" upper="2" effort="1" velocity="1"/></joint>
+      <joint name="t" type="fixed"><parent link="c"/><child link="tip"/>
+        <origin xyz="0.2 0 0"/></joint></robot>"""
+    robot = sjt.Robot.from_urdf(urdf, ee_frame="tip")
+    q = np.array([np.cos(0.7), np.sin(0.7), 0.3])
+    arm = robot.reduced(["ja"], q=q)
+    assert arm.nv == 1 and arm.mimic_joints == []
+    for angle in (0.3, -1.1):
+        pose = arm.fk(np.array([angle]))
+        np.testing.assert_allclose(pose.rotation.T @ pose.rotation, np.eye(3), atol=1e-12)
+        np.testing.assert_allclose(pose.homogeneous,
+                                   robot.fk(np.array([q[0], q[1], angle])).homogeneous,
+                                   atol=1e-12)
