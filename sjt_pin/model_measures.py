@@ -123,11 +123,10 @@ def check_memory(model: pin.Model, label: str, budget: float) -> None:
                       UserWarning, stacklevel=4)
 
 
-
 def check_mass(model: pin.Model, robot_name: str, what: str) -> None:
     """Raise ``ValueError`` where the links of ``model`` have no mass between them (a URDF
     without ``<inertial>`` elements): the centre of mass ``what`` needs is then 0 / 0."""
-    total = sum(inertia.mass for inertia in model.inertias)
+    total = sum(model.inertias[j].mass for j in range(1, model.njoints))  # (not the world's)
     if not total > 0:
         raise ValueError(f"{what} needs the robot's centre of mass, but the links of "
                          f"{robot_name} have no mass (total {total:g} kg): give them "

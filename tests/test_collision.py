@@ -809,8 +809,8 @@ def test_a_pickled_limit_is_the_same_limit_and_solve_many_keeps_the_margin(panda
     kin.update(q0)
     A, b = limit.rows(kin, at(1e-3))
     A2, b2 = copy.rows(kin, at(1e-3))
-    np.testing.assert_allclose(A2, A, atol=1e-9)
-    np.testing.assert_allclose(b2, b, atol=1e-6)
+    np.testing.assert_array_equal(A2, A)
+    np.testing.assert_array_equal(b2, b)
     solver = sjt.SJTSolver(panda, limits=[limit])
     targets = [pin.SE3(start.rotation, start.translation + offset)
                for offset in ([0.0, 0.25, -0.05], [0.1, 0.2, -0.1], [0.0, -0.2, 0.0])]
@@ -936,7 +936,8 @@ def test_a_query_without_closest_points_separates_the_pair(answer, panda):
 @pytest.mark.parametrize("answer", [None, _NoClosestPoints])
 def test_a_robot_of_one_joint_keeps_its_margin(kind, answer):
     """One joint swinging a 30 cm bar toward a box: the margin holds, through the compiled
-    queries and through Python's (where a query finds no closest points)."""
+    queries and through Python's (where every query finds no closest points, the rows move
+    the pair apart: the bar stays where it started)."""
     limits = '<limit lower="-3" upper="3" effort="1" velocity="2"/>' if kind == "revolute" \
         else '<limit effort="1" velocity="2"/>'
     urdf = f"""<robot name="bar"><link name="base"/>
@@ -955,8 +956,9 @@ def test_a_robot_of_one_joint_keeps_its_margin(kind, answer):
     q, target = robot.q0.copy(), np.array([0.0, 0.3, 0.0])  # (inside the box)
     for _ in range(2000):
         q = solver.step(q, target)
+    closest = limit.distances(q)[0].distance  # (coal's own query, not the limit's _compute)
+    assert closest >= limit.margin - 1e-6
     if answer is None:
-        assert limit.distances(q)[0].distance >= limit.margin - 1e-6
-        assert limit.distances(q)[0].distance < limit.margin + 5e-3  # (pressed against it)
-    else:
-        assert np.isfinite(q).all()
+        assert closest < limit.margin + 5e-3  # (pressed against it)
+    else:  # (every query "deep inside": its rows hold the bar off, where it started)
+        assert closest > 0.19

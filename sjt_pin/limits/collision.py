@@ -91,6 +91,7 @@ from .collision_geometry import (
     PairDistance,
     coal,
     collision_model_of,
+    settle_coal,
     srdf_of,
     to_hulls,
 )
@@ -160,6 +161,7 @@ class CollisionLimit(PairsMixin, TablesMixin, BroadPhaseMixin, MovingMixin, Rows
                  srdf: str | None = None, convex: bool | str = True, witnesses: int = 3):
         if coal is None:  # pragma: no cover
             raise CollisionError("CollisionLimit needs coal (shipped with the pin wheel)")
+        settle_coal()
         for name, value in (("margin", margin), ("influence", influence), ("gain", gain)):
             if isinstance(value, bool) or not isinstance(value, (int, float, np.integer,
                                                                  np.floating)):

@@ -11,6 +11,12 @@ every memory its next steps read, so that a copy's steps are the original's, bit
   they start, so two starts agree to that tolerance, not bitwise, and a copy's first
   queries must start where the original's would.
 
+A copy loaded in another process steps alike too: coal's process-wide state is settled
+before any limit's first query (``collision_geometry.settle_coal``). Not carried: the rows of
+the last configuration (a copy made where the arm rests queries them once more where the
+original answers from them, and its witnesses' clock runs one tick ahead; the steps stay the
+same).
+
 A part of the CollisionLimit (a mixin it inherits from), operating on its state."""
 
 from __future__ import annotations
@@ -59,8 +65,7 @@ class CopiesMixin(CollisionState):
                           self._tick),
             "broad_phase": (self._version, None if ref is None else (
                 ref[0], ref[1].copy(), ref[2].copy(), ref[3].copy(), list(ref[4])),
-                self._floor.copy(), None if self._floor_q is None else self._floor_q.copy(),
-                self._prefilter.copy()),
+                self._floor.copy(), None if self._floor_q is None else self._floor_q.copy()),
             "guesses": [(np.array(r.cached_gjk_guess), np.array(r.cached_support_func_guess))
                         for r in self.geometry_data.distanceRequests]}
 
@@ -75,9 +80,8 @@ class CopiesMixin(CollisionState):
         self._checked = memory["checked"]
         points, state, owners, self._tick = memory["witnesses"]
         self._memory[:], self._memory_state[:], self._owners[:] = points, state, owners
-        self._version, self._reference, floor, self._floor_q, prefilter = memory["broad_phase"]
-        self._floor[:], self._prefilter[:] = floor, prefilter
-        self._skip, self._cache = None, None
+        self._version, self._reference, floor, self._floor_q = memory["broad_phase"]
+        self._floor[:] = floor
         for request, (ray, support) in zip(self.geometry_data.distanceRequests,
                                            memory["guesses"], strict=True):
             request.cached_gjk_guess = ray

@@ -129,6 +129,27 @@ def to_hulls(geom: pin.GeometryModel) -> None:
             g.geometry = mesh_hull(shape, g.name)
 
 
+_coal_settled = False
+
+
+def settle_coal() -> None:
+    """One distance query of a box against a convex hull, on fixed shapes, once per process.
+    coal's first such query in a process leaves some state of its own behind: the same
+    queries then answer differently in their last bits than before it (a box, cylinder or
+    ellipsoid obstacle beside UR5's hulls; a sphere's are not affected). Made before a limit's
+    own queries, a run's distances no longer depend on what the process queried before, and a
+    copy of a limit loaded in another process steps as its original, bitwise."""
+    global _coal_settled
+    if _coal_settled:
+        return
+    corners = np.array([[x, y, z] for x in (0.0, 0.1) for y in (0.0, 0.1) for z in (0.0, 0.1)])
+    hull = mesh_hull(coal_mesh(corners), "settle_coal")
+    request, result = coal.DistanceRequest(), coal.DistanceResult()
+    coal.distance(hull, coal.Transform3s(), coal.Box(0.1, 0.1, 0.1),
+                  coal.Transform3s(np.eye(3), np.array([0.0, 0.0, -0.5])), request, result)
+    _coal_settled = True
+
+
 def coal_mesh(vertices: np.ndarray, triangles: np.ndarray | None = None):
     """A coal mesh (``BVHModelOBBRSS``) of ``vertices`` (n, 3; m) and ``triangles`` (k, 3;
     vertex indices), or of the points alone (None: for their hull)."""

@@ -141,8 +141,8 @@ class SupportLimit(Limit):
     def _polygon(self, kinematics) -> None:
         model = kinematics.model
         if self._frames is None:  # (found as the tasks find their frames)
-            self._frames = [find_frame(model, c, None, "the robot") for c in self.contacts]
             check_mass(model, model.name, "SupportLimit")
+            self._frames = [find_frame(model, c, None, "the robot") for c in self.contacts]
         hull, normals, offsets = support_polygon(
             [kinematics.placement(f) for f in self._frames], self._corners, self.contacts)
         self.polygon, self._normals, self._outward = hull, normals, -normals
