@@ -33,13 +33,10 @@ def _with_geometry(xml: str, rng: np.random.Generator) -> str:
     return re.sub(r'<link name="(l\d+)"/>', shape, xml)
 
 
-def _run(seed: int, method: str):
-    """One run: 1 s of targets changing every 0.25 s, at 1 kHz with 8 rad/s^2 and 4,000
-    rad/s^3 on every joint. ``(closest, acceleration, jerk, reported)``: the least distance of
-    any pair (every 5th step, checked by a limit of the test's own), each step's largest
-    acceleration and jerk over their limits (the tangent-space rates of the configurations
-    returned) and whether it reported a conflict; None where the tree is refused, has no
-    moving joint or starts within 15 mm of a pair."""
+def random_tree_with_geometry(seed: int) -> tuple[sjt.Robot, np.random.Generator] | None:
+    """The random tree of ``seed`` (3-10 joints) with a sphere or a box on each link, and the
+    generator its geometry was drawn from; None where the tree is refused or has no moving
+    joint."""
     rng = np.random.default_rng(seed)
     xml, leaf = random_urdf_semantics(seed, 3 + seed % 8)
     try:
@@ -47,8 +44,20 @@ def _run(seed: int, method: str):
                                     load_visuals=False)
     except sjt.URDFError:  # (mimic limits with no common range: the documented refusal)
         return None
-    if robot.nv == 0:
+    return (robot, rng) if robot.nv > 0 else None
+
+
+def _run(seed: int, method: str):
+    """One run: 1 s of targets changing every 0.25 s, at 1 kHz with 8 rad/s^2 and 4,000
+    rad/s^3 on every joint. ``(closest, acceleration, jerk, reported)``: the least distance of
+    any pair (every 5th step, checked by a limit of the test's own), each step's largest
+    acceleration and jerk over their limits (the tangent-space rates of the configurations
+    returned) and whether it reported a conflict; None where the tree is refused, has no
+    moving joint or starts within 15 mm of a pair."""
+    drawn = random_tree_with_geometry(seed)
+    if drawn is None:
         return None
+    robot, rng = drawn
     q = robot.q0.copy()
     ball = (coal.Sphere(0.03), pin.SE3(np.eye(3), robot.fk(q).translation
                                        + rng.normal(size=3) * 0.1))

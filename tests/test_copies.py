@@ -313,18 +313,12 @@ def test_copies_with_collision_step_as_the_original_on_random_trees(seed, cut, h
     their links) with self-collision, a box moving through them and acceleration and jerk
     limits, a solver copied after ``cut`` steps makes the same next steps as the original,
     bitwise."""
-    from .test_collision_trees import _with_geometry
-    from .test_random_urdfs import random_urdf_semantics
+    from .test_collision_trees import random_tree_with_geometry
 
-    rng = np.random.default_rng(seed)
-    xml, leaf = random_urdf_semantics(seed, 3 + seed % 8)
-    try:
-        robot = sjt.Robot.from_urdf(_with_geometry(xml, rng), ee_frame=leaf,
-                                    load_visuals=False)
-    except sjt.URDFError:  # (mimic limits with no common range: the documented refusal)
+    drawn = random_tree_with_geometry(seed)
+    if drawn is None:
         return
-    if robot.nv == 0:
-        return
+    robot, rng = drawn
     q = robot.q0.copy()
     centre = robot.fk(q).translation + rng.normal(size=3) * 0.1
     velocity = np.concatenate([rng.normal(size=3) * 0.2, np.zeros(3)])
