@@ -11,6 +11,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import sjt_pin as sjt
+from sjt_pin.kinematics import Kinematics
+from sjt_pin.limits.base import Motion
 from sjt_pin.limits.collision import CollisionError
 
 from .helpers import full_range_pair
@@ -209,6 +211,40 @@ def test_a_copy_carries_where_the_last_start_from_rest_began(ur5, how):
     ahead = run(original, q, [target] * 1000)
     np.testing.assert_array_equal(run(twin, q, [target] * 1000), ahead)
     assert np.abs(ahead - q).max() < 1e-9  # (at rest)
+
+
+@pytest.mark.parametrize("how", ["pickle", "deepcopy"])
+def test_a_copy_answers_from_the_last_rows_where_the_original_does(ur5, how):
+    """A step at the configuration and motion of the last one (an arm at a bitwise rest)
+    answers from the last rows without a query. A copy carries them: it answers alike, with
+    its own arrays of the same limits, and its witnesses' clock stays the original's (a
+    query advanced it a tick ahead); with other limits it queries."""
+    q = ur5.q0.copy()
+    hand = ur5.fk(q).translation
+    table = (coal.Box(0.3, 0.3, 0.02), pin.SE3(np.eye(3), hand + [0.0, 0.0, -0.07]))
+    limit = sjt.CollisionLimit(ur5, [table])
+    kinematics = Kinematics(ur5.model)
+    kinematics.update(q)
+
+    def motion(acceleration):
+        return Motion(q=q, dq=np.full(ur5.nv, 0.1), ddq=np.zeros(ur5.nv), dt=1e-3,
+                      velocity_limits=np.full(ur5.nv, 3.0),
+                      acceleration_limits=np.full(ur5.nv, acceleration),
+                      jerk_limits=np.full(ur5.nv, 2000.0))
+
+    same = motion(10.0)
+    rows = limit.rows(kinematics, same)
+    assert rows is not None
+    tick = limit._tick
+    _assert_same(limit.rows(kinematics, same), rows)
+    assert limit._tick == tick  # (answered from the last rows)
+    twin = pickle.loads(pickle.dumps(limit)) if how == "pickle" else copy.deepcopy(limit)
+    _assert_same(twin.rows(kinematics, motion(10.0)), rows)
+    assert twin._tick == tick
+    _assert_same(twin._memories(), limit._memories())
+    other = pickle.loads(pickle.dumps(limit)) if how == "pickle" else copy.deepcopy(limit)
+    other.rows(kinematics, motion(12.0))
+    assert other._tick == tick + 1.0  # (other limits: queried)
 
 
 @pytest.mark.parametrize("how", ["pickle", "deepcopy"])

@@ -301,8 +301,8 @@ class CollisionLimit(PairsMixin, TablesMixin, BroadPhaseMixin, MovingMixin, Rows
             if listed and views[0] is kinematics.data and self._reaches[0] is speeds \
                     and self._checked:  # (a step like the last: no check, views and reach)
                 here = self._key(q, motion)
-                cache = self._cache
-                if cache is not None and cache[0] is views[0] and cache[1] == here:
+                cache = self._cached(views[0], here, motion)
+                if cache is not None:
                     (self.active, self.within, self._witness_count, self._room,
                      self._needs) = cache[2]
                 else:
@@ -311,13 +311,13 @@ class CollisionLimit(PairsMixin, TablesMixin, BroadPhaseMixin, MovingMixin, Rows
                     self._room, self._needs = self._room_of(out), None
                     cache = self._cache = (views[0], here, (self.active, self.within,
                                                             self._witness_count, self._room,
-                                                            None), out)
+                                                            None), out, self._limits_of(motion))
                 return cache[3]
         data, dt = kinematics.data, motion.dt
         accelerations, jerks = motion.acceleration_limits, motion.jerk_limits
         key = self._key(q, motion)
-        cache = self._cache
-        if cache is not None and q is not None and cache[0] is data and cache[1] == key:
+        cache = None if q is None else self._cached(data, key, motion)
+        if cache is not None:
             (self.active, self.within, self._witness_count, self._room,
              self._needs) = cache[2]
             return cache[3]
@@ -362,7 +362,7 @@ class CollisionLimit(PairsMixin, TablesMixin, BroadPhaseMixin, MovingMixin, Rows
             out = out[0], b
         self._room, self._needs = self._room_of(out), needs
         self._cache = (data, key, (self.active, self.within, self._witness_count, self._room,
-                                   needs), out)
+                                   needs), out, self._limits_of(motion))
         return out
 
     def room(self) -> np.ndarray | None:

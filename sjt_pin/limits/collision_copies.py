@@ -11,11 +11,14 @@ every memory its next steps read, so that a copy's steps are the original's, bit
   they start, so two starts agree to that tolerance, not bitwise, and a copy's first
   queries must start where the original's would.
 
+- the rows of the last configuration, which the next step at the same configuration and
+  motion answers from without a query (an arm at rest): a copy that queried them again
+  advanced its witnesses' clock a tick past the original's, and UR5 resting above a table
+  then parted from its copy once it moved on. A copy's solver names its limits by other
+  arrays: the carried rows answer where their values agree (``RowsMixin._cached``).
+
 A copy loaded in another process steps alike too: coal's process-wide state is settled
-before any limit's first query (``collision_geometry.settle_coal``). Not carried: the rows of
-the last configuration (a copy made where the arm rests queries them once more where the
-original answers from them, and its witnesses' clock runs one tick ahead; the steps stay the
-same).
+before any limit's first query (``collision_geometry.settle_coal``).
 
 A part of the CollisionLimit (a mixin it inherits from), operating on its state."""
 
@@ -67,7 +70,8 @@ class CopiesMixin(CollisionState):
                 ref[0], ref[1].copy(), ref[2].copy(), ref[3].copy(), list(ref[4])),
                 self._floor.copy(), None if self._floor_q is None else self._floor_q.copy()),
             "guesses": [(np.array(r.cached_gjk_guess), np.array(r.cached_support_func_guess))
-                        for r in self.geometry_data.distanceRequests]}
+                        for r in self.geometry_data.distanceRequests],
+            "rows": None if self._cache is None else _carried_rows(self._cache)}
 
     def _remember(self, memory: dict) -> None:
         """Take the memories of :meth:`_memories` (written into the arrays the compiled
@@ -86,3 +90,24 @@ class CopiesMixin(CollisionState):
                                            memory["guesses"], strict=True):
             request.cached_gjk_guess = ray
             request.cached_support_func_guess = support
+        rows = memory.get("rows")
+        self._cache = None if rows is None else _carried_rows(rows)
+
+
+def _copied(x):
+    """``x`` (an array, a tuple or list of them, or an immutable value) as a copy; an array
+    read-only where it was."""
+    if isinstance(x, np.ndarray):
+        y = x.copy()
+        y.setflags(write=x.flags.writeable)
+        return y
+    if isinstance(x, tuple | list):
+        return type(x)(_copied(y) for y in x)
+    return x
+
+
+def _carried_rows(cache: tuple) -> tuple:
+    """The rows cache a copy carries, as copies: (the kinematics data they were made on: left
+    out, the key, the limit's state they set, the rows, the values of the motion's limits)."""
+    _, key, state, out, limits = cache
+    return (None, (*key[:-1], None), _copied(state), _copied(out), _copied(limits))

@@ -20,14 +20,40 @@ class RowsMixin(CollisionState):
 
     def _key(self, q: np.ndarray | None, motion: Motion) -> tuple:
         """What :meth:`rows` answers for, its cache's key: the configuration, the period, the
-        obstacles' poses (``_version``) and the motion's limits, with acceleration limits its
-        joint speeds and accelerations too."""
+        obstacles' poses (``_version``) and, with acceleration limits, the joint speeds and
+        accelerations; last, the identities of the motion's limits (a copy's first step
+        compares their values instead: :meth:`_cached`)."""
         where = None if q is None else q.tobytes()
         accelerations = motion.acceleration_limits
         if accelerations is None:
-            return (where, motion.dt, self._version, id(motion.velocity_limits))
-        return (where, motion.dt, self._version, id(accelerations), id(motion.jerk_limits),
-                motion.dq.tobytes() + motion.ddq.tobytes())
+            return (where, motion.dt, self._version, None, (id(motion.velocity_limits),))
+        return (where, motion.dt, self._version, motion.dq.tobytes() + motion.ddq.tobytes(),
+                (id(accelerations), id(motion.jerk_limits)))
+
+    @staticmethod
+    def _limits_of(motion: Motion) -> tuple:
+        """The motion's limits that :meth:`_key` names by identity (references)."""
+        if motion.acceleration_limits is None:
+            return (motion.velocity_limits,)
+        return (motion.acceleration_limits, motion.jerk_limits)
+
+    def _cached(self, data: object, key: tuple, motion: Motion) -> tuple | None:
+        """The last rows where they answer for ``key`` on ``data``, else None. A copy's
+        carried rows (``_cache[0]`` None: :mod:`.collision_copies`) answer where all but the
+        limits' identities agree and the limits' values are those they were made with; they
+        are then this solver's."""
+        cache = self._cache
+        if cache is None:
+            return None
+        if cache[0] is data and cache[1] == key:
+            return cache
+        if cache[0] is None and cache[1][:-1] == key[:-1] and all(
+                (a is None and b is None) or (a is not None and b is not None
+                                              and np.array_equal(a, b))
+                for a, b in zip(cache[4], self._limits_of(motion), strict=True)):
+            cache = self._cache = (data, key, cache[2], cache[3], self._limits_of(motion))
+            return cache
+        return None
 
     def _reach(self, speeds: np.ndarray | None) -> np.ndarray | None:
         """Each pair's reach (npairs,; m/s; kept for these ``speeds``): the fastest its
