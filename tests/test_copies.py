@@ -239,7 +239,9 @@ def test_a_copy_answers_from_the_last_rows_where_the_original_does(ur5, how):
     _assert_same(limit.rows(kinematics, same), rows)
     assert limit._tick == tick  # (answered from the last rows)
     twin = pickle.loads(pickle.dumps(limit)) if how == "pickle" else copy.deepcopy(limit)
-    _assert_same(twin.rows(kinematics, motion(10.0)), rows)
+    carried = twin.rows(kinematics, motion(10.0))
+    _assert_same(carried, rows)
+    assert not any(x.flags.writeable for x in carried)  # (read-only, as the original's)
     assert twin._tick == tick
     _assert_same(twin._memories(), limit._memories())
     other = pickle.loads(pickle.dumps(limit)) if how == "pickle" else copy.deepcopy(limit)

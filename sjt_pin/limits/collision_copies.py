@@ -94,15 +94,15 @@ class CopiesMixin(CollisionState):
         self._cache = None if rows is None else _carried_rows(rows)
 
 
-def _copied(x):
-    """``x`` (an array, a tuple or list of them, or an immutable value) as a copy; an array
-    read-only where it was."""
+def _frozen(x):
+    """``x`` (an array, a tuple or list of them, or an immutable value) as a copy, its arrays
+    read-only as the cached rows' are (pickle and deepcopy give writable arrays)."""
     if isinstance(x, np.ndarray):
         y = x.copy()
-        y.setflags(write=x.flags.writeable)
+        y.setflags(write=False)
         return y
     if isinstance(x, tuple | list):
-        return type(x)(_copied(y) for y in x)
+        return type(x)(_frozen(y) for y in x)
     return x
 
 
@@ -110,4 +110,4 @@ def _carried_rows(cache: tuple) -> tuple:
     """The rows cache a copy carries, as copies: (the kinematics data they were made on: left
     out, the key, the limit's state they set, the rows, the values of the motion's limits)."""
     _, key, state, out, limits = cache
-    return (None, (*key[:-1], None), _copied(state), _copied(out), _copied(limits))
+    return (None, (*key[:-1], None), _frozen(state), _frozen(out), _frozen(limits))
