@@ -128,6 +128,8 @@ FRAMES = {"ur5": ["ee_link", "wrist_3_link"], "panda": ["panda_hand", "panda_lin
     ("panda", 0.1, 500.0, "dls"),   # never left its start
     ("panda", 0.1, None, "sjt"),    # never left its start (a start without jerk limits)
     ("panda", 0.3, 2000.0, "dls"),  # never left its start
+    ("panda", 0.1, 500.0, "sjt"),   # rested 22 mm above: each joint clipped alone
+    ("panda", 0.1, 2000.0, "sjt"),  # rested 51 mm above, the hand moved sideways
 ])
 def test_an_arm_sent_through_a_users_floor_rests_on_it_within_every_limit(name, speed, ratio,
                                                                           method):

@@ -94,6 +94,10 @@ class Controller {
   // arm is still in it
   double start_error = 1e300;
   bool start_run = false;
+  // the least |e|^2 of the steps' targets (e_sq) since the target last moved (inf: none):
+  // settle's check that a step along the line toward the goal's velocity still gains
+  double least_e_sq = 1e300;
+  double least_age = 0.0;  // s since least_e_sq was last lowered
   Vector rest_keep;
   Index rest_rank = 0;
   // the first level's pose errors take their exact rows (exact_rows; set after `still`
@@ -148,6 +152,8 @@ class Controller {
   // Not while the saddle escape adds a velocity (its own test found the error lower along it,
   // and it yields if the error grows)
   static constexpr double kRestRate = 1e-3;
+  // a growth of |e|^2 by this factor in one step is a target that moved (least_e_sq forgets)
+  static constexpr double kRecord = 1.1025;
   // the exact rows of a pose error (run, exact_rows): taken after this many consecutive steps
   // held by a position range short of the target, lowering 1/2 |e_w|^2 by less than kRestRate
   // of it a second, with |e_w| above kExactFrom times the converged floor; given back once
@@ -264,6 +270,8 @@ class Controller {
   JointBox rest_box_;      // settle: the box of braking to rest
   // fit_within_box: its box about the velocity, J0 (desired - v), the velocity it found
   Vector fit_lo_, fit_hi_, fit_a_, fit_v_;
+  Vector goal_desired_;  // the goal's velocity where the step went along the line toward it
+  bool synced_ = false;
   bool goal_rows_ = false;  // a row's room binds range_goal's displacement (settle applies)
   bool goal_dampers_ = false;  // ... and one of those rows is a damper (b / K caps it)
   bool replaced_ = false;  // range_goal replaced the first level's feedback this step
