@@ -52,7 +52,8 @@ constexpr double kWindow = 0.2;
 // minimum) kept arms at an obstacle sliding along it (TALOS's arm on the blocked bench: still
 // moving at 8 s); where rooms alone bind it (a user's rows) they start there too: Panda (SJT)
 // sent through a user's floors under acceleration limits alone never left its start, or
-// rested 24 mm above them (all 4 runs, one per speed cap; now 1, 49 mm above them).
+// rested 24 mm above them (all 4 runs, one per speed cap; with starts, 1 run 49 mm above
+// them; with the line toward the goal's velocity in run, none).
 void Controller::settle(const Eigen::Ref<const RowMatrix>& J0, const double* q,
                         const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b,
                         const double* user_lo, const double* user_hi) {
