@@ -117,7 +117,7 @@ def test_the_stage_brakes_only_the_rows_their_limits_leave_to_it(panda):
 
 
 FRAMES = {"ur5": ["ee_link", "wrist_3_link"], "panda": ["panda_hand", "panda_link7"],
-          "kinova": ["j2s6s200_end_effector", "j2s6s200_link_6"]}
+          "kinova": ["j2s6s200_end_effector", "j2s6s200_link_6"], "xarm7": ["link_eef", "link7"]}
 
 
 @pytest.mark.parametrize("name, speed, ratio, method", [
@@ -130,6 +130,7 @@ FRAMES = {"ur5": ["ee_link", "wrist_3_link"], "panda": ["panda_hand", "panda_lin
     ("panda", 0.3, 2000.0, "dls"),  # never left its start
     ("panda", 0.1, 500.0, "sjt"),   # rested 22 mm above: each joint clipped alone
     ("panda", 0.1, 2000.0, "sjt"),  # rested 51 mm above, the hand moved sideways
+    ("xarm7", 0.1, 500.0, "sjt"),   # rested 14 mm above
 ])
 def test_an_arm_sent_through_a_users_floor_rests_on_it_within_every_limit(name, speed, ratio,
                                                                           method):
