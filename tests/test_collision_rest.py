@@ -166,3 +166,31 @@ def test_an_arm_at_rest_above_an_obstacle_starts_under_a_jerk_limit(arms):
     _, a, j = bench.rates(robot.model, qs, DT)
     assert np.all(np.abs(a) <= acceleration * (1 + 1e-9))
     assert np.all(np.abs(j) <= jerk * (1 + 1e-9))
+
+
+@pytest.mark.parametrize("name, jerk, below", [
+    ("ur5", 20_000.0, 0.23),  # each joint clipped alone: braked to rest at 0.237, 8.7 mm above
+    ("xarm7", None, 0.21),    # a line not judged by the error measured: still sliding at 8 s
+])
+def test_an_arm_sent_through_a_table_slides_on_it_and_rests(name, jerk, below, arms):
+    """An arm (SJT), a table 13 cm under its hand, a target 30 cm below the hand (behind the
+    table), 10 rad/s^2 and a jerk limit or none: the joints move along one line toward the
+    bounded displacement's velocity, the arm slides along the table and comes to rest, below
+    ``below`` from the target (its start: 0.305), within every limit and the margin."""
+    robot = arms[name]
+    q0 = robot.q0.copy()
+    hand = robot.fk(q0).translation
+    table = (coal.Box(0.3, 0.3, 0.02), pin.SE3(np.eye(3), hand + [0.0, 0.0, -0.13]))
+    limit = CollisionLimit(robot, [table], margin=MARGIN)
+    smooth = {} if jerk is None else {"jerk_limits": jerk}
+    solver = sjt.SJTSolver(robot, task=sjt.PositionTask(), limits=[limit], dt=DT,
+                           acceleration_limits=10.0, **smooth)
+    target = hand + [0.05, 0.02, -0.3]
+    qs = _run(robot, q0, lambda t: (target, None), limit, solver, seconds=8.0)
+    assert np.linalg.norm(robot.fk(qs[-1]).translation - target) < below
+    assert np.abs(np.diff(qs[-501:], axis=0)).max() / DT < 1e-6  # at rest, the last 0.5 s
+    assert _closest(robot, [table], limit, qs) >= MARGIN - 1e-3
+    _, a, j = bench.rates(robot.model, qs, DT)
+    assert np.abs(a).max() <= 10.0 * (1 + 1e-9)
+    if jerk is not None:
+        assert np.abs(j).max() <= jerk * (1 + 1e-9)
