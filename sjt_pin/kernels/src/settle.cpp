@@ -73,19 +73,18 @@ void Controller::settle(const Eigen::Ref<const RowMatrix>& J0, const double* q,
   // without this, xArm7 above a table still slid along it after 8 s in 4 of 6 runs (SJT and
   // DLS, acceleration limits alone or jerk limits 2,000 times them), and in an earlier form
   // of the line UR5 at 5 mm/s, its error growing by 3e-4 a second where the model promised a
-  // decrease. (A bound on the error's rise above its
-  // least stopped arms short instead: theirs rose 0.3-1 % on the way down to a user's floor,
-  // 5 % near a target through a ring.)
+  // decrease. (A bound on the error's rise above its least stopped arms short instead: theirs
+  // rose 0.3-1 % on the way down to a user's floor, 5 % near a target through a ring.)
   if (synced_ && least_age > kWindow) rate = std::min(rate, 0.0);
   // A step along the line from rest or slow moves little this period, less than a resting
   // arm would: it is judged by where it heads, the goal's own motion, while the error is at
   // its least (UR5 sent through a user's floors under jerk limits rested 3.5 cm along them
-  // from its constrained minimum)
+  // from its constrained minimum). (goal_y_ is scratch: `moved` is the step's motion again
+  // only where the step is judged on)
   if (synced_ && rate > 0.0 && rate < 2.0 * rest && e_sq <= least_e_sq) {
     goal_y_.noalias() = J0 * desired;
-    const bool heading = e.dot(moved) >= 2.0 * rest_rate();
+    if (e.dot(moved) >= 2.0 * rest_rate()) return;  // (heading down the error)
     goal_y_.noalias() = J0 * velocity;
-    if (heading) return;
   }
   // (a start: every joint within the speed one step or one jerk ramp gives it; without jerk
   // limits only where no damper row binds the displacement, which b / K bounds to a step's
