@@ -171,12 +171,16 @@ def test_an_arm_at_rest_above_an_obstacle_starts_under_a_jerk_limit(arms):
 @pytest.mark.parametrize("name, jerk, below", [
     ("ur5", 20_000.0, 0.23),  # each joint clipped alone: braked to rest at 0.237, 8.7 mm above
     ("xarm7", None, 0.21),    # a line not judged by the error measured: still sliding at 8 s
+    # its fingers start 2.9 mm inside the margin: pushed out, it rested at 0.3076, judged
+    # against the error before the push
+    ("panda", 5_000.0, 0.304),
 ])
 def test_an_arm_sent_through_a_table_slides_on_it_and_rests(name, jerk, below, arms):
     """An arm (SJT), a table 13 cm under its hand, a target 30 cm below the hand (behind the
     table), 10 rad/s^2 and a jerk limit or none: the joints move along one line toward the
     bounded displacement's velocity, the arm slides along the table and comes to rest, below
-    ``below`` from the target (its start: 0.305), within every limit and the margin."""
+    ``below`` from the target (its start: 0.305), within every limit and the margin (Panda's
+    fingers start inside it)."""
     robot = arms[name]
     q0 = robot.q0.copy()
     hand = robot.fk(q0).translation
@@ -189,7 +193,9 @@ def test_an_arm_sent_through_a_table_slides_on_it_and_rests(name, jerk, below, a
     qs = _run(robot, q0, lambda t: (target, None), limit, solver, seconds=8.0)
     assert np.linalg.norm(robot.fk(qs[-1]).translation - target) < below
     assert np.abs(np.diff(qs[-501:], axis=0)).max() / DT < 1e-6  # at rest, the last 0.5 s
-    assert _closest(robot, [table], limit, qs) >= MARGIN - 1e-3
+    start = _closest(robot, [table], limit, qs[:1])  # (out of the margin within 0.2 s)
+    assert _closest(robot, [table], limit, qs) >= min(start, MARGIN - 1e-3)
+    assert _closest(robot, [table], limit, qs[200:]) >= MARGIN - 1e-3
     _, a, j = bench.rates(robot.model, qs, DT)
     assert np.abs(a).max() <= 10.0 * (1 + 1e-9)
     if jerk is not None:

@@ -98,6 +98,9 @@ class Controller {
   // settle's check that a step along the line toward the goal's velocity still gains
   double least_e_sq = 1e300;
   double least_age = 0.0;  // s since least_e_sq was last lowered
+  // a row pushed the arm (its bound below zero: inside the margin, an obstacle closing in)
+  // and the arm has not come to rest since: least_e_sq follows the error meanwhile
+  bool pushed = false;
   Vector rest_keep;
   Index rest_rank = 0;
   // the first level's pose errors take their exact rows (exact_rows; set after `still`
@@ -154,6 +157,9 @@ class Controller {
   static constexpr double kRestRate = 1e-3;
   // a growth of |e|^2 by this factor in one step is a target that moved (least_e_sq forgets)
   static constexpr double kRecord = 1.1025;
+  // a row's motion (m/s for a collision pair's) below minus this is the arm moving away along
+  // it (run: the error's record after a push)
+  static constexpr double kPushed = 1e-9;
   // the exact rows of a pose error (run, exact_rows): taken after this many consecutive steps
   // held by a position range short of the target, lowering 1/2 |e_w|^2 by less than kRestRate
   // of it a second, with |e_w| above kExactFrom times the converged floor; given back once

@@ -222,6 +222,7 @@ void register_controller(nb::module_& m) {
       .def_rw("start_run", &Controller::start_run)
       .def_rw("least_e_sq", &Controller::least_e_sq)
       .def_rw("least_age", &Controller::least_age)
+      .def_rw("pushed", &Controller::pushed)
       .def_rw("rest_rank", &Controller::rest_rank)
       .def_prop_ro("rest_keep",
                    [](Controller& c) { return view<WriteView>(c, c.rest_keep.data(), c.nv * c.nv); },
