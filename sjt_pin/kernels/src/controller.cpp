@@ -417,8 +417,8 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
   // along a table for good, as without the window. Only a row the step moves away along: a
   // link no joint moves away, inside the margin for good, reset it at every rest, and Kinova
   // still moved after 8 s.)
-  for (Index i = 0; i < A.rows() && from_rest; ++i)
-    pushed = pushed || (b[i] < 0.0 && A.row(i).dot(dq) < -kPushed);
+  for (Index i = 0; i < A.rows() && from_rest && !pushed; ++i)
+    pushed = b[i] < 0.0 && A.row(i).dot(dq) < -kPushed;
   if (pushed || e_sq < least_e_sq || e_sq > kRecord * least_e_sq) {
     least_e_sq = e_sq;
     least_age = 0.0;

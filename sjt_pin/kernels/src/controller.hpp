@@ -98,8 +98,8 @@ class Controller {
   // settle's check that a step along the line toward the goal's velocity still gains
   double least_e_sq = 1e300;
   double least_age = 0.0;  // s since least_e_sq was last lowered
-  // a row pushed the arm (its bound below zero: inside the margin, an obstacle closing in)
-  // and the arm has not come to rest since: least_e_sq follows the error meanwhile
+  // a row pushed the arm from rest (its bound below zero: inside the margin) and the arm's
+  // motion still raises the error: least_e_sq follows the error meanwhile
   bool pushed = false;
   Vector rest_keep;
   Index rest_rank = 0;
