@@ -130,11 +130,20 @@ def mesh_dirs(source: URDFSource, package_dirs, allow_outside: bool, must_exist:
     return dirs
 
 
+# example-robot-data's loaders by name where its registry gives another robot's: 5.0 registers
+# "ur3" to UR5Loader (ur5_robot.urdf), so that a UR3 asked for came as a UR5 named "ur3"
+OWN_LOADERS = {"ur3": "UR3Loader"}
+
+
 def load_example(erd, name: str):
-    """example-robot-data's robot ``name``; a clear error for an SDF model (Cassie) where
-    this Pinocchio has no SDF parser (``pinocchio.WITH_SDFORMAT``)."""
+    """example-robot-data's robot ``name`` (by its own loader where the registry names
+    another's, :data:`OWN_LOADERS`); a clear error for an SDF model (Cassie) where this
+    Pinocchio has no SDF parser (``pinocchio.WITH_SDFORMAT``)."""
+    from example_robot_data import robots_loader
+
+    own = getattr(robots_loader, OWN_LOADERS.get(name, ""), None)
     try:
-        return erd.load(name)
+        return own().robot if own is not None else erd.load(name)
     except ImportError as exc:
         if "SDF" in str(exc) and not getattr(pin, "WITH_SDFORMAT", False):
             raise URDFError(

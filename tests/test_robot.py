@@ -130,6 +130,16 @@ def test_every_default_ee_frame_exists(name):
     assert robot.jacobian(robot.q0).shape == (6, robot.nv)
 
 
+def test_the_ur3_example_is_a_ur3():
+    """example-robot-data 5.0 registers "ur3" to UR5's loader: the robot asked for is a UR3
+    (its own URDF, its reach at q = 0 about 0.46 m against UR5's 0.82 m), not a UR5."""
+    ur3 = sjt.Robot.from_example("ur3")
+    assert ur3.model.name == "ur3"
+    assert abs(ur3.fk(np.zeros(6)).translation[0] - 0.4569) < 1e-3
+    assert abs(sjt.Robot.from_example("ur3_gripper").fk(np.zeros(6)).translation[0]
+               - 0.4569) < 1e-3  # (the same arm)
+
+
 @pytest.mark.parametrize("name, hint", [("UR5", "did you mean 'ur5'"),
                                         ("pandas", "did you mean 'panda'"),
                                         ("talos-full", "did you mean 'talos_full'")])
