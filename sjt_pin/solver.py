@@ -368,7 +368,8 @@ class Solver:
         state = {"motion": (c.dq.copy(), c.ddq.copy()), "escape": self.escape,
                  "escaping": c.escaping, "escape_velocity": c.escape_velocity.copy(),
                  "resting": (c.resting, c.rest_rank, c.rest_keep.copy()),
-                 "start": (c.start_error, c.start_run, c.least_e_sq, c.least_age, c.pushed),
+                 "start": (c.start_error, c.start_run, c.least_e_sq, c.least_age, c.pushed,
+                           c.damped_error, c.goal_damping, c.damping_raises),
                  "warned": self._stability.warned, "count": self._count, "first": self._first,
                  "stall": (c.stall_run, c.stall_wait, c.exact, c.still, c.expected.copy()),
                  "warm": c.warm_state, "curvature": c.curvature_memory,
@@ -380,7 +381,8 @@ class Solver:
         c.dq[:], c.ddq[:] = state["motion"]
         self.escape, c.escaping = state["escape"], state["escaping"]
         c.resting, c.rest_rank, c.rest_keep[:] = state["resting"]
-        c.start_error, c.start_run, c.least_e_sq, c.least_age, c.pushed = state["start"]
+        (c.start_error, c.start_run, c.least_e_sq, c.least_age, c.pushed, c.damped_error,
+         c.goal_damping, c.damping_raises) = state["start"]
         c.escape_velocity[:] = state["escape_velocity"]
         self._stability.warned, self._count, self._first = (state["warned"], state["count"],
                                                             state["first"])

@@ -200,3 +200,35 @@ def test_an_arm_sent_through_a_table_slides_on_it_and_rests(name, jerk, below, a
     assert np.abs(a).max() <= 10.0 * (1 + 1e-9)
     if jerk is not None:
         assert np.abs(j).max() <= jerk * (1 + 1e-9)
+
+
+@pytest.mark.parametrize("name, table_z, target, jerk, below, seconds", [
+    # pushed out, the arm braked, and from that rest it never started again (0.304)
+    ("ur5", -0.0610, [0.05, 0.02, -0.3], 5_000.0, 0.26, 8.0),
+    # its line along the table failed (the error rose) and braked it to rest at 0.2305; with
+    # the damping raised it slides on and rests at 0.1519 by 10 s
+    ("ur10", -0.0644, [0.2, 0.1, -0.15], 1_000.0, 0.153, 11.0),
+])
+def test_an_arm_started_inside_a_tables_margin_goes_on_to_its_constrained_minimum(
+        name, table_z, target, jerk, below, seconds, arms):
+    """An arm (SJT) whose hand starts 2 mm inside a table's 10 mm margin, a target below the
+    table, 10 rad/s^2 and a jerk limit: pushed out, it slides along the table and rests at the
+    constrained minimum the same solver without acceleration limits finds from there (UR5
+    0.2585, UR10 0.1519), within every limit and, from 0.2 s on, the margin."""
+    robot = arms[name]
+    q0 = robot.q0.copy()
+    hand = robot.fk(q0).translation
+    table = (coal.Box(0.3, 0.3, 0.02), pin.SE3(np.eye(3), hand + [0.0, 0.0, table_z]))
+    limit = CollisionLimit(robot, [table], margin=MARGIN)
+    assert _closest(robot, [table], limit, [q0]) < MARGIN - 1.9e-3  # (the case under test)
+    solver = sjt.SJTSolver(robot, task=sjt.PositionTask(), limits=[limit], dt=DT,
+                           acceleration_limits=10.0, jerk_limits=jerk)
+    goal = hand + target
+    with pytest.warns(UserWarning, match="margin"):
+        qs = _run(robot, q0, lambda t: (goal, None), limit, solver, seconds=seconds)
+    assert np.linalg.norm(robot.fk(qs[-1]).translation - goal) < below
+    assert np.abs(np.diff(qs[-501:], axis=0)).max() / DT < 1e-6  # at rest, the last 0.5 s
+    assert _closest(robot, [table], limit, qs[200:]) >= MARGIN - 1e-3
+    _, a, j = bench.rates(robot.model, qs, DT)
+    assert np.abs(a).max() <= 10.0 * (1 + 1e-9)
+    assert np.abs(j).max() <= jerk * (1 + 1e-9)

@@ -193,24 +193,42 @@ def test_a_copy_at_a_rest_takes_the_rows_the_original_takes(how):
     assert not np.array_equal(run(fresh, q, [target] * 200), ahead)  # (the case under test)
 
 
-@pytest.mark.parametrize("how", ["pickle", "deepcopy"])
-def test_a_copy_carries_where_the_last_start_from_rest_began(ur5, how):
-    """UR5 above a table under jerk limits, its target below it, comes to rest 4 mm above the
-    margin, where a new start from rest needs the last one to have lowered the error by more
-    than it did: a copy made there carries that memory and stays at rest as the original
-    does (one without it starts again), bitwise."""
-    q = ur5.q0.copy()
-    hand = ur5.fk(q).translation
+def _ur5_above_a_table(ur5):
+    """(SJT solver, q0, target): UR5 under jerk limits, a table 13 cm under its hand, its
+    target 30 cm below the hand (behind the table)."""
+    hand = ur5.fk(ur5.q0).translation
     table = (coal.Box(0.3, 0.3, 0.02), pin.SE3(np.eye(3), hand + [0.0, 0.0, -0.13]))
     limit = sjt.CollisionLimit(ur5, [table])
-    original = sjt.SJTSolver(ur5, task=sjt.PositionTask(), limits=[limit],
-                             acceleration_limits=10.0, jerk_limits=2000.0)
-    target = hand + [0.05, 0.02, -0.3]
-    q = run(original, q, [target] * 3000)[-1]
+    solver = sjt.SJTSolver(ur5, task=sjt.PositionTask(), limits=[limit],
+                           acceleration_limits=10.0, jerk_limits=2000.0)
+    return solver, ur5.q0.copy(), hand + [0.05, 0.02, -0.3]
+
+
+@pytest.mark.parametrize("how", ["pickle", "deepcopy"])
+def test_a_copy_carries_where_the_last_start_from_rest_began(ur5, how):
+    """UR5 above a table under jerk limits, its target below it, comes to rest on the table's
+    margin by 4 s, where its starts from rest (and the damping they raised) have gained what
+    they could: a copy made there carries that memory and stays at rest as the original does
+    (a fresh solver there starts again: a joint moves 2e-3 rad), bitwise."""
+    original, q, target = _ur5_above_a_table(ur5)
+    q = run(original, q, [target] * 5000)[-1]
     twin = pickle.loads(pickle.dumps(original)) if how == "pickle" else copy.deepcopy(original)
     ahead = run(original, q, [target] * 1000)
     np.testing.assert_array_equal(run(twin, q, [target] * 1000), ahead)
     assert np.abs(ahead - q).max() < 1e-9  # (at rest)
+
+
+@pytest.mark.parametrize("how", ["pickle", "deepcopy"])
+def test_a_copy_carries_the_damping_a_failed_line_raised(ur5, how):
+    """The same UR5 2 s in: its line along the table has failed once and raised the damping
+    of its bounded displacement (fourfold); a copy made there goes on with that damping, and
+    its next 1.5 s are the original's, bitwise."""
+    original, q, target = _ur5_above_a_table(ur5)
+    q = run(original, q, [target] * 2000)[-1]
+    twin = pickle.loads(pickle.dumps(original)) if how == "pickle" else copy.deepcopy(original)
+    ahead = run(original, q, [target] * 1500)
+    np.testing.assert_array_equal(run(twin, q, [target] * 1500), ahead)
+    assert np.abs(ahead[-1] - q).max() > 1e-3  # (it still moved)
 
 
 @pytest.mark.parametrize("how", ["pickle", "deepcopy"])

@@ -101,6 +101,12 @@ class Controller {
   // a row pushed the arm from rest (its bound below zero: inside the margin) and the arm's
   // motion still raises the error: least_e_sq follows the error meanwhile
   bool pushed = false;
+  // the factor on range_goal's damping where rows with room bind it (raise_damping), |e|
+  // where it last changed or a start from rest began (inf: neither since the target moved),
+  // and how many times it was raised since
+  double damped_error = 1e300;
+  double goal_damping = 1.0;
+  int damping_raises = 0;
   Vector rest_keep;
   Index rest_rank = 0;
   // the first level's pose errors take their exact rows (exact_rows; set after `still`
@@ -160,6 +166,9 @@ class Controller {
   // a row's motion (m/s for a collision pair's) below minus this is the arm moving away along
   // it (run: the error's record after a push)
   static constexpr double kPushed = 1e-9;
+  // range_goal's damping factor where rows with room bind it: its growth where the line failed,
+  // and the fall of |e| (a share of it) after which it shrinks back (raise_damping)
+  static constexpr double kDampingGrowth = 4.0, kDampedProgress = 0.01;
   // the exact rows of a pose error (run, exact_rows): taken after this many consecutive steps
   // held by a position range short of the target, lowering 1/2 |e_w|^2 by less than kRestRate
   // of it a second, with |e_w| above kExactFrom times the converged floor; given back once
@@ -201,6 +210,9 @@ class Controller {
   bool range_goal(const Eigen::Ref<const RowMatrix>& J0, const double* q, double K, bool user,
                   const Eigen::Ref<const RowMatrix>& A, const Eigen::Ref<const Vector>& b,
                   const double* room, const double* dampers);
+  bool restart_from_rest();
+  bool raise_damping();
+  bool at_rest() const;
   bool fit_within_box(const Eigen::Ref<const RowMatrix>& J0, const Eigen::Ref<const RowMatrix>& A,
                       const Eigen::Ref<const Vector>& b);
   void rest_along_flat();

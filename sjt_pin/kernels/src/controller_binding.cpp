@@ -223,6 +223,9 @@ void register_controller(nb::module_& m) {
       .def_rw("least_e_sq", &Controller::least_e_sq)
       .def_rw("least_age", &Controller::least_age)
       .def_rw("pushed", &Controller::pushed)
+      .def_rw("damped_error", &Controller::damped_error)
+      .def_rw("damping_raises", &Controller::damping_raises)
+      .def_rw("goal_damping", &Controller::goal_damping)
       .def_rw("rest_rank", &Controller::rest_rank)
       .def_prop_ro("rest_keep",
                    [](Controller& c) { return view<WriteView>(c, c.rest_keep.data(), c.nv * c.nv); },

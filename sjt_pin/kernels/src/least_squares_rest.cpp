@@ -244,8 +244,9 @@ bool Controller::range_goal(const Eigen::Ref<const RowMatrix>& J0, const double*
   // the rows' own gains weigh them as in the method's feedback (K e_w, over the mean gain)
   goal_e_ = ew_.segment(L0.begin, r0);
   if (!user) goal_e_.array() *= gains.segment(L0.begin, r0).array() * (top.gain / K);
-  const double mu = (kGoalFloor + (rows_with_room ? kGoalDampingRows : kGoalDamping) *
-                                     goal_e_.head(targets).norm()) *
+  // (where rows with room bind it, times the factor a failed line raised: raise_damping)
+  const double term = rows_with_room ? goal_damping * kGoalDampingRows : kGoalDamping;
+  const double mu = (kGoalFloor + term * goal_e_.head(targets).norm()) *
                     std::max(J0.squaredNorm() / static_cast<double>(nv), 1e-300);
   // the curvature the last step measured along its own velocity u, as a row sqrt(bend) u^T / |u|
   // with no error of its own: the model's curvature along u is then the error's (a secant
