@@ -422,21 +422,7 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
   // still moved after 8 s.)
   for (Index i = 0; i < A.rows() && from_rest && !pushed; ++i)
     pushed = b[i] < 0.0 && A.row(i).dot(dq) < -kPushed;
-  if (e_sq > kRecord * least_e_sq) {  // (a target that moved)
-    damped_error = kInf;
-    goal_damping = 1.0;
-    damping_raises = 0;
-  }
-  // the damping a failed line raised falls back once the error has fallen kDampedProgress
-  // below where it was raised, not below its first raise: back at the light damping, xArm7
-  // slid along a table at 1.3-1.7 rad/s, its hand's link closing on the table faster than its
-  // rows foresaw as it turned, and dipped 1.2 mm into the 10 mm margin (and one step took 1.7
-  // times its acceleration limit, reported); never falling back, it left 11 of 144 starts
-  // inside a table's margin still moving at 8 s (UR10 at 0.2 rad/s) (raise_damping)
-  if (goal_damping > 1.0 && std::sqrt(e_sq) < (1.0 - kDampedProgress) * damped_error) {
-    goal_damping = std::max(goal_damping / kDampingGrowth, kDampingGrowth);
-    damped_error = std::sqrt(e_sq);
-  }
+  follow_damping();  // (settle.cpp; before the record below forgets a moved target)
   if (pushed || e_sq < least_e_sq || e_sq > kRecord * least_e_sq) {
     least_e_sq = e_sq;
     least_age = 0.0;

@@ -166,9 +166,6 @@ class Controller {
   // a row's motion (m/s for a collision pair's) below minus this is the arm moving away along
   // it (run: the error's record after a push)
   static constexpr double kPushed = 1e-9;
-  // range_goal's damping factor where rows with room bind it: its growth where the line failed,
-  // and the fall of |e| (a share of it) after which it shrinks back (raise_damping)
-  static constexpr double kDampingGrowth = 4.0, kDampedProgress = 0.01;
   // the exact rows of a pose error (run, exact_rows): taken after this many consecutive steps
   // held by a position range short of the target, lowering 1/2 |e_w|^2 by less than kRestRate
   // of it a second, with |e_w| above kExactFrom times the converged floor; given back once
@@ -212,6 +209,7 @@ class Controller {
                   const double* room, const double* dampers);
   bool restart_from_rest();
   bool raise_damping();
+  void follow_damping();
   bool at_rest() const;
   bool fit_within_box(const Eigen::Ref<const RowMatrix>& J0, const Eigen::Ref<const RowMatrix>& A,
                       const Eigen::Ref<const Vector>& b);
