@@ -401,9 +401,7 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
     }
   }
   // (a row that pushes an arm at rest, below)
-  bool from_rest = !pushed && A.rows() > 0 && bounds.smooth;
-  for (Index j = 0; j < n && from_rest; ++j)
-    from_rest = std::abs(dq[j]) <= bounds.acceleration[j] * dt_;
+  const bool from_rest = !pushed && A.rows() > 0 && bounds.smooth && at_rest();
   ddq = (velocity - dq) / dt_;
   dq = velocity;
   bent_.noalias() = J0 * dq;  // (measured_bend, next step)
@@ -422,8 +420,9 @@ int Controller::run(const Eigen::Ref<const RowMatrix>& J, const Eigen::Ref<const
   // still moved after 8 s.)
   for (Index i = 0; i < A.rows() && from_rest && !pushed; ++i)
     pushed = b[i] < 0.0 && A.row(i).dot(dq) < -kPushed;
-  follow_damping();  // (settle.cpp; before the record below forgets a moved target)
-  if (pushed || e_sq < least_e_sq || e_sq > kRecord * least_e_sq) {
+  const bool target_moved = e_sq > kRecord * least_e_sq;
+  follow_damping(target_moved);  // (settle.cpp)
+  if (pushed || e_sq < least_e_sq || target_moved) {
     least_e_sq = e_sq;
     least_age = 0.0;
   } else {

@@ -209,7 +209,7 @@ class Controller {
                   const double* room, const double* dampers);
   bool restart_from_rest();
   bool raise_damping();
-  void follow_damping();
+  void follow_damping(bool target_moved);
   bool at_rest() const;
   bool fit_within_box(const Eigen::Ref<const RowMatrix>& J0, const Eigen::Ref<const RowMatrix>& A,
                       const Eigen::Ref<const Vector>& b);

@@ -160,9 +160,9 @@ bool Controller::restart_from_rest() {
   return true;
 }
 
-// Every joint within one step of its acceleration limit of rest (raise_damping's window:
-// raised at rest too, the damping was spent there without motion, and UR5 above a table crept
-// on by 1e-5 rad and less for 1.5 s before its bitwise rest).
+// Every joint within one step of its acceleration limit of rest (run's push; raise_damping's
+// window: raised at rest too, the damping was spent there without motion, and UR5 above a
+// table crept on by 1e-5 rad and less for 1.5 s before its bitwise rest).
 bool Controller::at_rest() const {
   for (Index j = 0; j < nv; ++j)
     if (std::abs(dq[j]) > bounds.acceleration[j] * dt_) return false;
@@ -174,13 +174,13 @@ bool Controller::at_rest() const {
 // for kWindow, or a start from rest gained too little) raises the damping kDampingGrowth-fold,
 // which shortens the displacement and turns it toward the gradient J0^T e_w, whose every share
 // lowers the error by itself; follow_damping lowers it again once |e| has fallen
-// kDampedProgress below where it was raised. Traced: UR10 (SJT, jerk limits 100 times its acceleration limits,
-// started 2 mm inside a table's margin) slid along the table, its error rising where the
-// light damping's Gauss-Newton displacement (at 0.01 of the gradient's direction, cosine)
-// promised a fall, and the window braked it to rest at 0.2305; with the damping raised it
-// slides on to its constrained minimum, 0.1519. At most kMostRaises raises per target (a row's
-// push does not refund them: xArm7 sliding along a table dipped 0.04 mm into the margin at
-// each rest, was pushed, and slid on for good). True: it raised.
+// kDampedProgress below where it was raised. Traced: UR10 (SJT, jerk limits 100 times its
+// acceleration limits, started 2 mm inside a table's margin) slid along the table, its error
+// rising where the light damping's Gauss-Newton displacement (at 0.01 of the gradient's
+// direction, cosine) promised a fall, and the window braked it to rest at 0.2305; with the
+// damping raised it slides on to its constrained minimum, 0.1519. At most kMostRaises raises
+// per target (a row's push does not refund them: xArm7 sliding along a table dipped 0.04 mm
+// into the margin at each rest, was pushed, and slid on for good). True: it raised.
 bool Controller::raise_damping() {
   if (damping_raises >= kMostRaises) return false;
   ++damping_raises;
@@ -196,8 +196,8 @@ bool Controller::raise_damping() {
 // 1.2 mm into the 10 mm margin, and one step took 1.7 times its acceleration limit, reported;
 // never falling back, it left 11 of 144 starts inside a table's margin still moving at 8 s,
 // UR10 at 0.2 rad/s).
-void Controller::follow_damping() {
-  if (e_sq > kRecord * least_e_sq) {  // (a target that moved)
+void Controller::follow_damping(bool target_moved) {
+  if (target_moved) {
     damped_error = kInf;
     goal_damping = 1.0;
     damping_raises = 0;
