@@ -70,7 +70,8 @@ def test_stoppable_rows_brake_within_the_excess_and_ease_in(jerk):
     period (and the jerk's ramp) and braked at BRAKING_SHARE of the row's acceleration, stops
     within the excess h = b / rate; never below what the previous velocity and acceleration can
     reach in one period at that share unless the pair would then come closer than
-    margin - slack; inside the margin, never below what they can reach in one period. The
+    margin - slack; inside the margin, never below what they can reach in one period, and
+    where the row's lever is below PUSH_LEVER the pair only stops closing. The
     row's jerk is its joints' (:func:`_row_jerk`), and the ramp the held speed waits for at
     most the time its slowest joint takes from one acceleration limit to the other."""
     rng = np.random.default_rng(7 + jerk)
@@ -80,6 +81,7 @@ def test_stoppable_rows_brake_within_the_excess_and_ease_in(jerk):
     h = rng.uniform(-0.004, 0.05, k)
     damper = rate * h
     dq, ddq = rng.normal(size=n) * 1.5, rng.normal(size=n) * 8.0
+    A[np.flatnonzero(h < 0.0)[::2]] *= 0.005  # (levers too short to push their pairs out)
     acc = rng.uniform(5.0, 20.0, n)
     jerks = rng.uniform(2000.0, 8000.0, n) if jerk else None
     if jerk:  # (some joints at their acceleration limit, one of them beyond it: yielded)
@@ -124,6 +126,10 @@ def test_stoppable_rows_brake_within_the_excess_and_ease_in(jerk):
     inside = h < 0.0  # (a pair inside its margin separates as the share lets it)
     expected[inside] = np.maximum(expected[inside], (s + r * dt)[inside])
     assert inside.sum() > 5
+    # (where its lever can push it: else it stops closing as the share lets it)
+    held = inside & (np.linalg.norm(A, axis=1) < kernels.PUSH_LEVER)
+    expected[held] = np.maximum(s + r * dt, 0.0)[held]
+    assert held.sum() >= 3 and (inside & ~held).sum() >= 3
     np.testing.assert_allclose(b, expected, rtol=1e-12, atol=1e-15)
     # the cut bound stops within h: v tau + v^2 / (2 a) <= h where it holds
     kept = (b <= cut) & (h >= 0.0)

@@ -35,7 +35,9 @@ vector. The numpy references that pin them are in ``tests/``.
 - ``frame_velocity``, ``position_rows``, ``rotation_defect``, ``unit_defect``
   (``src/transforms.cpp``): the tasks' small transforms and the door's manifold check of q;
 - the collision limit's kernels (:mod:`sjt_pin.limits.collision`, ``src/collision.hpp``):
-  ``damper_rows``: its velocity-damper rows from its pairs' closest points;
+  ``damper_rows``: its velocity-damper rows from its pairs' closest points (a row of norm at
+  most ``ROUNDING_LEVER`` set to 0; a pair inside its margin pushed out only by a row whose
+  lever is at least ``PUSH_LEVER``);
   ``stoppable_rows``: their bounds cut to closing speeds the acceleration limits can stop (also
   a user's rows with room, :mod:`sjt_pin.constraints`), and
   ``braking_reach``: each pair's influence for an arm with acceleration limits
@@ -51,6 +53,8 @@ vector. The numpy references that pin them are in ``tests/``.
 from ._core import (  # noqa: F401
     CONTINUE,
     CONVERGED,
+    PUSH_LEVER,
+    ROUNDING_LEVER,
     SEARCH_STALLED,
     CollisionTables,
     Controller,

@@ -11,7 +11,11 @@ with ``p_a``, ``p_b`` the closest points, ``n`` the unit normal from ``b`` to ``
 ``J_x(p)`` the world-aligned linear Jacobian of the point ``p`` fixed to geometry ``x``'s parent
 joint (zero for an obstacle). Over one period ``dt`` the distance then changes to first order
 by ``d_dot dt >= -gain (d - margin)``: with ``gain`` in (0, 1] it never crosses ``margin``,
-and below ``margin`` (or in penetration) the row pushes the pair apart. Where the solver's
+and below ``margin`` (or in penetration) the row pushes the pair apart, where its lever
+``|A_i|`` is at least ``kernels.PUSH_LEVER`` (1 cm per unit of joint motion); a link with a
+shorter one turns about a point near its closest one rather than away, over more than a
+radian for a centimetre, and its row only keeps the pair from closing (``b_i = 0``; a row
+whose norm is at most ``kernels.ROUNDING_LEVER`` is rounding, set to 0). Where the solver's
 speed limits ``v`` keep ``|d_dot|`` below ``gain (d - margin) / dt`` already (``|d_dot| <=
 sum_j lever_j v_j``, the levers of the broad phase's skip, below), the row is implied by them
 and is left out of the step's rows.

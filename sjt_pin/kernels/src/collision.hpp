@@ -58,9 +58,18 @@ class JointPoses {
 // of one array per joint (`who`: the kernel's name)
 void check_views(nb::handle views, const char* who);
 
+// (m per unit of q_dot) a damper row whose norm is at most this is rounding (coal's points
+// times Jacobian columns), not a lever
+constexpr double kRoundingLever = 1e-12;
+// (m per unit of q_dot) the least lever |A_i| with which a row inside its margin pushes its
+// pair out: below it a centimetre's push takes more than a radian of joint motion, over which
+// no linearisation of the distance holds, and the row only keeps the pair from closing
+constexpr double kPushLever = 0.01;
+
 // damper_rows into A (k, N) and b (k,) from the first k rows of `rows` (rows' joints checked
 // against support's rows already): row i, A_i = (u_a^T J) support[a] - (u_b^T J) support[b]
-// with u_x = [n; p_x x n], b_i = rate (d - margin). J (6, N) in either order.
+// with u_x = [n; p_x x n] (0 where |A_i| <= kRoundingLever), b_i = rate (d - margin), or 0
+// where that is negative and |A_i| < kPushLever. J (6, N) in either order.
 void damper_rows_into(const StridedMatrixMap& J, const ConstMatrixMap& support, const double* rows,
                       Index k, double rate, double* A, double* b);
 

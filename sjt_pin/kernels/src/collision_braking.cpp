@@ -115,11 +115,13 @@ void register_collision_braking(nb::module_& m) {
           // in [least, most]; the joints' speeds (speed limits, range braking) let it retreat
           // at up to retreat (m/s)
           double a = 0.0, j = 0.0, s = 0.0, sd = 0.0, least = 0.0, most = 0.0, retreat = 0.0;
+          double lever_sq = 0.0;  // |A_i|^2
           double full = 0.0;  // s until every joint of the row brakes it at its limit
           double rise = 0.0;  // the row's largest acc_j / jerk_j (s)
           for (Index c = 0; c < N; ++c) {
             const double w = rows(i, c);
             if (w == 0.0) continue;
+            lever_sq += w * w;
             a += std::fabs(w) * acc[c];
             if (jerk) {
               j += std::fabs(w) * jl[c];
@@ -170,11 +172,16 @@ void register_collision_braking(nb::module_& m) {
           // nor faster than the joints' boxes let it drop this step (a joint at its
           // acceleration limit, or held by its jerk limit, gives less than its share)
           const double r = boxes && std::isfinite(least) ? std::max(r0, least) : r0;
+          // a row at or inside its margin whose lever is too short to push its pair out
+          // (damper_rows: kPushLever) keeps it from closing, from braking as fast as the share
+          // of the limits lets it
+          const bool held = !given && damper <= 0.0 && lever_sq < kPushLever * kPushLever;
           // the bound on the closing speed of the arm's side of a pair whose other side comes
           // at u: it is the arm's speed that brakes, the obstacle's stays (the relative
           // closing speed s + u)
           const auto cut = [&](double u) {
             const double s_rel = s + u;
+            if (held) return std::max(s_rel + r * dt, 0.0) - u;
             double v = stoppable_speed(h, share * a, dt + ramp);
             // a bound above the closing speed lets the row speed up toward its margin, and
             // under a jerk limit that acceleration takes time to ramp out: the fastest
@@ -256,7 +263,8 @@ void register_collision_braking(nb::module_& m) {
       "    its share of the limits (and the boxes) allows, while its pair, braking at a_i,\n"
       "    stays at least margin - slack apart;\n"
       "  - b_i = max(b_i, c_i + r dt - u_i) inside the margin (h < 0): the pair separates as\n"
-      "    fast as that share lets its closing speed drop;\n"
+      "    fast as that share lets its closing speed drop; b_i = max(c_i + r dt, 0) - u_i at or\n"
+      "    inside it (b_i <= 0) where |A_i| < PUSH_LEVER (damper_rows): the pair stops closing;\n"
       "  - outrun (speeds (2, N) given: how fast each joint can move down, then up; u_i >\n"
       "    sum_j |A_ij| speeds[A_ij > 0 ? 0 : 1, j], the fastest the row can retreat: no\n"
       "    retreat keeps the margin, whatever the acceleration and jerk limits give): the bound\n"

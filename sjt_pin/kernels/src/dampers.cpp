@@ -1,5 +1,6 @@
 // The collision limit's velocity-damper rows (sjt_pin/limits/collision.py): one row per pair
 // on the relative normal velocity of its closest points.
+#include <cmath>
 #include <sstream>
 
 #include "collision.hpp"
@@ -28,11 +29,27 @@ void damper_rows_into(const StridedMatrixMap& J, const ConstMatrixMap& support, 
     }
     out.row(i) = u[0].transpose().lazyProduct(J6).cwiseProduct(support.row(joint[0])) -
                  u[1].transpose().lazyProduct(J6).cwiseProduct(support.row(joint[1]));
+    // a row no joint moves along n (a link turning about an axis through its closest point)
+    // is rounding, not a lever: 3e-15 m/rad on Kinova's first link, whose row then bound the
+    // base's turn to one direction
+    double lever_sq = out.row(i).squaredNorm();
+    if (lever_sq <= kRoundingLever * kRoundingLever) {
+      out.row(i).setZero();
+      lever_sq = 0.0;
+    }
     b[i] = rate * (r[row::distance] - r[row::margin]);
+    // inside the margin a short lever turns the link about a point near its closest one
+    // rather than away, and the row only keeps the pair from closing. (Z1's upper arm beside
+    // a table at its shoulder, 1.5 mm/rad: the push drove the shoulder at its speed limit, or
+    // at half its acceleration limit, for good while the distance never grew; the arm swung
+    // at up to 3.1 rad/s, and under acceleration limits its forearm went through the table.)
+    if (b[i] < 0.0 && lever_sq < kPushLever * kPushLever) b[i] = 0.0;
   }
 }
 
 void register_dampers(nb::module_& m) {
+  m.attr("ROUNDING_LEVER") = kRoundingLever;
+  m.attr("PUSH_LEVER") = kPushLever;
   m.def(
       "damper_rows",
       [](nb::handle J_obj, nb::handle support_obj, nb::handle pairs_obj, double rate,
@@ -64,7 +81,9 @@ void register_dampers(nb::module_& m) {
       "distance d, margin, the joints of the two geometries (a, b), the unit normal n from a\n"
       "to b (coal's), the closest points p_a and p_b (world). Row i: A_i = (u_a^T J)\n"
       "support[a] - (u_b^T J) support[b] with u_x = [n; p_x x n], and b_i = rate (d -\n"
-      "margin); A (k, N) and b (k,) are written.");
+      "margin), but 0 where b_i < 0 and |A_i| < PUSH_LEVER (0.01: a pair inside its margin is\n"
+      "pushed out only by a lever of at least 1 cm per unit); a row |A_i| <= ROUNDING_LEVER\n"
+      "(1e-12) is rounding and set to 0; A (k, N) and b (k,) are written.");
 }
 
 }  // namespace sjt
