@@ -96,9 +96,7 @@ void Controller::reset() {
   least_e_sq = 1e300;
   least_age = 0.0;
   pushed = false;
-  damped_error = 1e300;
-  goal_damping = 1.0;
-  damping_raises = 0;
+  forget_damping();
   nearest.forget();
   bent_ready_ = false;
   exact = false;

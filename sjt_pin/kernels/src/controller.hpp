@@ -102,8 +102,8 @@ class Controller {
   // motion still raises the error: least_e_sq follows the error meanwhile
   bool pushed = false;
   // the factor on range_goal's damping where rows with room bind it (raise_damping), |e|
-  // where it last changed or a start from rest began (inf: neither since the target moved),
-  // and how many times it was raised since
+  // where it last changed or a start from rest began (1e300: neither since the target moved),
+  // and how many times it was raised since (forget_damping: none)
   double damped_error = 1e300;
   double goal_damping = 1.0;
   int damping_raises = 0;
@@ -210,6 +210,7 @@ class Controller {
   bool restart_from_rest();
   bool raise_damping();
   void follow_damping(bool target_moved);
+  void forget_damping();
   bool at_rest() const;
   bool fit_within_box(const Eigen::Ref<const RowMatrix>& J0, const Eigen::Ref<const RowMatrix>& A,
                       const Eigen::Ref<const Vector>& b);

@@ -197,15 +197,18 @@ bool Controller::raise_damping() {
 // never falling back, it left 11 of 144 starts inside a table's margin still moving at 8 s,
 // UR10 at 0.2 rad/s).
 void Controller::follow_damping(bool target_moved) {
-  if (target_moved) {
-    damped_error = kInf;
-    goal_damping = 1.0;
-    damping_raises = 0;
-  }
+  if (target_moved) forget_damping();
   if (goal_damping > 1.0 && std::sqrt(e_sq) < (1.0 - kDampedProgress) * damped_error) {
     goal_damping = std::max(goal_damping / kDampingGrowth, kDampingGrowth);
     damped_error = std::sqrt(e_sq);
   }
+}
+
+// No damping raised, nor a start from rest to judge against (reset; a target that moved).
+void Controller::forget_damping() {
+  damped_error = 1e300;
+  goal_damping = 1.0;
+  damping_raises = 0;
 }
 
 // Each joint clipped alone into its own box (acceleration, jerk, braking) bends the motion the
