@@ -13,8 +13,30 @@ import sjt_pin as sjt
 from sjt_pin import kernels as K
 from sjt_pin.kinematics import Kinematics
 from sjt_pin.limits.base import Motion
-from sjt_pin.limits.collision import CollisionLimit, damper_rows_reference
+from sjt_pin.limits.collision import CollisionLimit
 from sjt_pin.solvers import make_solver
+
+
+def damper_rows_reference(J: np.ndarray, support: np.ndarray, pairs: np.ndarray, rate: float
+                          ) -> tuple[np.ndarray, np.ndarray]:
+    """``kernels.damper_rows`` in numpy: coal's normal ``n`` points from geometry a to b, so
+    ``n^T (v_a - v_b) = -d_dot``; the WORLD Jacobian of joint j (its supports' columns) moves
+    a point p fixed to it at ``v_O + w x p``, so ``n.v(p) = n.v_O + (p x n).w``; a row whose
+    norm is at most ``kernels.ROUNDING_LEVER`` (m per unit of q_dot) is rounding and set to 0,
+    and a row inside its margin with a lever below ``kernels.PUSH_LEVER`` only keeps its pair
+    from closing."""
+    pairs = np.atleast_2d(pairs)
+    n = pairs[:, 4:7]
+    ends = []
+    for side, joints in ((pairs[:, 7:10], pairs[:, 2]), (pairs[:, 10:13], pairs[:, 3])):
+        u = np.hstack([n, np.cross(side, n)])
+        ends.append((u @ J) * support[joints.astype(int)])
+    A = ends[0] - ends[1]
+    lever = np.linalg.norm(A, axis=1)
+    A[lever <= K.ROUNDING_LEVER] = 0.0  # (rounding, not a lever)
+    b = rate * (pairs[:, 0] - pairs[:, 1])
+    b[(b < 0.0) & (lever < K.PUSH_LEVER)] = 0.0  # (no lever to push with)
+    return A, b
 
 
 def test_compiled_kernels_name_the_argument_that_does_not_fit():

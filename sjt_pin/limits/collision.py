@@ -101,7 +101,6 @@ from .collision_geometry import (
 )
 from .collision_moving import MovingMixin
 from .collision_pairs import PairsMixin
-from .collision_reach import damper_rows_reference as damper_rows_reference
 from .collision_reach import mimic_map
 from .collision_rows import RowsMixin
 from .collision_tables import TablesMixin

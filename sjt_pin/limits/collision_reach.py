@@ -1,7 +1,6 @@
 """How far the joints can carry the collision limit's geometry: each joint's kind and the
 extent of its own motion over its position range (what the levers of the broad phase's skip
-add up), the map from mimic joints' velocities to the model's, and ``kernels.damper_rows`` in
-numpy (the reference the tests hold the kernel to)."""
+add up), and the map from mimic joints' velocities to the model's."""
 
 from __future__ import annotations
 
@@ -9,30 +8,6 @@ from collections.abc import Sequence
 
 import numpy as np
 import pinocchio as pin
-
-from ..kernels import PUSH_LEVER, ROUNDING_LEVER
-
-
-def damper_rows_reference(J: np.ndarray, support: np.ndarray, pairs: np.ndarray, rate: float
-                          ) -> tuple[np.ndarray, np.ndarray]:
-    """``kernels.damper_rows`` in numpy: coal's normal ``n`` points from geometry a to b, so
-    ``n^T (v_a - v_b) = -d_dot``; the WORLD Jacobian of joint j (its supports' columns) moves
-    a point p fixed to it at ``v_O + w x p``, so ``n.v(p) = n.v_O + (p x n).w``; a row whose
-    norm is at most ``ROUNDING_LEVER`` (m per unit of q_dot) is rounding and set to 0, and a
-    row inside its margin with a lever below ``PUSH_LEVER`` only keeps its pair from
-    closing."""
-    pairs = np.atleast_2d(pairs)
-    n = pairs[:, 4:7]
-    ends = []
-    for side, joints in ((pairs[:, 7:10], pairs[:, 2]), (pairs[:, 10:13], pairs[:, 3])):
-        u = np.hstack([n, np.cross(side, n)])
-        ends.append((u @ J) * support[joints.astype(int)])
-    A = ends[0] - ends[1]
-    lever = np.linalg.norm(A, axis=1)
-    A[lever <= ROUNDING_LEVER] = 0.0  # (rounding, not a lever)
-    b = rate * (pairs[:, 0] - pairs[:, 1])
-    b[(b < 0.0) & (lever < PUSH_LEVER)] = 0.0  # (no lever to push with)
-    return A, b
 
 
 def joint_translates(kind: str) -> bool:
